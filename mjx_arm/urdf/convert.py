@@ -1,0 +1,361 @@
+"""URDF -> MJCF through MuJoCo's own URDF importer and ``mujoco.MjSpec`` edits.
+
+The importer does the parsing (links, joints, inertials, geometry, limits, damping). What it leaves
+out is added here on the spec: joint damping and armature, velocity actuators sized from the URDF
+``<limit effort velocity>``, an ``ee`` site, wrist force/torque sensors with what is needed to tare
+them, MJX-ready solver options, contact filtering and, optionally, the task scene.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import xml.etree.ElementTree as ET
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from mjx_arm.urdf.errors import ConversionError
+from mjx_arm.urdf.inertia import inertia_problem, repair_inertia
+from mjx_arm.urdf.meshes import resolve_mesh_filename
+from mjx_arm.urdf.model import RobotModel, parse_urdf
+from mjx_arm.urdf.scene import SCENES, add_scene
+
+# Collision bit masks: arm geoms collide with each other and with scene geoms; scene geoms
+# (table, target box) never collide with each other.
+ARM_CONTYPE, ARM_CONAFFINITY = 1, 3
+SCENE_CONTYPE, SCENE_CONAFFINITY = 2, 0
+
+# Names the converted model always carries (the task code looks them up by name).
+EE_SITE = "ee"
+FT_SITE = "ft"
+TOOL_COM_SITE = "tool_com"
+SENSORS = ("ft_force", "ft_torque", "tool_acc", "tool_gyro", "tool_angacc")
+
+
+@dataclass(frozen=True)
+class ConvertConfig:
+    """How a URDF becomes an MJCF model. Saved with every run that uses it.
+
+    Attributes:
+        default_damping: joint damping (N m s/rad) for joints whose URDF gives none or zero.
+        armature: reflected rotor inertia (kg m^2) added to every actuated joint.
+        kv_saturation: fraction of the velocity limit at which a velocity error saturates the
+            actuator; the velocity gain is ``kv = effort / (kv_saturation * velocity)``.
+        gravity_compensation: compensate the arm's weight through its actuators (inside the
+            effort limit), as an industrial arm's joint controllers do.
+        ee_link: link whose frame is the end-effector point; None picks ``ee_link`` if present,
+            else the deepest link of the tree.
+        ft_joint: fixed joint where the wrist force/torque reading is taken; None picks
+            ``ft_sensor_joint`` if present, else the joint above the end-effector body.
+        sim_dt: physics time step (s).
+        solver_iterations: constraint solver iterations (few, for MJX speed).
+        ls_iterations: line-search iterations of the Newton solver.
+        scene: "none", "reach" or "touch": the task scene added around the arm.
+        package_dirs: ``package://NAME`` -> directory; unnamed packages are searched for upwards
+            from the URDF's folder.
+        repair_inertia: replace inertia tensors that break the triangle inequality (or are not
+            positive definite) by the nearest valid one instead of failing.
+    """
+
+    default_damping: float = 1.0
+    armature: float = 0.01
+    kv_saturation: float = 0.1
+    gravity_compensation: bool = True
+    ee_link: str | None = None
+    ft_joint: str | None = None
+    sim_dt: float = 1.0 / 240.0
+    solver_iterations: int = 4
+    ls_iterations: int = 8
+    scene: str = "none"
+    package_dirs: Mapping[str, str] = field(default_factory=dict)
+    repair_inertia: bool = False
+
+    def replace(self, **changes) -> ConvertConfig:
+        """Return a copy with some fields changed."""
+        return dataclasses.replace(self, **changes)
+
+
+def build_spec(urdf: str | Path, config: ConvertConfig | None = None) -> mujoco.MjSpec:
+    """Import a URDF and return the edited ``mujoco.MjSpec``.
+
+    Args:
+        urdf: path of the URDF file.
+        config: conversion settings; defaults to :class:`ConvertConfig()`.
+
+    Raises:
+        ConversionError: a mesh that cannot be found or read, an invalid inertia (without
+            ``repair_inertia``), a joint without effort or velocity limits, or an importer error.
+    """
+    config = config or ConvertConfig()
+    if config.scene not in SCENES:
+        raise ConversionError(f"unknown scene {config.scene!r}; choose one of {sorted(SCENES)}")
+    path = Path(urdf).resolve()
+    model = parse_urdf(path)
+    xml_text = _prepare_urdf_text(path, config)
+    try:
+        spec = mujoco.MjSpec.from_string(xml_text)
+    except Exception as exc:  # MuJoCo raises ValueError with its own text
+        raise ConversionError(f"{path}: MuJoCo's URDF importer failed: {exc}") from exc
+    _set_options(spec, config)
+    actuated = _edit_joints(spec, model, config, path)
+    _add_actuators(spec, actuated, model, config)
+    ee_body, ft_body = _tool_bodies(spec, model, config, path)
+    _add_sites_and_sensors(spec, model, ee_body, ft_body, config)
+    _set_contact_bits(spec)
+    if config.gravity_compensation:
+        for body in spec.bodies[1:]:
+            body.gravcomp = 1.0
+    add_scene(spec, config.scene)
+    _exclude_neighbours(spec, model)
+    return spec
+
+
+def to_mjcf(urdf: str | Path, config: ConvertConfig | None = None, **overrides) -> str:
+    """Convert a URDF to MJCF XML text.
+
+    Args:
+        urdf: path of the URDF file.
+        config: conversion settings; keyword ``overrides`` replace single fields of it.
+
+    Returns:
+        The MJCF document. The same input gives the same bytes.
+    """
+    config = (config or ConvertConfig()).replace(**overrides)
+    spec = build_spec(urdf, config)
+    try:
+        spec.compile()
+    except Exception as exc:
+        raise ConversionError(f"{urdf}: the converted model does not compile: {exc}") from exc
+    return spec.to_xml()
+
+
+def load_model(urdf: str | Path, config: ConvertConfig | None = None, **overrides) -> mujoco.MjModel:
+    """Convert a URDF and compile it into a ``mujoco.MjModel``."""
+    config = (config or ConvertConfig()).replace(**overrides)
+    spec = build_spec(urdf, config)
+    try:
+        return spec.compile()
+    except Exception as exc:
+        raise ConversionError(f"{urdf}: the converted model does not compile: {exc}") from exc
+
+
+# --------------------------------------------------------------------------- URDF text
+
+
+def _prepare_urdf_text(path: Path, config: ConvertConfig) -> str:
+    """Resolve mesh paths, check inertias and tell the importer to keep every link apart."""
+    tree = ET.parse(path)
+    root = tree.getroot()
+    for mesh in root.iter("mesh"):
+        link = _enclosing_link_name(root, mesh)
+        mesh.set("filename", str(resolve_mesh_filename(mesh.get("filename", ""), path, link,
+                                                       config.package_dirs)))
+    for link in root.findall("link"):
+        _check_or_repair_inertia(link, path, config.repair_inertia)
+    for old in root.findall("mujoco"):
+        root.remove(old)
+    extension = ET.Element("mujoco")
+    ET.SubElement(
+        extension,
+        "compiler",
+        {"fusestatic": "false", "discardvisual": "false", "strippath": "false",
+         "angle": "radian", "autolimits": "true"},
+    )
+    root.insert(0, extension)
+    return ET.tostring(root, encoding="unicode")
+
+
+def _enclosing_link_name(root: ET.Element, node: ET.Element) -> str:
+    for link in root.findall("link"):
+        if any(n is node for n in link.iter()):
+            return link.get("name", "?")
+    return "?"
+
+
+def _check_or_repair_inertia(link: ET.Element, path: Path, repair: bool) -> None:
+    inertia = link.find("inertial/inertia")
+    if inertia is None:
+        return
+    keys = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
+    v = {k: float(inertia.get(k, "0")) for k in keys}
+    tensor = np.array([[v["ixx"], v["ixy"], v["ixz"]],
+                       [v["ixy"], v["iyy"], v["iyz"]],
+                       [v["ixz"], v["iyz"], v["izz"]]])
+    problem = inertia_problem(tensor)
+    if problem is None:
+        return
+    name = link.get("name", "?")
+    if not repair:
+        raise ConversionError(
+            f"{path}: link {name!r}: inertia {problem}. Fix the <inertia> values, or convert "
+            "with repair_inertia=True (CLI: --repair-inertia) to raise the smaller principal "
+            "moments to the nearest valid tensor."
+        )
+    fixed = repair_inertia(tensor)
+    for key, (i, j) in zip(keys, [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)], strict=True):
+        inertia.set(key, repr(float(fixed[i, j])))
+
+
+# --------------------------------------------------------------------------- spec edits
+
+
+def _set_options(spec: mujoco.MjSpec, config: ConvertConfig) -> None:
+    spec.option.timestep = config.sim_dt
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_EULERDAMP
+    spec.option.iterations = config.solver_iterations
+    spec.option.ls_iterations = config.ls_iterations
+    spec.compiler.autolimits = True
+
+
+def _edit_joints(spec: mujoco.MjSpec, model: RobotModel, config: ConvertConfig, path: Path):
+    """Inject damping and armature; return the actuated spec joints in URDF tree order."""
+    actuated = []
+    for urdf_joint in model.actuated_joints:
+        joint = spec.joint(urdf_joint.name)
+        if joint is None:
+            raise ConversionError(f"{path}: joint {urdf_joint.name!r} missing after import")
+        lim = urdf_joint.limit
+        if lim is None or lim.effort <= 0 or lim.velocity <= 0:
+            raise ConversionError(
+                f"{path}: joint {urdf_joint.name!r} needs <limit effort=... velocity=...> with "
+                "positive values: the velocity actuator's torque cap and speed come from them"
+            )
+        if not (urdf_joint.damping and urdf_joint.damping > 0):
+            joint.damping[0] = config.default_damping
+        joint.armature = config.armature
+        if config.gravity_compensation:
+            joint.actgravcomp = True
+        actuated.append(joint)
+    if not actuated:
+        raise ConversionError(f"{path}: no movable joint to actuate")
+    return actuated
+
+
+def _add_actuators(spec: mujoco.MjSpec, joints, model: RobotModel, config: ConvertConfig) -> None:
+    for joint in joints:
+        lim = model.joints[joint.name].limit
+        assert lim is not None  # checked in _edit_joints
+        act = spec.add_actuator()
+        act.name = joint.name
+        act.target = joint.name
+        act.trntype = mujoco.mjtTrn.mjTRN_JOINT
+        act.set_to_velocity(kv=lim.effort / (config.kv_saturation * lim.velocity))
+        act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
+        act.ctrlrange = [-lim.velocity, lim.velocity]
+        act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
+        act.forcerange = [-lim.effort, lim.effort]
+
+
+def _tool_bodies(spec: mujoco.MjSpec, model: RobotModel, config: ConvertConfig, path: Path):
+    """Return (end-effector body, force/torque body) of the spec."""
+    ee_link = config.ee_link or ("ee_link" if "ee_link" in model.links else _deepest_link(model))
+    if ee_link not in model.links:
+        raise ConversionError(f"{path}: ee_link {ee_link!r} is not a link of this URDF")
+    ft_joint = config.ft_joint or ("ft_sensor_joint" if "ft_sensor_joint" in model.joints else None)
+    if ft_joint is not None:
+        if ft_joint not in model.joints:
+            raise ConversionError(f"{path}: ft_joint {ft_joint!r} is not a joint of this URDF")
+        ft_link = model.joints[ft_joint].child
+    else:
+        # the child of the last movable joint above the end-effector
+        chain = [j for j in model.chain_to(ee_link) if j.movable]
+        ft_link = chain[-1].child if chain else ee_link
+    return spec.body(ee_link), spec.body(ft_link)
+
+
+def _deepest_link(model: RobotModel) -> str:
+    return max(model.links, key=lambda name: (len(model.chain_to(name)), name))
+
+
+def _add_sites_and_sensors(spec, model: RobotModel, ee_body, ft_body, config) -> None:
+    """The ``ee`` site, the F/T site at the wrist and the sensors that tare the reading.
+
+    The force and torque sensors measure what the arm exerts on the tool subtree at the ``ft``
+    site. The accelerometer at the subtree's centre of mass, the gyro and the angular
+    acceleration sensor give what the tool's own weight and inertia contribute, so the task code
+    can remove it (see :mod:`mjx_arm.task.wrench`).
+    """
+    ee = ee_body.add_site()
+    ee.name = EE_SITE
+    ee.size = [0.008, 0, 0]
+    ee.rgba = [0.1, 0.8, 0.1, 0.6]
+    ee.group = 4
+    ft = ft_body.add_site()
+    ft.name = FT_SITE
+    ft.size = [0.01, 0, 0]
+    ft.group = 4
+    com = ft_body.add_site()
+    com.name = TOOL_COM_SITE
+    com.pos = _subtree_com_in_body(spec, ft_body.name)
+    com.size = [0.005, 0, 0]
+    com.group = 4
+    site_of = {"ft_force": FT_SITE, "ft_torque": FT_SITE, "tool_acc": TOOL_COM_SITE,
+               "tool_gyro": FT_SITE, "tool_angacc": FT_SITE}
+    kinds = {"ft_force": mujoco.mjtSensor.mjSENS_FORCE,
+             "ft_torque": mujoco.mjtSensor.mjSENS_TORQUE,
+             "tool_acc": mujoco.mjtSensor.mjSENS_ACCELEROMETER,
+             "tool_gyro": mujoco.mjtSensor.mjSENS_GYRO,
+             "tool_angacc": mujoco.mjtSensor.mjSENS_FRAMEANGACC}
+    for name in SENSORS:
+        sensor = spec.add_sensor()
+        sensor.name = name
+        sensor.type = kinds[name]
+        sensor.objtype = mujoco.mjtObj.mjOBJ_SITE
+        sensor.objname = site_of[name]
+
+
+def _subtree_com_in_body(spec: mujoco.MjSpec, body_name: str) -> list[float]:
+    """Centre of mass of a body's subtree, in that body's frame (m), from a compiled copy."""
+    model = spec.copy().compile()
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    mujoco.mj_comPos(model, data)
+    body = model.body(body_name).id
+    world = data.subtree_com[body] - data.xpos[body]
+    local = data.xmat[body].reshape(3, 3).T @ world
+    return [float(v) for v in np.round(local, 12)]
+
+
+def _set_contact_bits(spec: mujoco.MjSpec) -> None:
+    """Arm collision geoms get the arm's bit masks and are hidden in renders (group 3)."""
+    for geom in spec.geoms:
+        if geom.contype or geom.conaffinity:
+            geom.contype = ARM_CONTYPE
+            geom.conaffinity = ARM_CONAFFINITY
+            geom.group = 3
+
+
+def _exclude_neighbours(spec: mujoco.MjSpec, model: RobotModel) -> None:
+    """Exclude contacts between links joined by a joint and between links touching at rest.
+
+    Neighbouring links overlap at their joint by construction, and so do links whose collision
+    shapes already touch in the reference configuration; neither is a real collision.
+    """
+    pairs = {tuple(sorted((j.parent, j.child))) for j in model.joints.values()}
+    root = model.root_link
+    first = [j.child for j in model.joints.values() if j.parent == root]
+    pairs |= {tuple(sorted((root, c))) for c in first}
+    pairs |= _pairs_in_contact_at_rest(spec, set(model.links))
+    for body1, body2 in sorted(pairs):
+        if body1 == body2:
+            continue
+        exclude = spec.add_exclude()
+        exclude.bodyname1 = body1
+        exclude.bodyname2 = body2
+
+
+def _pairs_in_contact_at_rest(spec: mujoco.MjSpec, arm_links: set[str]) -> set[tuple[str, str]]:
+    model = spec.copy().compile()
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    found = set()
+    for contact in data.contact[: data.ncon]:
+        b1 = model.body(model.geom_bodyid[contact.geom1]).name
+        b2 = model.body(model.geom_bodyid[contact.geom2]).name
+        if b1 in arm_links and b2 in arm_links:
+            found.add(tuple(sorted((b1, b2))))
+    return found

@@ -1,0 +1,11 @@
+"""Errors raised by the URDF pipeline."""
+
+from __future__ import annotations
+
+
+class UrdfError(ValueError):
+    """A URDF that cannot be used, with a message that names the element and the fix."""
+
+
+class ConversionError(UrdfError):
+    """A URDF that MuJoCo's importer or compiler rejects, or that lacks what conversion needs."""

@@ -1,0 +1,54 @@
+"""Checks and repairs of link inertia tensors, shared by validation and conversion."""
+
+from __future__ import annotations
+
+import numpy as np
+
+# Relative slack on the triangle inequality, as MuJoCo's compiler allows for rounding.
+TRIANGLE_TOL = 1e-6
+
+
+def principal_moments(inertia: np.ndarray) -> np.ndarray:
+    """Eigenvalues of a symmetric inertia tensor, shape ``(3,)``, ascending."""
+    return np.linalg.eigvalsh(0.5 * (inertia + inertia.T))
+
+
+def inertia_problem(inertia: np.ndarray) -> str | None:
+    """Describe what is wrong with an inertia tensor, or return None when it is physical.
+
+    Args:
+        inertia: the tensor about the centre of mass, shape ``(3, 3)``.
+    """
+    if not np.all(np.isfinite(inertia)):
+        return "has non-finite entries"
+    moments = principal_moments(inertia)
+    if moments[0] <= 0.0:
+        return f"is not positive definite (principal moments {_fmt(moments)})"
+    a, b, c = moments
+    if a + b < c * (1.0 - TRIANGLE_TOL):
+        return (
+            f"breaks the triangle inequality of its principal moments {_fmt(moments)}: "
+            f"{a:.6g} + {b:.6g} < {c:.6g}"
+        )
+    return None
+
+
+def repair_inertia(inertia: np.ndarray) -> np.ndarray:
+    """Return the nearest tensor that satisfies the triangle inequality, shape ``(3, 3)``.
+
+    The principal axes are kept; the two smaller principal moments are raised together until
+    their sum equals the largest one, and every moment is kept above a small positive floor.
+    """
+    sym = 0.5 * (inertia + inertia.T)
+    moments, axes = np.linalg.eigh(sym)
+    floor = max(1e-9, 1e-6 * float(np.abs(moments).max()))
+    moments = np.maximum(moments, floor)
+    deficit = moments[2] - (moments[0] + moments[1])
+    if deficit > 0:
+        moments[0] += deficit / 2
+        moments[1] += deficit / 2
+    return axes @ np.diag(moments) @ axes.T
+
+
+def _fmt(values: np.ndarray) -> str:
+    return "[" + ", ".join(f"{v:.6g}" for v in values) + "]"

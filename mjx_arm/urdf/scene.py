@@ -1,0 +1,117 @@
+"""The task scene around the arm: floor, table, target and a camera, built on an ``MjSpec``.
+
+Table and box sizes come from ``assets/table.urdf`` and ``assets/target_box.urdf``, which the
+PyBullet reference env loads directly, so both engines see the same scene.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import mujoco
+import numpy as np
+
+from mjx_arm.paths import asset
+from mjx_arm.urdf.model import Geometry, parse_urdf
+
+SCENES = frozenset({"none", "reach", "touch"})
+TARGET_BODY = "target"
+TARGET_SITE = "target"
+TARGET_GEOM = "target_box"
+FLOOR_Z = -0.75
+
+# One camera for every engine: eye, look-at point (m, world frame) and vertical field of view.
+CAMERA_EYE = (1.45, -1.05, 0.85)
+CAMERA_TARGET = (0.35, 0.0, 0.1)
+CAMERA_FOVY = 45.0
+
+
+@functools.cache
+def scene_geometry() -> dict[str, tuple[Geometry, ...]]:
+    """Collision shapes of the table and the target box, from the shipped URDFs."""
+    table = parse_urdf(asset("table.urdf"))
+    box = parse_urdf(asset("target_box.urdf"))
+    return {
+        "table": table.links["table_top"].collisions,
+        "box": box.links["box"].collisions,
+    }
+
+
+def box_top_offset() -> float:
+    """Height (m) of the target box's top face above the box frame (its bottom face centre)."""
+    (geom,) = scene_geometry()["box"]
+    return geom.origin.xyz[2] + geom.size[2] / 2
+
+
+def camera_quat() -> np.ndarray:
+    """Orientation (w, x, y, z) of a MuJoCo camera at CAMERA_EYE looking at CAMERA_TARGET."""
+    eye, target = np.array(CAMERA_EYE), np.array(CAMERA_TARGET)
+    back = eye - target
+    back /= np.linalg.norm(back)  # camera z axis points away from the scene
+    right = np.cross([0.0, 0.0, 1.0], back)
+    right /= np.linalg.norm(right)
+    up = np.cross(back, right)
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, np.stack([right, up, back], axis=1).ravel())
+    return quat
+
+
+def add_scene(spec: mujoco.MjSpec, scene: str) -> None:
+    """Add floor, table, light, camera and (for reach/touch) the mocap target body."""
+    if scene == "none":
+        return
+    from mjx_arm.urdf.convert import SCENE_CONAFFINITY, SCENE_CONTYPE
+
+    world = spec.worldbody
+    light = world.add_light()
+    light.pos = [0.5, -0.5, 2.5]
+    light.dir = [-0.2, 0.2, -1.0]
+    floor = world.add_geom()
+    floor.name = "floor"
+    floor.type = mujoco.mjtGeom.mjGEOM_PLANE
+    floor.size = [3.0, 3.0, 0.05]
+    floor.pos = [0.0, 0.0, FLOOR_Z]
+    floor.rgba = [0.8, 0.8, 0.82, 1.0]
+    floor.contype = floor.conaffinity = 0
+    for i, g in enumerate(scene_geometry()["table"]):
+        geom = world.add_geom()
+        geom.name = f"table_{i}"
+        _set_box(geom, g, rgba=[0.62, 0.5, 0.38, 1.0])
+        geom.contype, geom.conaffinity = SCENE_CONTYPE, SCENE_CONAFFINITY
+    camera = world.add_camera()
+    camera.name = "main"
+    camera.pos = list(CAMERA_EYE)
+    camera.quat = camera_quat()
+    camera.fovy = CAMERA_FOVY
+    target = world.add_body()
+    target.name = TARGET_BODY
+    target.mocap = True
+    target.pos = [0.5, 0.0, 0.0]
+    site = target.add_site()
+    site.name = TARGET_SITE
+    site.size = [0.006, 0, 0]
+    site.group = 4
+    if scene == "touch":
+        for g in scene_geometry()["box"]:
+            geom = target.add_geom()
+            geom.name = TARGET_GEOM
+            _set_box(geom, g, rgba=[0.85, 0.15, 0.15, 1.0])
+            geom.contype, geom.conaffinity = SCENE_CONTYPE, SCENE_CONAFFINITY
+        site.pos = [0.0, 0.0, box_top_offset()]
+    else:
+        marker = target.add_geom()
+        marker.name = "target_marker"
+        marker.type = mujoco.mjtGeom.mjGEOM_SPHERE
+        marker.size = [0.02, 0, 0]
+        marker.rgba = [0.1, 0.8, 0.2, 0.5]
+        marker.contype = marker.conaffinity = 0
+
+
+def _set_box(geom, source: Geometry, rgba: list[float]) -> None:
+    if source.kind != "box" or any(source.origin.rpy):
+        raise ValueError("scene pieces must be axis-aligned boxes")
+    geom.type = mujoco.mjtGeom.mjGEOM_BOX
+    geom.size = [s / 2 for s in source.size]
+    geom.pos = list(source.origin.xyz)
+    geom.rgba = rgba
+
