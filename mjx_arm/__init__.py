@@ -1,3 +1,21 @@
-"""mjx_arm: train and check 6-DoF arm control policies."""
+"""mjx_arm: train and check 6-DoF arm control policies.
+
+Importing the package registers the Gymnasium ids ``mjx_arm/Reach-v0`` and ``mjx_arm/Touch-v0``.
+"""
+
+import os as _os
+import sys as _sys
 
 __version__ = "0.1.0"
+
+# Headless rendering by default: MuJoCo picks its GL backend when first imported.
+if (
+    "MUJOCO_GL" not in _os.environ
+    and _sys.platform.startswith("linux")
+    and not _os.environ.get("DISPLAY")
+):
+    _os.environ["MUJOCO_GL"] = "egl"
+
+from mjx_arm.envs.registration import register_envs as _register_envs
+
+_register_envs()

@@ -34,13 +34,19 @@ def cmd_convert(args: argparse.Namespace) -> int:
     from mjx_arm.urdf.validate import validate
 
     package_dirs = _package_dirs(args.package)
-    report = validate(args.urdf, engine="mujoco", package_dirs=package_dirs,
-                      native=False, repair_inertia=args.repair_inertia)
+    report = validate(
+        args.urdf,
+        engine="mujoco",
+        package_dirs=package_dirs,
+        native=False,
+        repair_inertia=args.repair_inertia,
+    )
     if not report.ok:
         print(report.format(), file=sys.stderr)
         return EXIT_INVALID
-    config = ConvertConfig(scene=args.scene, package_dirs=package_dirs,
-                           repair_inertia=args.repair_inertia)
+    config = ConvertConfig(
+        scene=args.scene, package_dirs=package_dirs, repair_inertia=args.repair_inertia
+    )
     try:
         xml = to_mjcf(args.urdf, config)
     except ConversionError as exc:
@@ -73,25 +79,48 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    p = sub.add_parser("validate", help="validate a URDF (XML/tree, engine compatibility, physics)",
-                       description=cmd_validate.__doc__)
+    p = sub.add_parser(
+        "validate",
+        help="validate a URDF (XML/tree, engine compatibility, physics)",
+        description=cmd_validate.__doc__,
+    )
     p.add_argument("urdf", help="path of the URDF file")
-    p.add_argument("--engine", choices=["mujoco", "pybullet", "all"], default="all",
-                   help="engine(s) to check compatibility with and load into (default: all)")
-    p.add_argument("--package", action="append", metavar="NAME=DIR",
-                   help="directory of a package:// name (repeatable)")
+    p.add_argument(
+        "--engine",
+        choices=["mujoco", "pybullet", "all"],
+        default="all",
+        help="engine(s) to check compatibility with and load into (default: all)",
+    )
+    p.add_argument(
+        "--package",
+        action="append",
+        metavar="NAME=DIR",
+        help="directory of a package:// name (repeatable)",
+    )
     p.set_defaults(func=cmd_validate)
 
-    p = sub.add_parser("convert", help="convert a URDF to an MJX-ready MJCF",
-                       description=cmd_convert.__doc__)
+    p = sub.add_parser(
+        "convert", help="convert a URDF to an MJX-ready MJCF", description=cmd_convert.__doc__
+    )
     p.add_argument("urdf", help="path of the URDF file")
     p.add_argument("-o", "--output", required=True, help="MJCF file to write")
-    p.add_argument("--scene", choices=["none", "reach", "touch"], default="none",
-                   help="add the task scene (floor, table, target) around the arm")
-    p.add_argument("--package", action="append", metavar="NAME=DIR",
-                   help="directory of a package:// name (repeatable)")
-    p.add_argument("--repair-inertia", action="store_true",
-                   help="replace inertia tensors that break the triangle inequality")
+    p.add_argument(
+        "--scene",
+        choices=["none", "reach", "touch"],
+        default="none",
+        help="add the task scene (floor, table, target) around the arm",
+    )
+    p.add_argument(
+        "--package",
+        action="append",
+        metavar="NAME=DIR",
+        help="directory of a package:// name (repeatable)",
+    )
+    p.add_argument(
+        "--repair-inertia",
+        action="store_true",
+        help="replace inertia tensors that break the triangle inequality",
+    )
     p.set_defaults(func=cmd_convert)
     return parser
 

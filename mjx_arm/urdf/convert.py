@@ -139,7 +139,9 @@ def to_mjcf(urdf: str | Path, config: ConvertConfig | None = None, **overrides) 
     return spec.to_xml()
 
 
-def load_model(urdf: str | Path, config: ConvertConfig | None = None, **overrides) -> mujoco.MjModel:
+def load_model(
+    urdf: str | Path, config: ConvertConfig | None = None, **overrides
+) -> mujoco.MjModel:
     """Convert a URDF and compile it into a ``mujoco.MjModel``."""
     config = (config or ConvertConfig()).replace(**overrides)
     spec = build_spec(urdf, config)
@@ -158,8 +160,10 @@ def _prepare_urdf_text(path: Path, config: ConvertConfig) -> str:
     root = tree.getroot()
     for mesh in root.iter("mesh"):
         link = _enclosing_link_name(root, mesh)
-        mesh.set("filename", str(resolve_mesh_filename(mesh.get("filename", ""), path, link,
-                                                       config.package_dirs)))
+        mesh.set(
+            "filename",
+            str(resolve_mesh_filename(mesh.get("filename", ""), path, link, config.package_dirs)),
+        )
     for link in root.findall("link"):
         _check_or_repair_inertia(link, path, config.repair_inertia)
     for old in root.findall("mujoco"):
@@ -168,8 +172,13 @@ def _prepare_urdf_text(path: Path, config: ConvertConfig) -> str:
     ET.SubElement(
         extension,
         "compiler",
-        {"fusestatic": "false", "discardvisual": "false", "strippath": "false",
-         "angle": "radian", "autolimits": "true"},
+        {
+            "fusestatic": "false",
+            "discardvisual": "false",
+            "strippath": "false",
+            "angle": "radian",
+            "autolimits": "true",
+        },
     )
     root.insert(0, extension)
     return ET.tostring(root, encoding="unicode")
@@ -188,9 +197,13 @@ def _check_or_repair_inertia(link: ET.Element, path: Path, repair: bool) -> None
         return
     keys = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
     v = {k: float(inertia.get(k, "0")) for k in keys}
-    tensor = np.array([[v["ixx"], v["ixy"], v["ixz"]],
-                       [v["ixy"], v["iyy"], v["iyz"]],
-                       [v["ixz"], v["iyz"], v["izz"]]])
+    tensor = np.array(
+        [
+            [v["ixx"], v["ixy"], v["ixz"]],
+            [v["ixy"], v["iyy"], v["iyz"]],
+            [v["ixz"], v["iyz"], v["izz"]],
+        ]
+    )
     problem = inertia_problem(tensor)
     if problem is None:
         return
@@ -252,8 +265,9 @@ def _add_actuators(spec: mujoco.MjSpec, joints, model: RobotModel, config: Conve
         act.target = joint.name
         act.trntype = mujoco.mjtTrn.mjTRN_JOINT
         kv = config.kv_factor * inertia[joint.name] / config.sim_dt
-        act.set_to_velocity(kv=float(np.format_float_positional(kv, precision=4, unique=False,
-                                                                fractional=False)))
+        act.set_to_velocity(
+            kv=float(np.format_float_positional(kv, precision=4, unique=False, fractional=False))
+        )
         act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
         act.ctrlrange = [-lim.velocity, lim.velocity]
         act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
@@ -279,8 +293,10 @@ def _min_joint_inertia(spec: mujoco.MjSpec, names: list[str], samples: int = 256
     for _ in range(samples):
         data.qpos[:] = model.qpos0
         for j in range(model.njnt):
-            if int(model.jnt_type[j]) in (int(mujoco.mjtJoint.mjJNT_HINGE),
-                                          int(mujoco.mjtJoint.mjJNT_SLIDE)):
+            if int(model.jnt_type[j]) in (
+                int(mujoco.mjtJoint.mjJNT_HINGE),
+                int(mujoco.mjtJoint.mjJNT_SLIDE),
+            ):
                 data.qpos[model.jnt_qposadr[j]] = rng.uniform(low[j], high[j])
         mujoco.mj_forward(model, data)
         mujoco.mj_fullM(model, data, full)
@@ -333,13 +349,20 @@ def _add_sites_and_sensors(spec, model: RobotModel, ee_body, ft_body, config) ->
     com.pos = _subtree_com_in_body(spec, ft_body.name)
     com.size = [0.005, 0, 0]
     com.group = 4
-    site_of = {"ft_force": FT_SITE, "ft_torque": FT_SITE, "tool_acc": TOOL_COM_SITE,
-               "tool_gyro": FT_SITE, "tool_angacc": FT_SITE}
-    kinds = {"ft_force": mujoco.mjtSensor.mjSENS_FORCE,
-             "ft_torque": mujoco.mjtSensor.mjSENS_TORQUE,
-             "tool_acc": mujoco.mjtSensor.mjSENS_ACCELEROMETER,
-             "tool_gyro": mujoco.mjtSensor.mjSENS_GYRO,
-             "tool_angacc": mujoco.mjtSensor.mjSENS_FRAMEANGACC}
+    site_of = {
+        "ft_force": FT_SITE,
+        "ft_torque": FT_SITE,
+        "tool_acc": TOOL_COM_SITE,
+        "tool_gyro": FT_SITE,
+        "tool_angacc": FT_SITE,
+    }
+    kinds = {
+        "ft_force": mujoco.mjtSensor.mjSENS_FORCE,
+        "ft_torque": mujoco.mjtSensor.mjSENS_TORQUE,
+        "tool_acc": mujoco.mjtSensor.mjSENS_ACCELEROMETER,
+        "tool_gyro": mujoco.mjtSensor.mjSENS_GYRO,
+        "tool_angacc": mujoco.mjtSensor.mjSENS_FRAMEANGACC,
+    }
     for name in SENSORS:
         sensor = spec.add_sensor()
         sensor.name = name

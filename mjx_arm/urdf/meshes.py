@@ -32,11 +32,11 @@ def find_package_dir(package: str, urdf_path: Path, package_dirs: Mapping[str, s
 def mesh_path(filename: str, urdf_path: Path, package_dirs: Mapping[str, str]) -> Path | None:
     """Absolute path a URDF mesh ``filename`` points to, or None for an unknown package."""
     if filename.startswith("package://"):
-        package, _, rest = filename[len("package://"):].partition("/")
+        package, _, rest = filename[len("package://") :].partition("/")
         base = find_package_dir(package, urdf_path, package_dirs)
         return None if base is None else (base / rest).resolve()
     if filename.startswith("file://"):
-        filename = filename[len("file://"):]
+        filename = filename[len("file://") :]
     path = Path(filename)
     return path if path.is_absolute() else (urdf_path.parent / path).resolve()
 
@@ -47,7 +47,7 @@ def resolve_mesh_filename(
     """Resolve a mesh for MuJoCo or raise a :class:`ConversionError` that says how to fix it."""
     path = mesh_path(filename, urdf_path, package_dirs)
     if path is None:
-        package = filename[len("package://"):].split("/", 1)[0]
+        package = filename[len("package://") :].split("/", 1)[0]
         raise ConversionError(
             f"{urdf_path}: link {link!r}: mesh {filename!r} names package {package!r}, which was "
             f"not found above {urdf_path.parent}; pass package_dirs={{'{package}': '/path'}} "

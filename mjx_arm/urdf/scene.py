@@ -114,4 +114,3 @@ def _set_box(geom, source: Geometry, rgba: list[float]) -> None:
     geom.size = [s / 2 for s in source.size]
     geom.pos = list(source.origin.xyz)
     geom.rgba = rgba
-

@@ -1,0 +1,150 @@
+"""Typed configuration of a task: timing, action scaling, sampling, reward weights, success.
+
+One :class:`TaskConfig` drives every engine (CPU MuJoCo, PyBullet, MJX), so the numbers below are
+the contract. Presets: :func:`reach_config` and :func:`touch_config`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+TASKS = ("reach", "touch")
+
+# The arm's home pose: tool pointing down, about 0.37 m above the table, in front of the base.
+HOME_QPOS = (0.0, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0)
+
+
+@dataclass(frozen=True)
+class RewardConfig:
+    """Weights of the named reward terms; the reward is ``sum(weight * term)``.
+
+    The seed preset is ``-10*(1-exp(-d/0.1)) + 500*contact - 5*(#joints beyond limits)
+    - 0.1*sum(|qdot|)``. Terms (see :mod:`mjx_arm.task.reward`):
+    ``distance`` = 1 - exp(-d / distance_length), ``contact`` = 1 when the tool presses the target
+    inside the force band, ``joint_limit`` = number of joints beyond ``soft_limit`` of their range,
+    ``joint_velocity`` = sum |qdot| (rad/s), ``success`` = 1 on the success step,
+    ``nonfinite`` = 1 when the physics state is not finite.
+    """
+
+    distance: float = -10.0
+    contact: float = 500.0
+    joint_limit: float = -5.0
+    joint_velocity: float = -0.1
+    success: float = 0.0
+    nonfinite: float = -100.0
+    distance_length: float = 0.1
+    soft_limit: float = 0.95
+
+    def weights(self) -> dict[str, float]:
+        """Weight of each named term."""
+        return {name: getattr(self, name) for name in REWARD_TERMS}
+
+
+REWARD_TERMS = ("distance", "contact", "joint_limit", "joint_velocity", "success", "nonfinite")
+
+
+@dataclass(frozen=True)
+class TaskConfig:
+    """Everything that defines a task, identical in every engine.
+
+    Attributes:
+        task: "reach" (point target, no contact) or "touch" (press the 5 cm box).
+        ctrl_dt: control period (s); one action and one observation per period.
+        sim_dt: physics step (s); ``ctrl_dt / sim_dt`` substeps per control step.
+        action_scale: joint velocity target = action * action_scale * v_max (URDF velocity).
+        episode_steps: control steps before truncation (150 = 5 s).
+        terminate_on_success: end the episode on the first success step.
+        home_qpos: joint angles (rad) episodes start around.
+        init_noise: half-width (rad) of the uniform noise added to ``home_qpos`` at reset.
+        target_low, target_high: box (m, base frame) the target is drawn from uniformly. For
+            touch only x and y are used: the box stands on the table at z = 0.
+        success_distance: d (m) below which the ee point counts as at the target.
+        force_band: (min, max) contact force norm (N) of a successful touch.
+        force_clip: bound (N and N m) of each contact_force component.
+        reward: weights of the reward terms.
+    """
+
+    task: str = "touch"
+    ctrl_dt: float = 1.0 / 30.0
+    sim_dt: float = 1.0 / 240.0
+    action_scale: float = 0.5
+    episode_steps: int = 150
+    terminate_on_success: bool = True
+    home_qpos: tuple[float, ...] = HOME_QPOS
+    init_noise: float = 0.05
+    target_low: tuple[float, float, float] = (0.35, -0.25, 0.05)
+    target_high: tuple[float, float, float] = (0.65, 0.25, 0.45)
+    success_distance: float = 0.05
+    force_band: tuple[float, float] = (1.0, 50.0)
+    force_clip: float = 100.0
+    reward: RewardConfig = field(default_factory=RewardConfig)
+
+    def __post_init__(self) -> None:
+        if self.task not in TASKS:
+            raise ValueError(f"task must be one of {TASKS}, got {self.task!r}")
+        ratio = self.ctrl_dt / self.sim_dt
+        if abs(ratio - round(ratio)) > 1e-6 or round(ratio) < 1:
+            raise ValueError(
+                f"ctrl_dt {self.ctrl_dt} is not a whole multiple of sim_dt {self.sim_dt}"
+            )
+        if len(self.home_qpos) != 6:
+            raise ValueError("home_qpos needs 6 joint angles")
+
+    @property
+    def n_substeps(self) -> int:
+        """Physics steps per control step."""
+        return round(self.ctrl_dt / self.sim_dt)
+
+    @property
+    def uses_contact(self) -> bool:
+        """True for tasks whose success needs a contact force."""
+        return self.task == "touch"
+
+    def replace(self, **changes: Any) -> TaskConfig:
+        """Return a copy with some fields changed (``reward`` takes a dict or a RewardConfig)."""
+        if isinstance(changes.get("reward"), dict):
+            changes["reward"] = dataclasses.replace(self.reward, **changes["reward"])
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-ready dict of every field."""
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> TaskConfig:
+        """Inverse of :meth:`to_dict`."""
+        data = dict(data)
+        reward = RewardConfig(**data.pop("reward", {}))
+        for key in ("home_qpos", "target_low", "target_high", "force_band"):
+            if key in data:
+                data[key] = tuple(data[key])
+        return cls(reward=reward, **data)
+
+
+def reach_config(**overrides: Any) -> TaskConfig:
+    """Reach: bring the tool tip within 2 cm of a point in the air; no contact term."""
+    base = TaskConfig(
+        task="reach",
+        success_distance=0.02,
+        target_low=(0.35, -0.25, 0.10),
+        target_high=(0.65, 0.25, 0.45),
+        reward=RewardConfig(contact=0.0),
+    )
+    return base.replace(**overrides)
+
+
+def touch_config(**overrides: Any) -> TaskConfig:
+    """Touch (the seed task): press the top of a 5 cm box with 1-50 N, within 5 cm of its centre."""
+    return TaskConfig(task="touch").replace(**overrides)
+
+
+def task_config(name: str, **overrides: Any) -> TaskConfig:
+    """The preset of task ``name`` ("reach" or "touch", any case), with overrides."""
+    presets = {"reach": reach_config, "touch": touch_config}
+    key = name.lower()
+    if key not in presets:
+        raise ValueError(f"unknown task {name!r}; choose one of {sorted(presets)}")
+    return presets[key](**overrides)
