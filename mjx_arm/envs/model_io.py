@@ -18,10 +18,14 @@ from mjx_arm.urdf.convert import EE_SITE, ConvertConfig, load_model
 from mjx_arm.urdf.scene import TARGET_SITE
 
 
+def task_convert_config(task: TaskConfig) -> ConvertConfig:
+    """Conversion settings of a task model: its scene and time step, no self-collision."""
+    return ConvertConfig(scene=task.task, sim_dt=task.sim_dt, self_collision=False)
+
+
 def arm_model(urdf: Path, task: TaskConfig) -> mujoco.MjModel:
     """The task's MuJoCo model: the arm converted from ``urdf`` with the task scene."""
-    path = Path(urdf).resolve()
-    return load_model(path, ConvertConfig(scene=task.task, sim_dt=task.sim_dt))
+    return load_model(Path(urdf).resolve(), task_convert_config(task))
 
 
 class SensorReader:
@@ -34,21 +38,16 @@ class SensorReader:
         self.dof_adr = np.array([j.dofadr[0] for j in joints])
         self.actuators = np.array([model.actuator(name).id for name in arm.joint_names])
         self.ee_site = model.site(EE_SITE).id
+        self.ee_body = int(model.site_bodyid[self.ee_site])
         self.target_site = model.site(TARGET_SITE).id
         self.sensor_slices = {
             name: slice(int(model.sensor(name).adr[0]), int(model.sensor(name).adr[0]) + 3)
             for name in ("ft_force", "ft_torque", "tool_acc", "tool_gyro", "tool_angacc")
         }
 
-    def ee_quat(self, data: Any, xp: Any = np):
-        """ee orientation (w, x, y, z) from the site's rotation matrix, shape ``(4,)``."""
-        if xp is np:
-            quat = np.zeros(4)
-            mujoco.mju_mat2Quat(quat, data.site_xmat[self.ee_site].ravel())
-            return quat
-        from mujoco.mjx._src import math as mjx_math
-
-        return mjx_math.quat_from_mat(data.site_xmat[self.ee_site])  # pragma: no cover
+    def ee_quat(self, data: Any):
+        """ee orientation (w, x, y, z): the ee body's, whose frame the ``ee`` site shares, ``(4,)``."""
+        return data.xquat[self.ee_body]
 
     def wrench(self, xp: Any, sensordata):
         """Tared external wrench on the tool in the ee frame, shape ``(6,)``."""

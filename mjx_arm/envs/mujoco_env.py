@@ -60,7 +60,7 @@ class MujocoArmEnv(BaseRobotEnv):
         d = self.data
         return PhysicsReading(
             ee_pos=d.site_xpos[self.ids.ee_site].copy(),
-            ee_quat=self.ids.ee_quat(d),
+            ee_quat=self.ids.ee_quat(d).copy(),
             qpos=d.qpos[self.ids.qpos_adr].copy(),
             qvel=d.qvel[self.ids.dof_adr].copy(),
             target_pos=d.site_xpos[self.ids.target_site].copy(),
