@@ -14,7 +14,7 @@ import numpy as np
 from mjx_arm.envs.arm import ArmInfo
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.wrench import external_wrench
-from mjx_arm.urdf.convert import EE_SITE, ConvertConfig, load_model
+from mjx_arm.urdf.convert import EE_SITE, SENSORS, ConvertConfig, load_model
 from mjx_arm.urdf.scene import TARGET_SITE
 
 
@@ -41,8 +41,9 @@ class SensorReader:
         self.ee_body = int(model.site_bodyid[self.ee_site])
         self.target_site = model.site(TARGET_SITE).id
         self.sensor_slices = {
-            name: slice(int(model.sensor(name).adr[0]), int(model.sensor(name).adr[0]) + 3)
-            for name in ("ft_force", "ft_torque", "tool_acc", "tool_gyro", "tool_angacc")
+            name: slice(int(model.sensor(name).adr[0]),
+                        int(model.sensor(name).adr[0]) + int(model.sensor(name).dim[0]))
+            for name in SENSORS
         }
 
     def ee_quat(self, data: Any):

@@ -33,7 +33,7 @@ SCENE_CONTYPE, SCENE_CONAFFINITY = 2, 1
 EE_SITE = "ee"
 FT_SITE = "ft"
 TOOL_COM_SITE = "tool_com"
-SENSORS = ("ft_force", "ft_torque", "tool_acc", "tool_gyro", "tool_angacc")
+SENSORS = ("ft_force", "ft_torque", "tool_acc", "tool_gyro", "tool_angacc", "ee_pos", "ee_quat")
 
 
 @dataclass(frozen=True)
@@ -335,8 +335,9 @@ def _deepest_link(model: RobotModel) -> str:
 def _add_sites_and_sensors(spec, model: RobotModel, ee_body, ft_body, config) -> None:
     """The ``ee`` site, the F/T site at the wrist and the sensors that tare the reading.
 
-    The force and torque sensors measure what the arm exerts on the tool subtree at the ``ft``
-    site. The accelerometer at the subtree's centre of mass, the gyro and the angular
+    ``ee_pos`` and ``ee_quat`` give the end-effector pose (a batched C backend reads only
+    sensors). The force and torque sensors measure what the arm exerts on the tool subtree at
+    the ``ft`` site. The accelerometer at the subtree's centre of mass, the gyro and the angular
     acceleration sensor give what the tool's own weight and inertia contribute, so the task code
     can remove it (see :mod:`mjx_arm.task.wrench`).
     """
@@ -354,26 +355,20 @@ def _add_sites_and_sensors(spec, model: RobotModel, ee_body, ft_body, config) ->
     com.pos = _subtree_com_in_body(spec, ft_body.name)
     com.size = [0.005, 0, 0]
     com.group = 4
-    site_of = {
-        "ft_force": FT_SITE,
-        "ft_torque": FT_SITE,
-        "tool_acc": TOOL_COM_SITE,
-        "tool_gyro": FT_SITE,
-        "tool_angacc": FT_SITE,
-    }
-    kinds = {
-        "ft_force": mujoco.mjtSensor.mjSENS_FORCE,
-        "ft_torque": mujoco.mjtSensor.mjSENS_TORQUE,
-        "tool_acc": mujoco.mjtSensor.mjSENS_ACCELEROMETER,
-        "tool_gyro": mujoco.mjtSensor.mjSENS_GYRO,
-        "tool_angacc": mujoco.mjtSensor.mjSENS_FRAMEANGACC,
+    sensor_table = {  # name: (type, site)
+        "ft_force": (mujoco.mjtSensor.mjSENS_FORCE, FT_SITE),
+        "ft_torque": (mujoco.mjtSensor.mjSENS_TORQUE, FT_SITE),
+        "tool_acc": (mujoco.mjtSensor.mjSENS_ACCELEROMETER, TOOL_COM_SITE),
+        "tool_gyro": (mujoco.mjtSensor.mjSENS_GYRO, FT_SITE),
+        "tool_angacc": (mujoco.mjtSensor.mjSENS_FRAMEANGACC, FT_SITE),
+        "ee_pos": (mujoco.mjtSensor.mjSENS_FRAMEPOS, EE_SITE),
+        "ee_quat": (mujoco.mjtSensor.mjSENS_FRAMEQUAT, EE_SITE),
     }
     for name in SENSORS:
         sensor = spec.add_sensor()
         sensor.name = name
-        sensor.type = kinds[name]
+        sensor.type, sensor.objname = sensor_table[name]
         sensor.objtype = mujoco.mjtObj.mjOBJ_SITE
-        sensor.objname = site_of[name]
 
 
 def _subtree_com_in_body(spec: mujoco.MjSpec, body_name: str) -> list[float]:

@@ -889,13 +889,15 @@ def _check_moving_mass(
     if mass > 0 or not (direct or elem.find("collision") is not None):
         return
     how = "is moved by a non-fixed joint" if direct else "moves and has collision geometry"
-    what = "has no <inertial>" if elem.find("inertial") is None else "has mass 0"
+    if elem.find("inertial") is None:
+        what = "has no <inertial> (PyBullet then invents 1 kg and unit inertia)"
+    else:
+        what = "has mass 0"
     out.error(
         3,
         _link(name),
-        f"{how} but {what} (PyBullet then invents 1 kg and unit inertia, "
-        "MuJoCo guesses from the geometry)",
-        "add <inertial> with the link's mass (kg), centre of mass and inertia tensor",
+        f"{how} but {what}",
+        "add <inertial> with the link's mass (kg > 0), centre of mass and inertia tensor",
     )
 
 
@@ -1015,7 +1017,11 @@ def _load_mujoco(
 
 @contextlib.contextmanager
 def _captured_fds() -> Iterator[list[str]]:
-    """Send C-level stdout and stderr to a temporary file; the yielded list gets the text."""
+    """Send C-level stdout and stderr to a temporary file; the yielded list gets the text.
+
+    This swaps the process's file descriptors 1 and 2, so it is not safe to use from two threads
+    at once.
+    """
     captured: list[str] = []
     _flush_all()
     with tempfile.TemporaryFile() as tmp:
@@ -1056,7 +1062,11 @@ def _absolute_mesh_copy(tree: _Tree, package_dirs: Mapping[str, str], folder: st
 
 
 def _load_pybullet(tree: _Tree, package_dirs: Mapping[str, str], out: _Findings) -> None:
-    """Load into a private DIRECT PyBullet client with its C output captured; report problems."""
+    """Load into a private DIRECT PyBullet client with its C output captured; report problems.
+
+    PyBullet runs in this process (it segfaults on some broken trees, which is why this layer only
+    runs after the static checks passed). Its ``b3Warning`` messages become warnings.
+    """
     with tempfile.TemporaryDirectory() as folder:
         copy = _absolute_mesh_copy(tree, package_dirs, folder)
         failure = None
@@ -1167,8 +1177,9 @@ def validate(
 
 
 def _layer1(path: Path, out: _Findings) -> _Tree | None:
-    root = _read_xml(path.expanduser().resolve(), out)
-    return None if root is None else _check_tree(path.expanduser().resolve(), root, out)
+    resolved = path.expanduser().resolve()
+    root = _read_xml(resolved, out)
+    return None if root is None else _check_tree(resolved, root, out)
 
 
 def _native(

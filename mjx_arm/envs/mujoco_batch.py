@@ -1,0 +1,151 @@
+"""C MuJoCo physics for the batched env: multithreaded rollouts behind a JAX host callback.
+
+On a CPU, MJX (the JAX implementation) steps this arm about 100x slower than C MuJoCo and takes
+minutes to compile a training step. :class:`MujocoCallbackPhysics` has the same interface as
+:class:`mjx_arm.envs.mjx_env.MjxPhysics`, but a control step of the whole batch is one
+``jax.pure_callback`` into ``mujoco.rollout`` (``nthread`` = CPU cores). Everything around it
+(observation, reward, success, auto-reset, Brax PPO) is the same JAX code as on MJX.
+
+State precision: between control steps the physics state (time, qpos, qvel) and the target
+position live in JAX arrays of the default dtype, float32 unless ``jax_enable_x64`` is set; the
+rollout itself runs in float64. Joint angles therefore carry a rounding of about 1e-7 rad per
+control step compared with a float64 CPU env. The solver's warm start is not carried between
+control steps (each control step starts it cold).
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+from flax import struct
+from mujoco import rollout as mj_rollout
+
+from mjx_arm.envs.arm import ArmInfo
+from mjx_arm.envs.model_io import SensorReader
+from mjx_arm.task import sampling
+from mjx_arm.task.config import TaskConfig
+from mjx_arm.urdf.scene import TARGET_BODY
+
+STATE_SPEC = mujoco.mjtState.mjSTATE_FULLPHYSICS
+CONTROL_SPEC = mujoco.mjtState.mjSTATE_CTRL | mujoco.mjtState.mjSTATE_MOCAP_POS
+
+
+@struct.dataclass
+class CState:
+    """Physics state of one env for the C backend.
+
+    Attributes:
+        state: MuJoCo full physics state (time, qpos, qvel), ``(nstate,)``.
+        mocap_pos: target body position (m), ``(3,)``.
+        sensordata: sensors at ``state`` (as after ``mj_forward``), ``(nsensordata,)``.
+    """
+
+    state: jax.Array
+    mocap_pos: jax.Array
+    sensordata: jax.Array
+
+
+class _Stepper:
+    """Host side: a thread pool of MjData stepping batches with ``mujoco.rollout``."""
+
+    def __init__(self, model: mujoco.MjModel, nthread: int) -> None:
+        self.model = model
+        self.nthread = nthread
+        self.datas = [mujoco.MjData(model) for _ in range(nthread)]
+        self.rollout = mj_rollout.Rollout(nthread=nthread)
+        self.lock = threading.Lock()
+
+    def __call__(self, state: np.ndarray, ctrl: np.ndarray, mocap: np.ndarray, nstep: int):
+        """Advance each row of ``state`` by ``nstep`` steps; return (state, sensordata).
+
+        Args:
+            state: ``(..., nstate)``; ctrl: ``(..., nu)``; mocap: ``(..., 3)``.
+            nstep: physics steps to take; the sensors returned are those at the final state.
+        """
+        lead = state.shape[:-1]
+        state2 = np.ascontiguousarray(state.reshape(-1, state.shape[-1]), dtype=np.float64)
+        control = np.concatenate([ctrl.reshape(-1, ctrl.shape[-1]), mocap.reshape(-1, 3)], -1)
+        control = np.ascontiguousarray(control[:, None, :], dtype=np.float64)
+        # one extra step: its sensors are computed (by mj_forward inside mj_step) at the state
+        # reached after nstep steps, with the same control, as the CPU env reads them
+        with self.lock:
+            states, sensors = self.rollout.rollout(
+                self.model, self.datas, state2, control, control_spec=int(CONTROL_SPEC),
+                nstep=nstep + 1,
+            )
+        new_state = states[:, nstep - 1] if nstep > 0 else state2
+        return (new_state.reshape(*lead, -1).astype(np.float32),
+                sensors[:, nstep].reshape(*lead, -1).astype(np.float32))
+
+
+class MujocoCallbackPhysics:
+    """Batched C MuJoCo physics with the interface of ``MjxPhysics``.
+
+    Args:
+        mj_model: the compiled task model.
+        arm: the arm facts.
+        task: the task configuration.
+        nthread: rollout threads (default: the CPU count).
+    """
+
+    def __init__(self, mj_model: mujoco.MjModel, arm: ArmInfo, task: TaskConfig,
+                 nthread: int | None = None) -> None:
+        self.mj_model = mj_model
+        self.ids = SensorReader(mj_model, arm)
+        self.task = task
+        self.n_substeps = task.n_substeps
+        self.mocap = int(mj_model.body_mocapid[mj_model.body(TARGET_BODY).id])
+        self.stepper = _Stepper(mj_model, nthread or os.cpu_count() or 1)
+        data = mujoco.MjData(mj_model)
+        template = np.zeros(mujoco.mj_stateSize(mj_model, STATE_SPEC))
+        mujoco.mj_getState(mj_model, data, template, STATE_SPEC)
+        self._template = template
+        self._qpos_slice = slice(1, 1 + mj_model.nq)  # state = [time, qpos, qvel]
+        self._qvel_slice = slice(1 + mj_model.nq, 1 + mj_model.nq + mj_model.nv)
+        self._nsensor = mj_model.nsensordata
+
+    def _call(self, state: jax.Array, ctrl: jax.Array, mocap: jax.Array, nstep: int):
+        shapes = (jax.ShapeDtypeStruct(state.shape, jnp.float32),
+                  jax.ShapeDtypeStruct(state.shape[:-1] + (self._nsensor,), jnp.float32))
+
+        def host(s, c, m):
+            return self.stepper(np.asarray(s), np.asarray(c), np.asarray(m), nstep)
+
+        return jax.pure_callback(host, shapes, state, ctrl, mocap, vmap_method="broadcast_all")
+
+    def init(self, qpos: jax.Array, target_body: jax.Array) -> CState:
+        """State at rest at ``qpos (6,)`` with the target body at ``(3,)``; sensors filled."""
+        state = jnp.asarray(self._template, jnp.float32)
+        state = state.at[self._qpos_slice.start + self.ids.qpos_adr].set(qpos)
+        ctrl = jnp.zeros(self.mj_model.nu, jnp.float32)
+        _, sensors = self._call(state, ctrl, target_body.astype(jnp.float32), 0)
+        return CState(state=state, mocap_pos=target_body.astype(jnp.float32), sensordata=sensors)
+
+    def set_target(self, data: CState, target_body: jax.Array) -> CState:
+        """Move the target body (sensors unaffected: the target carries none)."""
+        return data.replace(mocap_pos=target_body.astype(jnp.float32))
+
+    def step(self, data: CState, ctrl: jax.Array) -> CState:
+        """One control step of ``n_substeps`` physics steps with ``ctrl (6,)``."""
+        full = jnp.zeros(self.mj_model.nu, jnp.float32).at[self.ids.actuators].set(ctrl)
+        state, sensors = self._call(data.state, full, data.mocap_pos, self.n_substeps)
+        return data.replace(state=state, sensordata=sensors)
+
+    def read(self, data: CState):
+        """The contract's read-out (see ``mjx_env.Reading``)."""
+        from mjx_arm.envs.mjx_env import Reading
+
+        ids, s = self.ids, data.sensordata
+        return Reading(
+            ee_pos=s[ids.sensor_slices["ee_pos"]],
+            ee_quat=s[ids.sensor_slices["ee_quat"]],
+            qpos=data.state[self._qpos_slice][ids.qpos_adr],
+            qvel=data.state[self._qvel_slice][ids.dof_adr],
+            target_pos=sampling.target_point(jnp, data.mocap_pos, self.task),
+            wrench=ids.wrench(jnp, s),
+        )

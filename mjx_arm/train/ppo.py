@@ -1,0 +1,247 @@
+"""Brax PPO on the batched arm env, with a run directory, checkpoints and resume.
+
+``train(config, run_dir)`` is what ``mjx-arm train`` calls. Brax does the learning; this module
+builds the env, wires Brax's callbacks to the run directory (metrics, checkpoints, transitions,
+progress bar) and restores a run. Brax checkpoints hold params only (normaliser, policy, value):
+on resume the optimiser's moment estimates start from zero again (google/brax#655).
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import jax
+import numpy as np
+
+from mjx_arm.task.config import TaskConfig, task_config
+from mjx_arm.train import compat
+from mjx_arm.train.config import TrainConfig
+from mjx_arm.train.rundir import RunDir
+
+TRANSITIONS_KEPT = 100
+LOGGED_PREFIXES = ("eval/", "training/")
+
+
+@dataclass
+class TrainResult:
+    """What a finished run returns: its folder, final step, last metrics and timings (s)."""
+
+    run_dir: Path
+    steps: int
+    metrics: dict[str, float]
+    compile_seconds: float
+    train_seconds: float
+    steps_per_second: float
+
+
+def resolve_backend(name: str) -> str:
+    """``auto`` -> ``mjx`` when an accelerator is present, else ``mujoco`` (C MuJoCo)."""
+    if name != "auto":
+        return name
+    return "mjx" if jax.default_backend() in ("gpu", "cuda", "rocm", "tpu") else "mujoco"
+
+
+def make_training_env(config: TrainConfig, task: TaskConfig):
+    """The single (unbatched) Brax env of the configured backend."""
+    backend = resolve_backend(config.backend)
+    if backend == "mjx":
+        from mjx_arm.envs.mjx_env import MjxArmEnv
+
+        return MjxArmEnv(task)
+    if backend == "mujoco":
+        from mjx_arm.envs.mjx_env import MjxArmEnv
+        from mjx_arm.envs.mujoco_batch import MujocoCallbackPhysics
+
+        return MjxArmEnv(task, physics_factory=MujocoCallbackPhysics)
+    raise ValueError(f"unknown backend {backend!r}")
+
+
+def full_config(config: TrainConfig, task: TaskConfig) -> dict[str, Any]:
+    """Every resolved setting of a run, as saved in ``config.json``."""
+    from mjx_arm import __version__
+    from mjx_arm.envs.model_io import task_convert_config
+
+    conversion = task_convert_config(task)
+    return {
+        "mjx_arm_version": __version__,
+        "train": config.to_dict(),
+        "task": task.to_dict(),
+        "convert": {k: v for k, v in vars(conversion).items() if k != "package_dirs"},
+        "backend": resolve_backend(config.backend),
+        "jax_backend": jax.default_backend(),
+        "devices": [str(d) for d in jax.devices()],
+    }
+
+
+class _Progress:
+    """Brax callbacks: metrics to the run dir, a progress bar, checkpoints at an interval."""
+
+    def __init__(self, run: RunDir, config: TrainConfig, task: TaskConfig, step_offset: int,
+                 total: int, quiet: bool) -> None:
+        from tqdm import tqdm
+
+        self.run, self.config, self.task = run, config, task
+        self.offset, self.total = step_offset, total
+        self.bar = tqdm(total=total, initial=step_offset, unit="step", unit_scale=True,
+                        disable=quiet, desc=f"train {config.task}", dynamic_ncols=True)
+        self.calls = 0
+        self.start = time.monotonic()
+        self.times: list[tuple[float, int]] = []
+        self.last_metrics: dict[str, float] = {}
+
+    def progress(self, step: int, metrics: dict[str, Any]) -> None:
+        """Brax ``progress_fn``: log one evaluation."""
+        global_step = self.offset + int(step)
+        self.times.append((time.monotonic(), int(step)))
+        row = {k: float(np.asarray(v).mean()) for k, v in metrics.items()
+               if k.startswith(LOGGED_PREFIXES)}
+        self.last_metrics = row
+        self.run.log_metrics(global_step, row)
+        self.bar.n = global_step
+        success = row.get("eval/episode_success", float("nan"))
+        self.bar.set_postfix(reward=f"{row.get('eval/episode_reward', float('nan')):.1f}",
+                             success=f"{success:.2f}")
+        self.bar.refresh()
+
+    def policy_params(self, step: int, make_policy, params) -> None:
+        """Brax ``policy_params_fn``: a checkpoint every ``checkpoint_every`` calls and last."""
+        self.calls += 1
+        global_step = self.offset + int(step)
+        last = global_step >= self.total
+        if step == 0 or not (last or self.calls % self.config.checkpoint_every == 0):
+            return
+        params = jax.tree.map(np.asarray, params)
+        folder = self.run.save_checkpoint(global_step, params, {"task": self.config.task})
+        transitions = rollout_transitions(make_policy, params, self.task, seed=global_step)
+        self.run.save_transitions(folder, transitions)
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+def rollout_transitions(make_policy, params, task: TaskConfig, seed: int) -> dict[str, np.ndarray]:
+    """One evaluation episode in the CPU MuJoCo env; the last 100 transitions as arrays.
+
+    Returns:
+        obs ``(T, 22)``, action ``(T, 6)``, reward ``(T,)``, done ``(T,)``, ee_pos ``(T, 3)``,
+        contact_force ``(T,)`` with T <= 100.
+    """
+    from mjx_arm.envs.mujoco_env import MujocoArmEnv
+    from mjx_arm.task.observation import flatten_obs
+
+    policy = jax.jit(make_policy(params, deterministic=True))
+    env = MujocoArmEnv(task)
+    obs, _ = env.reset(seed=int(seed) % (2**31))
+    key = jax.random.PRNGKey(0)
+    rows: dict[str, list] = {k: [] for k in ("obs", "action", "reward", "done", "ee_pos",
+                                             "contact_force")}
+    for _ in range(task.episode_steps):
+        flat = flatten_obs(np, obs)
+        action = np.asarray(policy(flat, key)[0], dtype=np.float32)
+        obs, reward, terminated, truncated, info = env.step(action)
+        for name, value in (("obs", flat), ("action", action), ("reward", reward),
+                            ("done", terminated), ("ee_pos", obs["ee_pose"][:3]),
+                            ("contact_force", info["contact_force_norm"])):
+            rows[name].append(value)
+        if terminated:
+            break
+    env.close()
+    return {k: np.asarray(v[-TRANSITIONS_KEPT:]) for k, v in rows.items()}
+
+
+def train(config: TrainConfig, run_dir: str | Path, resume: bool = False,
+          quiet: bool = False) -> TrainResult:
+    """Train a PPO policy and fill ``run_dir``.
+
+    Args:
+        config: the resolved training config.
+        run_dir: the run directory (created if missing).
+        resume: continue from the newest checkpoint in ``run_dir``.
+        quiet: no progress bar.
+    """
+    from brax.training.agents.ppo import networks as ppo_networks
+    from brax.training.agents.ppo import train as brax_ppo
+
+    from mjx_arm.envs.wrappers import wrap_for_training
+
+    compat.install()
+    config.validate()
+    task = task_config(config.task, **config.task_overrides)
+    run = RunDir(run_dir)
+    step_offset, restore = 0, None
+    if resume:
+        latest = run.latest_checkpoint()
+        if latest is None:
+            raise FileNotFoundError(f"no checkpoint to resume from in {run.path}")
+        step_offset = int(RunDir.load_meta(latest)["step"])
+        restore = tuple(RunDir.load_params(latest))
+    else:
+        run.save_config(full_config(config, task))
+    remaining = config.num_timesteps - step_offset
+    if remaining <= 0:
+        raise ValueError(f"run already has {step_offset} of {config.num_timesteps} steps")
+
+    env = make_training_env(config, task)
+    network_factory = functools.partial(
+        ppo_networks.make_ppo_networks,
+        policy_hidden_layer_sizes=config.policy_hidden,
+        value_hidden_layer_sizes=config.value_hidden,
+    )
+    progress = _Progress(run, config, task, step_offset, config.num_timesteps, quiet)
+    start = time.monotonic()
+    try:
+        _, params, metrics = brax_ppo.train(
+            environment=env,
+            num_timesteps=remaining,
+            episode_length=task.episode_steps,
+            wrap_env_fn=wrap_for_training,
+            num_envs=config.num_envs,
+            unroll_length=config.unroll_length,
+            batch_size=config.batch_size,
+            num_minibatches=config.num_minibatches,
+            num_updates_per_batch=config.num_updates_per_batch,
+            learning_rate=config.learning_rate,
+            discounting=config.discounting,
+            gae_lambda=config.gae_lambda,
+            clipping_epsilon=config.clipping_epsilon,
+            vf_loss_coefficient=config.vf_loss_coefficient,
+            max_grad_norm=config.max_grad_norm,
+            entropy_cost=config.entropy_cost,
+            reward_scaling=config.reward_scaling,
+            normalize_observations=config.normalize_observations,
+            network_factory=network_factory,
+            num_evals=config.num_evals,
+            num_eval_envs=config.num_eval_envs,
+            deterministic_eval=True,
+            seed=config.seed + step_offset,
+            progress_fn=progress.progress,
+            policy_params_fn=progress.policy_params,
+            restore_params=restore,
+        )
+    finally:
+        progress.close()
+        run.close()
+    total = time.monotonic() - start
+    compile_s, sps = _timings(progress.times, config)
+    return TrainResult(run.path, step_offset + remaining, progress.last_metrics, compile_s,
+                       total, sps)
+
+
+def _timings(times: list[tuple[float, int]], config: TrainConfig) -> tuple[float, float]:
+    """(compile seconds, steady env steps/s) from the evaluation timestamps.
+
+    The first training epoch carries the compilation; later epochs are steady. Compile time is
+    the first epoch's time minus what its steps take at the steady rate (evaluation included).
+    """
+    if len(times) < 3:
+        return float("nan"), float("nan")
+    (t0, s0), (t1, s1) = times[0], times[1]
+    steady = [(b[1] - a[1]) / (b[0] - a[0]) for a, b in zip(times[1:], times[2:], strict=False)
+              if b[0] > a[0]]
+    sps = float(np.median(steady)) if steady else float("nan")
+    compile_s = (t1 - t0) - (s1 - s0) / sps if steady else float("nan")
+    return max(compile_s, 0.0), sps
