@@ -166,7 +166,8 @@ class MjxArmEnv(Env):
         terms = {k: jnp.where(finite | (k == "nonfinite"), v, 0.0) for k, v in terms.items()}
         reward = reward_lib.total_reward(terms, self.task)
         done = ~finite | (success & self.task.terminate_on_success)
-        metrics = {f"reward/{name}": value for name, value in terms.items()}
+        metrics = dict(state.metrics)  # keep keys wrappers added (EvalWrapper's "reward")
+        metrics.update({f"reward/{name}": value for name, value in terms.items()})
         metrics.update(self._measures(reading, success))
         return state.replace(pipeline_state=data, obs=obs, reward=reward,
                              done=done.astype(jnp.float32), metrics=metrics)

@@ -14,6 +14,9 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
+# brax pmaps its training step over an axis of this name; replicated values must match its mesh
+BRAX_AXIS_NAME = "i"
+
 
 def _device_put_replicated(value: Any, devices: Sequence[jax.Device]) -> Any:
     """Replicate a pytree onto ``devices``; every leaf gains a leading axis of len(devices)."""
@@ -23,7 +26,9 @@ def _device_put_replicated(value: Any, devices: Sequence[jax.Device]) -> Any:
     def replicate(_: jax.Array) -> list[jax.Array]:
         return leaves
 
-    out = jax.pmap(replicate, devices=list(devices))(jnp.arange(len(devices)))
+    out = jax.pmap(replicate, axis_name=BRAX_AXIS_NAME, devices=list(devices))(
+        jnp.arange(len(devices))
+    )
     return jax.tree.unflatten(treedef, out)
 
 

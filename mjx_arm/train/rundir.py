@@ -111,6 +111,11 @@ class RunDir:
         return found[-1] if found else None
 
     @staticmethod
+    def load_meta(folder: Path) -> dict[str, Any]:
+        """The ``meta.json`` of a checkpoint folder."""
+        return json.loads((folder / "meta.json").read_text())
+
+    @staticmethod
     def load_params(folder: Path) -> Any:
         """The params saved in a checkpoint folder."""
         import orbax.checkpoint as ocp
