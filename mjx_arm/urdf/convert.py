@@ -99,7 +99,9 @@ def build_spec(urdf: str | Path, config: ConvertConfig | None = None) -> mujoco.
 
     Raises:
         ConversionError: a mesh that cannot be found or read, an invalid inertia (without
-            ``repair_inertia``), a joint without effort or velocity limits, or an importer error.
+            ``repair_inertia``), a joint without effort or velocity limits, or an error of
+            MuJoCo's importer or compiler (a zero joint axis, an unreadable mesh), always naming
+            the file and quoting MuJoCo's message.
     """
     config = config or ConvertConfig()
     if config.scene not in SCENES:
@@ -111,6 +113,19 @@ def build_spec(urdf: str | Path, config: ConvertConfig | None = None) -> mujoco.
         spec = mujoco.MjSpec.from_string(xml_text)
     except Exception as exc:  # MuJoCo raises ValueError with its own text
         raise ConversionError(f"{path}: MuJoCo's URDF importer failed: {exc}") from exc
+    try:
+        _edit_spec(spec, model, config, path)
+    except ConversionError:
+        raise
+    except (ValueError, mujoco.FatalError) as exc:
+        # The edits compile copies of the spec (joint inertias, tool centre of mass, contacts at
+        # rest); MuJoCo's compiler reports a zero joint axis or an unreadable mesh there.
+        raise ConversionError(f"{path}: MuJoCo cannot compile the imported model: {exc}") from exc
+    return spec
+
+
+def _edit_spec(spec: mujoco.MjSpec, model: RobotModel, config: ConvertConfig, path: Path) -> None:
+    """Apply every edit of :func:`build_spec` to the imported ``spec``, in order."""
     _set_options(spec, config)
     actuated = _edit_joints(spec, model, config, path)
     _add_actuators(spec, actuated, model, config)
@@ -122,7 +137,6 @@ def build_spec(urdf: str | Path, config: ConvertConfig | None = None) -> mujoco.
             body.gravcomp = 1.0
     add_scene(spec, config.scene)
     _exclude_neighbours(spec, model)
-    return spec
 
 
 def to_mjcf(urdf: str | Path, config: ConvertConfig | None = None, **overrides) -> str:
@@ -237,13 +251,23 @@ def _set_options(spec: mujoco.MjSpec, config: ConvertConfig) -> None:
 
 
 def _edit_joints(spec: mujoco.MjSpec, model: RobotModel, config: ConvertConfig, path: Path):
-    """Inject damping and armature; return the actuated spec joints in URDF tree order."""
+    """Inject damping and armature; return the actuated spec joints in URDF tree order.
+
+    A ``<mimic>`` joint gets damping (and armature when it has an effort limit) but no actuator:
+    MuJoCo's importer already ties it to the joint it copies with a joint equality.
+    """
     actuated = []
     for urdf_joint in model.actuated_joints:
         joint = spec.joint(urdf_joint.name)
         if joint is None:
             raise ConversionError(f"{path}: joint {urdf_joint.name!r} missing after import")
         lim = urdf_joint.limit
+        if urdf_joint.mimic is not None:
+            if not (urdf_joint.damping and urdf_joint.damping > 0):
+                joint.damping[0] = config.default_damping
+            if lim is not None and lim.effort > 0:
+                joint.armature = config.armature_per_effort * lim.effort
+            continue
         if lim is None or lim.effort <= 0 or lim.velocity <= 0:
             raise ConversionError(
                 f"{path}: joint {urdf_joint.name!r} needs <limit effort=... velocity=...> with "

@@ -71,7 +71,7 @@ class Limit:
 
 @dataclass(frozen=True)
 class Joint:
-    """A URDF joint."""
+    """A URDF joint. ``mimic`` names the joint a ``<mimic>`` joint copies, else None."""
 
     name: str
     type: str
@@ -82,6 +82,7 @@ class Joint:
     limit: Limit | None = None
     damping: float | None = None
     friction: float | None = None
+    mimic: str | None = None
 
     @property
     def movable(self) -> bool:
@@ -228,6 +229,7 @@ def _joint(elem: ET.Element) -> Joint:
     axis_elem = elem.find("axis")
     axis = _floats(axis_elem.get("xyz") if axis_elem is not None else "1 0 0", 3)
     parent, child = elem.find("parent"), elem.find("child")
+    mimic = elem.find("mimic")
     return Joint(
         name=elem.get("name", ""),
         type=elem.get("type", ""),
@@ -238,6 +240,7 @@ def _joint(elem: ET.Element) -> Joint:
         limit=limit,
         damping=damping,
         friction=friction,
+        mimic=mimic.get("joint") if mimic is not None else None,
     )
 
 

@@ -1,0 +1,135 @@
+"""A Gymnasium ``VectorEnv`` backed by the batched JAX env (MJX or C MuJoCo physics).
+
+``gymnasium.make_vec("mjx_arm/Touch-v0", num_envs=N, vectorization_mode="vector_entry_point")``
+returns :class:`ArmVectorEnv`: numpy in and out, the contract's Dict observation, and the
+``SAME_STEP`` autoreset mode (a finished env is reset inside the step that ends it; its last
+observation and info are in ``info["final_obs"]`` / ``info["final_info"]``).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import jax
+import jax.numpy as jnp
+import numpy as np
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from mjx_arm.envs.base import check_action
+from mjx_arm.task import observation as obs_lib
+from mjx_arm.task.config import REWARD_TERMS, TaskConfig, task_config
+
+
+def make_batched_env(task: TaskConfig, backend: str = "auto"):
+    """The single-env JAX env of ``backend`` ("auto", "mjx" or "mujoco")."""
+    from mjx_arm.envs.mjx_env import MjxArmEnv
+    from mjx_arm.train.ppo import resolve_backend
+
+    backend = resolve_backend(backend)
+    if backend == "mujoco":
+        from mjx_arm.envs.mujoco_batch import MujocoCallbackPhysics
+
+        return MjxArmEnv(task, physics_factory=MujocoCallbackPhysics)
+    return MjxArmEnv(task)
+
+
+class ArmVectorEnv(VectorEnv):
+    """``num_envs`` copies of a task stepped as one jitted batch.
+
+    Args:
+        task: the task configuration.
+        num_envs: batch size.
+        backend: "auto" (MJX on an accelerator, C MuJoCo on a CPU), "mjx" or "mujoco".
+    """
+
+    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
+
+    def __init__(self, task: TaskConfig, num_envs: int, backend: str = "auto") -> None:
+        self.task, self.num_envs = task, num_envs
+        self.env = make_batched_env(task, backend)
+        self.single_observation_space = obs_lib.observation_space(task.force_clip)
+        self.observation_space = batch_space(self.single_observation_space, num_envs)
+        self.single_action_space = gym.spaces.Box(-1.0, 1.0, (6,), np.float32)
+        self.action_space = batch_space(self.single_action_space, num_envs)
+        self._reset = jax.jit(jax.vmap(self.env.reset))
+        self._step = jax.jit(jax.vmap(self.env.step))
+        self._select = jax.jit(_select_done)
+        self._state = None
+        self._steps = np.zeros(num_envs, np.int64)
+        self._key = jax.random.PRNGKey(0)
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        """Reset every env; ``seed`` seeds the batch's PRNG key."""
+        if seed is not None:
+            self._key = jax.random.PRNGKey(seed)
+        self._key, key = jax.random.split(self._key)
+        self._state = self._reset(jax.random.split(key, self.num_envs))
+        self._steps[:] = 0
+        return self._obs(self._state.obs), {}
+
+    def step(self, actions):
+        """Step every env with ``actions (num_envs, 6)``; finished envs reset in the same step."""
+        if self._state is None:
+            raise RuntimeError("call reset() before step()")
+        actions = np.asarray(actions, dtype=np.float64)
+        if actions.shape != (self.num_envs, 6):
+            raise ValueError(f"actions must have shape ({self.num_envs}, 6), got {actions.shape}")
+        actions = np.stack([check_action(a) for a in actions])
+        state = self._step(self._state, jnp.asarray(actions))
+        self._steps += 1
+        terminated = np.asarray(state.done) > 0
+        truncated = (self._steps >= self.task.episode_steps) & ~terminated
+        obs = self._obs(state.obs)
+        info = self._info(state)
+        rewards = np.asarray(state.reward, dtype=np.float64)
+        done = terminated | truncated
+        if done.any():
+            info["final_obs"] = obs
+            info["final_info"] = dict(info)
+            info["_final_obs"] = info["_final_info"] = done
+            self._key, key = jax.random.split(self._key)
+            fresh = self._reset(jax.random.split(key, self.num_envs))
+            state = self._select(jnp.asarray(done), fresh, state)
+            self._steps[done] = 0
+            obs = self._obs(state.obs)
+        self._state = state
+        return obs, rewards, terminated, truncated, info
+
+    def _obs(self, flat) -> dict[str, np.ndarray]:
+        flat = np.asarray(flat, dtype=np.float32)
+        return {k: np.ascontiguousarray(v) for k, v in obs_lib.unflatten_obs(flat).items()}
+
+    @staticmethod
+    def _info(state) -> dict[str, Any]:
+        m = {k: np.asarray(v) for k, v in state.metrics.items()}
+        info = {
+            "is_success": m["success"] > 0,
+            "distance": m["distance"],
+            "contact_force_norm": m["contact_force"],
+            "reward_terms": {name: m[f"reward/{name}"] for name in REWARD_TERMS},
+        }
+        return info
+
+
+def _select_done(done: jax.Array, fresh, state):
+    """Per env: ``fresh`` where done, else ``state`` (pytrees with a leading batch axis)."""
+
+    def pick(new, old):
+        mask = jnp.reshape(done, done.shape + (1,) * (old.ndim - 1))
+        return jnp.where(mask, new, old)
+
+    return jax.tree.map(pick, fresh, state)
+
+
+def make_vector_env(task_name: str, num_envs: int = 1, task: TaskConfig | dict | None = None,
+                    backend: str = "auto", max_episode_steps: int | None = None,
+                    **kwargs: Any) -> ArmVectorEnv:
+    """Vector entry point of the registered ids (``max_episode_steps`` sets the episode length)."""
+    if kwargs:
+        raise TypeError(f"unexpected arguments for the batched env: {sorted(kwargs)}")
+    cfg = task if isinstance(task, TaskConfig) else task_config(task_name, **(task or {}))
+    if max_episode_steps is not None:
+        cfg = cfg.replace(episode_steps=int(max_episode_steps))
+    return ArmVectorEnv(cfg, num_envs, backend)
