@@ -1,0 +1,3 @@
+from pybullet_ref.env import PybulletArmEnv
+
+__all__ = ["PybulletArmEnv"]

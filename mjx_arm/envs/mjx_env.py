@@ -163,8 +163,10 @@ class MjxArmEnv(Env):
         success = reward_lib.is_success(jnp, d, force, self.task) & finite
         terms = reward_lib.reward_terms(jnp, d, force, reading.qpos, reading.qvel, self._limits,
                                         success, ~finite, self.task)
-        terms = {k: jnp.where(finite | (k == "nonfinite"), v, 0.0) for k, v in terms.items()}
-        reward = reward_lib.total_reward(terms, self.task)
+        # strong float32 everywhere: a weak type would change the State's type and retrace
+        terms = {k: jnp.where(finite | (k == "nonfinite"), v, 0.0).astype(jnp.float32)
+                 for k, v in terms.items()}
+        reward = reward_lib.total_reward(terms, self.task).astype(jnp.float32)
         done = ~finite | (success & self.task.terminate_on_success)
         metrics = dict(state.metrics)  # keep keys wrappers added (EvalWrapper's "reward")
         metrics.update({f"reward/{name}": value for name, value in terms.items()})
@@ -197,7 +199,8 @@ class MjxArmEnv(Env):
 
     def _measures(self, reading: Reading, success: jax.Array) -> dict[str, jax.Array]:
         d, force = self._distance_and_force(reading)
-        return {"distance": d, "contact_force": force, "success": success.astype(jnp.float32)}
+        return {"distance": d.astype(jnp.float32), "contact_force": force.astype(jnp.float32),
+                "success": jnp.asarray(success).astype(jnp.float32)}
 
 
 def _all_finite(tree: Any) -> jax.Array:

@@ -53,12 +53,14 @@ class SensorReader:
     def wrench(self, xp: Any, sensordata):
         """Tared external wrench on the tool in the ee frame, shape ``(6,)``."""
         s = {name: sensordata[sl] for name, sl in self.sensor_slices.items()}
-        return external_wrench(
-            xp,
-            s["ft_force"],
-            s["ft_torque"],
-            s["tool_acc"],
-            s["tool_gyro"],
-            s["tool_angacc"],
-            self.arm.tool,
-        )
+        # frameangacc reports in the world frame; the other tool sensors in the sensor frame
+        alpha = quat_rotate_inverse(xp, s["ft_quat"], s["tool_angacc"])
+        return external_wrench(xp, s["ft_force"], s["ft_torque"], s["tool_acc"],
+                               s["tool_gyro"], alpha, self.arm.tool)
+
+
+def quat_rotate_inverse(xp: Any, quat, vec):
+    """Rotate ``vec (3,)`` by the inverse of unit quaternion ``quat (4,)`` (w, x, y, z)."""
+    w, u = quat[0], quat[1:]
+    t = 2.0 * xp.cross(-u, vec)
+    return vec + w * t + xp.cross(-u, t)

@@ -33,7 +33,16 @@ SCENE_CONTYPE, SCENE_CONAFFINITY = 2, 1
 EE_SITE = "ee"
 FT_SITE = "ft"
 TOOL_COM_SITE = "tool_com"
-SENSORS = ("ft_force", "ft_torque", "tool_acc", "tool_gyro", "tool_angacc", "ee_pos", "ee_quat")
+SENSORS = (
+    "ft_force",
+    "ft_torque",
+    "tool_acc",
+    "tool_gyro",
+    "tool_angacc",
+    "ft_quat",
+    "ee_pos",
+    "ee_quat",
+)
 
 
 @dataclass(frozen=True)
@@ -119,8 +128,9 @@ def build_spec(urdf: str | Path, config: ConvertConfig | None = None) -> mujoco.
         raise
     except (ValueError, mujoco.FatalError) as exc:
         # The edits compile copies of the spec (joint inertias, tool centre of mass, contacts at
-        # rest); MuJoCo's compiler reports a zero joint axis or an unreadable mesh there.
-        raise ConversionError(f"{path}: MuJoCo cannot compile the imported model: {exc}") from exc
+        # rest); MuJoCo's compiler reports a zero joint axis or an unreadable mesh there. Its
+        # message comes first, as the validator quotes it after "MuJoCo cannot load the model:".
+        raise ConversionError(f"{str(exc).rstrip()}\n(MuJoCo compiling {path})") from exc
     return spec
 
 
@@ -361,7 +371,8 @@ def _add_sites_and_sensors(spec, model: RobotModel, ee_body, ft_body, config) ->
 
     ``ee_pos`` and ``ee_quat`` give the end-effector pose (a batched C backend reads only
     sensors). The force and torque sensors measure what the arm exerts on the tool subtree at
-    the ``ft`` site. The accelerometer at the subtree's centre of mass, the gyro and the angular
+    the ``ft`` site. ``tool_angacc`` (a frame sensor) is in the world frame; ``ft_quat``
+    rotates it into the sensor frame. The accelerometer at the subtree's centre of mass, the gyro and the angular
     acceleration sensor give what the tool's own weight and inertia contribute, so the task code
     can remove it (see :mod:`mjx_arm.task.wrench`).
     """
@@ -386,6 +397,7 @@ def _add_sites_and_sensors(spec, model: RobotModel, ee_body, ft_body, config) ->
         "tool_gyro": (mujoco.mjtSensor.mjSENS_GYRO, FT_SITE),
         "tool_angacc": (mujoco.mjtSensor.mjSENS_FRAMEANGACC, FT_SITE),
         "ee_pos": (mujoco.mjtSensor.mjSENS_FRAMEPOS, EE_SITE),
+        "ft_quat": (mujoco.mjtSensor.mjSENS_FRAMEQUAT, FT_SITE),
         "ee_quat": (mujoco.mjtSensor.mjSENS_FRAMEQUAT, EE_SITE),
     }
     for name in SENSORS:

@@ -1,0 +1,485 @@
+"""The contract on PyBullet: the arm URDF loaded directly, stepped by ``stepSimulation``.
+
+The twin of :class:`mjx_arm.envs.mujoco_env.MujocoArmEnv`: the engine-neutral parts (spaces,
+sampling, observation, reward, success) come from :class:`mjx_arm.envs.base.BaseRobotEnv`; this
+file implements the physics hooks only. Each env owns one ``BulletClient`` in DIRECT mode, so
+several envs (also in the subprocesses of a Gymnasium ``AsyncVectorEnv``) never share a physics
+server or module state.
+
+Joint drive: the MuJoCo model's servo, applied as joint torques. The MuJoCo model drives each
+joint with ``clip(kv * (u - qdot), +-effort)`` (a velocity actuator) and adds joint damping
+``-d * qdot``, reflected rotor inertia (armature) and gravity compensation. PyBullet's
+``VELOCITY_CONTROL`` motor is a hard velocity constraint instead: blocked by the box it pushes
+with its whole torque cap (measured: about 380 N at the tool where MuJoCo gives 26 N), so contact
+forces would not be comparable. Here, at every substep, the same law goes through
+``TORQUE_CONTROL``: ``clip(kv * (u - qdot), +-effort) - d * qdot + g(q)``, with ``g(q)`` from
+``calculateInverseDynamics`` (MuJoCo's ``gravcomp``; gravity is -9.81 in both engines). A servo
+this stiff (``kv * dt`` equals the joint's smallest apparent inertia *with* armature) is only
+stable with the armature, which PyBullet lacks, so each joint's child link gets it as a rotor
+disc: ``a`` about the joint axis, ``a / 2`` across (a valid inertia tensor). URDF joint damping
+is zeroed in PyBullet (Bullet applies it explicitly, which diverges on the light wrist links; it
+is part of the law above). ``kv``, ``d``, the effort and the armature are read from the
+converted MuJoCo model. Friction is MuJoCo's 1.0 per contact.
+
+Wrist F/T: ``enableJointForceTorqueSensor`` on the fixed joint ``ft_sensor_joint``. Found with
+the tool hanging at rest in several orientations: ``getJointState(ft)[2]`` is the force the arm
+exerts on the tool subtree, in the tool link frame (the contract's sign), with the torque taken
+about the tool link's centre of mass, not the joint; it is moved to the joint here. The tare uses
+:func:`mjx_arm.task.wrench.external_wrench` with accelerations by finite differences over the
+last substep. In fast free motion the tared reading stays below 0.6 N and 0.04 N m: Bullet's
+joint reaction carries a small velocity-product term when several joints turn at once.
+
+Reset: PyBullet reproduces a seeded episode exactly only after a full rebuild, so every reset
+rebuilds the world (about 5 ms without rendering, 8 ms with visual shapes), takes one substep at
+rest so the F/T sensor has a reading, and puts the joints back at the sampled angles.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from itertools import combinations
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+import pybullet
+from pybullet_utils.bullet_client import BulletClient
+
+from mjx_arm.envs.arm import ArmInfo
+from mjx_arm.envs.base import DEFAULT_HEIGHT, DEFAULT_WIDTH, BaseRobotEnv, PhysicsReading
+from mjx_arm.paths import asset
+from mjx_arm.task import sampling
+from mjx_arm.task.config import TaskConfig
+from mjx_arm.task.wrench import external_wrench
+from mjx_arm.urdf.convert import ConvertConfig, load_model
+from mjx_arm.urdf.scene import CAMERA_EYE, CAMERA_FOVY, CAMERA_TARGET
+
+GRAVITY = (0.0, 0.0, -9.81)
+_GRAVITY = np.array(GRAVITY)
+# MuJoCo's sliding friction (every geom 1.0, a contact takes the larger); Bullet multiplies the
+# two bodies' coefficients, so 1.0 on every body gives the same 1.0 per contact.
+FRICTION = 1.0
+BASE = -1  # PyBullet's link index of a multibody's base
+ARM_FLAGS = pybullet.URDF_USE_INERTIA_FROM_FILE | pybullet.URDF_USE_SELF_COLLISION
+TARGET_MARKER_RADIUS = 0.02
+TARGET_MARKER_RGBA = (0.1, 0.8, 0.2, 0.5)
+NEAR, FAR = 0.01, 10.0
+
+
+@dataclass(frozen=True)
+class JointServo:
+    """The joint drive of the converted MuJoCo model, per actuated joint in contract order.
+
+    Attributes:
+        kv: velocity gain of the actuator (N m s/rad), ``(6,)``.
+        damping: joint damping (N m s/rad), ``(6,)``.
+        effort: torque cap of the actuator (N m), ``(6,)``.
+        armature: reflected rotor inertia (kg m^2), ``(6,)``.
+    """
+
+    kv: tuple[float, ...]
+    damping: tuple[float, ...]
+    effort: tuple[float, ...]
+    armature: tuple[float, ...]
+
+    def torque(self, u: list[float], qdot: list[float], gravity: list[float]) -> list[float]:
+        """Joint torques (N m): ``clip(kv (u - qdot), +-effort) - d qdot + gravity``.
+
+        Plain Python on purpose: for 6 joints it is ~1 us, numpy ~5 us.
+
+        Args:
+            u: velocity targets (rad/s), 6 values.
+            qdot: joint velocities (rad/s), 6 values.
+            gravity: gravity compensation torques (N m), 6 values.
+        """
+        out = []
+        for (kv, d, effort), v, w, g in zip(self._gains, u, qdot, gravity, strict=True):
+            t = kv * (v - w)
+            t = effort if t > effort else -effort if t < -effort else t
+            out.append(t - d * w + g)
+        return out
+
+    @functools.cached_property
+    def _gains(self) -> tuple[tuple[float, float, float], ...]:
+        return tuple(zip(self.kv, self.damping, self.effort, strict=True))
+
+
+@functools.cache
+def _servo_cached(urdf: Path, mtime: float, sim_dt: float, names: tuple[str, ...]) -> JointServo:
+    del mtime  # part of the cache key only
+    model = load_model(urdf, ConvertConfig(sim_dt=sim_dt))
+    actuators = [model.actuator(name) for name in names]
+    joints = [model.joint(name) for name in names]
+    return JointServo(
+        kv=tuple(float(a.gainprm[0]) for a in actuators),
+        damping=tuple(float(j.damping[0]) for j in joints),
+        effort=tuple(float(a.forcerange[1]) for a in actuators),
+        armature=tuple(float(j.armature[0]) for j in joints),
+    )
+
+
+def joint_servo(arm: ArmInfo, sim_dt: float) -> JointServo:
+    """The servo of the MuJoCo model converted from ``arm.urdf`` (cached per file version)."""
+    return _servo_cached(arm.urdf, arm.urdf.stat().st_mtime, sim_dt, arm.joint_names)
+
+
+@dataclass(frozen=True)
+class ArmIds:
+    """PyBullet indices of the arm, looked up by name (link index = joint index).
+
+    Attributes:
+        joints: the six actuated joints, contract order.
+        ft: the fixed joint of the wrist F/T reading; its child link is the tool link.
+        ee: the end-effector link.
+        read: what one ``getJointStates`` call reads: ``joints`` then ``ft``.
+        tool_com: the tool link's centre of mass in the tool link frame (m), ``(3,)``; PyBullet
+            reports the F/T torque about this point.
+        inertia: principal inertia (kg m^2) of each actuated joint's child link with the
+            joint's armature added, 6 triples.
+        self_collision_off: arm link pairs whose contacts are disabled.
+    """
+
+    joints: tuple[int, ...]
+    ft: int
+    ee: int
+    read: tuple[int, ...]
+    tool_com: np.ndarray
+    inertia: tuple[tuple[float, float, float], ...]
+    self_collision_off: tuple[tuple[int, int], ...]
+
+
+class _HotCalls(NamedTuple):
+    """The client calls of every step, bound once (``BulletClient`` rebinds them per access)."""
+
+    get_joint_states: Callable
+    get_link_state: Callable
+    get_link_states: Callable
+    inverse_dynamics: Callable
+    set_motors: Callable
+    step: Callable
+
+    @classmethod
+    def of(cls, client: BulletClient) -> _HotCalls:
+        """Bind the calls of ``client``."""
+        return cls(
+            client.getJointStates,
+            client.getLinkState,
+            client.getLinkStates,
+            client.calculateInverseDynamics,
+            client.setJointMotorControlArray,
+            client.stepSimulation,
+        )
+
+
+class PybulletArmEnv(BaseRobotEnv):
+    """The arm task on PyBullet (one world, CPU), same contract as ``MujocoArmEnv``.
+
+    The world is rebuilt at every reset (PyBullet reproduces a seeded episode exactly only after
+    a full rebuild). Self-collision mirrors the MuJoCo model (:func:`excluded_pairs`); the joint
+    drive is the MuJoCo model's servo (see the module docstring).
+
+    Args:
+        task: the task configuration (default: Touch).
+        urdf: the arm URDF (default: the shipped arm).
+        render_mode: None, "rgb_array" or "human".
+        width, height: frame size (pixels).
+    """
+
+    engine = "pybullet"
+
+    def __init__(
+        self,
+        task: TaskConfig | None = None,
+        urdf: str | Path | None = None,
+        render_mode: str | None = None,
+        width: int = DEFAULT_WIDTH,
+        height: int = DEFAULT_HEIGHT,
+    ) -> None:
+        super().__init__(task, urdf, render_mode, width, height)
+        self.servo = joint_servo(self.arm, self.task.sim_dt)
+        self.client = BulletClient(connection_mode=pybullet.DIRECT)
+        self._calls = _HotCalls.of(self.client)
+        # without a render mode nothing is drawn: skip the visual shapes (halves the reset time)
+        self._load_flags = 0 if render_mode else pybullet.URDF_IGNORE_VISUAL_SHAPES
+        self.ids = self._lookup_ids()
+        self._zeros = [0.0] * len(self.ids.joints)
+        self._u = list(self._zeros)
+        self._target_body = sampling.target_body_pos(np, np.full(3, 0.5), self.task)
+        self._tool_before = (np.zeros(3), np.zeros(3))
+        self._camera = self._camera_matrices()
+        # a complete world before the first reset (render, get_ee_pose): home pose, mid target
+        self._physics_reset(np.asarray(self.task.home_qpos), self._target_body)
+
+    # ------------------------------------------------------------------ world
+
+    def _load_arm(self) -> int:
+        return self.client.loadURDF(
+            str(self.arm.urdf), useFixedBase=True, flags=ARM_FLAGS | self._load_flags
+        )
+
+    def _lookup_ids(self) -> ArmIds:
+        """Load the arm alone at q = 0 and look its indices up by name."""
+        c = self.client
+        c.resetSimulation()
+        arm = self._load_arm()
+        infos = [c.getJointInfo(arm, j) for j in range(c.getNumJoints(arm))]
+        joint = {info[1].decode(): info[0] for info in infos}
+        link = {info[12].decode(): info[0] for info in infos}
+        joints = tuple(joint[name] for name in self.arm.joint_names)
+        ft = joint[self.arm.ft_joint]
+        return ArmIds(
+            joints=joints,
+            ft=ft,
+            ee=link[self.arm.ee_link],
+            read=(*joints, ft),
+            tool_com=np.array(c.getDynamicsInfo(arm, ft)[3]),
+            inertia=tuple(
+                inertia_with_armature(c, arm, j, a)
+                for j, a in zip(joints, self.servo.armature, strict=True)
+            ),
+            self_collision_off=excluded_pairs(c, arm),
+        )
+
+    def _build_world(self, qpos: np.ndarray, target_body_pos: np.ndarray) -> None:
+        """Rebuild the whole world: arm at ``qpos`` (rad, at rest), table, target."""
+        c = self.client
+        c.resetSimulation()
+        c.setGravity(*GRAVITY)
+        c.setTimeStep(self.task.sim_dt)
+        self.body = self._load_arm()
+        self._setup_arm(qpos)
+        table = c.loadURDF(str(asset("table.urdf")), useFixedBase=True, flags=self._load_flags)
+        c.changeDynamics(table, BASE, lateralFriction=FRICTION)
+        position = [float(v) for v in target_body_pos]
+        if self.task.uses_contact:
+            box = c.loadURDF(
+                str(asset("target_box.urdf")),
+                basePosition=position,
+                useFixedBase=True,
+                flags=self._load_flags,
+            )
+            c.changeDynamics(box, BASE, lateralFriction=FRICTION)
+        elif self.render_mode:
+            self._add_target_marker(position)
+
+    def _setup_arm(self, qpos: np.ndarray) -> None:
+        """Dynamics, collision filter, motors, joint state and F/T sensor of a fresh arm."""
+        c, arm, ids = self.client, self.body, self.ids
+        for link in range(BASE, c.getNumJoints(arm)):
+            c.changeDynamics(
+                arm, link, linearDamping=0.0, angularDamping=0.0, lateralFriction=FRICTION
+            )
+        for j, inertia in zip(ids.joints, ids.inertia, strict=True):
+            c.changeDynamics(arm, j, jointDamping=0.0, localInertiaDiagonal=inertia)
+        for i, j in ids.self_collision_off:
+            c.setCollisionFilterPair(arm, arm, i, j, 0)
+        # free the joints of the default velocity motors: the servo acts through torques
+        c.setJointMotorControlArray(arm, ids.joints, pybullet.VELOCITY_CONTROL, forces=self._zeros)
+        for j, q in zip(ids.joints, qpos, strict=True):
+            c.resetJointState(arm, j, float(q), 0.0)
+        c.enableJointForceTorqueSensor(arm, ids.ft, True)
+
+    def _add_target_marker(self, position: list[float]) -> None:
+        """A visual-only sphere at the reach target (no collision shape, no mass)."""
+        c = self.client
+        shape = c.createVisualShape(
+            pybullet.GEOM_SPHERE, radius=TARGET_MARKER_RADIUS, rgbaColor=TARGET_MARKER_RGBA
+        )
+        c.createMultiBody(baseMass=0.0, baseVisualShapeIndex=shape, basePosition=position)
+
+    # ------------------------------------------------------------------ engine hooks
+
+    def _physics_reset(self, qpos: np.ndarray, target_body_pos: np.ndarray) -> None:
+        self._target_body = np.asarray(target_body_pos, dtype=np.float64).copy()
+        self._build_world(qpos, self._target_body)
+        self._physics_set_velocity_targets(np.zeros(len(self.ids.joints)))
+        # The F/T sensor reports the joint force of the last step: take one substep at rest
+        # (the arm held by gravity compensation), then put the joints back at qpos, at rest.
+        self._physics_step(1)
+        for j, q in zip(self.ids.joints, qpos, strict=True):
+            self.client.resetJointState(self.body, j, float(q), 0.0)
+        self._tool_before = (np.zeros(3), np.zeros(3))
+
+    def _physics_set_velocity_targets(self, qdot_target: np.ndarray) -> None:
+        self._u = [float(v) for v in qdot_target]
+
+    def _physics_step(self, n_substeps: int) -> None:
+        calls, body, joints, zeros = self._calls, self.body, self.ids.joints, self._zeros
+        for i in range(n_substeps):
+            states = calls.get_joint_states(body, joints)
+            gravity = calls.inverse_dynamics(body, [s[0] for s in states], zeros, zeros)
+            torque = self.servo.torque(self._u, [s[1] for s in states], gravity)
+            calls.set_motors(body, joints, pybullet.TORQUE_CONTROL, forces=torque)
+            if i == n_substeps - 1:
+                self._tool_before = self._tool_velocity()
+            calls.step()
+
+    def _physics_read(self) -> PhysicsReading:
+        calls = self._calls
+        states = calls.get_joint_states(self.body, self.ids.read)
+        tool, ee = calls.get_link_states(
+            self.body, [self.ids.ft, self.ids.ee], computeLinkVelocity=1, computeForwardKinematics=1
+        )
+        x, y, z, w = ee[5]
+        return PhysicsReading(
+            ee_pos=np.array(ee[4]),
+            ee_quat=np.array([w, x, y, z]),
+            qpos=np.array([s[0] for s in states[:-1]]),
+            qvel=np.array([s[1] for s in states[:-1]]),
+            target_pos=np.asarray(sampling.target_point(np, self._target_body, self.task)),
+            wrench=self._wrench(states[-1][2], tool),
+        )
+
+    def _render_frame(self) -> np.ndarray:
+        view, projection = self._camera
+        _, _, rgba, _, _ = self.client.getCameraImage(
+            self.width,
+            self.height,
+            viewMatrix=view,
+            projectionMatrix=projection,
+            renderer=pybullet.ER_TINY_RENDERER,
+        )
+        return np.asarray(rgba, dtype=np.uint8).reshape(self.height, self.width, 4)[..., :3].copy()
+
+    def close(self) -> None:
+        """Disconnect this env's physics server."""
+        client = getattr(self, "client", None)
+        if client is not None:
+            client.disconnect()
+            self.client = None
+        super().close()
+
+    # ------------------------------------------------------------------ helpers
+
+    def _tool_velocity(self) -> tuple[np.ndarray, np.ndarray]:
+        """World velocity of the tool link's centre of mass and its angular velocity, ``(3,)``."""
+        state = self._calls.get_link_state(
+            self.body, self.ids.ft, computeLinkVelocity=1, computeForwardKinematics=1
+        )
+        return np.array(state[6]), np.array(state[7])
+
+    def _wrench(self, reaction: Sequence[float], tool_state: Sequence) -> np.ndarray:
+        """Tared external wrench on the tool in the ee frame, ``(6,)``, from PyBullet's F/T.
+
+        Args:
+            reaction: ``getJointState(ft)[2]``: the force the arm exerts on the tool link, in
+                the tool link frame, and the torque about the tool link's centre of mass.
+            tool_state: ``getLinkState(tool)`` with velocities, after the step.
+        """
+        rot = np.array(pybullet.getMatrixFromQuaternion(tool_state[5])).reshape(3, 3)
+        force = np.array(reaction[:3])
+        torque = np.array(reaction[3:]) + _cross(self.ids.tool_com, force)  # about the origin
+        v0, w0 = self._tool_before
+        v1, w1 = np.array(tool_state[6]), np.array(tool_state[7])
+        alpha = (w1 - w0) / self.task.sim_dt
+        offset = rot @ (self.arm.tool.com - self.ids.tool_com)  # link com -> subtree com
+        a_com = (v1 - v0) / self.task.sim_dt + _cross(alpha, offset)
+        a_com += _cross(w1, _cross(w1, offset))
+        acc = rot.T @ (a_com - _GRAVITY)
+        return external_wrench(_XP, force, torque, acc, rot.T @ w1, rot.T @ alpha, self.arm.tool)
+
+    def _camera_matrices(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        view = self.client.computeViewMatrix(CAMERA_EYE, CAMERA_TARGET, [0.0, 0.0, 1.0])
+        projection = self.client.computeProjectionMatrixFOV(
+            CAMERA_FOVY, self.width / self.height, NEAR, FAR
+        )
+        return view, projection
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product of two ``(3,)`` vectors (``np.cross`` costs ~20 us on tiny arrays)."""
+    return np.array(
+        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    )
+
+
+class _SmallNumpy:
+    """``numpy`` for the single 3-vectors of one env: fast ``cross`` and matrix-vector ``einsum``.
+
+    Passed as the array namespace ``xp`` of the contract's :func:`external_wrench`, so the tare
+    math stays defined once while one read-out costs ~15 us instead of ~80 us. Anything else,
+    and other shapes, go to numpy unchanged.
+    """
+
+    def __getattr__(self, name: str):
+        return getattr(np, name)
+
+    @staticmethod
+    def cross(a, b):
+        """``np.cross`` for two ``(3,)`` vectors, numpy's otherwise."""
+        if np.shape(a) == (3,) and np.shape(b) == (3,):
+            return _cross(a, b)
+        return np.cross(a, b)
+
+    @staticmethod
+    def einsum(spec: str, *operands):
+        """``np.einsum``; the matrix-vector product ``"ij,...j->...i"`` of a vector as ``@``."""
+        if spec == "ij,...j->...i" and np.ndim(operands[1]) == 1:
+            return operands[0] @ operands[1]
+        return np.einsum(spec, *operands)
+
+
+_XP = _SmallNumpy()
+
+
+def inertia_with_armature(
+    client: BulletClient, arm: int, joint: int, armature: float
+) -> tuple[float, float, float]:
+    """Principal inertia of ``joint``'s child link plus a rotor disc of ``armature`` on its axis.
+
+    The disc adds ``armature`` about the joint axis and half of it about the two axes across
+    (a valid inertia tensor, which Bullet's inverse dynamics checks). When the joint axis is not
+    a principal axis of the link, ``armature`` is added about all three axes instead.
+
+    Returns:
+        The three principal moments (kg m^2) for ``changeDynamics(localInertiaDiagonal=...)``.
+    """
+    dynamics = client.getDynamicsInfo(arm, joint)
+    diagonal = np.array(dynamics[2], dtype=np.float64)
+    rot = np.array(client.getMatrixFromQuaternion(dynamics[4])).reshape(3, 3)
+    axis = rot.T @ np.array(client.getJointInfo(arm, joint)[13])  # in the inertial frame
+    axis /= np.linalg.norm(axis)
+    principal = np.flatnonzero(np.abs(axis) > 1.0 - 1e-9)
+    disc = np.full(3, armature)
+    if principal.size == 1:
+        disc = np.full(3, armature / 2)
+        disc[principal[0]] = armature
+    return tuple(float(v) for v in diagonal + disc)
+
+
+def excluded_pairs(client: BulletClient, arm: int) -> tuple[tuple[int, int], ...]:
+    """Arm link pairs whose contacts are disabled, mirroring MuJoCo's filtering.
+
+    MuJoCo skips contacts inside one rigid group of links joined by fixed joints (a weld) and
+    between a weld and its parent weld (``filterparent``); the converter adds excludes for link
+    pairs in contact in the reference pose q = 0. The same rules here: welds and parents from the
+    joint tree, contacts at q = 0 from ``getClosestPoints`` (penetration only). Call it with the
+    arm at q = 0.
+
+    Returns:
+        Sorted pairs of link indices (-1 = base), each ``(i, j)`` with ``i < j``.
+    """
+    n = client.getNumJoints(arm)
+    infos = [client.getJointInfo(arm, j) for j in range(n)]
+
+    def weld(link: int) -> int:
+        while link != BASE and infos[link][2] == pybullet.JOINT_FIXED:
+            link = infos[link][16]
+        return link
+
+    def parent_weld(link: int) -> int | None:
+        w = weld(link)
+        return None if w == BASE else weld(infos[w][16])
+
+    def touching(i: int, j: int) -> bool:
+        points = client.getClosestPoints(arm, arm, 0.0, linkIndexA=i, linkIndexB=j)
+        return any(point[8] < 0.0 for point in points)
+
+    off = set()
+    for i, j in combinations(range(BASE, n), 2):
+        wi, wj = weld(i), weld(j)
+        if wi == wj or parent_weld(i) == wj or parent_weld(j) == wi or touching(i, j):
+            off.add((i, j))
+    return tuple(sorted(off))

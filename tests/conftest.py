@@ -1,0 +1,19 @@
+"""Shared test settings: JAX's persistent compilation cache and quiet logs."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+_CACHE = Path(os.environ.get("MJX_ARM_JAX_CACHE", Path(__file__).resolve().parents[1] / ".jax_cache"))
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Compile each JAX function once per machine: later runs load it from the cache."""
+    import jax
+
+    jax.config.update("jax_compilation_cache_dir", str(_CACHE))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
