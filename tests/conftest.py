@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
-_CACHE = Path(os.environ.get("MJX_ARM_JAX_CACHE", Path(__file__).resolve().parents[1] / ".jax_cache"))
+_REPO = Path(__file__).resolve().parents[1]
+_CACHE = Path(os.environ.get("MJX_ARM_JAX_CACHE", _REPO / ".jax_cache"))
 
 
 def pytest_configure(config: pytest.Config) -> None:

@@ -6,7 +6,6 @@ module compiles few functions and reuses them across tests.
 
 from __future__ import annotations
 
-
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -103,5 +102,3 @@ def test_reset_is_a_pure_function_of_the_key(env, traced):
     np.testing.assert_array_equal(a.obs, b.obs)
     c = reset(jax.random.split(jax.random.PRNGKey(12), BATCH))
     assert not np.allclose(a.obs[:, 13:16], c.obs[:, 13:16])  # new targets
-
-

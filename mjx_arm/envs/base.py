@@ -10,7 +10,7 @@ from __future__ import annotations
 from abc import abstractmethod
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
@@ -59,7 +59,7 @@ class BaseRobotEnv(gym.Env):
         width, height: frame size (pixels) of ``render()``.
     """
 
-    metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 30}
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array", "human"], "render_fps": 30}
     engine: str = "none"
 
     def __init__(
@@ -120,7 +120,7 @@ class BaseRobotEnv(gym.Env):
         return obs, self._info(self._reading, None, False)
 
     def step(self, action):
-        """Apply one action for ``ctrl_dt`` and return (obs, reward, terminated, truncated, info)."""
+        """Apply one action for ``ctrl_dt``: (obs, reward, terminated, truncated, info)."""
         if self._reading is None:
             raise RuntimeError("call reset() before step()")
         self.apply_action(action)

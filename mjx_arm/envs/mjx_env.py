@@ -108,8 +108,12 @@ class MjxArmEnv(Env):
         physics_factory: builds the physics from (mj_model, arm, task); default MJX.
     """
 
-    def __init__(self, task: TaskConfig | None = None, urdf: str | Path | None = None,
-                 physics_factory=MjxPhysics) -> None:
+    def __init__(
+        self,
+        task: TaskConfig | None = None,
+        urdf: str | Path | None = None,
+        physics_factory=MjxPhysics,
+    ) -> None:
         self.task = task or touch_config()
         self.arm = arm_info(urdf)
         validated(self.arm.urdf, "mujoco")
@@ -136,8 +140,10 @@ class MjxArmEnv(Env):
     def sample_episode(self, rng: jax.Array) -> tuple[jax.Array, jax.Array]:
         """Start joint angles ``(6,)`` and target body position ``(3,)`` from ``rng``."""
         u = jax.random.uniform(rng, (sampling.N_UNIFORMS,))
-        return (sampling.initial_qpos(jnp, u[:6], self.task),
-                sampling.target_body_pos(jnp, u[6:], self.task))
+        return (
+            sampling.initial_qpos(jnp, u[:6], self.task),
+            sampling.target_body_pos(jnp, u[6:], self.task),
+        )
 
     def reset(self, rng: jax.Array) -> State:
         """A new episode from ``rng`` (a single PRNG key)."""
@@ -148,8 +154,14 @@ class MjxArmEnv(Env):
         zero = jnp.zeros(())
         metrics = {f"reward/{name}": zero for name in REWARD_TERMS}
         metrics.update(self._measures(reading, zero))
-        return State(pipeline_state=data, obs=self.observe(reading), reward=zero, done=zero,
-                     metrics=metrics, info={"rng": rng})
+        return State(
+            pipeline_state=data,
+            obs=self.observe(reading),
+            reward=zero,
+            done=zero,
+            metrics=metrics,
+            info={"rng": rng},
+        )
 
     def step(self, state: State, action: jax.Array) -> State:
         """Apply ``action (6,)`` for one control step."""
@@ -161,18 +173,26 @@ class MjxArmEnv(Env):
         obs = jnp.where(finite, self.observe(reading), state.obs)
         d, force = self._distance_and_force(reading)
         success = reward_lib.is_success(jnp, d, force, self.task) & finite
-        terms = reward_lib.reward_terms(jnp, d, force, reading.qpos, reading.qvel, self._limits,
-                                        success, ~finite, self.task)
+        terms = reward_lib.reward_terms(
+            jnp, d, force, reading.qpos, reading.qvel, self._limits, success, ~finite, self.task
+        )
         # strong float32 everywhere: a weak type would change the State's type and retrace
-        terms = {k: jnp.where(finite | (k == "nonfinite"), v, 0.0).astype(jnp.float32)
-                 for k, v in terms.items()}
+        terms = {
+            k: jnp.where(finite | (k == "nonfinite"), v, 0.0).astype(jnp.float32)
+            for k, v in terms.items()
+        }
         reward = reward_lib.total_reward(terms, self.task).astype(jnp.float32)
         done = ~finite | (success & self.task.terminate_on_success)
         metrics = dict(state.metrics)  # keep keys wrappers added (EvalWrapper's "reward")
         metrics.update({f"reward/{name}": value for name, value in terms.items()})
         metrics.update(self._measures(reading, success))
-        return state.replace(pipeline_state=data, obs=obs, reward=reward,
-                             done=done.astype(jnp.float32), metrics=metrics)
+        return state.replace(
+            pipeline_state=data,
+            obs=obs,
+            reward=reward,
+            done=done.astype(jnp.float32),
+            metrics=metrics,
+        )
 
     def retarget(self, data: Any, rng: jax.Array) -> tuple[Any, jax.Array]:
         """The same start state with a new target from ``rng``: (data, obs ``(22,)``).
@@ -187,8 +207,15 @@ class MjxArmEnv(Env):
 
     def observe(self, reading: Reading) -> jax.Array:
         """The flat observation ``state (22,)`` of a reading."""
-        obs = obs_lib.assemble_obs(jnp, reading.ee_pos, reading.ee_quat, reading.qpos,
-                                   reading.target_pos, reading.wrench, self.task.force_clip)
+        obs = obs_lib.assemble_obs(
+            jnp,
+            reading.ee_pos,
+            reading.ee_quat,
+            reading.qpos,
+            reading.target_pos,
+            reading.wrench,
+            self.task.force_clip,
+        )
         return obs_lib.flatten_obs(jnp, obs)
 
     def _distance_and_force(self, reading: Reading) -> tuple[jax.Array, jax.Array]:
@@ -199,8 +226,11 @@ class MjxArmEnv(Env):
 
     def _measures(self, reading: Reading, success: jax.Array) -> dict[str, jax.Array]:
         d, force = self._distance_and_force(reading)
-        return {"distance": d.astype(jnp.float32), "contact_force": force.astype(jnp.float32),
-                "success": jnp.asarray(success).astype(jnp.float32)}
+        return {
+            "distance": d.astype(jnp.float32),
+            "contact_force": force.astype(jnp.float32),
+            "success": jnp.asarray(success).astype(jnp.float32),
+        }
 
 
 def _all_finite(tree: Any) -> jax.Array:

@@ -41,13 +41,15 @@ class SensorReader:
         self.ee_body = int(model.site_bodyid[self.ee_site])
         self.target_site = model.site(TARGET_SITE).id
         self.sensor_slices = {
-            name: slice(int(model.sensor(name).adr[0]),
-                        int(model.sensor(name).adr[0]) + int(model.sensor(name).dim[0]))
+            name: slice(
+                int(model.sensor(name).adr[0]),
+                int(model.sensor(name).adr[0]) + int(model.sensor(name).dim[0]),
+            )
             for name in SENSORS
         }
 
     def ee_quat(self, data: Any):
-        """ee orientation (w, x, y, z): the ee body's, whose frame the ``ee`` site shares, ``(4,)``."""
+        """ee orientation (w, x, y, z), ``(4,)``: the ee body's, whose frame the site shares."""
         return data.xquat[self.ee_body]
 
     def wrench(self, xp: Any, sensordata):
@@ -55,8 +57,9 @@ class SensorReader:
         s = {name: sensordata[sl] for name, sl in self.sensor_slices.items()}
         # frameangacc reports in the world frame; the other tool sensors in the sensor frame
         alpha = quat_rotate_inverse(xp, s["ft_quat"], s["tool_angacc"])
-        return external_wrench(xp, s["ft_force"], s["ft_torque"], s["tool_acc"],
-                               s["tool_gyro"], alpha, self.arm.tool)
+        return external_wrench(
+            xp, s["ft_force"], s["ft_torque"], s["tool_acc"], s["tool_gyro"], alpha, self.arm.tool
+        )
 
 
 def quat_rotate_inverse(xp: Any, quat, vec):

@@ -75,12 +75,18 @@ class _Stepper:
         # reached after nstep steps, with the same control, as the CPU env reads them
         with self.lock:
             states, sensors = self.rollout.rollout(
-                self.model, self.datas, state2, control, control_spec=int(CONTROL_SPEC),
+                self.model,
+                self.datas,
+                state2,
+                control,
+                control_spec=int(CONTROL_SPEC),
                 nstep=nstep + 1,
             )
         new_state = states[:, nstep - 1] if nstep > 0 else state2
-        return (new_state.reshape(*lead, -1).astype(np.float32),
-                sensors[:, nstep].reshape(*lead, -1).astype(np.float32))
+        return (
+            new_state.reshape(*lead, -1).astype(np.float32),
+            sensors[:, nstep].reshape(*lead, -1).astype(np.float32),
+        )
 
 
 class MujocoCallbackPhysics:
@@ -93,8 +99,9 @@ class MujocoCallbackPhysics:
         nthread: rollout threads (default: the CPU count).
     """
 
-    def __init__(self, mj_model: mujoco.MjModel, arm: ArmInfo, task: TaskConfig,
-                 nthread: int | None = None) -> None:
+    def __init__(
+        self, mj_model: mujoco.MjModel, arm: ArmInfo, task: TaskConfig, nthread: int | None = None
+    ) -> None:
         self.mj_model = mj_model
         self.ids = SensorReader(mj_model, arm)
         self.task = task
@@ -110,8 +117,10 @@ class MujocoCallbackPhysics:
         self._nsensor = mj_model.nsensordata
 
     def _call(self, state: jax.Array, ctrl: jax.Array, mocap: jax.Array, nstep: int):
-        shapes = (jax.ShapeDtypeStruct(state.shape, jnp.float32),
-                  jax.ShapeDtypeStruct(state.shape[:-1] + (self._nsensor,), jnp.float32))
+        shapes = (
+            jax.ShapeDtypeStruct(state.shape, jnp.float32),
+            jax.ShapeDtypeStruct((*state.shape[:-1], self._nsensor), jnp.float32),
+        )
 
         def host(s, c, m):
             return self.stepper(np.asarray(s), np.asarray(c), np.asarray(m), nstep)

@@ -8,7 +8,7 @@ observation and info are in ``info["final_obs"]`` / ``info["final_info"]``).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, ClassVar
 
 import gymnasium as gym
 import jax
@@ -44,7 +44,10 @@ class ArmVectorEnv(VectorEnv):
         backend: "auto" (MJX on an accelerator, C MuJoCo on a CPU), "mjx" or "mujoco".
     """
 
-    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
+    metadata: ClassVar[dict[str, Any]] = {
+        "autoreset_mode": AutoresetMode.SAME_STEP,
+        "render_modes": [],
+    }
 
     def __init__(self, task: TaskConfig, num_envs: int, backend: str = "auto") -> None:
         self.task, self.num_envs = task, num_envs
@@ -123,9 +126,14 @@ def _select_done(done: jax.Array, fresh, state):
     return jax.tree.map(pick, fresh, state)
 
 
-def make_vector_env(task_name: str, num_envs: int = 1, task: TaskConfig | dict | None = None,
-                    backend: str = "auto", max_episode_steps: int | None = None,
-                    **kwargs: Any) -> ArmVectorEnv:
+def make_vector_env(
+    task_name: str,
+    num_envs: int = 1,
+    task: TaskConfig | dict | None = None,
+    backend: str = "auto",
+    max_episode_steps: int | None = None,
+    **kwargs: Any,
+) -> ArmVectorEnv:
     """Vector entry point of the registered ids (``max_episode_steps`` sets the episode length)."""
     if kwargs:
         raise TypeError(f"unexpected arguments for the batched env: {sorted(kwargs)}")

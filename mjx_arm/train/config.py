@@ -179,8 +179,9 @@ def apply_overrides(config: TrainConfig, items: list[str]) -> TrainConfig:
     return config.replace(task_overrides=task_changes, **changes)
 
 
-def load_config(preset: str = "seed", file: str | Path | None = None,
-                overrides: list[str] | None = None) -> TrainConfig:
+def load_config(
+    preset: str = "seed", file: str | Path | None = None, overrides: list[str] | None = None
+) -> TrainConfig:
     """Resolve a config: preset, then a JSON file, then ``--set`` overrides."""
     if preset not in PRESETS:
         raise ValueError(f"unknown preset {preset!r}; choose one of {sorted(PRESETS)}")

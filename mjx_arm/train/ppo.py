@@ -9,6 +9,7 @@ on resume the optimiser's moment estimates start from zero again (google/brax#65
 from __future__ import annotations
 
 import functools
+import itertools
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -80,14 +81,28 @@ def full_config(config: TrainConfig, task: TaskConfig) -> dict[str, Any]:
 class _Progress:
     """Brax callbacks: metrics to the run dir, a progress bar, checkpoints at an interval."""
 
-    def __init__(self, run: RunDir, config: TrainConfig, task: TaskConfig, step_offset: int,
-                 total: int, quiet: bool) -> None:
+    def __init__(
+        self,
+        run: RunDir,
+        config: TrainConfig,
+        task: TaskConfig,
+        step_offset: int,
+        total: int,
+        quiet: bool,
+    ) -> None:
         from tqdm import tqdm
 
         self.run, self.config, self.task = run, config, task
         self.offset, self.total = step_offset, total
-        self.bar = tqdm(total=total, initial=step_offset, unit="step", unit_scale=True,
-                        disable=quiet, desc=f"train {config.task}", dynamic_ncols=True)
+        self.bar = tqdm(
+            total=total,
+            initial=step_offset,
+            unit="step",
+            unit_scale=True,
+            disable=quiet,
+            desc=f"train {config.task}",
+            dynamic_ncols=True,
+        )
         self.calls = 0
         self.start = time.monotonic()
         self.times: list[tuple[float, int]] = []
@@ -97,14 +112,18 @@ class _Progress:
         """Brax ``progress_fn``: log one evaluation."""
         global_step = self.offset + int(step)
         self.times.append((time.monotonic(), int(step)))
-        row = {k: float(np.asarray(v).mean()) for k, v in metrics.items()
-               if k.startswith(LOGGED_PREFIXES)}
+        row = {
+            k: float(np.asarray(v).mean())
+            for k, v in metrics.items()
+            if k.startswith(LOGGED_PREFIXES)
+        }
         self.last_metrics = row
         self.run.log_metrics(global_step, row)
         self.bar.n = global_step
         success = row.get("eval/episode_success", float("nan"))
-        self.bar.set_postfix(reward=f"{row.get('eval/episode_reward', float('nan')):.1f}",
-                             success=f"{success:.2f}")
+        self.bar.set_postfix(
+            reward=f"{row.get('eval/episode_reward', float('nan')):.1f}", success=f"{success:.2f}"
+        )
         self.bar.refresh()
 
     def policy_params(self, step: int, make_policy, params) -> None:
@@ -137,15 +156,21 @@ def rollout_transitions(make_policy, params, task: TaskConfig, seed: int) -> dic
     env = MujocoArmEnv(task)
     obs, _ = env.reset(seed=int(seed) % (2**31))
     key = jax.random.PRNGKey(0)
-    rows: dict[str, list] = {k: [] for k in ("obs", "action", "reward", "done", "ee_pos",
-                                             "contact_force")}
+    rows: dict[str, list] = {
+        k: [] for k in ("obs", "action", "reward", "done", "ee_pos", "contact_force")
+    }
     for _ in range(task.episode_steps):
         flat = flatten_obs(np, obs)
         action = np.asarray(policy(flat, key)[0], dtype=np.float32)
-        obs, reward, terminated, truncated, info = env.step(action)
-        for name, value in (("obs", flat), ("action", action), ("reward", reward),
-                            ("done", terminated), ("ee_pos", obs["ee_pose"][:3]),
-                            ("contact_force", info["contact_force_norm"])):
+        obs, reward, terminated, _, info = env.step(action)
+        for name, value in (
+            ("obs", flat),
+            ("action", action),
+            ("reward", reward),
+            ("done", terminated),
+            ("ee_pos", obs["ee_pose"][:3]),
+            ("contact_force", info["contact_force_norm"]),
+        ):
             rows[name].append(value)
         if terminated:
             break
@@ -153,8 +178,9 @@ def rollout_transitions(make_policy, params, task: TaskConfig, seed: int) -> dic
     return {k: np.asarray(v[-TRANSITIONS_KEPT:]) for k, v in rows.items()}
 
 
-def train(config: TrainConfig, run_dir: str | Path, resume: bool = False,
-          quiet: bool = False) -> TrainResult:
+def train(
+    config: TrainConfig, run_dir: str | Path, resume: bool = False, quiet: bool = False
+) -> TrainResult:
     """Train a PPO policy and fill ``run_dir``.
 
     Args:
@@ -194,7 +220,7 @@ def train(config: TrainConfig, run_dir: str | Path, resume: bool = False,
     progress = _Progress(run, config, task, step_offset, config.num_timesteps, quiet)
     start = time.monotonic()
     try:
-        _, params, metrics = brax_ppo.train(
+        brax_ppo.train(
             environment=env,
             num_timesteps=remaining,
             episode_length=task.episode_steps,
@@ -227,8 +253,9 @@ def train(config: TrainConfig, run_dir: str | Path, resume: bool = False,
         run.close()
     total = time.monotonic() - start
     compile_s, sps = _timings(progress.times, config)
-    return TrainResult(run.path, step_offset + remaining, progress.last_metrics, compile_s,
-                       total, sps)
+    return TrainResult(
+        run.path, step_offset + remaining, progress.last_metrics, compile_s, total, sps
+    )
 
 
 def _timings(times: list[tuple[float, int]], config: TrainConfig) -> tuple[float, float]:
@@ -240,8 +267,9 @@ def _timings(times: list[tuple[float, int]], config: TrainConfig) -> tuple[float
     if len(times) < 3:
         return float("nan"), float("nan")
     (t0, s0), (t1, s1) = times[0], times[1]
-    steady = [(b[1] - a[1]) / (b[0] - a[0]) for a, b in zip(times[1:], times[2:], strict=False)
-              if b[0] > a[0]]
+    steady = [
+        (b[1] - a[1]) / (b[0] - a[0]) for a, b in itertools.pairwise(times[1:]) if b[0] > a[0]
+    ]
     sps = float(np.median(steady)) if steady else float("nan")
     compile_s = (t1 - t0) - (s1 - s0) / sps if steady else float("nan")
     return max(compile_s, 0.0), sps

@@ -82,8 +82,10 @@ class RunDir:
         if not path.exists():
             return []
         with path.open() as f:
-            return [{k: float(v) if v not in ("", None) else math.nan for k, v in row.items()}
-                    for row in csv.DictReader(f)]
+            return [
+                {k: float(v) if v not in ("", None) else math.nan for k, v in row.items()}
+                for row in csv.DictReader(f)
+            ]
 
     # ------------------------------------------------------------------ checkpoints
 
@@ -106,8 +108,11 @@ class RunDir:
         """The newest checkpoint folder, or None."""
         if not self.checkpoints.exists():
             return None
-        found = sorted(p for p in self.checkpoints.iterdir()
-                       if p.name.startswith(CHECKPOINT_PREFIX) and (p / "meta.json").exists())
+        found = sorted(
+            p
+            for p in self.checkpoints.iterdir()
+            if p.name.startswith(CHECKPOINT_PREFIX) and (p / "meta.json").exists()
+        )
         return found[-1] if found else None
 
     @staticmethod
