@@ -71,8 +71,9 @@ class _Stepper:
         state2 = np.ascontiguousarray(state.reshape(-1, state.shape[-1]), dtype=np.float64)
         control = np.concatenate([ctrl.reshape(-1, ctrl.shape[-1]), mocap.reshape(-1, 3)], -1)
         control = np.ascontiguousarray(control[:, None, :], dtype=np.float64)
-        # one extra step: its sensors are computed (by mj_forward inside mj_step) at the state
-        # reached after nstep steps, with the same control, as the CPU env reads them
+        # The sensors of step k are computed by mj_step's forward pass at the state before
+        # step k, so the last step's sensors lag the returned state by one substep, exactly as
+        # the CPU env reads them. nstep == 0 runs one step only for its sensors (at ``state``).
         with self.lock:
             states, sensors = self.rollout.rollout(
                 self.model,
@@ -80,12 +81,12 @@ class _Stepper:
                 state2,
                 control,
                 control_spec=int(CONTROL_SPEC),
-                nstep=nstep + 1,
+                nstep=max(nstep, 1),
             )
         new_state = states[:, nstep - 1] if nstep > 0 else state2
         return (
             new_state.reshape(*lead, -1).astype(np.float32),
-            sensors[:, nstep].reshape(*lead, -1).astype(np.float32),
+            sensors[:, max(nstep, 1) - 1].reshape(*lead, -1).astype(np.float32),
         )
 
 

@@ -52,9 +52,10 @@ class MujocoArmEnv(BaseRobotEnv):
         self.data.ctrl[self.ids.actuators] = qdot_target
 
     def _physics_step(self, n_substeps: int) -> None:
+        # Positions, sensors and contacts are read as the last substep's mj_forward left them
+        # (one substep, 1/240 s, before the integrated qpos/qvel), as the MJX env and the
+        # batched C backend do: no extra forward pass per control step.
         mujoco.mj_step(self.model, self.data, nstep=n_substeps)
-        # sensors and xpos are those of the state before the last integration; refresh them
-        mujoco.mj_forward(self.model, self.data)
 
     def _physics_read(self) -> PhysicsReading:
         d = self.data

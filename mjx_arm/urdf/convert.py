@@ -371,10 +371,10 @@ def _add_sites_and_sensors(spec, model: RobotModel, ee_body, ft_body, config) ->
 
     ``ee_pos`` and ``ee_quat`` give the end-effector pose (a batched C backend reads only
     sensors). The force and torque sensors measure what the arm exerts on the tool subtree at
-    the ``ft`` site. ``tool_angacc`` (a frame sensor) is in the world frame; ``ft_quat``
-    rotates it into the sensor frame. The accelerometer at the subtree's centre of mass, the gyro and the angular
+    the ``ft`` site. The accelerometer at the subtree's centre of mass, the gyro and the angular
     acceleration sensor give what the tool's own weight and inertia contribute, so the task code
-    can remove it (see :mod:`mjx_arm.task.wrench`).
+    can remove it (see :mod:`mjx_arm.task.wrench`). ``tool_angacc`` (a frame sensor) is in the
+    world frame; ``ft_quat`` rotates it into the sensor frame.
     """
     ee = ee_body.add_site()
     ee.name = EE_SITE

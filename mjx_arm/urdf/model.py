@@ -140,7 +140,7 @@ def _depth_first(root: str, by_parent: dict[str, list[Joint]]) -> list[Joint]:
 
 
 def rpy_to_matrix(rpy: tuple[float, float, float]) -> np.ndarray:
-    """Rotation matrix of URDF fixed-axis roll, pitch, yaw: ``Rz(y) Ry(p) Rx(r)``, shape ``(3, 3)``."""
+    """Rotation of URDF fixed-axis roll, pitch, yaw: ``Rz(y) Ry(p) Rx(r)``, shape ``(3, 3)``."""
     r, p, y = rpy
     cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
     return np.array(

@@ -1,0 +1,98 @@
+"""Tests of the ``mjx-arm`` command line (:mod:`mjx_arm.cli`), without training."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import mujoco
+import pytest
+
+from mjx_arm.cli import EXIT_OK, build_parser, main
+
+ARM_URDF = Path(__file__).resolve().parents[1] / "assets" / "ur5e.urdf"
+
+
+def _subcommands() -> list[str]:
+    """Names of the subcommands, read from the parser itself."""
+    parser = build_parser()
+    (sub,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    return sorted(sub.choices)
+
+
+def _exit_code(argv: list[str]) -> int:
+    """Run ``mjx-arm argv`` in process; argparse's SystemExit becomes the exit code."""
+    try:
+        return main(argv)
+    except SystemExit as exc:
+        if exc.code is None or isinstance(exc.code, int):
+            return exc.code or 0
+        return 1  # a message instead of a number
+
+
+def test_subcommands_are_the_documented_ones():
+    assert set(_subcommands()) >= {"validate", "convert", "train"}
+
+
+def test_top_level_help(capsys):
+    assert _exit_code(["--help"]) == 0
+    out = capsys.readouterr().out
+    for name in _subcommands():
+        assert name in out
+
+
+@pytest.mark.parametrize("command", _subcommands())
+def test_subcommand_help(command: str, capsys):
+    assert _exit_code([command, "--help"]) == 0
+    assert f"mjx-arm {command}" in capsys.readouterr().out
+
+
+def test_no_command_is_a_usage_error(capsys):
+    assert _exit_code([]) == 2
+    assert "usage" in capsys.readouterr().err
+
+
+def test_validate_the_shipped_arm(capfd):
+    assert _exit_code(["validate", str(ARM_URDF)]) == EXIT_OK
+    assert "ur5e.urdf" in capfd.readouterr().out
+
+
+def test_convert_the_shipped_arm(tmp_path: Path, capsys):
+    output = tmp_path / "X.xml"
+    assert _exit_code(["convert", str(ARM_URDF), "-o", str(output)]) == EXIT_OK
+    model = mujoco.MjModel.from_xml_path(str(output))
+    assert model.nu == 6
+    assert "velocity actuators 6" in capsys.readouterr().out
+
+
+def test_convert_with_scene(tmp_path: Path):
+    output = tmp_path / "touch.xml"
+    assert _exit_code(["convert", str(ARM_URDF), "-o", str(output), "--scene", "touch"]) == 0
+    model = mujoco.MjModel.from_xml_path(str(output))
+    assert model.geom("target_box").id >= 0
+
+
+def test_convert_rejects_a_broken_urdf(tmp_path: Path, capsys):
+    broken = tmp_path / "broken.urdf"
+    broken.write_text(ARM_URDF.read_text().replace('effort="28"', 'effort="0"'))
+    output = tmp_path / "broken.xml"
+    assert _exit_code(["convert", str(broken), "-o", str(output)]) != EXIT_OK
+    assert not output.exists()
+    assert "wrist" in capsys.readouterr().err
+
+
+def test_console_script_is_on_the_venv_path(tmp_path: Path):
+    bin_dir = Path(sys.executable).parent
+    env = {**os.environ, "PATH": f"{bin_dir}{os.pathsep}{os.environ.get('PATH', '')}"}
+    script = shutil.which("mjx-arm", path=env["PATH"])
+    assert script is not None, f"mjx-arm is not installed in {bin_dir}"
+    assert Path(script).parent == bin_dir
+    result = subprocess.run(
+        ["mjx-arm", "--help"], env=env, cwd=tmp_path, capture_output=True, text=True, timeout=120
+    )
+    assert result.returncode == 0, result.stderr
+    assert "usage: mjx-arm" in result.stdout
