@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-
+from mjx_arm.cli import main
 from mjx_arm.paths import default_arm_urdf
 from mjx_arm.urdf import ConversionError, to_mjcf
 from mjx_arm.urdf import validate as validate_mod
