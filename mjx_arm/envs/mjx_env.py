@@ -20,6 +20,7 @@ from mujoco import mjx
 
 from mjx_arm.envs.arm import ArmInfo, arm_info
 from mjx_arm.envs.model_io import SensorReader, arm_model
+from mjx_arm.paths import default_arm_urdf
 from mjx_arm.task import observation as obs_lib
 from mjx_arm.task import reward as reward_lib
 from mjx_arm.task import sampling
@@ -116,8 +117,9 @@ class MjxArmEnv(Env):
         physics_factory=MjxPhysics,
     ) -> None:
         self.task = task or touch_config()
-        self.arm = arm_info(urdf)
-        validated(self.arm.urdf, "mujoco")
+        path = Path(urdf).expanduser().resolve() if urdf is not None else default_arm_urdf()
+        validated(path, "mujoco")  # before parsing: a broken file fails with the report
+        self.arm = arm_info(path)
         self.mj_model = arm_model(self.arm.urdf, self.task)
         self.physics = physics_factory(self.mj_model, self.arm, self.task)
         self._v_scale = jnp.asarray(self.task.action_scale * self.arm.v_max, jnp.float32)

@@ -40,6 +40,7 @@ class TrainConfig:
         num_eval_envs: envs per evaluation (one episode each).
         checkpoint_every: save a checkpoint every this many evaluations (and at the end).
         seed: PRNG seed.
+        max_devices: use at most this many local devices (0: all; Brax pmaps over them).
     """
 
     task: str = "reach"
@@ -66,6 +67,7 @@ class TrainConfig:
     num_eval_envs: int = 128
     checkpoint_every: int = 1
     seed: int = 0
+    max_devices: int = 0
 
     def samples_per_update(self) -> int:
         """Env steps consumed by one PPO update (one rollout batch)."""

@@ -244,6 +244,7 @@ def train(
             num_eval_envs=config.num_eval_envs,
             deterministic_eval=True,
             seed=config.seed + step_offset,
+            max_devices_per_host=config.max_devices or None,
             progress_fn=progress.progress,
             policy_params_fn=progress.policy_params,
             restore_params=restore,

@@ -1,0 +1,205 @@
+"""Batched env throughput on MJX beside the raw ``mjx.step`` rate of the same model.
+
+For each batch size, one process (so peak device memory is its own) times:
+
+* env: ``jit(vmap(env.step))`` of the task env, K control steps inside one ``lax.scan``,
+* raw: ``jit(vmap(8 x mjx.step))`` of the same model and batch, same K,
+
+and reports control steps/s, physics steps/s (8 per control step), the env's overhead against
+raw, compile times and peak device memory. Run on a GPU::
+
+    python benchmarks/bench_mjx_throughput.py --batches 1024 8192 32768 131072
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from benchmarks.common import environment_metadata, markdown_table, save_results  # noqa: E402
+
+
+def _peak_bytes() -> int | None:
+    import jax
+
+    stats = jax.devices()[0].memory_stats() or {}
+    return stats.get("peak_bytes_in_use")
+
+
+def measure(task_name: str, batch: int, steps: int, backend: str) -> dict:
+    """Time env and raw stepping for one batch size (in this process)."""
+    import jax
+    import jax.numpy as jnp
+    from mujoco import mjx
+
+    from mjx_arm.envs.vector import make_batched_env
+    from mjx_arm.task import task_config
+
+    env = make_batched_env(task_config(task_name), backend)
+    keys = jax.random.split(jax.random.PRNGKey(0), batch)
+    actions = jax.random.uniform(jax.random.PRNGKey(1), (batch, 6), minval=-1, maxval=1)
+
+    def env_rollout(state):
+        def body(s, _):
+            return jax.vmap(env.step)(s, actions), None
+
+        return jax.lax.scan(body, state, None, length=steps)[0]
+
+    state = jax.jit(jax.vmap(env.reset))(keys)
+    run_env = jax.jit(env_rollout)
+    t0 = time.perf_counter()
+    out = run_env(state)
+    jax.block_until_ready(out.obs)
+    env_compile = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    out = run_env(out)
+    jax.block_until_ready(out.obs)
+    env_time = time.perf_counter() - t0
+    env_peak = _peak_bytes()
+    result = {
+        "batch": batch,
+        "control_steps": steps,
+        "env_compile_s": env_compile,
+        "env_run_s": env_time,
+        "env_control_steps_per_s": batch * steps / env_time,
+        "env_physics_steps_per_s": batch * steps * env.task.n_substeps / env_time,
+        "env_peak_bytes": env_peak,
+        "finite": bool(jnp.all(jnp.isfinite(out.obs))),
+    }
+    if backend == "mjx":
+        result.update(_raw(env, out.pipeline_state, steps))
+        result["env_overhead"] = (
+            1.0 - result["env_physics_steps_per_s"] / result["raw_physics_steps_per_s"]
+        )
+    del mjx
+    return result
+
+
+def _raw(env, data, steps: int) -> dict:
+    """Plain ``mjx.step`` substeps on the same model, batch and control."""
+    import jax
+    from mujoco import mjx
+
+    model = env.physics.model
+    n_sub = env.task.n_substeps
+
+    def raw_rollout(d):
+        def body(d, _):
+            return jax.vmap(mjx.step, in_axes=(None, 0))(model, d), None
+
+        return jax.lax.scan(body, d, None, length=steps * n_sub)[0]
+
+    run = jax.jit(raw_rollout)
+    t0 = time.perf_counter()
+    out = run(data)
+    jax.block_until_ready(out.qpos)
+    compile_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    out = run(out)
+    jax.block_until_ready(out.qpos)
+    run_s = time.perf_counter() - t0
+    batch = data.qpos.shape[0]
+    return {
+        "raw_compile_s": compile_s,
+        "raw_run_s": run_s,
+        "raw_physics_steps_per_s": batch * steps * n_sub / run_s,
+        "peak_bytes_after_raw": _peak_bytes(),
+    }
+
+
+def _child(args: argparse.Namespace) -> None:
+    print(json.dumps(measure(args.task, args.child_batch, args.steps, args.backend)))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--task", default="touch", choices=["reach", "touch"])
+    parser.add_argument("--batches", type=int, nargs="+", default=[1024, 8192, 32768, 131072])
+    parser.add_argument("--steps", type=int, default=50, help="control steps timed per batch")
+    parser.add_argument("--backend", default="mjx", choices=["mjx", "mujoco"])
+    parser.add_argument("--results-dir", type=Path, default=None)
+    parser.add_argument("--name", default=None, help="result file stem")
+    parser.add_argument("--child-batch", type=int, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.child_batch:
+        _child(args)
+        return
+    rows = []
+    for batch in args.batches:
+        cmd = [
+            sys.executable,
+            __file__,
+            "--task",
+            args.task,
+            "--steps",
+            str(args.steps),
+            "--backend",
+            args.backend,
+            "--child-batch",
+            str(batch),
+        ]
+        proc = subprocess.run(cmd, capture_output=True, text=True)
+        if proc.returncode != 0:
+            print(proc.stderr[-3000:], file=sys.stderr)
+            rows.append({"batch": batch, "error": proc.stderr[-500:]})
+            continue
+        row = json.loads(proc.stdout.strip().splitlines()[-1])
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+    meta = environment_metadata(accelerator=True)
+    table = _table(rows, args.backend)
+    print(table)
+    name = args.name or f"mjx_throughput_{args.task}_{args.backend}"
+    save_results(
+        name,
+        {"meta": meta, "task": args.task, "backend": args.backend, "rows": rows, "goals": GOALS},
+        table,
+        args.results_dir,
+    )
+
+
+GOALS = {
+    "env_overhead_max": 0.10,
+    "physics_steps_per_s_min": 3_000_000,
+    "memory_128k_envs_max_gib": 20,
+}
+
+
+def _table(rows: list[dict], backend: str) -> str:
+    headers = [
+        "envs",
+        "control steps/s",
+        "physics steps/s",
+        "raw physics steps/s",
+        "overhead",
+        "env compile s",
+        "peak GiB",
+    ]
+    out = []
+    for r in rows:
+        if "error" in r:
+            out.append([r["batch"], "error", "", "", "", "", ""])
+            continue
+        peak = r.get("env_peak_bytes")
+        out.append(
+            [
+                r["batch"],
+                f"{r['env_control_steps_per_s']:,.0f}",
+                f"{r['env_physics_steps_per_s']:,.0f}",
+                f"{r.get('raw_physics_steps_per_s', float('nan')):,.0f}",
+                f"{100 * r.get('env_overhead', float('nan')):.1f}%",
+                f"{r['env_compile_s']:.1f}",
+                f"{peak / 2**30:.2f}" if peak else "n/a",
+            ]
+        )
+    return markdown_table(headers, out)
+
+
+if __name__ == "__main__":
+    main()

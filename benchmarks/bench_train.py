@@ -1,0 +1,134 @@
+"""Time to solve: wall-clock from the command start to evaluation success >= 95%.
+
+Trains each task with a preset and reads the run's ``metrics.csv``: the first evaluation whose
+``eval/episode_success`` reaches the threshold gives the time to solve, measured from the start of
+this script (imports included). Compile time (first training epoch minus its steady share) and
+steady training throughput are reported apart. ``--devices N`` limits Brax to N local devices,
+for the 1-vs-2 GPU scaling measurement::
+
+    python benchmarks/bench_train.py --tasks reach touch --preset fast
+    python benchmarks/bench_train.py --tasks reach --preset fast --devices 1 --name scaling_1
+"""
+
+from __future__ import annotations
+
+import time
+
+START = time.time()
+
+import argparse  # noqa: E402
+import sys  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from benchmarks.common import environment_metadata, markdown_table, save_results  # noqa: E402
+
+THRESHOLD = 0.95
+GOALS_H200 = {"reach_s": 60, "touch_s": 120, "steps_per_s_min": 500_000}
+
+
+def solve_time(run_dir: Path, start: float) -> tuple[float | None, int | None, float]:
+    """(seconds to the first eval >= THRESHOLD, its step, best success) from metrics.csv."""
+    from mjx_arm.train.rundir import RunDir
+
+    best, hit = 0.0, None
+    for row in RunDir(run_dir).read_metrics():
+        success = row.get("eval/episode_success", 0.0)
+        best = max(best, success)
+        if hit is None and success >= THRESHOLD:
+            hit = (row["time"] - start, int(row["step"]))
+    return (hit[0], hit[1], best) if hit else (None, None, best)
+
+
+def run_task(task: str, args: argparse.Namespace, start: float) -> dict:
+    """Train one task and return its timings."""
+    from mjx_arm.train.config import load_config
+    from mjx_arm.train.ppo import train
+
+    overrides = [f"task={task}", f"backend={args.backend}", *args.set]
+    if args.devices:
+        overrides.append(f"max_devices={args.devices}")
+    config = load_config(args.preset, None, overrides)
+    run_dir = args.out / f"{task}-{args.preset}-{int(time.time())}"
+    result = train(config, run_dir, quiet=True)
+    seconds, step, best = solve_time(run_dir, start)
+    return {
+        "task": task,
+        "preset": args.preset,
+        "config": config.to_dict(),
+        "time_to_solve_s": seconds,
+        "solve_step": step,
+        "best_success": best,
+        "final_success": result.metrics.get("eval/episode_success"),
+        "compile_s": result.compile_seconds,
+        "train_s": result.train_seconds,
+        "steady_steps_per_s": result.steps_per_second,
+        "total_steps": result.steps,
+        "run_dir": str(run_dir),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--tasks", nargs="+", default=["reach", "touch"])
+    parser.add_argument("--preset", default="fast")
+    parser.add_argument("--backend", default="auto")
+    parser.add_argument("--devices", type=int, default=0, help="limit Brax to N devices")
+    parser.add_argument("--set", nargs="*", default=[], help="config overrides key=value")
+    parser.add_argument("--out", type=Path, default=Path("runs/bench"))
+    parser.add_argument("--results-dir", type=Path, default=None)
+    parser.add_argument("--name", default=None)
+    args = parser.parse_args()
+
+    import jax
+
+    from mjx_arm.cli import _enable_compilation_cache
+
+    _enable_compilation_cache()
+    rows = []
+    for task in args.tasks:
+        start = START if not rows else time.time()  # each task timed from its own start
+        row = run_task(task, args, start)
+        rows.append(row)
+        print({k: v for k, v in row.items() if k != "config"}, flush=True)
+    meta = environment_metadata(accelerator=True)
+    meta["devices_used"] = args.devices or jax.local_device_count()
+    headers = [
+        "task",
+        "time to 95% (s)",
+        "solve step",
+        "best success",
+        "compile (s)",
+        "steady steps/s",
+        "train (s)",
+    ]
+    table = markdown_table(
+        headers,
+        [
+            [
+                r["task"],
+                f"{r['time_to_solve_s']:.1f}"
+                if r["time_to_solve_s"] is not None
+                else "not reached",
+                r["solve_step"],
+                f"{r['best_success']:.3f}",
+                f"{r['compile_s']:.1f}",
+                f"{r['steady_steps_per_s']:,.0f}",
+                f"{r['train_s']:.1f}",
+            ]
+            for r in rows
+        ],
+    )
+    print(table)
+    name = args.name or f"train_{args.preset}_{meta['device']['kind'].replace(' ', '_')}"
+    save_results(
+        name,
+        {"meta": meta, "rows": rows, "threshold": THRESHOLD, "goals_h200": GOALS_H200},
+        table,
+        args.results_dir,
+    )
+
+
+if __name__ == "__main__":
+    main()

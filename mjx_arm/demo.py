@@ -1,0 +1,299 @@
+"""``mjx-arm demo``: the whole product on a CPU in a few minutes.
+
+1. validate the shipped URDF (three layers, MuJoCo and PyBullet) and convert it to MJCF;
+2. train Reach with Brax PPO (preset ``cpu``, backend ``auto``);
+3. export the policy to ``.npz`` (and ``.onnx`` when onnxruntime is installed) and check that
+   the exports agree with each other;
+4. evaluate it in CPU MuJoCo, PyBullet and the batched JAX env (MJX on an accelerator, its C
+   MuJoCo backend on a CPU), filming the first MuJoCo episodes (skipped, with a note, where
+   MuJoCo cannot render);
+5. plot the longest MuJoCo episode;
+6. print and save a summary with the path of every file written.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+class DemoError(RuntimeError):
+    """The demo cannot run (e.g. its output folder already holds a run)."""
+
+
+@dataclass(frozen=True)
+class DemoSettings:
+    """How much the demo does.
+
+    Attributes:
+        timesteps: PPO env steps (Brax rounds up to whole epochs).
+        num_evals: evaluations during training.
+        episodes: evaluation episodes per engine.
+        video_episodes: episodes in the MuJoCo video.
+        width, height: video frame size (pixels).
+    """
+
+    timesteps: int
+    num_evals: int
+    episodes: int
+    video_episodes: int
+    width: int
+    height: int
+
+
+FULL = DemoSettings(300_000, 6, 50, 5, 640, 480)
+QUICK = DemoSettings(122_880, 4, 20, 2, 320, 240)
+
+
+class _Log:
+    """Step headers and timings, printed as they happen."""
+
+    def __init__(self, echo: Callable[[str], None] = print) -> None:
+        self.echo, self.start, self.timings = echo, time.monotonic(), {}
+
+    def step(self, name: str, text: str) -> float:
+        self.echo(f"\n== {text}")
+        self.timings[name] = time.monotonic()
+        return self.timings[name]
+
+    def done(self, name: str) -> None:
+        self.timings[name] = round(time.monotonic() - self.timings[name], 1)
+
+
+# --------------------------------------------------------------------------- the steps
+
+
+def validate_and_convert(out: Path, echo: Callable[[str], None]) -> dict[str, Any]:
+    """Validate the shipped arm for both engines and write its Touch-scene MJCF."""
+    import mujoco
+
+    from mjx_arm.paths import default_arm_urdf
+    from mjx_arm.urdf import ConvertConfig, to_mjcf
+    from mjx_arm.urdf.validate import validate
+
+    urdf = default_arm_urdf()
+    report = validate(urdf, engine="all")
+    echo(f"{urdf}: {len(report.errors)} errors, {len(report.warnings)} warnings")
+    if not report.ok:
+        raise DemoError(f"the shipped URDF does not validate:\n{report.format()}")
+    mjcf = out / "ur5e_touch.xml"
+    mjcf.write_text(to_mjcf(urdf, ConvertConfig(scene="touch")))
+    model = mujoco.MjModel.from_xml_path(str(mjcf))
+    echo(
+        f"wrote {mjcf}: {model.nbody} bodies, {model.nu} velocity actuators, "
+        f"{model.nsensor} sensors"
+    )
+    return {"urdf": str(urdf), "warnings": len(report.warnings), "mjcf": str(mjcf)}
+
+
+def train_reach(run_dir: Path, settings: DemoSettings, echo: Callable[[str], None]):
+    """Train Reach (preset cpu, backend auto) into ``run_dir``; returns Brax's TrainResult."""
+    from mjx_arm.train.config import load_config
+    from mjx_arm.train.ppo import resolve_backend, train
+
+    config = load_config(
+        "cpu",
+        overrides=[
+            "task=reach",
+            "backend=auto",
+            f"num_timesteps={settings.timesteps}",
+            f"num_evals={settings.num_evals}",
+        ],
+    )
+    echo(
+        f"backend {resolve_backend(config.backend)}, {config.num_envs} envs, "
+        f"{config.num_timesteps:,} steps -> {run_dir}"
+    )
+    result = train(config, run_dir)
+    success = result.metrics.get("eval/episode_success", float("nan"))
+    echo(
+        f"{result.steps:,} steps in {result.train_seconds:.0f} s "
+        f"(compile {result.compile_seconds:.0f} s), training eval success {success:.2f}"
+    )
+    return result
+
+
+def export_all(run_dir: Path, out: Path, echo: Callable[[str], None]) -> dict[str, Any]:
+    """Export .npz (and .onnx when possible) and measure how far the runtimes disagree."""
+    from mjx_arm.policy import export_policy, load
+
+    paths = {"npz": export_policy(run_dir, out / "policy.npz")}
+    have_onnx = all(importlib.util.find_spec(m) for m in ("onnx", "onnxruntime"))
+    if have_onnx:
+        paths["onnx"] = export_policy(run_dir, out / "policy.onnx")
+    else:
+        echo("onnx/onnxruntime not installed: skipping policy.onnx (pip install 'mjx_arm[onnx]')")
+    info: dict[str, Any] = {k: str(v) for k, v in paths.items()}
+    states = _probe_states(load(paths["npz"]), np.random.default_rng(0))
+    if have_onnx:
+        diff = np.abs(load(paths["npz"])(states) - load(paths["onnx"])(states)).max()
+        info["npz_vs_onnx_max_abs_diff"] = float(diff)
+    for path in paths.values():
+        echo(f"wrote {path} ({path.stat().st_size / 1024:.0f} KiB)")
+    if "npz_vs_onnx_max_abs_diff" in info:
+        echo(f"numpy and onnxruntime actions agree to {info['npz_vs_onnx_max_abs_diff']:.1e}")
+    return info
+
+
+def _probe_states(policy, rng: np.random.Generator, n: int = 256) -> np.ndarray:
+    """Random observations ``(n, 22)`` around the policy's normaliser statistics."""
+    mean = getattr(policy, "mean", np.zeros(policy.obs_size, np.float32))
+    std = getattr(policy, "std", np.ones(policy.obs_size, np.float32))
+    return (mean + std * rng.standard_normal((n, policy.obs_size))).astype(np.float32)
+
+
+def evaluate_engines(
+    policy_path: Path, out: Path, settings: DemoSettings, echo: Callable[[str], None]
+) -> tuple[dict[str, dict], Any]:
+    """Evaluate on CPU MuJoCo (filming the first episodes), PyBullet and the batched JAX env.
+
+    Returns:
+        Results per engine label and the MuJoCo :class:`~mjx_arm.evaluate.EvalRun`.
+    """
+    from mjx_arm.evaluate import eval_task, evaluate, format_summary
+    from mjx_arm.policy import load
+    from mjx_arm.train.ppo import resolve_backend
+
+    policy = load(policy_path)
+    task, _ = eval_task(policy)
+    backend = resolve_backend("auto")
+    runs: dict[str, dict] = {}
+    mujoco_run = None
+    for label, engine in (("mujoco", "mujoco"), ("pybullet", "pybullet"), ("batch", "mjx")):
+        video = out / "episodes_mujoco.mp4" if engine == "mujoco" else None
+        result, run = evaluate(
+            policy,
+            engine,
+            task,
+            settings.episodes,
+            seed=0,
+            video=video,
+            width=settings.width,
+            height=settings.height,
+            backend=backend if engine == "mjx" else None,
+            video_episodes=settings.video_episodes,
+        )
+        result["policy"] = str(policy_path)
+        path = out / f"eval_{label}.json"
+        path.write_text(json.dumps(result, indent=2))
+        result["json"] = str(path)
+        runs[label] = result
+        echo(format_summary(result))
+        mujoco_run = run if engine == "mujoco" else mujoco_run
+    return runs, mujoco_run
+
+
+def plot_episode(run, task, out: Path, echo: Callable[[str], None]) -> dict[str, Any]:
+    """Save the longest MuJoCo episode as a trajectory and plot it."""
+    from mjx_arm.replay import replay, save_trajectory
+
+    traj_path = save_trajectory(out / "trajectory_mujoco.npz", run.longest_trajectory(), task)
+    summary = replay(traj_path, out / "replay.png")
+    echo(f"wrote {traj_path} ({summary['steps']} steps) and {summary['plot']}")
+    return {"trajectory": str(traj_path), "plot": summary["plot"]}
+
+
+# --------------------------------------------------------------------------- the demo
+
+
+def default_out() -> Path:
+    """``runs/demo-YYYYmmdd-HHMMSS`` in the working directory."""
+    return Path("runs") / f"demo-{time.strftime('%Y%m%d-%H%M%S')}"
+
+
+def run_demo(
+    out: str | Path | None = None, quick: bool = False, echo: Callable[[str], None] = print
+) -> dict[str, Any]:
+    """Run the demo into ``out``; print and return its summary (also in ``out/summary.json``).
+
+    Raises:
+        DemoError: ``out`` already holds a training run, or the shipped URDF is invalid.
+    """
+    settings = QUICK if quick else FULL
+    out = Path(out) if out is not None else default_out()
+    run_dir = out / "run"
+    if (run_dir / "checkpoints").exists():
+        raise DemoError(f"{out} already holds a demo run; choose another --out")
+    out.mkdir(parents=True, exist_ok=True)
+    log = _Log(echo)
+    summary: dict[str, Any] = {"out": str(out), "quick": quick, "settings": vars(settings)}
+
+    log.step("validate", "1/5 validate and convert the arm")
+    summary["urdf"] = validate_and_convert(out, echo)
+    log.done("validate")
+    log.step("train", "2/5 train Reach with Brax PPO")
+    trained = train_reach(run_dir, settings, echo)
+    summary["train"] = {
+        "run_dir": str(run_dir),
+        "steps": trained.steps,
+        "seconds": round(trained.train_seconds, 1),
+        "eval_success": trained.metrics.get("eval/episode_success"),
+    }
+    log.done("train")
+    log.step("export", "3/5 export the policy")
+    summary["export"] = export_all(run_dir, out, echo)
+    log.done("export")
+    log.step("evaluate", f"4/5 evaluate ({settings.episodes} episodes per engine)")
+    summary["eval"], run = evaluate_engines(Path(summary["export"]["npz"]), out, settings, echo)
+    log.done("evaluate")
+    log.step("replay", "5/5 plot the longest MuJoCo episode")
+    summary["replay"] = plot_episode(run, _task_of(summary["export"]["npz"]), out, echo)
+    log.done("replay")
+    summary["timings_s"] = log.timings
+    summary["wall_seconds"] = round(time.monotonic() - log.start, 1)
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str))
+    echo(format_demo_summary(summary))
+    return summary
+
+
+def _task_of(policy_path: str):
+    from mjx_arm.evaluate import eval_task
+    from mjx_arm.policy import load
+
+    return eval_task(load(policy_path))[0]
+
+
+def _video_line(result: dict[str, Any]) -> str:
+    if result["video"]:
+        return result["video"]
+    skipped = [n for n in result["notes"] if n.startswith("video")]
+    return skipped[0] if skipped else "none"
+
+
+def format_demo_summary(summary: dict[str, Any]) -> str:
+    """The closing table: numbers per engine and the files written."""
+    lines = [
+        "",
+        f"== demo done in {summary['wall_seconds']:.0f} s "
+        f"(train {summary['timings_s']['train']:.0f} s)",
+        f"{'engine':<16}{'success':>9}{'95% CI':>17}{'return':>10}{'steps':>8}{'peak N':>9}",
+    ]
+    for label, r in summary["eval"].items():
+        low, high = r["success_ci95"]
+        steps = r["mean_steps_to_success"]
+        name = f"{label} ({r['backend']})" if "backend" in r else label
+        lines.append(
+            f"{name:<16}{r['success_rate']:>9.3f}{f'{low:.3f} - {high:.3f}':>17}"
+            f"{r['mean_return']:>10.2f}{'n/a' if steps is None else f'{steps:.1f}':>8}"
+            f"{r['mean_peak_contact_force']:>9.2f}"
+        )
+    files = [
+        ("MJCF", summary["urdf"]["mjcf"]),
+        ("run directory", summary["train"]["run_dir"]),
+        *((f"policy .{k}", v) for k, v in summary["export"].items() if k in ("npz", "onnx")),
+        *((f"eval {k} JSON", r["json"]) for k, r in summary["eval"].items()),
+        ("trajectory", summary["replay"]["trajectory"]),
+        ("replay plot", summary["replay"]["plot"]),
+        ("video", _video_line(summary["eval"]["mujoco"])),
+        ("summary", str(Path(summary["out"]) / "summary.json")),
+    ]
+    lines.append("files:")
+    lines += [f"  {name:<20}{path}" for name, path in files]
+    return "\n".join(lines)

@@ -1,0 +1,310 @@
+"""Replay a recorded trajectory: a plot of reward, ee position and contact force, and a video.
+
+A trajectory file is an ``.npz`` with, per control step ``t`` (``T`` steps):
+
+- ``obs (T, 22)``: the flat observation the action was computed from (joint angles at
+  ``[:, 7:13]``, target point at ``[:, 13:16]``);
+- ``action (T, 6)``, ``reward (T,)``, ``done (T,)``;
+- ``ee_pos (T, 3)`` and ``contact_force (T,)`` (force norm, N) after the step.
+
+Training writes one into each checkpoint (``transitions.npz``); ``mjx-arm eval --trajectory``
+writes one per run. The video is drawn by MuJoCo: each frame sets the joint angles and the
+target of ``obs[t]`` in the CPU MuJoCo env's model and renders it from the scene camera.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mjx_arm.task.config import TaskConfig, task_config
+from mjx_arm.task.observation import obs_slices
+
+REQUIRED_KEYS = ("obs", "reward", "ee_pos", "contact_force")
+DEFAULT_WIDTH, DEFAULT_HEIGHT = 800, 600
+DPI = 100
+
+
+# --------------------------------------------------------------------------- files
+
+
+def load_trajectory(path: str | Path) -> dict[str, Any]:
+    """Arrays of a trajectory ``.npz`` (and its ``task`` config, when the file holds one).
+
+    Raises:
+        ValueError: a required key is missing or the arrays disagree in length.
+    """
+    with np.load(path, allow_pickle=False) as data:
+        traj: dict[str, Any] = {k: data[k] for k in data.files}
+    missing = [k for k in REQUIRED_KEYS if k not in traj]
+    if missing:
+        raise ValueError(f"{path} is not a trajectory file: it lacks {missing}")
+    lengths = {k: len(traj[k]) for k in REQUIRED_KEYS}
+    if len(set(lengths.values())) != 1:
+        raise ValueError(f"{path}: arrays differ in length {lengths}")
+    if "task_config" in traj:
+        traj["task_config"] = json.loads(str(traj["task_config"]))
+    return traj
+
+
+def save_trajectory(path: str | Path, rows: dict[str, np.ndarray], task: TaskConfig) -> Path:
+    """Write a trajectory ``.npz`` (the arrays plus the task config as JSON)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    payload = {k: np.asarray(v) for k, v in rows.items()}
+    payload["task_config"] = np.array(json.dumps(task.to_dict()))
+    with path.open("wb") as f:
+        np.savez_compressed(f, **payload)
+    return path
+
+
+def trajectory_task(path: str | Path, traj: dict[str, Any], name: str | None = None):
+    """The task a trajectory was recorded in: ``(TaskConfig, where it came from)``.
+
+    Order: the ``name`` given; the file's own ``task_config``; the ``config.json`` of the run
+    directory a ``checkpoints/step_N/transitions.npz`` sits in; else Touch.
+    """
+    if "task_config" in traj:
+        task = TaskConfig.from_dict(traj["task_config"])
+        if name is None or name == task.task:
+            return task, "the trajectory file"
+    if name is not None:
+        return task_config(name), "--task"
+    parents = Path(path).resolve().parents
+    config = parents[2] / "config.json" if len(parents) > 2 else None
+    if config is not None and config.exists():
+        return TaskConfig.from_dict(json.loads(config.read_text())["task"]), str(config)
+    return task_config("touch"), "default (touch): the file names no task"
+
+
+# --------------------------------------------------------------------------- plot
+
+
+def largest_reward_drop(reward: np.ndarray) -> int | None:
+    """Step ``t`` where ``reward[t] - reward[t - 1]`` is most negative; None if none drops."""
+    reward = np.asarray(reward, dtype=np.float64)
+    if reward.size < 2:
+        return None
+    diff = np.diff(reward)
+    t = int(np.argmin(diff))
+    return t + 1 if diff[t] < 0 else None
+
+
+def plot_trajectory(
+    traj: dict[str, Any],
+    output: str | Path,
+    width: int = DEFAULT_WIDTH,
+    height: int = DEFAULT_HEIGHT,
+    title: str | None = None,
+) -> Path:
+    """Plot reward, ee x/y/z (with the target) and contact force per step to a PNG.
+
+    Args:
+        traj: arrays as from :func:`load_trajectory`.
+        output: the PNG to write, exactly ``width`` x ``height`` pixels.
+        title: figure title.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    steps = np.arange(len(traj["reward"]))
+    fig, axes = plt.subplots(3, 1, sharex=True, figsize=(width / DPI, height / DPI), dpi=DPI)
+    _plot_reward(axes[0], steps, traj["reward"])
+    _plot_position(axes[1], steps, traj)
+    axes[2].plot(steps, traj["contact_force"], color="tab:purple")
+    axes[2].set_ylabel("contact force (N)")
+    axes[2].set_xlabel("control step")
+    drop = largest_reward_drop(traj["reward"])
+    for ax in axes:
+        ax.grid(alpha=0.3)
+        if drop is not None:
+            ax.axvline(drop, color="tab:red", linestyle="--", linewidth=1)
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    output = Path(output)
+    output.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(output, dpi=DPI)
+    plt.close(fig)
+    return output
+
+
+def _plot_reward(ax, steps: np.ndarray, reward: np.ndarray) -> None:
+    ax.plot(steps, reward, color="tab:blue")
+    ax.set_ylabel("reward")
+    drop = largest_reward_drop(reward)
+    if drop is None:
+        ax.text(0.02, 0.1, "the reward never drops", transform=ax.transAxes, color="tab:gray")
+    else:
+        delta = float(reward[drop] - reward[drop - 1])
+        ax.annotate(
+            f"largest drop {delta:+.2f} at step {drop}",
+            xy=(drop, reward[drop]),
+            xytext=(0.02, 0.1),
+            textcoords="axes fraction",
+            color="tab:red",
+            arrowprops={"arrowstyle": "->", "color": "tab:red"},
+        )
+
+
+def _plot_position(ax, steps: np.ndarray, traj: dict[str, Any]) -> None:
+    target = traj["obs"][:, obs_slices()["target_rel"]]
+    colors = ("tab:red", "tab:green", "tab:blue")
+    for i, (axis, color) in enumerate(zip("xyz", colors, strict=True)):
+        ax.plot(steps, traj["ee_pos"][:, i], color=color, label=f"ee {axis}")
+        ax.plot(steps, target[:, i], color=color, linestyle=":", label=f"target {axis}")
+    ax.set_ylabel("position (m)")
+    ax.legend(ncol=3, fontsize="small", loc="best")
+
+
+# --------------------------------------------------------------------------- video
+
+
+def rendering_available() -> tuple[bool, str]:
+    """Whether MuJoCo can render off screen here: ``(ok, reason when not)``."""
+    try:
+        import mujoco
+
+        model = mujoco.MjModel.from_xml_string("<mujoco><worldbody/></mujoco>")
+        with mujoco.Renderer(model, 8, 8) as renderer:
+            renderer.render()
+    except Exception as exc:  # no EGL/OSMesa/GLFW, no display, driver errors
+        return False, f"MuJoCo cannot render off screen here ({type(exc).__name__}: {exc})"
+    return True, ""
+
+
+def fit_framebuffer(model: Any, width: int, height: int) -> None:
+    """Grow a MuJoCo model's off-screen framebuffer to hold ``width`` x ``height`` frames."""
+    model.vis.global_.offwidth = max(int(model.vis.global_.offwidth), int(width))
+    model.vis.global_.offheight = max(int(model.vis.global_.offheight), int(height))
+
+
+def render_frames(
+    traj: dict[str, Any], task: TaskConfig, width: int = DEFAULT_WIDTH, height: int = DEFAULT_HEIGHT
+) -> Iterator[np.ndarray]:
+    """MuJoCo frames ``(height, width, 3)`` uint8 of each step's joint angles and target."""
+    import mujoco
+
+    from mjx_arm.envs.mujoco_env import MujocoArmEnv
+    from mjx_arm.task import sampling
+    from mjx_arm.urdf.scene import TARGET_BODY
+
+    env = MujocoArmEnv(task, render_mode="rgb_array", width=width, height=height)
+    fit_framebuffer(env.model, width, height)
+    env.reset(seed=0)
+    model, data = env.model, env.data
+    mocap = int(model.body_mocapid[model.body(TARGET_BODY).id])
+    offset = sampling.target_point(np, np.zeros(3), task)
+    s = obs_slices()
+    try:
+        for obs in np.asarray(traj["obs"], dtype=np.float64):
+            data.qpos[env.ids.qpos_adr] = obs[s["joint_angles"]]
+            data.mocap_pos[mocap] = obs[s["target_rel"]] - offset
+            mujoco.mj_forward(model, data)
+            yield env.render()
+    finally:
+        env.close()
+
+
+class VideoWriter:
+    """Frames streamed to an ``.mp4`` (H.264) or ``.gif`` file, opened at the first frame.
+
+    Args:
+        path: the video file; its suffix picks the format.
+        fps: frames per second (the contract renders one frame per control step: 30).
+    """
+
+    def __init__(self, path: str | Path, fps: float = 30.0) -> None:
+        self.path, self.fps, self.count = Path(path), float(fps), 0
+        self._writer = None
+
+    def append(self, frame: np.ndarray) -> None:
+        """Add one RGB frame ``(height, width, 3)`` uint8."""
+        with warnings.catch_warnings():
+            # ffmpeg runs as a child process: JAX warns about any fork, but exec follows at once
+            warnings.filterwarnings("ignore", message=r"os\.fork\(\) was called")
+            if self._writer is None:
+                self._writer = self._open()
+            self._writer.append_data(np.asarray(frame, dtype=np.uint8))
+        self.count += 1
+
+    def _open(self):
+        import imageio.v2 as imageio
+
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        if self.path.suffix.lower() == ".gif":
+            return imageio.get_writer(self.path, mode="I", duration=1000.0 / self.fps, loop=0)
+        return imageio.get_writer(
+            self.path, fps=self.fps, codec="libx264", macro_block_size=2, ffmpeg_log_level="error"
+        )
+
+    def close(self) -> int:
+        """Finish the file; returns the number of frames written."""
+        if self._writer is not None:
+            self._writer.close()
+            self._writer = None
+        return self.count
+
+    def __enter__(self) -> VideoWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def write_video(path: str | Path, frames: Iterable[np.ndarray], fps: float = 30.0) -> int:
+    """Write RGB frames to an ``.mp4`` (H.264) or ``.gif``; returns the frame count."""
+    with VideoWriter(path, fps) as writer:
+        for frame in frames:
+            writer.append(frame)
+    return writer.count
+
+
+# --------------------------------------------------------------------------- the command
+
+
+def replay(
+    path: str | Path,
+    output: str | Path,
+    video: str | Path | None = None,
+    width: int = DEFAULT_WIDTH,
+    height: int = DEFAULT_HEIGHT,
+    task_name: str | None = None,
+) -> dict[str, Any]:
+    """Plot a trajectory and optionally render its video.
+
+    Returns:
+        A summary: the files written, the step count, the largest reward drop, the task used,
+        and a note when the video was skipped.
+    """
+    traj = load_trajectory(path)
+    task, task_source = trajectory_task(path, traj, task_name)
+    title = f"{Path(path).name} ({task.task}, {len(traj['reward'])} steps)"
+    plot = plot_trajectory(traj, output, width, height, title)
+    drop = largest_reward_drop(traj["reward"])
+    summary: dict[str, Any] = {
+        "trajectory": str(path),
+        "steps": len(traj["reward"]),
+        "return": float(np.sum(traj["reward"])),
+        "largest_reward_drop_step": drop,
+        "task": task.task,
+        "task_from": task_source,
+        "plot": str(plot),
+        "video": None,
+    }
+    if video is not None:
+        ok, reason = rendering_available()
+        if ok:
+            fps = 1.0 / task.ctrl_dt
+            summary["frames"] = write_video(video, render_frames(traj, task, width, height), fps)
+            summary["video"] = str(video)
+        else:
+            summary["video_note"] = f"video skipped: {reason}"
+    return summary
