@@ -22,7 +22,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.common import environment_metadata, markdown_table, save_results  # noqa: E402
+from benchmarks.common import environment_metadata, markdown_table, save_results
 
 
 def _peak_bytes() -> int | None:

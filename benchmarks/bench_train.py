@@ -41,6 +41,21 @@ def solve_time(run_dir: Path, start: float) -> tuple[float | None, int | None, f
     return (hit[0], hit[1], best) if hit else (None, None, best)
 
 
+def brax_training_sps(run_dir: Path) -> float | None:
+    """Median of Brax's ``training/sps`` (rollout + update, evaluation excluded), first epoch
+    (which carries the compilation) left out."""
+    import statistics
+
+    from mjx_arm.train.rundir import RunDir
+
+    values = [
+        r["training/sps"]
+        for r in RunDir(run_dir).read_metrics()[2:]
+        if r.get("training/sps", 0) > 0
+    ]
+    return statistics.median(values) if values else None
+
+
 def run_task(task: str, args: argparse.Namespace, start: float) -> dict:
     """Train one task and return its timings."""
     from mjx_arm.train.config import load_config
@@ -64,6 +79,7 @@ def run_task(task: str, args: argparse.Namespace, start: float) -> dict:
         "compile_s": result.compile_seconds,
         "train_s": result.train_seconds,
         "steady_steps_per_s": result.steps_per_second,
+        "training_steps_per_s": brax_training_sps(run_dir),
         "total_steps": result.steps,
         "run_dir": str(run_dir),
     }
@@ -100,7 +116,8 @@ def main() -> None:
         "solve step",
         "best success",
         "compile (s)",
-        "steady steps/s",
+        "steps/s with evals",
+        "training steps/s",
         "train (s)",
     ]
     table = markdown_table(
@@ -115,6 +132,7 @@ def main() -> None:
                 f"{r['best_success']:.3f}",
                 f"{r['compile_s']:.1f}",
                 f"{r['steady_steps_per_s']:,.0f}",
+                f"{r['training_steps_per_s'] or float('nan'):,.0f}",
                 f"{r['train_s']:.1f}",
             ]
             for r in rows

@@ -3,16 +3,19 @@
 Importing the package registers the Gymnasium ids ``mjx_arm/Reach-v0`` and ``mjx_arm/Touch-v0``.
 """
 
+import ctypes.util as _ctypes_util
 import os as _os
 import sys as _sys
 
 __version__ = "0.1.0"
 
-# Headless rendering by default: MuJoCo picks its GL backend when first imported.
+# Headless rendering by default: MuJoCo picks its GL backend when first imported. Only where an
+# EGL library exists: MuJoCo's import fails outright when told to use a missing one.
 if (
     "MUJOCO_GL" not in _os.environ
     and _sys.platform.startswith("linux")
     and not _os.environ.get("DISPLAY")
+    and _ctypes_util.find_library("EGL")
 ):
     _os.environ["MUJOCO_GL"] = "egl"
 

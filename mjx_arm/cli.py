@@ -96,9 +96,11 @@ def cmd_train(args: argparse.Namespace) -> int:
     print(f"run directory: {run_dir}")
     result = train(config, run_dir, resume=bool(args.resume), quiet=args.quiet)
     success = result.metrics.get("eval/episode_success", float("nan"))
-    print(f"done: {result.steps} steps in {result.train_seconds:.1f} s "
-          f"(compile {result.compile_seconds:.1f} s, {result.steps_per_second:,.0f} steps/s), "
-          f"eval success {success:.3f}")
+    print(
+        f"done: {result.steps} steps in {result.train_seconds:.1f} s "
+        f"(compile {result.compile_seconds:.1f} s, {result.steps_per_second:,.0f} steps/s), "
+        f"eval success {success:.3f}"
+    )
     return EXIT_OK
 
 
@@ -108,8 +110,7 @@ def _enable_compilation_cache() -> None:
 
     import jax
 
-    folder = os.environ.get("MJX_ARM_JAX_CACHE",
-                            str(Path.home() / ".cache" / "mjx_arm" / "jax"))
+    folder = os.environ.get("MJX_ARM_JAX_CACHE", str(Path.home() / ".cache" / "mjx_arm" / "jax"))
     jax.config.update("jax_compilation_cache_dir", folder)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
 
@@ -208,7 +209,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     """The whole product on a CPU: validate and convert the arm, train Reach, export the
     policy, evaluate it in CPU MuJoCo, PyBullet and the batched JAX env, plot and film it.
 
-    About 2-3 minutes on a 2-core CPU (--quick: about 1-2 minutes).
+    About 1-2 minutes on a 2-core CPU (--quick: under a minute).
     """
     from mjx_arm.demo import DemoError, run_demo
 
@@ -347,17 +348,35 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.set_defaults(func=cmd_convert)
 
-    p = sub.add_parser("train", help="train a PPO policy (Brax) and write a run directory",
-                       description=cmd_train.__doc__)
-    p.add_argument("--task", type=str.lower, choices=["reach", "touch"],
-                   help="task to train (default: the preset's)")
-    p.add_argument("--preset", choices=["seed", "fast", "cpu"], default="seed",
-                   help="hyperparameter preset (default: seed)")
-    p.add_argument("--backend", choices=["auto", "mjx", "mujoco"],
-                   help="physics: mjx (GPU), mujoco (C MuJoCo, CPU), auto (default)")
+    p = sub.add_parser(
+        "train",
+        help="train a PPO policy (Brax) and write a run directory",
+        description=cmd_train.__doc__,
+    )
+    p.add_argument(
+        "--task",
+        type=str.lower,
+        choices=["reach", "touch"],
+        help="task to train (default: the preset's)",
+    )
+    p.add_argument(
+        "--preset",
+        choices=["seed", "fast", "cpu"],
+        default="seed",
+        help="hyperparameter preset (default: seed)",
+    )
+    p.add_argument(
+        "--backend",
+        choices=["auto", "mjx", "mujoco"],
+        help="physics: mjx (GPU), mujoco (C MuJoCo, CPU), auto (default)",
+    )
     p.add_argument("--config", help="JSON file with training config fields")
-    p.add_argument("--set", action="append", metavar="KEY=VALUE",
-                   help="override a config field (repeatable); task.FIELD=... for the task")
+    p.add_argument(
+        "--set",
+        action="append",
+        metavar="KEY=VALUE",
+        help="override a config field (repeatable); task.FIELD=... for the task",
+    )
     p.add_argument("--run-dir", help="run directory (default: runs/TASK-TIMESTAMP)")
     p.add_argument("--resume", metavar="RUN_DIR", help="continue the run in RUN_DIR")
     p.add_argument("--quiet", action="store_true", help="no progress bar")

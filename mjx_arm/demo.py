@@ -19,9 +19,13 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from mjx_arm.evaluate import EvalRun
+    from mjx_arm.task.config import TaskConfig
 
 
 class DemoError(RuntimeError):
@@ -48,7 +52,7 @@ class DemoSettings:
     height: int
 
 
-FULL = DemoSettings(300_000, 6, 50, 5, 640, 480)
+FULL = DemoSettings(300_000, 6, 50, 10, 640, 480)
 QUICK = DemoSettings(122_880, 4, 20, 2, 320, 240)
 
 
@@ -114,10 +118,18 @@ def train_reach(run_dir: Path, settings: DemoSettings, echo: Callable[[str], Non
     result = train(config, run_dir)
     success = result.metrics.get("eval/episode_success", float("nan"))
     echo(
-        f"{result.steps:,} steps in {result.train_seconds:.0f} s "
+        f"{trained_steps(run_dir):,} steps in {result.train_seconds:.0f} s "
         f"(compile {result.compile_seconds:.0f} s), training eval success {success:.2f}"
     )
     return result
+
+
+def trained_steps(run_dir: Path) -> int:
+    """Env steps of the newest checkpoint (Brax rounds ``num_timesteps`` up to whole epochs)."""
+    from mjx_arm.policy.export import available_steps
+
+    steps = available_steps(run_dir)
+    return steps[-1] if steps else 0
 
 
 def export_all(run_dir: Path, out: Path, echo: Callable[[str], None]) -> dict[str, Any]:
@@ -142,7 +154,7 @@ def export_all(run_dir: Path, out: Path, echo: Callable[[str], None]) -> dict[st
     return info
 
 
-def _probe_states(policy, rng: np.random.Generator, n: int = 256) -> np.ndarray:
+def _probe_states(policy: Any, rng: np.random.Generator, n: int = 256) -> np.ndarray:
     """Random observations ``(n, 22)`` around the policy's normaliser statistics."""
     mean = getattr(policy, "mean", np.zeros(policy.obs_size, np.float32))
     std = getattr(policy, "std", np.ones(policy.obs_size, np.float32))
@@ -151,7 +163,7 @@ def _probe_states(policy, rng: np.random.Generator, n: int = 256) -> np.ndarray:
 
 def evaluate_engines(
     policy_path: Path, out: Path, settings: DemoSettings, echo: Callable[[str], None]
-) -> tuple[dict[str, dict], Any]:
+) -> tuple[dict[str, dict], EvalRun]:
     """Evaluate on CPU MuJoCo (filming the first episodes), PyBullet and the batched JAX env.
 
     Returns:
@@ -184,13 +196,15 @@ def evaluate_engines(
         path = out / f"eval_{label}.json"
         path.write_text(json.dumps(result, indent=2))
         result["json"] = str(path)
-        runs[label] = result
+        runs[label] = {k: v for k, v in result.items() if k != "per_episode"}
         echo(format_summary(result))
         mujoco_run = run if engine == "mujoco" else mujoco_run
     return runs, mujoco_run
 
 
-def plot_episode(run, task, out: Path, echo: Callable[[str], None]) -> dict[str, Any]:
+def plot_episode(
+    run: EvalRun, task: TaskConfig, out: Path, echo: Callable[[str], None]
+) -> dict[str, Any]:
     """Save the longest MuJoCo episode as a trajectory and plot it."""
     from mjx_arm.replay import replay, save_trajectory
 
@@ -232,7 +246,7 @@ def run_demo(
     trained = train_reach(run_dir, settings, echo)
     summary["train"] = {
         "run_dir": str(run_dir),
-        "steps": trained.steps,
+        "steps": trained_steps(run_dir),
         "seconds": round(trained.train_seconds, 1),
         "eval_success": trained.metrics.get("eval/episode_success"),
     }
@@ -253,7 +267,7 @@ def run_demo(
     return summary
 
 
-def _task_of(policy_path: str):
+def _task_of(policy_path: str) -> TaskConfig:
     from mjx_arm.evaluate import eval_task
     from mjx_arm.policy import load
 

@@ -21,7 +21,7 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -34,6 +34,9 @@ Z95 = 1.959963984540054
 # Fields of a task that change what an action does; kept from the policy's training config when
 # it is evaluated on the other task.
 DYNAMICS_FIELDS = ("ctrl_dt", "sim_dt", "action_scale")
+
+if TYPE_CHECKING:
+    import gymnasium as gym
 
 Policy = Callable[[Any], np.ndarray]
 
@@ -93,7 +96,15 @@ class _Recorder:
     def __init__(self) -> None:
         self.rows: dict[str, list] = {k: [] for k in self.KEYS}
 
-    def add(self, flat_obs, action, reward, done, next_obs: dict, info: dict) -> None:
+    def add(
+        self,
+        flat_obs: np.ndarray,
+        action: np.ndarray,
+        reward: float,
+        done: bool,
+        next_obs: dict[str, np.ndarray],
+        info: dict[str, Any],
+    ) -> None:
         """Record one step: the observation acted on, then what the step produced."""
         values = (
             flat_obs,
@@ -166,7 +177,7 @@ def _flat(obs: Any) -> np.ndarray:
 
 
 def run_episode(
-    policy: Policy, env, seed: int | None, capture: Callable[[], None] | None = None
+    policy: Policy, env: gym.Env, seed: int | None, capture: Callable[[], None] | None = None
 ) -> tuple[EpisodeStats, dict]:
     """One episode of ``policy`` in a Gymnasium env of the contract.
 
@@ -204,7 +215,7 @@ def run_episode(
 
 def run_episodes(
     policy: Policy,
-    env,
+    env: gym.Env,
     episodes: int,
     seed: int = 0,
     video: str | Path | None = None,
@@ -250,7 +261,8 @@ class _SafeVideo:
     def __init__(self, writer) -> None:
         self.writer = writer
 
-    def capture(self, env) -> None:
+    def capture(self, env: gym.Env) -> None:
+        """Render one frame of ``env`` into the video."""
         try:
             frame = env.render()
         except Exception as exc:  # GL context or driver errors surface as many types
@@ -260,10 +272,11 @@ class _SafeVideo:
         self.writer.append(frame)
 
     def close(self) -> int:
+        """Finish the file; returns the frame count."""
         return self.writer.close()
 
 
-def _open_video(env, video: str | Path | None) -> tuple[_SafeVideo | None, list[str]]:
+def _open_video(env: gym.Env, video: str | Path | None) -> tuple[_SafeVideo | None, list[str]]:
     from mjx_arm.replay import VideoWriter, fit_framebuffer, rendering_available
 
     if video is None:
@@ -336,7 +349,7 @@ class _BatchAccumulator:
         self.peak = np.zeros(n)
         self.distance = np.full(n, np.nan)
 
-    def add(self, rewards, done, info: dict) -> None:
+    def add(self, rewards: np.ndarray, done: np.ndarray, info: dict[str, Any]) -> None:
         """Add one step's numbers to the envs still in their first episode."""
         a = self.active
         self.ret[a] += np.asarray(rewards)[a]
@@ -384,7 +397,7 @@ def resolve_policy(source: str | Path, step: int | None = None) -> tuple[Any, st
     return policy, f"{source} (checkpoint step {policy.metadata['step']})"
 
 
-def eval_task(policy, name: str | None = None) -> tuple[TaskConfig, list[str]]:
+def eval_task(policy: Any, name: str | None = None) -> tuple[TaskConfig, list[str]]:
     """The task to evaluate in: the policy's training task, or preset ``name``.
 
     When ``name`` is another task than the training one, its preset is used with the
@@ -404,7 +417,9 @@ def eval_task(policy, name: str | None = None) -> tuple[TaskConfig, list[str]]:
     return task_config(name, **dynamics), [note]
 
 
-def make_env(task: TaskConfig, engine: str, render: bool = False, width=640, height=480):
+def make_env(
+    task: TaskConfig, engine: str, render: bool = False, width: int = 640, height: int = 480
+) -> gym.Env:
     """A Gymnasium env of ``task`` on a CPU engine ("mujoco" or "pybullet")."""
     import gymnasium as gym
 
@@ -466,7 +481,9 @@ def evaluate(
     return result, run
 
 
-def _replay_video(traj, task: TaskConfig, video, width: int, height: int) -> tuple[int, str]:
+def _replay_video(
+    traj: dict[str, np.ndarray], task: TaskConfig, video: str | Path, width: int, height: int
+) -> tuple[int, str]:
     """Film a batched env's trajectory through the CPU MuJoCo renderer."""
     from mjx_arm.replay import render_frames, rendering_available, write_video
 

@@ -15,6 +15,7 @@ target of ``obs[t]`` in the CPU MuJoCo env's model and renders it from the scene
 from __future__ import annotations
 
 import json
+import os
 import warnings
 from collections.abc import Iterable, Iterator
 from pathlib import Path
@@ -141,13 +142,13 @@ def _plot_reward(ax, steps: np.ndarray, reward: np.ndarray) -> None:
     ax.set_ylabel("reward")
     drop = largest_reward_drop(reward)
     if drop is None:
-        ax.text(0.02, 0.1, "the reward never drops", transform=ax.transAxes, color="tab:gray")
+        ax.text(0.02, 0.85, "the reward never drops", transform=ax.transAxes, color="tab:gray")
     else:
         delta = float(reward[drop] - reward[drop - 1])
         ax.annotate(
             f"largest drop {delta:+.2f} at step {drop}",
             xy=(drop, reward[drop]),
-            xytext=(0.02, 0.1),
+            xytext=(0.02, 0.85),
             textcoords="axes fraction",
             color="tab:red",
             arrowprops={"arrowstyle": "->", "color": "tab:red"},
@@ -176,7 +177,12 @@ def rendering_available() -> tuple[bool, str]:
         with mujoco.Renderer(model, 8, 8) as renderer:
             renderer.render()
     except Exception as exc:  # no EGL/OSMesa/GLFW, no display, driver errors
-        return False, f"MuJoCo cannot render off screen here ({type(exc).__name__}: {exc})"
+        backend = os.environ.get("MUJOCO_GL", "default")
+        return False, (
+            f"MuJoCo cannot render off screen here (MUJOCO_GL={backend}; "
+            f"{type(exc).__name__}: {exc}); install EGL (e.g. apt-get install libegl1) "
+            "or OSMesa and set MUJOCO_GL=egl or osmesa"
+        )
     return True, ""
 
 

@@ -101,7 +101,11 @@ class BasePolicy:
     # ------------------------------------------------------------------ to implement
 
     def distribution_params(self, state: np.ndarray) -> np.ndarray:
-        """The network output ``(N, 2 * action_size)`` for normalised-later ``state (N, 22)``."""
+        """The network output ``(N, 2 * action_size)``: mean, then pre-softplus scale.
+
+        Args:
+            state: raw (not yet normalised) observations ``(N, 22)``, float32.
+        """
         raise NotImplementedError
 
     def mode(self, state: np.ndarray) -> np.ndarray:

@@ -42,7 +42,7 @@ def _activation_nodes(helper, name: str, x: str, out: str) -> list:
 
 def build_model(arrays: Mapping[str, np.ndarray], metadata: Mapping[str, Any]):
     """The ONNX ``ModelProto`` of a policy (see the module docstring for its inputs/outputs)."""
-    import onnx
+    onnx = _require("onnx")
     from onnx import TensorProto, helper, numpy_helper
 
     n_layers = sum(1 for k in arrays if k.startswith("kernel_"))
@@ -92,9 +92,21 @@ def build_model(arrays: Mapping[str, np.ndarray], metadata: Mapping[str, Any]):
     return model
 
 
+def _require(module: str):
+    """Import ``module`` or explain how to install it."""
+    import importlib
+
+    try:
+        return importlib.import_module(module)
+    except ImportError as exc:
+        raise ImportError(
+            f"{module} is not installed: pip install 'mjx_arm[onnx]' (onnx + onnxruntime)"
+        ) from exc
+
+
 def write_onnx(path: str | Path, arrays: Mapping[str, np.ndarray], metadata: Mapping) -> Path:
     """Write the policy as an ONNX file; returns the path."""
-    import onnx
+    onnx = _require("onnx")
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -115,8 +127,7 @@ class OnnxPolicy(BasePolicy):
     """
 
     def __init__(self, path: str | Path, deterministic: bool = True, seed: int | None = None):
-        import onnxruntime as ort
-
+        ort = _require("onnxruntime")
         try:
             session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
         except Exception as exc:  # onnxruntime raises its own exception types

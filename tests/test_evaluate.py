@@ -1,0 +1,165 @@
+"""Evaluation of an exported policy (:mod:`mjx_arm.evaluate`, ``mjx-arm eval``)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_policy import trained_run_dir
+
+from mjx_arm.cli import EXIT_OK, main
+from mjx_arm.evaluate import (
+    EpisodeStats,
+    eval_task,
+    evaluate,
+    make_env,
+    run_batched,
+    run_episodes,
+    summarize,
+    wilson_interval,
+)
+from mjx_arm.policy import export_policy, load
+from mjx_arm.replay import rendering_available
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory) -> Path:
+    return trained_run_dir(tmp_path_factory)
+
+
+@pytest.fixture(scope="module")
+def policy_path(run_dir: Path, tmp_path_factory) -> Path:
+    return export_policy(run_dir, tmp_path_factory.mktemp("eval") / "policy.npz")
+
+
+# reading a video back starts ffmpeg: JAX warns about any fork, harmless here (exec follows)
+pytestmark = pytest.mark.filterwarnings("ignore:os.fork")
+needs_render = pytest.mark.skipif(not rendering_available()[0], reason=rendering_available()[1])
+
+
+def _check_sane(result: dict, episodes: int) -> None:
+    low, high = result["success_ci95"]
+    assert result["episodes"] == episodes
+    assert 0.0 <= low <= result["success_rate"] <= high <= 1.0
+    assert math.isfinite(result["mean_return"]) and result["mean_return"] < 0
+    assert result["mean_peak_contact_force"] >= 0.0
+    steps = result["mean_steps_to_success"]
+    assert steps is None or 1 <= steps <= 150
+    assert len(result["per_episode"]) == episodes
+
+
+# --------------------------------------------------------------------------- statistics
+
+
+@pytest.mark.parametrize(
+    ("successes", "n", "expected"),
+    [(5, 10, (0.2366, 0.7634)), (0, 10, (0.0, 0.2775)), (10, 10, (0.7225, 1.0)), (0, 0, (0, 1))],
+)
+def test_wilson_interval_worked_values(successes, n, expected):
+    np.testing.assert_allclose(wilson_interval(successes, n), expected, atol=1e-4)
+
+
+def test_summarize_hand_worked():
+    episodes = [
+        EpisodeStats(-10.0, 5, True, 5, 2.0, 0.01),
+        EpisodeStats(-30.0, 150, False, None, 4.0, 0.2),
+    ]
+    s = summarize(episodes)
+    assert s["success_rate"] == 0.5 and s["successes"] == 1
+    assert s["mean_return"] == -20.0 and s["mean_steps_to_success"] == 5.0
+    assert s["mean_peak_contact_force"] == 3.0 and s["mean_episode_steps"] == 77.5
+
+
+# --------------------------------------------------------------------------- CPU engines
+
+
+@pytest.mark.parametrize("engine", ["mujoco", "pybullet"])
+def test_cli_eval_on_cpu_engines(policy_path: Path, tmp_path: Path, engine: str, capsys):
+    output = tmp_path / f"{engine}.json"
+    argv = ["eval", str(policy_path), "--engine", engine, "--episodes", "12", "-o", str(output)]
+    assert main(argv) == EXIT_OK
+    result = json.loads(output.read_text())
+    _check_sane(result, 12)
+    assert result["engine"] == engine and result["task"] == "reach"
+    assert "success rate" in capsys.readouterr().out
+
+
+def test_engines_see_the_same_episodes(policy_path: Path):
+    policy = load(policy_path)
+    task, _ = eval_task(policy)
+    starts = []
+    for engine in ("mujoco", "pybullet"):
+        env = make_env(task, engine)
+        starts.append(run_episodes(policy, env, 2, seed=7).trajectories[1]["obs"][0])
+        env.close()
+    # same seed: same start pose and target (joint angles and target_rel exactly)
+    np.testing.assert_allclose(starts[0][7:16], starts[1][7:16], atol=1e-6)
+
+
+def test_eval_accepts_a_run_directory(run_dir: Path, tmp_path: Path):
+    output = tmp_path / "run.json"
+    argv = ["eval", str(run_dir), "--episodes", "3", "--task", "touch", "-o", str(output)]
+    assert main(argv) == EXIT_OK
+    result = json.loads(output.read_text())
+    assert "checkpoint step" in result["policy"]
+    assert result["task"] == "touch"
+    assert any("trained on reach" in note for note in result["notes"])
+
+
+@needs_render
+def test_runner_films_the_first_episodes(policy_path: Path, tmp_path: Path):
+    import imageio.v3 as iio
+
+    policy = load(policy_path)
+    task, _ = eval_task(policy)
+    env = make_env(task, "mujoco", render=True, width=160, height=120)
+    run = run_episodes(policy, env, 3, seed=0, video=tmp_path / "v.mp4", video_episodes=2)
+    env.close()
+    expected = sum(e.steps + 1 for e in run.episodes[:2])  # the reset frame, then one per step
+    assert run.frames == expected
+    frames = iio.imread(tmp_path / "v.mp4")
+    assert frames.shape == (expected, 120, 160, 3)
+
+
+def test_runner_notes_an_env_without_render_mode(policy_path: Path, tmp_path: Path):
+    policy = load(policy_path)
+    env = make_env(eval_task(policy)[0], "mujoco")
+    run = run_episodes(policy, env, 1, video=tmp_path / "v.mp4")
+    env.close()
+    assert run.frames == 0 and "render_mode" in run.notes[0]
+
+
+# --------------------------------------------------------------------------- batched env
+
+
+def test_batched_runner_on_the_c_mujoco_backend(policy_path: Path):
+    """The JAX batch (C MuJoCo backend: MJX's stand-in on a CPU) gives sane numbers."""
+    policy = load(policy_path)
+    task, _ = eval_task(policy)
+    run = run_batched(policy, task, 8, seed=0, backend="mujoco")
+    assert len(run.episodes) == 8
+    assert all(1 <= e.steps <= task.episode_steps for e in run.episodes)
+    for e in run.episodes:
+        assert e.success == (e.steps_to_success is not None)
+    traj = run.trajectory
+    assert traj["obs"].shape == (run.episodes[0].steps, 22)
+    assert np.isclose(traj["reward"].sum(), run.episodes[0].episode_return, rtol=1e-5)
+
+
+def test_evaluate_rejects_unknown_engines(policy_path: Path):
+    with pytest.raises(ValueError, match="engine"):
+        evaluate(load(policy_path), "gazebo", eval_task(load(policy_path))[0], 1)
+
+
+def test_eval_without_a_renderer_notes_the_skipped_video(policy_path: Path, tmp_path, monkeypatch):
+    import mjx_arm.replay
+
+    monkeypatch.setattr(mjx_arm.replay, "rendering_available", lambda: (False, "no EGL (test)"))
+    policy = load(policy_path)
+    result, run = evaluate(policy, "mujoco", eval_task(policy)[0], 2, video=tmp_path / "v.mp4")
+    assert result["video"] is None and run.frames == 0
+    assert result["notes"] == ["video skipped: no EGL (test)"]
+    assert not (tmp_path / "v.mp4").exists()

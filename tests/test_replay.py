@@ -1,0 +1,125 @@
+"""Trajectory replay: plot and MuJoCo video (:mod:`mjx_arm.replay`, ``mjx-arm replay``)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_policy import trained_run_dir
+
+from mjx_arm.cli import EXIT_INVALID, EXIT_OK, main
+from mjx_arm.replay import (
+    largest_reward_drop,
+    load_trajectory,
+    rendering_available,
+    save_trajectory,
+    trajectory_task,
+)
+from mjx_arm.task.config import reach_config, touch_config
+
+# reading a video back starts ffmpeg: JAX warns about any fork, harmless here (exec follows)
+pytestmark = pytest.mark.filterwarnings("ignore:os.fork")
+needs_render = pytest.mark.skipif(not rendering_available()[0], reason=rendering_available()[1])
+
+
+@pytest.fixture(scope="module")
+def transitions(tmp_path_factory) -> Path:
+    from mjx_arm.train.rundir import RunDir
+
+    run_dir = trained_run_dir(tmp_path_factory)
+    return RunDir(run_dir).latest_checkpoint() / "transitions.npz"
+
+
+def _synthetic(steps: int = 12) -> dict[str, np.ndarray]:
+    """A made-up trajectory: the base turning from home, the reward dropping by 5 at step 7."""
+    from mjx_arm.task.config import HOME_QPOS
+
+    obs = np.zeros((steps, 22), np.float32)
+    obs[:, 7:13] = HOME_QPOS
+    obs[:, 7] = np.linspace(0.0, 0.5, steps)  # distinct frames (a GIF merges equal ones)
+    obs[:, 13:16] = (0.5, 0.1, 0.04)
+    reward = -np.linspace(5.0, 1.0, steps)
+    reward[7:] -= 5.0
+    return {
+        "obs": obs,
+        "action": np.zeros((steps, 6), np.float32),
+        "reward": reward,
+        "done": np.zeros(steps, bool),
+        "ee_pos": np.tile([0.5, 0.1, 0.3], (steps, 1)),
+        "contact_force": np.linspace(0.0, 3.0, steps),
+    }
+
+
+def test_largest_reward_drop_hand_worked():
+    assert largest_reward_drop(np.array([0.0, 1.0, -2.0, -1.0, -4.5])) == 4
+    assert largest_reward_drop(np.array([0.0, 1.0, 2.0])) is None
+    assert largest_reward_drop(np.array([3.0])) is None
+    assert largest_reward_drop(_synthetic()["reward"]) == 7
+
+
+@needs_render
+def test_replay_writes_png_of_the_size_and_a_playable_video(transitions: Path, tmp_path: Path):
+    import imageio.v3 as iio
+
+    png, video = tmp_path / "plot.png", tmp_path / "replay.mp4"
+    argv = ["replay", str(transitions), "-o", str(png), "--video", str(video)]
+    assert main([*argv, "--width", "320", "--height", "240"]) == EXIT_OK
+    assert iio.imread(png).shape[:2] == (240, 320)
+    steps = len(np.load(transitions)["reward"])
+    frames = iio.imread(video)
+    assert frames.shape == (steps, 240, 320, 3)
+    assert frames.std() > 5  # a scene, not a blank frame
+
+
+@needs_render
+def test_replay_renders_larger_than_the_default_framebuffer(tmp_path: Path):
+    import imageio.v3 as iio
+
+    path = save_trajectory(tmp_path / "t.npz", _synthetic(3), touch_config())
+    video = tmp_path / "big.gif"
+    assert main(["replay", str(path), "-o", str(tmp_path / "p.png"), "--video", str(video),
+                 "--width", "800", "--height", "600"]) == EXIT_OK  # fmt: skip
+    assert iio.imread(video).shape == (3, 600, 800, 3)
+
+
+def test_replay_of_an_eval_trajectory(tmp_path: Path, capsys):
+    import imageio.v3 as iio
+
+    path = save_trajectory(tmp_path / "traj.npz", _synthetic(), touch_config())
+    png = tmp_path / "p.png"
+    assert main(["replay", str(path), "-o", str(png)]) == EXIT_OK
+    out = capsys.readouterr().out
+    assert "largest reward drop at step 7" in out and "touch" in out
+    assert iio.imread(png).shape[:2] == (600, 800)
+
+
+def test_task_comes_from_the_file_or_the_run_directory(transitions: Path, tmp_path: Path):
+    path = save_trajectory(tmp_path / "t.npz", _synthetic(), reach_config(action_scale=0.3))
+    task, source = trajectory_task(path, load_trajectory(path))
+    assert task.task == "reach" and task.action_scale == 0.3 and "file" in source
+    task, source = trajectory_task(transitions, load_trajectory(transitions))
+    assert task.task == "reach" and source.endswith("config.json")
+    assert trajectory_task(path, load_trajectory(path), "touch")[0].task == "touch"
+
+
+def test_replay_rejects_other_files(tmp_path: Path, capsys):
+    np.savez(tmp_path / "x.npz", reward=np.zeros(3))
+    assert main(["replay", str(tmp_path / "x.npz"), "-o", str(tmp_path / "p.png")]) == EXIT_INVALID
+    assert "not a trajectory file" in capsys.readouterr().err
+
+
+def test_no_renderer_skips_the_video_with_a_note(tmp_path: Path):
+    """Without a working GL backend the plot is still written and the video skipped."""
+    path = save_trajectory(tmp_path / "t.npz", _synthetic(), reach_config())
+    png, video = tmp_path / "p.png", tmp_path / "v.mp4"
+    argv = ["replay", str(path), "-o", str(png), "--video", str(video)]
+    code = f"import sys; from mjx_arm.cli import main; sys.exit(main({argv!r}))"
+    env = {**os.environ, "MUJOCO_GL": "no-such-backend"}
+    done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert "video skipped" in done.stdout and "MUJOCO_GL=no-such-backend" in done.stdout
+    assert png.is_file() and not video.exists()
