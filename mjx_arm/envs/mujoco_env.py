@@ -70,6 +70,12 @@ class MujocoArmEnv(BaseRobotEnv):
 
     def _render_frame(self) -> np.ndarray:
         if self._renderer is None:
+            # the off-screen framebuffer must hold the frame (MuJoCo's default is 640x480)
+            vis = self.model.vis.global_
+            vis.offwidth, vis.offheight = (
+                max(vis.offwidth, self.width),
+                max(vis.offheight, self.height),
+            )
             self._renderer = mujoco.Renderer(self.model, self.height, self.width)
         self._renderer.update_scene(self.data, camera="main")
         return self._renderer.render().copy()

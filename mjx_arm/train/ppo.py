@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 from mjx_arm.task.config import TaskConfig, task_config
@@ -204,7 +205,7 @@ def train(
         if latest is None:
             raise FileNotFoundError(f"no checkpoint to resume from in {run.path}")
         step_offset = int(RunDir.load_meta(latest)["step"])
-        restore = tuple(RunDir.load_params(latest))
+        restore = restore_brax_params(RunDir.load_params(latest))
     else:
         run.save_config(full_config(config, task))
     remaining = config.num_timesteps - step_offset
@@ -254,9 +255,34 @@ def train(
         run.close()
     total = time.monotonic() - start
     compile_s, sps = _timings(progress.times, config)
+    trained = progress.times[-1][1] if progress.times else remaining  # Brax rounds up to epochs
     return TrainResult(
-        run.path, step_offset + remaining, progress.last_metrics, compile_s, total, sps
+        run.path, step_offset + trained, progress.last_metrics, compile_s, total, sps
     )
+
+
+def restore_brax_params(raw: Any) -> tuple:
+    """Brax's (normalizer, policy, value) from a checkpoint read back without a target.
+
+    orbax returns plain dicts; Brax needs its running-statistics dataclass (with the UInt64
+    sample count) for the normaliser. Policy and value params are plain dicts already.
+    """
+    from brax.training import types as brax_types
+    from brax.training.acme import running_statistics
+
+    norm, policy, value = raw
+    count = norm["count"]
+    if isinstance(count, dict):
+        count = brax_types.UInt64(hi=jnp.asarray(count["hi"]), lo=jnp.asarray(count["lo"]))
+    state = running_statistics.RunningStatisticsState(
+        mean=jnp.asarray(norm["mean"]),
+        std=jnp.asarray(norm["std"]),
+        count=count,
+        summed_variance=jnp.asarray(norm["summed_variance"]),
+        std_eps=float(np.asarray(norm.get("std_eps", 0.0))),
+    )
+    to_jax = functools.partial(jax.tree.map, jnp.asarray)
+    return state, to_jax(policy), to_jax(value)
 
 
 def _timings(times: list[tuple[float, int]], config: TrainConfig) -> tuple[float, float]:
