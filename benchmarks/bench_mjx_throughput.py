@@ -32,16 +32,41 @@ def _peak_bytes() -> int | None:
     return stats.get("peak_bytes_in_use")
 
 
-def measure(task_name: str, batch: int, steps: int, backend: str) -> dict:
+def _env(task_name: str, backend: str, convert: list[str]):
+    """The batched env, its model converted with ``key=value`` overrides of ConvertConfig."""
+    from mjx_arm.envs.vector import make_batched_env
+    from mjx_arm.task import task_config
+
+    task = task_config(task_name)
+    if not convert:
+        return make_batched_env(task, backend)
+    import dataclasses
+
+    from mjx_arm.envs.mjx_env import MjxArmEnv
+    from mjx_arm.envs.model_io import task_convert_config
+    from mjx_arm.paths import default_arm_urdf
+    from mjx_arm.urdf import load_model
+
+    base = task_convert_config(task)
+    kinds = {f.name: f.type for f in dataclasses.fields(base)}
+    changes = {}
+    for item in convert:
+        key, _, value = item.partition("=")
+        changes[key] = {"int": int, "float": float, "bool": lambda v: v == "true"}.get(
+            str(kinds[key]), str
+        )(value)
+    model = load_model(default_arm_urdf(), base.replace(**changes))
+    return MjxArmEnv(task, mj_model=model)
+
+
+def measure(task_name: str, batch: int, steps: int, backend: str,
+            convert: list[str] | None = None) -> dict:
     """Time env and raw stepping for one batch size (in this process)."""
     import jax
     import jax.numpy as jnp
     from mujoco import mjx
 
-    from mjx_arm.envs.vector import make_batched_env
-    from mjx_arm.task import task_config
-
-    env = make_batched_env(task_config(task_name), backend)
+    env = _env(task_name, backend, convert or [])
     keys = jax.random.split(jax.random.PRNGKey(0), batch)
     actions = jax.random.uniform(jax.random.PRNGKey(1), (batch, 6), minval=-1, maxval=1)
 
@@ -114,7 +139,9 @@ def _raw(env, data, steps: int) -> dict:
 
 
 def _child(args: argparse.Namespace) -> None:
-    print(json.dumps(measure(args.task, args.child_batch, args.steps, args.backend)))
+    row = measure(args.task, args.child_batch, args.steps, args.backend, args.convert)
+    row["convert"] = args.convert
+    print(json.dumps(row))
 
 
 def main() -> None:
@@ -125,6 +152,8 @@ def main() -> None:
     parser.add_argument("--backend", default="mjx", choices=["mjx", "mujoco"])
     parser.add_argument("--results-dir", type=Path, default=None)
     parser.add_argument("--name", default=None, help="result file stem")
+    parser.add_argument("--convert", nargs="*", default=[],
+                        help="ConvertConfig overrides key=value (e.g. solver_iterations=2)")
     parser.add_argument("--child-batch", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child_batch:
@@ -144,6 +173,8 @@ def main() -> None:
             "--child-batch",
             str(batch),
         ]
+        if args.convert:
+            cmd += ["--convert", *args.convert]
         proc = subprocess.run(cmd, capture_output=True, text=True)
         if proc.returncode != 0:
             print(proc.stderr[-3000:], file=sys.stderr)

@@ -108,6 +108,8 @@ class MjxArmEnv(Env):
         task: the task configuration (default: Touch).
         urdf: the arm URDF (default: the shipped arm); validated before use.
         physics_factory: builds the physics from (mj_model, arm, task); default MJX.
+        mj_model: a task model converted with other settings (benchmark sweeps); default: the
+            task's model from :func:`mjx_arm.envs.model_io.arm_model`.
     """
 
     def __init__(
@@ -115,12 +117,13 @@ class MjxArmEnv(Env):
         task: TaskConfig | None = None,
         urdf: str | Path | None = None,
         physics_factory=MjxPhysics,
+        mj_model: mujoco.MjModel | None = None,
     ) -> None:
         self.task = task or touch_config()
         path = Path(urdf).expanduser().resolve() if urdf is not None else default_arm_urdf()
         validated(path, "mujoco")  # before parsing: a broken file fails with the report
         self.arm = arm_info(path)
-        self.mj_model = arm_model(self.arm.urdf, self.task)
+        self.mj_model = mj_model if mj_model is not None else arm_model(self.arm.urdf, self.task)
         self.physics = physics_factory(self.mj_model, self.arm, self.task)
         self._v_scale = jnp.asarray(self.task.action_scale * self.arm.v_max, jnp.float32)
         self._limits = (jnp.asarray(self.arm.lower), jnp.asarray(self.arm.upper))
