@@ -59,8 +59,9 @@ def _env(task_name: str, backend: str, convert: list[str]):
     return MjxArmEnv(task, mj_model=model)
 
 
-def measure(task_name: str, batch: int, steps: int, backend: str,
-            convert: list[str] | None = None) -> dict:
+def measure(
+    task_name: str, batch: int, steps: int, backend: str, convert: list[str] | None = None
+) -> dict:
     """Time env and raw stepping for one batch size (in this process)."""
     import jax
     import jax.numpy as jnp
@@ -152,8 +153,12 @@ def main() -> None:
     parser.add_argument("--backend", default="mjx", choices=["mjx", "mujoco"])
     parser.add_argument("--results-dir", type=Path, default=None)
     parser.add_argument("--name", default=None, help="result file stem")
-    parser.add_argument("--convert", nargs="*", default=[],
-                        help="ConvertConfig overrides key=value (e.g. solver_iterations=2)")
+    parser.add_argument(
+        "--convert",
+        nargs="*",
+        default=[],
+        help="ConvertConfig overrides key=value (e.g. solver_iterations=2)",
+    )
     parser.add_argument("--child-batch", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child_batch:

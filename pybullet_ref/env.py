@@ -378,7 +378,7 @@ class PybulletArmEnv(BaseRobotEnv):
         a_com = (v1 - v0) / self.task.sim_dt + _cross(alpha, offset)
         a_com += _cross(w1, _cross(w1, offset))
         acc = rot.T @ (a_com - _GRAVITY)
-        return external_wrench(_XP, force, torque, acc, rot.T @ w1, rot.T @ alpha, self.arm.tool)
+        return external_wrench(np, force, torque, acc, rot.T @ w1, rot.T @ alpha, self.arm.tool)
 
     def _camera_matrices(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
         view = self.client.computeViewMatrix(CAMERA_EYE, CAMERA_TARGET, [0.0, 0.0, 1.0])
@@ -393,35 +393,6 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.array(
         [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
     )
-
-
-class _SmallNumpy:
-    """``numpy`` for the single 3-vectors of one env: fast ``cross`` and matrix-vector ``einsum``.
-
-    Passed as the array namespace ``xp`` of the contract's :func:`external_wrench`, so the tare
-    math stays defined once while one read-out costs ~15 us instead of ~80 us. Anything else,
-    and other shapes, go to numpy unchanged.
-    """
-
-    def __getattr__(self, name: str):
-        return getattr(np, name)
-
-    @staticmethod
-    def cross(a, b):
-        """``np.cross`` for two ``(3,)`` vectors, numpy's otherwise."""
-        if np.shape(a) == (3,) and np.shape(b) == (3,):
-            return _cross(a, b)
-        return np.cross(a, b)
-
-    @staticmethod
-    def einsum(spec: str, *operands):
-        """``np.einsum``; the matrix-vector product ``"ij,...j->...i"`` of a vector as ``@``."""
-        if spec == "ij,...j->...i" and np.ndim(operands[1]) == 1:
-            return operands[0] @ operands[1]
-        return np.einsum(spec, *operands)
-
-
-_XP = _SmallNumpy()
 
 
 def inertia_with_armature(

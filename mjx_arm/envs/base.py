@@ -7,10 +7,10 @@ An engine subclass implements the five ``_physics_*`` / ``_render_frame`` hooks 
 
 from __future__ import annotations
 
+import math
 from abc import abstractmethod
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any, ClassVar, NamedTuple
 
 import gymnasium as gym
 import numpy as np
@@ -26,9 +26,10 @@ from mjx_arm.urdf.validate import validated
 DEFAULT_WIDTH, DEFAULT_HEIGHT = 640, 480
 
 
-@dataclass(frozen=True)
-class PhysicsReading:
+class PhysicsReading(NamedTuple):
     """One read-out of the physics after a control step (world frame = base frame).
+
+    Immutable; the arrays belong to the reading (copies, not views into the engine's state).
 
     Attributes:
         ee_pos: ee point (m), ``(3,)``; ee_quat: ee orientation (w, x, y, z), ``(4,)``.
@@ -46,7 +47,12 @@ class PhysicsReading:
 
     def finite(self) -> bool:
         """True when every quantity is finite."""
-        return all(np.all(np.isfinite(v)) for v in vars(self).values())
+        return bool(np.isfinite(np.concatenate(self)).all())
+
+
+# What the contract makes of one reading (:meth:`BaseRobotEnv._evaluate`): obs, reward,
+# success, info. A plain tuple: it is built at every step.
+_Evaluation = tuple[dict[str, np.ndarray], float, bool, dict[str, Any]]
 
 
 class BaseRobotEnv(gym.Env):
@@ -81,6 +87,14 @@ class BaseRobotEnv(gym.Env):
         self.arm: ArmInfo = arm_info(path)
         self.action_space = gym.spaces.Box(-1.0, 1.0, (6,), np.float32)
         self.observation_space = obs_lib.observation_space(self.task.force_clip)
+        # constants of the per-step evaluation, computed once
+        self._n_substeps = self.task.n_substeps
+        self._terminate_on_success = bool(self.task.terminate_on_success)
+        # a * (action_scale * v_max): bit-identical to (a * action_scale) * v_max for the
+        # power-of-two scales of the presets, within one rounding otherwise
+        self._qdot_scale = self.task.action_scale * self.arm.v_max
+        self._band = reward_lib.joint_band((self.arm.lower, self.arm.upper), self.task)
+        self._bounds = obs_lib.state_bounds(self.task.force_clip)
         self._reading: PhysicsReading | None = None
         self._last_obs: dict[str, np.ndarray] | None = None
 
@@ -100,7 +114,8 @@ class BaseRobotEnv(gym.Env):
 
     @abstractmethod
     def _physics_read(self) -> PhysicsReading:
-        """Read the state the contract needs."""
+        """Read the state the contract needs, into arrays of its own (no views of the engine's
+        state: the last finite reading is kept while the physics steps on)."""
 
     @abstractmethod
     def _render_frame(self) -> np.ndarray:
@@ -117,28 +132,26 @@ class BaseRobotEnv(gym.Env):
         if options and "target" in options:
             body = np.asarray(options["target"], dtype=np.float64)
         self._physics_reset(qpos, body)
-        self._reading = self._physics_read()
-        obs = self._observe(self._reading)
-        return obs, self._info(self._reading, None, False)
+        self._reading = reading = self._physics_read()
+        _, state, d, force = self._measure(reading)
+        self._last_obs = obs = obs_lib.unflatten_obs(state.astype(np.float32))
+        info = {"is_success": False, "distance": d, "contact_force_norm": force, "reward_terms": {}}
+        return obs, info
 
     def step(self, action):
         """Apply one action for ``ctrl_dt``: (obs, reward, terminated, truncated, info)."""
         if self._reading is None:
             raise RuntimeError("call reset() before step()")
         self.apply_action(action)
-        self._physics_step(self.task.n_substeps)
+        self._physics_step(self._n_substeps)
         reading = self._physics_read()
-        finite = reading.finite()
-        if finite:
-            self._reading = reading
-        obs = self._observe(self._reading) if finite else self._last_obs
-        success = finite and self.is_success()
-        terms = self._reward_terms(self._reading, success, not finite)
-        reward = float(reward_lib.total_reward(terms, self.task))
-        terminated = (not finite) or (success and self.task.terminate_on_success)
-        info = self._info(self._reading, terms, success)
-        info["nonfinite"] = not finite
-        return obs, reward, bool(terminated), False, info
+        result = self._evaluate(reading)
+        if result is None:  # non-finite: keep the last finite reading and observation, and stop
+            _, reward, _, info = self._evaluate(self._reading, nonfinite=True)
+            return self._last_obs, reward, True, False, info
+        self._reading = reading
+        self._last_obs, reward, success, info = result
+        return result[0], reward, success and self._terminate_on_success, False, info
 
     def render(self):
         """The current frame (rgb_array) or None after drawing it (human)."""
@@ -159,8 +172,7 @@ class BaseRobotEnv(gym.Env):
 
     def apply_action(self, action) -> np.ndarray:
         """Check and clip an action, command joint velocity targets; return them (rad/s)."""
-        action = check_action(action)
-        qdot = action.astype(np.float64) * self.task.action_scale * self.arm.v_max
+        qdot = check_action(action) * self._qdot_scale
         self._physics_set_velocity_targets(qdot)
         return qdot
 
@@ -168,52 +180,59 @@ class BaseRobotEnv(gym.Env):
         """Success rule of the task on the current state."""
         if self._reading is None:
             return False
-        d, force = self._distance_and_force(self._reading)
+        _, _, d, force = self._measure(self._reading)
         return bool(reward_lib.is_success(np, d, force, self.task))
 
     # ------------------------------------------------------------------ helpers
 
-    def _distance_and_force(self, reading: PhysicsReading) -> tuple[float, float]:
-        d = float(reward_lib.target_distance(np, reading.ee_pos, reading.target_pos))
-        wrench = np.clip(reading.wrench, -self.task.force_clip, self.task.force_clip)
-        return d, float(np.linalg.norm(wrench[:3]))
+    def _measure(self, reading: PhysicsReading) -> tuple[np.ndarray, np.ndarray, float, float]:
+        """The flat state before and after clipping (float64, ``(22,)``), distance d (m) and
+        contact force norm (N) of a reading, each computed once."""
+        ee_pos, ee_quat, qpos, _, target_pos, wrench = reading
+        raw = obs_lib.raw_state(np, ee_pos, ee_quat, qpos, target_pos, wrench)
+        state = obs_lib.clip_state(np, raw, self._bounds)
+        d = float(reward_lib.target_distance(np, ee_pos, target_pos))
+        force = float(reward_lib.contact_force_norm(np, state[obs_lib.FORCE_SLICE]))
+        return raw, state, d, force
 
-    def _observe(self, reading: PhysicsReading) -> dict[str, np.ndarray]:
-        obs = obs_lib.assemble_obs(
-            np,
-            reading.ee_pos,
-            reading.ee_quat,
-            reading.qpos,
-            reading.target_pos,
-            reading.wrench,
-            self.task.force_clip,
+    def _evaluate(self, reading: PhysicsReading, nonfinite: bool = False) -> _Evaluation | None:
+        """Observation, reward, success and info of a reading, everything computed once.
+
+        Args:
+            reading: the physics read-out after a control step.
+            nonfinite: score ``reading`` (the last finite one) for a step whose physics went
+                non-finite: no success, the ``nonfinite`` term set.
+
+        Returns:
+            The evaluation, or None when ``reading`` is not finite (and ``nonfinite`` is False).
+            Every quantity of the reading shows in the unclipped state (the quaternion through
+            its norm, the joint angles through sin/cos) except the joint velocities, which show
+            in the joint velocity term (a sum of magnitudes).
+        """
+        task = self.task
+        raw, state, d, force = self._measure(reading)
+        # a sum of squares is finite exactly when every entry is, barring overflow (>1e154),
+        # which the exact test then rules out
+        if not (nonfinite or math.isfinite(raw.dot(raw)) or np.isfinite(raw).all()):
+            return None
+        success = not nonfinite and bool(reward_lib.is_success(np, d, force, task))
+        qpos, qvel = reading.qpos, reading.qvel
+        terms = reward_lib.band_reward_terms(
+            np, d, force, qpos, qvel, self._band, success, nonfinite, task
         )
-        self._last_obs = obs
-        return obs
-
-    def _reward_terms(self, reading: PhysicsReading, success: bool, nonfinite: bool) -> dict:
-        d, force = self._distance_and_force(reading)
-        terms = reward_lib.reward_terms(
-            np,
-            d,
-            force,
-            reading.qpos,
-            reading.qvel,
-            (self.arm.lower, self.arm.upper),
-            success,
-            nonfinite,
-            self.task,
-        )
-        return {name: float(value) for name, value in terms.items()}
-
-    def _info(self, reading: PhysicsReading, terms: dict | None, success: bool) -> dict:
-        d, force = self._distance_and_force(reading)
-        return {
-            "is_success": bool(success),
+        terms = {name: float(value) for name, value in terms.items()}
+        joint_velocity = terms["joint_velocity"]
+        if not (nonfinite or math.isfinite(joint_velocity) or np.isfinite(qvel).all()):
+            return None
+        info = {
+            "is_success": success,
             "distance": d,
             "contact_force_norm": force,
-            "reward_terms": terms or {},
+            "reward_terms": terms,
+            "nonfinite": nonfinite,
         }
+        obs = obs_lib.unflatten_obs(state.astype(np.float32))
+        return obs, float(reward_lib.total_reward(terms, task)), success, info
 
     def _show(self, frame: np.ndarray) -> None:
         """Draw a frame in a window (needs a display and matplotlib)."""
@@ -230,15 +249,22 @@ class BaseRobotEnv(gym.Env):
         plt.pause(1.0 / self.metadata["render_fps"])
 
 
+_FLOAT32 = np.dtype(np.float32)
+_ACTION_LOW, _ACTION_HIGH = np.full(6, -1.0, np.float32), np.full(6, 1.0, np.float32)
+
+
 def check_action(action) -> np.ndarray:
     """Validate an action: shape ``(6,)``, finite; clip into [-1, 1]; return float32.
 
     Raises:
         ValueError: wrong shape, or NaN / inf entries.
     """
-    arr = np.asarray(action, dtype=np.float64)
+    arr = np.asarray(action)
+    if arr.dtype is not _FLOAT32:  # float32 clips exactly as its float64 widening would
+        arr = arr.astype(np.float64)
     if arr.shape != (6,):
         raise ValueError(f"action must have shape (6,), got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
+    # finite sum of squares <=> finite entries, barring overflow, which the exact test rules out
+    if not (math.isfinite(arr.dot(arr)) or np.isfinite(arr).all()):
         raise ValueError(f"action contains NaN or inf: {arr.tolist()}")
-    return np.clip(arr, -1.0, 1.0).astype(np.float32)
+    return np.minimum(np.maximum(arr, _ACTION_LOW), _ACTION_HIGH).astype(np.float32, copy=False)

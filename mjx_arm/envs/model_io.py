@@ -13,7 +13,7 @@ import numpy as np
 
 from mjx_arm.envs.arm import ArmInfo
 from mjx_arm.task.config import TaskConfig
-from mjx_arm.task.wrench import external_wrench
+from mjx_arm.task.wrench import SENSOR_BLOCK, SENSOR_BLOCK_SIZE, sensor_wrench
 from mjx_arm.urdf.convert import EE_SITE, SENSORS, ConvertConfig, load_model
 from mjx_arm.urdf.scene import TARGET_SITE
 
@@ -28,8 +28,35 @@ def arm_model(urdf: Path, task: TaskConfig) -> mujoco.MjModel:
     return load_model(Path(urdf).resolve(), task_convert_config(task))
 
 
+# The model's sensor of each entry of the wrench sensor block (``SENSOR_BLOCK`` order).
+BLOCK_SENSORS = {
+    "force": "ft_force",
+    "torque": "ft_torque",
+    "acc": "tool_acc",
+    "gyro": "tool_gyro",
+    "angacc": "tool_angacc",
+    "quat": "ft_quat",
+}
+# What one gather of the sensor data holds (:attr:`SensorReader.read_index`): the wrench block,
+# then the ee site's position and orientation.
+BLOCK = slice(0, SENSOR_BLOCK_SIZE)
+EE_POS = slice(SENSOR_BLOCK_SIZE, SENSOR_BLOCK_SIZE + 3)
+EE_QUAT = slice(SENSOR_BLOCK_SIZE + 3, SENSOR_BLOCK_SIZE + 7)
+
+
 class SensorReader:
-    """Ids and addresses, looked up by name once, and the contract read-outs built on them."""
+    """Ids and addresses, looked up by name once, and the contract read-outs built on them.
+
+    Attributes:
+        qpos_adr, dof_adr: qpos and dof addresses of the six joints, ``(6,)`` each.
+        actuators: actuator ids of the six joints, ``(6,)``.
+        ee_site, ee_body, target_site: ids of the ee site, its body and the target site.
+        sensor_slices: where each named sensor sits in ``sensordata``.
+        block_index: ``sensordata`` positions of the wrench block
+            (:data:`mjx_arm.task.wrench.SENSOR_BLOCK` order), ``(19,)``.
+        read_index: ``block_index`` then the ee position and quaternion sensors, ``(26,)``;
+            ``sensordata[read_index]`` splits with :data:`BLOCK`, :data:`EE_POS`, :data:`EE_QUAT`.
+    """
 
     def __init__(self, model: mujoco.MjModel, arm: ArmInfo) -> None:
         self.arm = arm
@@ -47,23 +74,37 @@ class SensorReader:
             )
             for name in SENSORS
         }
+        block = [self._positions(BLOCK_SENSORS[name], size) for name, size in SENSOR_BLOCK]
+        self.block_index = np.concatenate(block)
+        self.read_index = np.concatenate(
+            [self.block_index, self._positions("ee_pos", 3), self._positions("ee_quat", 4)]
+        )
+        self._block = as_slice(self.block_index)
+
+    def _positions(self, name: str, size: int) -> np.ndarray:
+        sl = self.sensor_slices[name]
+        if sl.stop - sl.start != size:
+            raise ValueError(f"sensor {name!r} has {sl.stop - sl.start} values, expected {size}")
+        return np.arange(sl.start, sl.stop)
 
     def ee_quat(self, data: Any):
         """ee orientation (w, x, y, z), ``(4,)``: the ee body's, whose frame the site shares."""
         return data.xquat[self.ee_body]
 
+    def block(self, sensordata):
+        """The wrench sensor block of ``sensordata (..., nsensordata)``, shape ``(..., 19)``."""
+        if isinstance(self._block, slice):
+            return sensordata[..., self._block]
+        return sensordata.take(self._block, axis=-1)
+
     def wrench(self, xp: Any, sensordata):
-        """Tared external wrench on the tool in the ee frame, shape ``(6,)``."""
-        s = {name: sensordata[sl] for name, sl in self.sensor_slices.items()}
-        # frameangacc reports in the world frame; the other tool sensors in the sensor frame
-        alpha = quat_rotate_inverse(xp, s["ft_quat"], s["tool_angacc"])
-        return external_wrench(
-            xp, s["ft_force"], s["ft_torque"], s["tool_acc"], s["tool_gyro"], alpha, self.arm.tool
-        )
+        """Tared external wrench on the tool in the ee frame, shape ``(..., 6)``."""
+        return sensor_wrench(xp, self.block(sensordata), self.arm.tool)
 
 
-def quat_rotate_inverse(xp: Any, quat, vec):
-    """Rotate ``vec (3,)`` by the inverse of unit quaternion ``quat (4,)`` (w, x, y, z)."""
-    w, u = quat[0], quat[1:]
-    t = 2.0 * xp.cross(-u, vec)
-    return vec + w * t + xp.cross(-u, t)
+def as_slice(index: np.ndarray) -> slice | np.ndarray:
+    """``index`` as a slice when it is a run of consecutive positions, else unchanged."""
+    start = int(index[0])
+    if np.array_equal(index, np.arange(start, start + len(index))):
+        return slice(start, start + len(index))
+    return index

@@ -8,8 +8,12 @@ import mujoco
 import numpy as np
 
 from mjx_arm.envs.base import DEFAULT_HEIGHT, DEFAULT_WIDTH, BaseRobotEnv, PhysicsReading
-from mjx_arm.envs.model_io import SensorReader, arm_model
+from mjx_arm.envs.model_io import BLOCK as _BLOCK
+from mjx_arm.envs.model_io import EE_POS as _EE_POS
+from mjx_arm.envs.model_io import EE_QUAT as _EE_QUAT
+from mjx_arm.envs.model_io import SensorReader, arm_model, as_slice
 from mjx_arm.task.config import TaskConfig
+from mjx_arm.task.wrench import sensor_wrench
 from mjx_arm.urdf.scene import TARGET_BODY
 
 
@@ -39,6 +43,16 @@ class MujocoArmEnv(BaseRobotEnv):
         self.ids = SensorReader(self.model, self.arm)
         self._mocap = self.model.body_mocapid[self.model.body(TARGET_BODY).id]
         self._renderer: mujoco.Renderer | None = None
+        # The step's read-out, set up once: views of MjData's arrays (valid while ``data``
+        # lives). Reads gather with intp index arrays (numpy's fast path, and a copy).
+        self._ctrl, self._sensordata = self.data.ctrl, self.data.sensordata
+        self._qpos, self._qvel = self.data.qpos, self.data.qvel
+        self._act = as_slice(self.ids.actuators)
+        self._qpos_adr = self.ids.qpos_adr.astype(np.intp)
+        self._dof_adr = self.ids.dof_adr.astype(np.intp)
+        self._read_index = self.ids.read_index.astype(np.intp)
+        self._tool = self.arm.tool
+        self._target_pos = np.zeros(3)  # the target point: fixed within an episode
 
     def _physics_reset(self, qpos: np.ndarray, target_body_pos: np.ndarray) -> None:
         mujoco.mj_resetData(self.model, self.data)
@@ -47,9 +61,12 @@ class MujocoArmEnv(BaseRobotEnv):
         mujoco.mj_forward(self.model, self.data)
         mujoco.mj_rnePostConstraint(self.model, self.data)
         mujoco.mj_sensorAcc(self.model, self.data)
+        # the target (a mocap body) only moves here: read its point once per episode
+        self._target_pos = self.data.site_xpos[self.ids.target_site].copy()
+        self._target_pos.setflags(write=False)
 
     def _physics_set_velocity_targets(self, qdot_target: np.ndarray) -> None:
-        self.data.ctrl[self.ids.actuators] = qdot_target
+        self._ctrl[self._act] = qdot_target
 
     def _physics_step(self, n_substeps: int) -> None:
         # Positions, sensors and contacts are read as the last substep's mj_forward left them
@@ -58,14 +75,16 @@ class MujocoArmEnv(BaseRobotEnv):
         mujoco.mj_step(self.model, self.data, nstep=n_substeps)
 
     def _physics_read(self) -> PhysicsReading:
-        d = self.data
-        return PhysicsReading(
-            ee_pos=d.site_xpos[self.ids.ee_site].copy(),
-            ee_quat=self.ids.ee_quat(d).copy(),
-            qpos=d.qpos[self.ids.qpos_adr].copy(),
-            qvel=d.qvel[self.ids.dof_adr].copy(),
-            target_pos=d.site_xpos[self.ids.target_site].copy(),
-            wrench=self.ids.wrench(np, d.sensordata),
+        # one gather of the sensors: the wrench block, the ee site's position and quaternion
+        # (framepos / framequat of the ee site: the values of site_xpos and the body's xquat)
+        s = self._sensordata[self._read_index]
+        return PhysicsReading(  # fields in order: ee_pos, ee_quat, qpos, qvel, target_pos, wrench
+            s[_EE_POS],
+            s[_EE_QUAT],
+            self._qpos[self._qpos_adr],
+            self._qvel[self._dof_adr],
+            self._target_pos,
+            sensor_wrench(np, s[_BLOCK], self._tool),
         )
 
     def _render_frame(self) -> np.ndarray:

@@ -6,6 +6,7 @@ not, assembles observations with the same code.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any
 
@@ -25,28 +26,52 @@ OBS_SIZE = sum(size for _, size in OBS_LAYOUT)
 POSITION_BOUND = 2.0
 
 
+def _layout_slices() -> tuple[tuple[str, slice], ...]:
+    """(key, slice of the flat vector) in contract order."""
+    out, start = [], 0
+    for key, size in OBS_LAYOUT:
+        out.append((key, slice(start, start + size)))
+        start += size
+    return tuple(out)
+
+
+_SLICES = _layout_slices()
+_CONTACT = dict(_SLICES)["contact_force"]
+# The force part (fx, fy, fz) of ``contact_force`` in the flat vector.
+FORCE_SLICE = slice(_CONTACT.start, _CONTACT.start + 3)
+
+
 def obs_slices() -> dict[str, slice]:
     """Where each key sits in the flat vector."""
-    out, start = {}, 0
-    for key, size in OBS_LAYOUT:
-        out[key] = slice(start, start + size)
-        start += size
-    return out
+    return dict(_SLICES)
 
 
-def _bounds(force_clip: float) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    pose_high = np.array([POSITION_BOUND] * 3 + [1.0] * 4, np.float32)
+def _bounds(force_clip: float, dtype: Any = np.float32) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """(low, high) of each key, arrays of ``dtype``."""
+    pose_high = np.array([POSITION_BOUND] * 3 + [1.0] * 4, dtype)
     pose_low = -pose_high.copy()
     pose_low[3] = 0.0  # quaternion w >= 0
     return {
         "ee_pose": (pose_low, pose_high),
-        "joint_angles": (np.full(6, -math.pi, np.float32), np.full(6, math.pi, np.float32)),
-        "target_rel": (
-            np.full(3, -POSITION_BOUND, np.float32),
-            np.full(3, POSITION_BOUND, np.float32),
-        ),
-        "contact_force": (np.full(6, -force_clip, np.float32), np.full(6, force_clip, np.float32)),
+        "joint_angles": (np.full(6, -math.pi, dtype), np.full(6, math.pi, dtype)),
+        "target_rel": (np.full(3, -POSITION_BOUND, dtype), np.full(3, POSITION_BOUND, dtype)),
+        "contact_force": (np.full(6, -force_clip, dtype), np.full(6, force_clip, dtype)),
     }
+
+
+@functools.lru_cache(maxsize=16)
+def state_bounds(force_clip: float) -> tuple[np.ndarray, np.ndarray]:
+    """Bounds of the flat ``state`` (float64, read-only), low and high, each ``(22,)``.
+
+    The float64 twins of :func:`flat_observation_space`'s bounds: clipping with them leaves
+    wrapped joint angles (already inside [-pi, pi]) and canonical quaternions unchanged.
+    """
+    bounds = _bounds(force_clip, np.float64)
+    low = np.concatenate([bounds[k][0] for k in OBS_KEYS])
+    high = np.concatenate([bounds[k][1] for k in OBS_KEYS])
+    low.setflags(write=False)
+    high.setflags(write=False)
+    return low, high
 
 
 def observation_space(force_clip: float = 100.0) -> spaces.Dict:
@@ -74,10 +99,43 @@ def wrap_angle(xp: Any, q):
 
 
 def canonical_quat(xp: Any, quat):
-    """Unit quaternion (w, x, y, z) with w >= 0, shape ``(..., 4)``."""
-    quat = quat / xp.linalg.norm(quat, axis=-1, keepdims=True)
-    sign = xp.where(quat[..., :1] < 0, -1.0, 1.0)
-    return quat * sign
+    """Unit quaternion (w, x, y, z) with w >= 0, shape ``(..., 4)``.
+
+    Divides by the norm carrying the sign of ``w`` (``-0.0`` counts as positive): the values
+    of ``quat / |quat|`` times ``-1 if w < 0 else 1``, in five cheap array operations.
+    """
+    norm = xp.sqrt(xp.vecdot(quat, quat))[..., None]
+    return quat / xp.copysign(norm, quat[..., :1] + 0.0)
+
+
+def raw_state(xp: Any, ee_pos, ee_quat, qpos, target_pos, wrench):
+    """The flat ``state`` before clipping, shape ``(..., 22)``, the dtype of the inputs.
+
+    Quaternion made canonical, joint angles wrapped, nothing clipped: a non-finite input shows
+    as a non-finite entry here (clipping would turn an infinity into a bound).
+
+    Args:
+        xp: ``numpy`` or ``jax.numpy``.
+        ee_pos: end-effector point (m), shape ``(..., 3)``.
+        ee_quat: end-effector orientation (w, x, y, z), shape ``(..., 4)``.
+        qpos: the six joint angles (rad), shape ``(..., 6)``.
+        target_pos: target point (m), shape ``(..., 3)``.
+        wrench: tared external wrench on the tool in the ee frame, shape ``(..., 6)``.
+    """
+    parts = [ee_pos, canonical_quat(xp, ee_quat), wrap_angle(xp, qpos), target_pos, wrench]
+    return xp.concatenate(parts, axis=-1)
+
+
+def clip_state(xp: Any, state, bounds: tuple[Any, Any]):
+    """Clip a flat ``state (..., 22)`` into ``bounds`` (:func:`state_bounds`); same dtype."""
+    low, high = bounds
+    return xp.minimum(xp.maximum(state, low), high)
+
+
+def flat_obs(xp: Any, ee_pos, ee_quat, qpos, target_pos, wrench, force_clip: float):
+    """The observation as the flat float32 ``state (..., 22)`` (see :func:`assemble_obs`)."""
+    raw = raw_state(xp, ee_pos, ee_quat, qpos, target_pos, wrench)
+    return xp.asarray(clip_state(xp, raw, state_bounds(force_clip)), dtype=xp.float32)
 
 
 def assemble_obs(xp: Any, ee_pos, ee_quat, qpos, target_pos, wrench, force_clip: float) -> dict:
@@ -93,18 +151,10 @@ def assemble_obs(xp: Any, ee_pos, ee_quat, qpos, target_pos, wrench, force_clip:
         force_clip: bound of each wrench component.
 
     Returns:
-        Dict of float32 arrays in contract key order, each inside :func:`observation_space`.
+        Dict of float32 arrays in contract key order, each inside :func:`observation_space`:
+        views into one flat ``state (..., 22)`` (:func:`flat_obs`).
     """
-    b = POSITION_BOUND
-    quat = xp.clip(canonical_quat(xp, ee_quat), -1.0, 1.0)
-    pose = xp.concatenate([xp.clip(ee_pos, -b, b), quat], axis=-1)
-    values = {
-        "ee_pose": pose,
-        "joint_angles": wrap_angle(xp, qpos),
-        "target_rel": xp.clip(target_pos, -b, b),
-        "contact_force": xp.clip(wrench, -force_clip, force_clip),
-    }
-    return {key: xp.asarray(values[key], dtype=xp.float32) for key in OBS_KEYS}
+    return unflatten_obs(flat_obs(xp, ee_pos, ee_quat, qpos, target_pos, wrench, force_clip))
 
 
 def flatten_obs(xp: Any, obs: dict):
@@ -114,4 +164,4 @@ def flatten_obs(xp: Any, obs: dict):
 
 def unflatten_obs(state) -> dict:
     """Split ``state (..., 22)`` back into the observation dict (views, no copy)."""
-    return {key: state[..., s] for key, s in obs_slices().items()}
+    return {key: state[..., s] for key, s in _SLICES}

@@ -1,21 +1,79 @@
-"""Reward terms, success and termination, written once against an array namespace ``xp``."""
+"""Reward terms, success and termination, written once against an array namespace ``xp``.
+
+Every function works on one env (scalars and ``(6,)`` vectors) and on batches (a leading shape
+``(...)``), in ``numpy`` and under ``jax.numpy`` / ``jax.jit``. Norms are ``sqrt(vecdot)``, sums
+over the joints are dot products with ones and 0/1 flags are ``flag * 1.0``: the values of
+``linalg.norm``, ``sum`` and ``where(flag, 1.0, 0.0)`` at a fraction of numpy's per-call cost on
+tiny arrays (a single env steps in tens of microseconds), and plain XLA ops under ``jit``.
+"""
 
 from __future__ import annotations
 
-from typing import Any
+import functools
+import operator
+from typing import Any, NamedTuple
+
+import numpy as np
 
 from mjx_arm.task.config import REWARD_TERMS, TaskConfig
 
 
+class JointBand(NamedTuple):
+    """The joint-limit test in precomputed form: joint ``j`` is beyond when
+    ``|q_j - mid_j| > reach_j``.
+
+    Attributes:
+        mid: centre of each joint range (rad), ``(6,)``.
+        reach: ``soft_limit`` times the half range (rad), ``(6,)``.
+    """
+
+    mid: Any
+    reach: Any
+
+
+def joint_band(joint_limits, cfg: TaskConfig) -> JointBand:
+    """The :class:`JointBand` of ``(lower, upper)`` joint limits (rad), each ``(6,)``."""
+    lower, upper = joint_limits
+    mid, half = (upper + lower) / 2, (upper - lower) / 2
+    return JointBand(mid, cfg.reward.soft_limit * half)
+
+
+@functools.cache
+def _ones(n: int) -> np.ndarray:
+    return np.ones(n)
+
+
+_ONES6 = _ones(6)
+
+
+def _sum_last(x):
+    """Sum over the last axis, ``(..., n) -> (...)``, float (booleans count as 0/1)."""
+    n = x.shape[-1]
+    return x.dot(_ONES6 if n == 6 else _ones(n))
+
+
 def target_distance(xp: Any, ee_pos, target_pos):
     """Distance d (m) from the ee point to the target point, shape ``(...)``."""
-    return xp.linalg.norm(ee_pos - target_pos, axis=-1)
+    diff = ee_pos - target_pos
+    return xp.sqrt(xp.vecdot(diff, diff))
+
+
+def contact_force_norm(xp: Any, contact_force):
+    """Norm (N) of the force part of a clipped wrench ``(..., 6)`` (or ``(..., 3)``): ``(...)``.
+
+    Args:
+        xp: ``numpy`` or ``jax.numpy``.
+        contact_force: the ``contact_force`` observation (the tared wrench clipped to
+            +-``force_clip``), float64 or float32; only its first three entries count.
+    """
+    force = contact_force[..., :3]
+    return xp.sqrt(xp.vecdot(force, force))
 
 
 def force_in_band(xp: Any, force_norm, cfg: TaskConfig):
     """1.0 where the contact force norm (N) lies inside ``cfg.force_band``, else 0.0."""
     low, high = cfg.force_band
-    return xp.where((force_norm >= low) & (force_norm <= high), 1.0, 0.0)
+    return ((force_norm >= low) & (force_norm <= high)) * 1.0
 
 
 def is_success(xp: Any, distance, force_norm, cfg: TaskConfig):
@@ -45,24 +103,48 @@ def reward_terms(
     Returns:
         Dict term name -> float array, shape ``(...)``; keys are ``REWARD_TERMS``.
     """
-    lower, upper = joint_limits
-    mid, half = (upper + lower) / 2, (upper - lower) / 2
-    beyond = xp.abs(qpos - mid) > cfg.reward.soft_limit * half
+    band = joint_band(joint_limits, cfg)
+    return band_reward_terms(xp, distance, force_norm, qpos, qvel, band, success, nonfinite, cfg)
+
+
+def band_reward_terms(
+    xp: Any, distance, force_norm, qpos, qvel, band: JointBand, success, nonfinite, cfg: TaskConfig
+) -> dict:
+    """:func:`reward_terms` with the joint limits as a precomputed :class:`JointBand`.
+
+    Args:
+        xp: ``numpy`` or ``jax.numpy``.
+        distance: d (m), shape ``(...)``.
+        force_norm: tared contact force norm (N), shape ``(...)``.
+        qpos: joint angles (rad), shape ``(..., 6)``.
+        qvel: joint velocities (rad/s), shape ``(..., 6)``.
+        band: :func:`joint_band` of the joint limits.
+        success: success flag (bool), shape ``(...)``.
+        nonfinite: flag (bool) of a non-finite physics state, shape ``(...)``.
+        cfg: the task configuration.
+
+    Returns:
+        Dict term name -> float array, shape ``(...)``; keys are ``REWARD_TERMS``.
+    """
+    beyond = xp.abs(qpos - band.mid) > band.reach
     near = distance < cfg.success_distance
     contact = force_in_band(xp, force_norm, cfg) * near if cfg.uses_contact else 0.0 * distance
     terms = {
         "distance": 1.0 - xp.exp(-distance / cfg.reward.distance_length),
         "contact": contact,
-        "joint_limit": xp.sum(beyond, axis=-1) * 1.0,
-        "joint_velocity": xp.sum(xp.abs(qvel), axis=-1),
-        "success": xp.where(success, 1.0, 0.0),
-        "nonfinite": xp.where(nonfinite, 1.0, 0.0),
+        "joint_limit": _sum_last(beyond),
+        "joint_velocity": _sum_last(xp.abs(qvel)),
+        "success": success * 1.0,
+        "nonfinite": nonfinite * 1.0,
     }
     assert tuple(terms) == REWARD_TERMS
     return terms
 
 
+_WEIGHTS = operator.attrgetter(*REWARD_TERMS)  # RewardConfig -> the weights in term order
+
+
 def total_reward(terms: dict, cfg: TaskConfig):
-    """Weighted sum of the reward terms, shape ``(...)``."""
-    weights = cfg.reward.weights()
-    return sum(weights[name] * value for name, value in terms.items())
+    """Weighted sum of the reward terms (every name of ``REWARD_TERMS``), shape ``(...)``."""
+    values = map(terms.__getitem__, REWARD_TERMS)
+    return sum(map(operator.mul, _WEIGHTS(cfg.reward), values))

@@ -11,17 +11,83 @@ inertia ``I`` (about ``c``), Newton-Euler gives, in the sensor frame:
 where ``F_s, tau_s`` is the sensor reading (force and torque about the sensor point ``s``),
 ``acc = a_c - g`` is what an accelerometer at ``c`` reads, ``omega`` and ``alpha`` the tool's
 angular velocity and acceleration. The wrench is then moved to the ee point and rotated into the
-ee frame. Every engine feeds its own measurements through :func:`external_wrench`.
+ee frame. Every engine feeds its own measurements through :func:`external_wrench` (or, for
+MuJoCo's sensor block, :func:`sensor_wrench`).
+
+Evaluation: the wrench is linear in ``(F_s, tau_s, acc, alpha)`` plus the gyroscopic term
+``omega x (I omega)``, which is linear in the nine products ``omega_j omega_k``. Both are folded
+into one constant matrix per tool (:attr:`ToolInertia.wrench_matrix`), so a reading costs one
+outer product, one concatenation and one matrix product in ``numpy`` as in ``jax.numpy``.
+MuJoCo reports the angular acceleration in the world frame; rotating it into the sensor frame is
+quadratic in the sensor quaternion, so :func:`sensor_wrench` adds the products
+``q_j q_k alpha_a`` to the features (:attr:`ToolInertia.sensor_wrench_matrix`).
 """
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from mjx_arm.urdf.model import RobotModel
+
+# Layout of the MuJoCo sensor block read by :func:`sensor_wrench`, shape ``(..., 19)``.
+SENSOR_BLOCK: tuple[tuple[str, int], ...] = (
+    ("force", 3),  # force the arm exerts on the tool at the sensor (N), sensor frame
+    ("torque", 3),  # torque about the sensor point (N m), sensor frame
+    ("acc", 3),  # accelerometer at the tool's centre of mass, a_c - g (m/s^2), sensor frame
+    ("gyro", 3),  # angular velocity (rad/s), sensor frame
+    ("angacc", 3),  # angular acceleration (rad/s^2), world frame
+    ("quat", 4),  # sensor frame orientation in the world (w, x, y, z), unit
+)
+SENSOR_BLOCK_SIZE = sum(size for _, size in SENSOR_BLOCK)
+
+# Index pairs (j <= k) of the distinct products of 3 (omega) and 4 (quaternion) components.
+_PAIRS3 = [(j, k) for j in range(3) for k in range(j, 3)]
+_PAIRS4 = [(j, k) for j in range(4) for k in range(j, 4)]
+# external_wrench: x = (force, torque, acc, alpha, omega) (15); products omega_j omega_k (6)
+_EXT_OMEGA = 12
+_EXT_I = np.array([_EXT_OMEGA + j for j, _ in _PAIRS3])
+_EXT_J = np.array([_EXT_OMEGA + k for _, k in _PAIRS3])
+# sensor_wrench: block (19); products p = (omega_j omega_k (6), q_j q_k (10)); then
+# q_j q_k alpha_a (30, row 3 * pair + a)
+_BLK_OMEGA, _BLK_ALPHA, _BLK_QUAT = 9, 12, 15
+_BLK_I = np.array([_BLK_OMEGA + j for j, _ in _PAIRS3] + [_BLK_QUAT + j for j, _ in _PAIRS4])
+_BLK_J = np.array([_BLK_OMEGA + k for _, k in _PAIRS3] + [_BLK_QUAT + k for _, k in _PAIRS4])
+_BLK_K = np.repeat(np.arange(len(_PAIRS3), len(_PAIRS3) + len(_PAIRS4)), 3)
+_BLK_L = np.tile(np.arange(_BLK_ALPHA, _BLK_ALPHA + 3), len(_PAIRS4))
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    """Cross-product matrix ``(3, 3)``: ``_skew(v) @ u == np.cross(v, u)``."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def _levi_civita() -> np.ndarray:
+    """The permutation symbol ``eps[i, j, k]``, shape ``(3, 3, 3)``."""
+    eps = np.zeros((3, 3, 3))
+    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+        eps[i, j, k], eps[i, k, j] = 1.0, -1.0
+    return eps
+
+
+def _inverse_rotation_tensor() -> np.ndarray:
+    """Quadratic part of rotating a vector by the inverse of a quaternion, ``(3, 4, 4, 3)``.
+
+    For a unit quaternion ``q = (w, u)`` the inverse rotation of ``v`` is
+    ``v - 2 w (u x v) + 2 u x (u x v)``; the entry ``[b, j, k, a]`` is the coefficient of
+    ``q_j q_k v_a`` in component ``b``, so the rotation is ``v + C : (q x q x v)``.
+    """
+    eps = _levi_civita()
+    c = np.zeros((3, 4, 4, 3))
+    for b in range(3):
+        c[b, 0, 1:, :] -= 2.0 * eps[b]  # -2 w (u x v)_b
+        for a in range(3):
+            c[b, b + 1, a + 1, a] += 2.0  # 2 u_b (u . v)
+            c[b, a + 1, a + 1, b] -= 2.0  # -2 |u|^2 v_b
+    return c
 
 
 @dataclass(frozen=True)
@@ -42,6 +108,60 @@ class ToolInertia:
     inertia: np.ndarray
     ee_pos: np.ndarray
     ee_rot: np.ndarray
+
+    @functools.cached_property
+    def wrench_matrix(self) -> np.ndarray:
+        """The tare as one matrix, shape ``(21, 6)``: ``wrench = features @ wrench_matrix``.
+
+        Feature rows (see :func:`external_wrench`): ``force_s, torque_s, acc, alpha, omega``
+        (3 each), then the products ``omega_j omega_k`` for ``j <= k`` (6). With ``R = ee_rot``,
+        ``e = ee_pos``, ``c = com``, Newton-Euler gives ``F_ee = R (m acc - F_s)`` and
+        ``tau_ee = R (I alpha + omega x I omega - tau_s + e x F_s + m (c - e) x acc)``.
+        """
+        rot, m = np.asarray(self.ee_rot, float), float(self.mass)
+        com, ee = np.asarray(self.com, float), np.asarray(self.ee_pos, float)
+        inertia = np.asarray(self.inertia, float)
+        zero = np.zeros((3, 3))
+        force = np.hstack([-rot, zero, m * rot, zero, zero])
+        torque = np.hstack([rot @ _skew(ee), -rot, m * rot @ _skew(com - ee), rot @ inertia, zero])
+        # (omega x I omega)_i = sum_jk (eps_ijl I_lk) omega_j omega_k
+        gyro = rot @ _fold_pairs(np.einsum("ijl,lk->ijk", _levi_civita(), inertia), _PAIRS3)
+        out = np.vstack([np.hstack([force, np.zeros((3, 6))]), np.hstack([torque, gyro])])
+        return _frozen(out.T)
+
+    @functools.cached_property
+    def sensor_wrench_matrix(self) -> np.ndarray:
+        """:attr:`wrench_matrix` for MuJoCo's sensor block, shape ``(65, 6)``.
+
+        Feature rows (see :func:`sensor_wrench`): the block (19: force, torque, acc, omega,
+        world angular acceleration, quaternion), the products ``omega_j omega_k`` (6) and
+        ``q_j q_k`` (10, no weight) for ``j <= k``, and ``q_j q_k alpha_a`` (30). The world
+        angular acceleration is rotated into the sensor frame by the inverse of the sensor
+        quaternion ``q``, which is ``alpha + C : (q q alpha)`` (:func:`_inverse_rotation_tensor`).
+        """
+        w = self.wrench_matrix
+        f_tau_acc, alpha, gyro = w[:9], w[9:12], w[15:]
+        rot = np.einsum("bjka,bi->jkai", _inverse_rotation_tensor(), alpha)  # (4, 4, 3, 6)
+        rotated = _fold_pairs(rot.transpose(2, 3, 0, 1), _PAIRS4)  # (3, 6, 10)
+        rotated = rotated.transpose(2, 0, 1).reshape(3 * len(_PAIRS4), 6)
+        out = np.vstack(
+            [f_tau_acc, np.zeros((3, 6)), alpha, np.zeros((4, 6)), gyro, np.zeros((10, 6)), rotated]
+        )
+        return _frozen(out)
+
+
+def _fold_pairs(tensor: np.ndarray, pairs: list[tuple[int, int]]) -> np.ndarray:
+    """Coefficients of ``x_j x_k`` over the distinct pairs: ``(..., n, n) -> (..., len(pairs))``."""
+    return np.stack(
+        [tensor[..., j, k] + (tensor[..., k, j] if j != k else 0.0) for j, k in pairs], axis=-1
+    )
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    """A read-only, contiguous float64 copy of ``a``."""
+    out = np.ascontiguousarray(a, dtype=np.float64)
+    out.setflags(write=False)
+    return out
 
 
 def tool_inertia(model: RobotModel, ft_joint: str, ee_link: str) -> ToolInertia:
@@ -83,18 +203,31 @@ def external_wrench(xp: Any, force_s, torque_s, acc, omega, alpha, tool: ToolIne
         alpha: tool angular acceleration (rad/s^2), sensor frame, ``(..., 3)``.
         tool: the tool's mass properties.
 
+    All inputs share one leading shape ``(...)``.
+
     Returns:
         The wrench, shape ``(..., 6)``, not yet clipped.
     """
-    com = xp.asarray(tool.com)
-    inertia = xp.asarray(tool.inertia)
-    f_ext = tool.mass * acc - force_s
-    i_alpha = xp.einsum("ij,...j->...i", inertia, alpha)
-    i_omega = xp.einsum("ij,...j->...i", inertia, omega)
-    tau_c = i_alpha + xp.cross(omega, i_omega) - torque_s - xp.cross(-com, force_s)
-    # moment about the ee point: tau_ee = tau_c + (c - ee) x F_ext
-    tau_ee = tau_c + xp.cross(com - xp.asarray(tool.ee_pos), f_ext)
-    rot = xp.asarray(tool.ee_rot)
-    f_ee = xp.einsum("ij,...j->...i", rot, f_ext)
-    t_ee = xp.einsum("ij,...j->...i", rot, tau_ee)
-    return xp.concatenate([f_ee, t_ee], axis=-1)
+    x = xp.concatenate([force_s, torque_s, acc, alpha, omega], axis=-1)
+    products = x.take(_EXT_I, axis=-1) * x.take(_EXT_J, axis=-1)
+    return xp.concatenate([x, products], axis=-1).dot(tool.wrench_matrix)
+
+
+def sensor_wrench(xp: Any, block, tool: ToolInertia):
+    """:func:`external_wrench` from MuJoCo's wrist sensor block.
+
+    Args:
+        xp: ``numpy`` or ``jax.numpy``.
+        block: the sensors in :data:`SENSOR_BLOCK` order, shape ``(..., 19)``: force, torque,
+            accelerometer, gyro (sensor frame), angular acceleration (world frame), sensor
+            quaternion (w, x, y, z).
+        tool: the tool's mass properties.
+
+    Returns:
+        The wrench, shape ``(..., 6)``, not yet clipped.
+    """
+    # ``.take`` (one gather) and ``.dot`` (a matrix product for a 2-D right operand, batched
+    # over the leading axes) are the cheapest numpy calls for this and plain XLA ops in JAX
+    pairs = block.take(_BLK_I, axis=-1) * block.take(_BLK_J, axis=-1)
+    triples = pairs.take(_BLK_K, axis=-1) * block.take(_BLK_L, axis=-1)
+    return xp.concatenate([block, pairs, triples], axis=-1).dot(tool.sensor_wrench_matrix)
