@@ -18,7 +18,7 @@ import mujoco
 import numpy as np
 
 from mjx_arm.urdf.errors import ConversionError
-from mjx_arm.urdf.inertia import inertia_problem, repair_inertia
+from mjx_arm.urdf.inertia import inertia_problem, inertia_tensor, repair_inertia
 from mjx_arm.urdf.meshes import resolve_mesh_filename
 from mjx_arm.urdf.model import RobotModel, parse_urdf
 from mjx_arm.urdf.scene import SCENES, add_scene
@@ -228,13 +228,7 @@ def _check_or_repair_inertia(link: ET.Element, path: Path, repair: bool) -> None
         return
     keys = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
     v = {k: float(inertia.get(k, "0")) for k in keys}
-    tensor = np.array(
-        [
-            [v["ixx"], v["ixy"], v["ixz"]],
-            [v["ixy"], v["iyy"], v["iyz"]],
-            [v["ixz"], v["iyz"], v["izz"]],
-        ]
-    )
+    tensor = inertia_tensor(v)
     problem = inertia_problem(tensor)
     if problem is None:
         return

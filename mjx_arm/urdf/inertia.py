@@ -2,10 +2,27 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 
 # Relative slack on the triangle inequality, as MuJoCo's compiler allows for rounding.
 TRIANGLE_TOL = 1e-6
+
+
+INERTIA_KEYS = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
+
+
+def inertia_tensor(values: Mapping[str, float]) -> np.ndarray:
+    """The symmetric tensor, shape ``(3, 3)``, of a URDF ``<inertia>``'s six values."""
+    v = values
+    return np.array(
+        [
+            [v["ixx"], v["ixy"], v["ixz"]],
+            [v["ixy"], v["iyy"], v["iyz"]],
+            [v["ixz"], v["iyz"], v["izz"]],
+        ]
+    )
 
 
 def principal_moments(inertia: np.ndarray) -> np.ndarray:

@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from mjx_arm.urdf.inertia import inertia_tensor
+
 
 @dataclass(frozen=True)
 class Origin:
@@ -195,13 +197,7 @@ def _inertial(elem: ET.Element | None) -> Inertial | None:
     i = elem.find("inertia")
     keys = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
     v = {k: float(i.get(k, "0")) if i is not None else 0.0 for k in keys}
-    tensor = np.array(
-        [
-            [v["ixx"], v["ixy"], v["ixz"]],
-            [v["ixy"], v["iyy"], v["iyz"]],
-            [v["ixz"], v["iyz"], v["izz"]],
-        ]
-    )
+    tensor = inertia_tensor(v)
     return Inertial(mass, _origin(elem.find("origin")), tensor)
 
 

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from mjx_arm.urdf.errors import UrdfError
-from mjx_arm.urdf.inertia import inertia_problem
+from mjx_arm.urdf.inertia import inertia_problem, inertia_tensor
 from mjx_arm.urdf.meshes import MUJOCO_MESH_FORMATS, PYBULLET_MESH_FORMATS, mesh_path
 from mjx_arm.urdf.model import rpy_to_matrix
 
@@ -926,13 +926,7 @@ def _check_tensor(
         out.error(3, _link(name), f"has non-numeric inertia {', '.join(bad)}", "give numbers")
         return
     v = {k: float(values[k] or 0.0) for k in keys}  # type: ignore[arg-type]
-    tensor = np.array(
-        [
-            [v["ixx"], v["ixy"], v["ixz"]],
-            [v["ixy"], v["iyy"], v["iyz"]],
-            [v["ixz"], v["iyz"], v["izz"]],
-        ]
-    )
+    tensor = inertia_tensor(v)
     problem = inertia_problem(tensor)
     if problem is None:
         return
