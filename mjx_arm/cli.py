@@ -373,9 +373,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--config", help="JSON file with training config fields")
     p.add_argument(
         "--set",
-        action="append",
+        action="extend",
+        nargs="+",
         metavar="KEY=VALUE",
-        help="override a config field (repeatable); task.FIELD=... for the task",
+        help="override config fields (KEY=VALUE ...; repeatable); task.FIELD=... for the task",
+    ); task.FIELD=... for the task",
     )
     p.add_argument("--run-dir", help="run directory (default: runs/TASK-TIMESTAMP)")
     p.add_argument("--resume", metavar="RUN_DIR", help="continue the run in RUN_DIR")
