@@ -377,7 +377,6 @@ def build_parser() -> argparse.ArgumentParser:
         nargs="+",
         metavar="KEY=VALUE",
         help="override config fields (KEY=VALUE ...; repeatable); task.FIELD=... for the task",
-    ); task.FIELD=... for the task",
     )
     p.add_argument("--run-dir", help="run directory (default: runs/TASK-TIMESTAMP)")
     p.add_argument("--resume", metavar="RUN_DIR", help="continue the run in RUN_DIR")
