@@ -27,7 +27,7 @@ def rollout_rate(backend: str, task_name: str, batch: int, steps: int) -> dict:
     import jax
     from brax.training.agents.ppo import networks as ppo_networks
 
-    from mjx_arm.envs.vector import make_batched_env
+    from mjx_arm.envs.backend import make_batched_env
     from mjx_arm.envs.wrappers import wrap_for_training
     from mjx_arm.task import task_config
 

@@ -34,7 +34,7 @@ def _peak_bytes() -> int | None:
 
 def _env(task_name: str, backend: str, convert: list[str]):
     """The batched env, its model converted with ``key=value`` overrides of ConvertConfig."""
-    from mjx_arm.envs.vector import make_batched_env
+    from mjx_arm.envs.backend import make_batched_env
     from mjx_arm.task import task_config
 
     task = task_config(task_name)

@@ -99,8 +99,9 @@ def validate_and_convert(out: Path, echo: Callable[[str], None]) -> dict[str, An
 
 def train_reach(run_dir: Path, settings: DemoSettings, echo: Callable[[str], None]):
     """Train Reach (preset cpu, backend auto) into ``run_dir``; returns Brax's TrainResult."""
+    from mjx_arm.envs.backend import resolve_backend
     from mjx_arm.train.config import load_config
-    from mjx_arm.train.ppo import resolve_backend, train
+    from mjx_arm.train.ppo import train
 
     config = load_config(
         "cpu",
@@ -169,9 +170,9 @@ def evaluate_engines(
     Returns:
         Results per engine label and the MuJoCo :class:`~mjx_arm.evaluate.EvalRun`.
     """
+    from mjx_arm.envs.backend import resolve_backend
     from mjx_arm.evaluate import eval_task, evaluate, format_summary
     from mjx_arm.policy import load
-    from mjx_arm.train.ppo import resolve_backend
 
     policy = load(policy_path)
     task, _ = eval_task(policy)

@@ -17,22 +17,10 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from mjx_arm.envs.backend import make_batched_env
 from mjx_arm.envs.base import check_action
 from mjx_arm.task import observation as obs_lib
 from mjx_arm.task.config import REWARD_TERMS, TaskConfig, task_config
-
-
-def make_batched_env(task: TaskConfig, backend: str = "auto"):
-    """The single-env JAX env of ``backend`` ("auto", "mjx" or "mujoco")."""
-    from mjx_arm.envs.mjx_env import MjxArmEnv
-    from mjx_arm.train.ppo import resolve_backend
-
-    backend = resolve_backend(backend)
-    if backend == "mujoco":
-        from mjx_arm.envs.mujoco_batch import MujocoCallbackPhysics
-
-        return MjxArmEnv(task, physics_factory=MujocoCallbackPhysics)
-    return MjxArmEnv(task)
 
 
 class ArmVectorEnv(VectorEnv):

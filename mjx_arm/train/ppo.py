@@ -19,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from mjx_arm.envs.backend import make_batched_env, resolve_backend
 from mjx_arm.task.config import TaskConfig, task_config
 from mjx_arm.train import compat
 from mjx_arm.train.config import TrainConfig
@@ -38,28 +39,6 @@ class TrainResult:
     compile_seconds: float
     train_seconds: float
     steps_per_second: float
-
-
-def resolve_backend(name: str) -> str:
-    """``auto`` -> ``mjx`` when an accelerator is present, else ``mujoco`` (C MuJoCo)."""
-    if name != "auto":
-        return name
-    return "mjx" if jax.default_backend() in ("gpu", "cuda", "rocm", "tpu") else "mujoco"
-
-
-def make_training_env(config: TrainConfig, task: TaskConfig):
-    """The single (unbatched) Brax env of the configured backend."""
-    backend = resolve_backend(config.backend)
-    if backend == "mjx":
-        from mjx_arm.envs.mjx_env import MjxArmEnv
-
-        return MjxArmEnv(task)
-    if backend == "mujoco":
-        from mjx_arm.envs.mjx_env import MjxArmEnv
-        from mjx_arm.envs.mujoco_batch import MujocoCallbackPhysics
-
-        return MjxArmEnv(task, physics_factory=MujocoCallbackPhysics)
-    raise ValueError(f"unknown backend {backend!r}")
 
 
 def full_config(config: TrainConfig, task: TaskConfig) -> dict[str, Any]:
@@ -212,7 +191,7 @@ def train(
     if remaining <= 0:
         raise ValueError(f"run already has {step_offset} of {config.num_timesteps} steps")
 
-    env = make_training_env(config, task)
+    env = make_batched_env(task, config.backend)
     network_factory = functools.partial(
         ppo_networks.make_ppo_networks,
         policy_hidden_layer_sizes=config.policy_hidden,
