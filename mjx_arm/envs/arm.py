@@ -71,3 +71,16 @@ def arm_info(urdf: str | Path | None = None) -> ArmInfo:
     """Arm facts of ``urdf`` (default: the shipped arm), cached per file version."""
     path = Path(urdf or default_arm_urdf()).resolve()
     return _arm_info_cached(path, path.stat().st_mtime)
+
+
+def validated_arm_info(urdf: str | Path | None, engine: str) -> ArmInfo:
+    """Validate ``urdf`` (default: the shipped arm) for ``engine``, then read its arm facts.
+
+    Validation comes first, so a broken file fails with the validator's report instead of a
+    parse error.
+    """
+    from mjx_arm.urdf.validate import validated
+
+    path = Path(urdf).expanduser().resolve() if urdf is not None else default_arm_urdf()
+    validated(path, engine)
+    return arm_info(path)

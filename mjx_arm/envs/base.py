@@ -15,13 +15,11 @@ from typing import Any, ClassVar, NamedTuple
 import gymnasium as gym
 import numpy as np
 
-from mjx_arm.envs.arm import ArmInfo, arm_info
-from mjx_arm.paths import default_arm_urdf
+from mjx_arm.envs.arm import ArmInfo, validated_arm_info
 from mjx_arm.task import observation as obs_lib
 from mjx_arm.task import reward as reward_lib
 from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig, touch_config
-from mjx_arm.urdf.validate import validated
 
 DEFAULT_WIDTH, DEFAULT_HEIGHT = 640, 480
 
@@ -82,9 +80,7 @@ class BaseRobotEnv(gym.Env):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}")
         self.render_mode, self.width, self.height = render_mode, width, height
-        path = Path(urdf).expanduser().resolve() if urdf is not None else default_arm_urdf()
-        validated(path, self.engine)  # before parsing: a broken file fails with the report
-        self.arm: ArmInfo = arm_info(path)
+        self.arm: ArmInfo = validated_arm_info(urdf, self.engine)
         self.action_space = gym.spaces.Box(-1.0, 1.0, (6,), np.float32)
         self.observation_space = obs_lib.observation_space(self.task.force_clip)
         # constants of the per-step evaluation, computed once

@@ -18,15 +18,13 @@ from brax.envs.base import Env, State
 from flax import struct
 from mujoco import mjx
 
-from mjx_arm.envs.arm import ArmInfo, arm_info
+from mjx_arm.envs.arm import ArmInfo, validated_arm_info
 from mjx_arm.envs.model_io import SensorReader, arm_model
-from mjx_arm.paths import default_arm_urdf
 from mjx_arm.task import observation as obs_lib
 from mjx_arm.task import reward as reward_lib
 from mjx_arm.task import sampling
 from mjx_arm.task.config import REWARD_TERMS, TaskConfig, touch_config
 from mjx_arm.urdf.scene import TARGET_BODY
-from mjx_arm.urdf.validate import validated
 
 
 @struct.dataclass
@@ -120,9 +118,7 @@ class MjxArmEnv(Env):
         mj_model: mujoco.MjModel | None = None,
     ) -> None:
         self.task = task or touch_config()
-        path = Path(urdf).expanduser().resolve() if urdf is not None else default_arm_urdf()
-        validated(path, "mujoco")  # before parsing: a broken file fails with the report
-        self.arm = arm_info(path)
+        self.arm = validated_arm_info(urdf, "mujoco")
         self.mj_model = mj_model if mj_model is not None else arm_model(self.arm.urdf, self.task)
         self.physics = physics_factory(self.mj_model, self.arm, self.task)
         self._v_scale = jnp.asarray(self.task.action_scale * self.arm.v_max, jnp.float32)
@@ -159,7 +155,7 @@ class MjxArmEnv(Env):
         reading = self.physics.read(data)
         zero = jnp.zeros(())
         metrics = {f"reward/{name}": zero for name in REWARD_TERMS}
-        metrics.update(self._measures(reading, zero))
+        metrics.update(self._measures(*self._distance_and_force(reading), zero))
         return State(
             pipeline_state=data,
             obs=self.observe(reading),
@@ -191,7 +187,7 @@ class MjxArmEnv(Env):
         done = ~finite | (success & self.task.terminate_on_success)
         metrics = dict(state.metrics)  # keep keys wrappers added (EvalWrapper's "reward")
         metrics.update({f"reward/{name}": value for name, value in terms.items()})
-        metrics.update(self._measures(reading, success))
+        metrics.update(self._measures(d, force, success))
         return state.replace(
             pipeline_state=data,
             obs=obs,
@@ -213,7 +209,7 @@ class MjxArmEnv(Env):
 
     def observe(self, reading: Reading) -> jax.Array:
         """The flat observation ``state (22,)`` of a reading."""
-        obs = obs_lib.assemble_obs(
+        return obs_lib.flat_obs(
             jnp,
             reading.ee_pos,
             reading.ee_quat,
@@ -222,16 +218,15 @@ class MjxArmEnv(Env):
             reading.wrench,
             self.task.force_clip,
         )
-        return obs_lib.flatten_obs(jnp, obs)
 
     def _distance_and_force(self, reading: Reading) -> tuple[jax.Array, jax.Array]:
         d = reward_lib.target_distance(jnp, reading.ee_pos, reading.target_pos)
         clip = self.task.force_clip
-        force = jnp.linalg.norm(jnp.clip(reading.wrench[:3], -clip, clip))
+        force = reward_lib.contact_force_norm(jnp, jnp.clip(reading.wrench, -clip, clip))
         return d, force
 
-    def _measures(self, reading: Reading, success: jax.Array) -> dict[str, jax.Array]:
-        d, force = self._distance_and_force(reading)
+    @staticmethod
+    def _measures(d: jax.Array, force: jax.Array, success: jax.Array) -> dict[str, jax.Array]:
         return {
             "distance": d.astype(jnp.float32),
             "contact_force": force.astype(jnp.float32),
