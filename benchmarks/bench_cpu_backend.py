@@ -12,12 +12,16 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.common import environment_metadata, markdown_table, save_results
+from benchmarks.common import (
+    compile_and_time,
+    environment_metadata,
+    markdown_table,
+    save_results,
+)
 
 GOALS = {"control_steps_per_s_min": 15_000, "train_compile_s_max": 20}
 
@@ -37,7 +41,9 @@ def rollout_rate(backend: str, task_name: str, batch: int, steps: int) -> dict:
     params = nets.policy_network.init(jax.random.PRNGKey(0))
     dist = nets.parametric_action_distribution
 
-    def rollout(state, key):
+    def rollout(carry):
+        """``steps`` policy-driven control steps from carry = (state, key)."""
+
         def body(carry, _):
             s, k = carry
             k, sub = jax.random.split(k)
@@ -45,18 +51,10 @@ def rollout_rate(backend: str, task_name: str, batch: int, steps: int) -> dict:
             action = dist.sample(logits, sub)
             return (env.step(s, action), k), None
 
-        return jax.lax.scan(body, (state, key), None, length=steps)[0]
+        return jax.lax.scan(body, carry, None, length=steps)[0]
 
     state = jax.jit(env.reset)(jax.random.split(jax.random.PRNGKey(1), batch))
-    run = jax.jit(rollout)
-    t0 = time.perf_counter()
-    state, key = run(state, jax.random.PRNGKey(2))
-    jax.block_until_ready(state.obs)
-    compile_s = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    state, key = run(state, key)
-    jax.block_until_ready(state.obs)
-    run_s = time.perf_counter() - t0
+    _, compile_s, run_s = compile_and_time(jax.jit(rollout), (state, jax.random.PRNGKey(2)))
     return {
         "backend": backend,
         "batch": batch,

@@ -17,12 +17,16 @@ import argparse
 import json
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.common import environment_metadata, markdown_table, save_results
+from benchmarks.common import (
+    compile_and_time,
+    environment_metadata,
+    markdown_table,
+    save_results,
+)
 
 
 def _peak_bytes() -> int | None:
@@ -65,7 +69,6 @@ def measure(
     """Time env and raw stepping for one batch size (in this process)."""
     import jax
     import jax.numpy as jnp
-    from mujoco import mjx
 
     env = _env(task_name, backend, convert or [])
     keys = jax.random.split(jax.random.PRNGKey(0), batch)
@@ -78,15 +81,7 @@ def measure(
         return jax.lax.scan(body, state, None, length=steps)[0]
 
     state = jax.jit(jax.vmap(env.reset))(keys)
-    run_env = jax.jit(env_rollout)
-    t0 = time.perf_counter()
-    out = run_env(state)
-    jax.block_until_ready(out.obs)
-    env_compile = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    out = run_env(out)
-    jax.block_until_ready(out.obs)
-    env_time = time.perf_counter() - t0
+    out, env_compile, env_time = compile_and_time(jax.jit(env_rollout), state)
     env_peak = _peak_bytes()
     result = {
         "batch": batch,
@@ -103,7 +98,6 @@ def measure(
         result["env_overhead"] = (
             1.0 - result["env_physics_steps_per_s"] / result["raw_physics_steps_per_s"]
         )
-    del mjx
     return result
 
 
@@ -121,15 +115,7 @@ def _raw(env, data, steps: int) -> dict:
 
         return jax.lax.scan(body, d, None, length=steps * n_sub)[0]
 
-    run = jax.jit(raw_rollout)
-    t0 = time.perf_counter()
-    out = run(data)
-    jax.block_until_ready(out.qpos)
-    compile_s = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    out = run(out)
-    jax.block_until_ready(out.qpos)
-    run_s = time.perf_counter() - t0
+    _, compile_s, run_s = compile_and_time(jax.jit(raw_rollout), data)
     batch = data.qpos.shape[0]
     return {
         "raw_compile_s": compile_s,

@@ -195,6 +195,23 @@ def _timed(fn: Callable[[], Any], setup: Callable[[], Any] | None = None) -> flo
             gc.enable()
 
 
+def compile_and_time(fn: Callable[[Any], Any], arg: Any) -> tuple[Any, float, float]:
+    """Run a jitted ``fn`` twice, feeding the first output into the second call.
+
+    Returns:
+        (second output, seconds of the first call: compilation plus one run, seconds of the
+        second call), each call waited for with ``jax.block_until_ready``.
+    """
+    import jax
+
+    t0 = time.perf_counter()
+    out = jax.block_until_ready(fn(arg))
+    compile_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    out = jax.block_until_ready(fn(out))
+    return out, compile_s, time.perf_counter() - t0
+
+
 def summarize(values: Sequence[float]) -> dict[str, Any]:
     """Median, min, max and every value (in run order) of repeated measurements."""
     return {
