@@ -6,9 +6,10 @@ For each batch size, one process (so peak device memory is its own) times:
 * raw: ``jit(vmap(8 x mjx.step))`` of the same model and batch, same K,
 
 and reports control steps/s, physics steps/s (8 per control step), the env's overhead against
-raw, compile times and peak device memory. Run on a GPU::
+raw, compile times and peak device memory, for each MJX implementation given (``--impls jax
+warp``: both in one run, so the Warp/JAX ratio is measured side by side). Run on a GPU::
 
-    python benchmarks/bench_mjx_throughput.py --batches 1024 8192 32768 131072
+    python benchmarks/bench_mjx_throughput.py --batches 1024 8192 32768 131072 --impls jax warp
 """
 
 from __future__ import annotations
@@ -36,14 +37,14 @@ def _peak_bytes() -> int | None:
     return stats.get("peak_bytes_in_use")
 
 
-def _env(task_name: str, backend: str, convert: list[str]):
+def _env(task_name: str, backend: str, convert: list[str], physics, batch: int):
     """The batched env, its model converted with ``key=value`` overrides of ConvertConfig."""
     from mjx_arm.envs.backend import make_batched_env
     from mjx_arm.task import task_config
 
     task = task_config(task_name)
     if not convert:
-        return make_batched_env(task, backend)
+        return make_batched_env(task, backend, physics, batch)
     import dataclasses
 
     from mjx_arm.envs.mjx_env import MjxArmEnv
@@ -60,17 +61,22 @@ def _env(task_name: str, backend: str, convert: list[str]):
             str(kinds[key]), str
         )(value)
     model = load_model(default_arm_urdf(), base.replace(**changes))
-    return MjxArmEnv(task, mj_model=model)
+    return MjxArmEnv(task, mj_model=model, physics=physics, batch_size=batch)
 
 
 def measure(
-    task_name: str, batch: int, steps: int, backend: str, convert: list[str] | None = None
+    task_name: str,
+    batch: int,
+    steps: int,
+    backend: str,
+    convert: list[str] | None = None,
+    physics=None,
 ) -> dict:
     """Time env and raw stepping for one batch size (in this process)."""
     import jax
     import jax.numpy as jnp
 
-    env = _env(task_name, backend, convert or [])
+    env = _env(task_name, backend, convert or [], physics, batch)
     keys = jax.random.split(jax.random.PRNGKey(0), batch)
     actions = jax.random.uniform(jax.random.PRNGKey(1), (batch, 6), minval=-1, maxval=1)
 
@@ -92,6 +98,8 @@ def measure(
         "env_physics_steps_per_s": batch * steps * env.task.n_substeps / env_time,
         "env_peak_bytes": env_peak,
         "finite": bool(jnp.all(jnp.isfinite(out.obs))),
+        "physics": env.physics.describe(),
+        "overflowed_envs": int(jnp.sum(out.metrics["physics_overflow"] > 0)),
     }
     if backend == "mjx":
         result.update(_raw(env, out.pipeline_state, steps))
@@ -126,8 +134,14 @@ def _raw(env, data, steps: int) -> dict:
 
 
 def _child(args: argparse.Namespace) -> None:
-    row = measure(args.task, args.child_batch, args.steps, args.backend, args.convert)
+    from mjx_arm.envs.physics_config import PhysicsConfig
+
+    physics = PhysicsConfig(
+        impl=args.child_impl, naconmax_per_env=args.naconmax_per_env, njmax=args.njmax
+    )
+    row = measure(args.task, args.child_batch, args.steps, args.backend, args.convert, physics)
     row["convert"] = args.convert
+    row["impl"] = row["physics"].get("impl", args.backend)
     print(json.dumps(row))
 
 
@@ -145,13 +159,19 @@ def main() -> None:
         default=[],
         help="ConvertConfig overrides key=value (e.g. solver_iterations=2)",
     )
+    parser.add_argument(
+        "--impls", nargs="+", default=["auto"], help="MJX implementations: auto, jax, warp"
+    )
+    parser.add_argument("--naconmax-per-env", type=int, default=0, help="Warp contacts per env")
+    parser.add_argument("--njmax", type=int, default=0, help="Warp constraint rows per env")
     parser.add_argument("--child-batch", type=int, help=argparse.SUPPRESS)
+    parser.add_argument("--child-impl", default="auto", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child_batch:
         _child(args)
         return
     rows = []
-    for batch in args.batches:
+    for batch, impl in [(b, i) for b in args.batches for i in args.impls]:
         cmd = [
             sys.executable,
             __file__,
@@ -163,13 +183,19 @@ def main() -> None:
             args.backend,
             "--child-batch",
             str(batch),
+            "--child-impl",
+            impl,
+            "--naconmax-per-env",
+            str(args.naconmax_per_env),
+            "--njmax",
+            str(args.njmax),
         ]
         if args.convert:
             cmd += ["--convert", *args.convert]
         proc = subprocess.run(cmd, capture_output=True, text=True)
         if proc.returncode != 0:
             print(proc.stderr[-3000:], file=sys.stderr)
-            rows.append({"batch": batch, "error": proc.stderr[-500:]})
+            rows.append({"batch": batch, "impl": impl, "error": proc.stderr[-500:]})
             continue
         row = json.loads(proc.stdout.strip().splitlines()[-1])
         rows.append(row)
@@ -177,10 +203,17 @@ def main() -> None:
     meta = environment_metadata(accelerator=True)
     table = _table(rows, args.backend)
     print(table)
-    name = args.name or f"mjx_throughput_{args.task}_{args.backend}"
+    name = args.name or f"mjx_throughput_{args.task}_{args.backend}_{'_'.join(args.impls)}"
     save_results(
         name,
-        {"meta": meta, "task": args.task, "backend": args.backend, "rows": rows, "goals": GOALS},
+        {
+            "meta": meta,
+            "task": args.task,
+            "backend": args.backend,
+            "rows": rows,
+            "warp_over_jax": _ratios(rows),
+            "goals": GOALS,
+        },
         table,
         args.results_dir,
     )
@@ -190,34 +223,54 @@ GOALS = {
     "env_overhead_max": 0.10,
     "physics_steps_per_s_min": 3_000_000,
     "memory_128k_envs_max_gib": 20,
+    "warp_over_jax_min": 4.0,
 }
 
 
+def _ratios(rows: list[dict]) -> dict[str, float]:
+    """Warp over JAX env control steps/s, per batch where both ran."""
+    rate = {
+        (r["batch"], r.get("impl")): r["env_control_steps_per_s"] for r in rows if "error" not in r
+    }
+    return {
+        str(b): rate[(b, "warp")] / rate[(b, "jax")]
+        for b, impl in rate
+        if impl == "warp" and (b, "jax") in rate
+    }
+
+
 def _table(rows: list[dict], backend: str) -> str:
+    ratios = _ratios(rows)
     headers = [
         "envs",
+        "impl",
         "control steps/s",
         "physics steps/s",
         "raw physics steps/s",
         "overhead",
         "env compile s",
         "peak GiB",
+        "warp / jax",
     ]
     out = []
     for r in rows:
+        impl = r.get("impl", backend)
         if "error" in r:
-            out.append([r["batch"], "error", "", "", "", "", ""])
+            out.append([r["batch"], impl, "error", "", "", "", "", "", ""])
             continue
         peak = r.get("env_peak_bytes")
+        ratio = ratios.get(str(r["batch"])) if impl == "warp" else None
         out.append(
             [
                 r["batch"],
+                impl,
                 f"{r['env_control_steps_per_s']:,.0f}",
                 f"{r['env_physics_steps_per_s']:,.0f}",
                 f"{r.get('raw_physics_steps_per_s', float('nan')):,.0f}",
                 f"{100 * r.get('env_overhead', float('nan')):.1f}%",
                 f"{r['env_compile_s']:.1f}",
                 f"{peak / 2**30:.2f}" if peak else "n/a",
+                f"{ratio:.2f}x" if ratio else "",
             ]
         )
     return markdown_table(headers, out)

@@ -30,7 +30,16 @@ from pathlib import Path
 from typing import Any
 
 RESULTS_DIR = Path(__file__).resolve().parent / "results"
-DEFAULT_PACKAGES = ("mujoco", "mujoco-mjx", "pybullet", "gymnasium", "numpy", "jax", "brax")
+DEFAULT_PACKAGES = (
+    "mujoco",
+    "mujoco-mjx",
+    "warp-lang",
+    "pybullet",
+    "gymnasium",
+    "numpy",
+    "jax",
+    "brax",
+)
 
 # --------------------------------------------------------------------------- metadata
 

@@ -150,7 +150,15 @@ def cmd_eval(args: argparse.Namespace) -> int:
     policy, source = resolve_policy(args.policy, args.step)
     task, notes = eval_task(policy, args.task)
     result, run = evaluate(
-        policy, args.engine, task, args.episodes, args.seed, args.video, args.width, args.height
+        policy,
+        args.engine,
+        task,
+        args.episodes,
+        args.seed,
+        args.video,
+        args.width,
+        args.height,
+        impl=args.impl,
     )
     result = {"policy": str(source), **result, "notes": notes + result["notes"]}
     print(format_summary(result))
@@ -253,6 +261,12 @@ def _add_policy_commands(sub) -> None:
         help="mujoco or pybullet (Gymnasium env, CPU) or mjx (the batched MJX env; "
         "on a CPU it still runs MJX, only slowly: minutes to compile, about "
         "100x slower than C MuJoCo) (default: mujoco)",
+    )
+    p.add_argument(
+        "--impl",
+        choices=["auto", "jax", "warp"],
+        default="auto",
+        help="MJX implementation for --engine mjx (default: auto: Warp on a GPU where installed)",
     )
     p.add_argument("--step", type=int, help="checkpoint step of a run directory (default: newest)")
     p.add_argument("--episodes", type=int, default=50, help="episodes (default: 50)")

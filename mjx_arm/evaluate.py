@@ -297,7 +297,12 @@ def _open_video(env: gym.Env, video: str | Path | None) -> tuple[_SafeVideo | No
 
 
 def run_batched(
-    policy: Policy, task: TaskConfig, episodes: int, seed: int = 0, backend: str = "mjx"
+    policy: Policy,
+    task: TaskConfig,
+    episodes: int,
+    seed: int = 0,
+    backend: str = "mjx",
+    impl: str = "auto",
 ) -> EvalRun:
     """Run ``episodes`` episodes at once, one per env of an :class:`ArmVectorEnv`.
 
@@ -310,10 +315,12 @@ def run_batched(
         episodes: number of envs (= episodes).
         seed: seed of the batch's PRNG key.
         backend: "mjx" (MJX: slow on a CPU), "mujoco" (C MuJoCo) or "auto".
+        impl: MJX implementation: "auto", "jax" or "warp".
     """
+    from mjx_arm.envs.physics_config import PhysicsConfig
     from mjx_arm.envs.vector import ArmVectorEnv
 
-    env = ArmVectorEnv(task, episodes, backend)
+    env = ArmVectorEnv(task, episodes, backend, PhysicsConfig(impl=impl))
     obs, _ = env.reset(seed=seed)
     acc = _BatchAccumulator(episodes)
     rec = _Recorder()
@@ -440,6 +447,7 @@ def evaluate(
     height: int = 480,
     backend: str | None = None,
     video_episodes: int = 1,
+    impl: str = "auto",
 ) -> tuple[dict[str, Any], EvalRun]:
     """Evaluate ``policy`` on ``engine`` and summarise.
 
@@ -453,6 +461,7 @@ def evaluate(
             (mjx: env 0's episode, re-rendered in CPU MuJoCo).
         width, height: video frame size (pixels).
         backend: for ``engine="mjx"``: "mjx" (default) or "mujoco" (C MuJoCo, fast on a CPU).
+        impl: for the MJX backend: "auto" (Warp on a GPU where installed), "jax" or "warp".
 
     Returns:
         The JSON-ready summary and the raw :class:`EvalRun`.
@@ -461,7 +470,7 @@ def evaluate(
         raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
     start = time.monotonic()
     if engine == "mjx":
-        run = run_batched(policy, task, episodes, seed, backend or "mjx")
+        run = run_batched(policy, task, episodes, seed, backend or "mjx", impl)
         if video is not None:
             run.frames, note = _replay_video(run.trajectory, task, video, width, height)
             run.notes += [note] if note else []
@@ -473,7 +482,11 @@ def evaluate(
             env.close()
     result = {"engine": engine, "task": task.task, "seed": seed, **summarize(run.episodes)}
     if engine == "mjx":
+        from mjx_arm.envs.physics_config import resolve_impl
+
         result["backend"] = backend or "mjx"
+        if result["backend"] == "mjx":
+            result["impl"] = resolve_impl(impl)
     result["wall_seconds"] = time.monotonic() - start
     result["video"] = str(video) if video is not None and run.frames else None
     result["notes"] = run.notes

@@ -1,4 +1,5 @@
-"""Typed settings of the batched physics: which MJX implementation steps it, and its buffers.
+"""Typed settings of the batched env: the MJX implementation and its buffers, and the domain
+randomisation (:mod:`mjx_arm.envs.randomization` applies it).
 
 Kept free of heavy imports so that configs load without JAX or MuJoCo.
 """
@@ -52,6 +53,50 @@ class PhysicsConfig:
         unknown = set(data) - known
         if unknown:
             raise ValueError(f"unknown physics config keys: {sorted(unknown)}")
+        return cls(**data)
+
+
+Range = tuple[float, float]
+
+
+@dataclass(frozen=True)
+class RandomizationConfig:
+    """Ranges of the domain randomisation (multipliers are uniform in ``(low, high)``).
+
+    Attributes:
+        enabled: randomise at all (off: every env steps the nominal model, no noise or delay).
+        friction: multiplier of every geom's friction.
+        damping: multiplier of each joint's damping (drawn per joint).
+        armature: multiplier of each joint's rotor inertia (per joint).
+        gain: multiplier of each velocity servo's gain (per joint).
+        box_offset: half-width (m) of the uniform x/y offset of the box from its observed place.
+        ft_force_noise: standard deviation (N) of the noise on the observed force.
+        ft_torque_noise: standard deviation (N m) of the noise on the observed torque.
+        latency_prob: probability that an episode applies each action one control step late.
+    """
+
+    enabled: bool = False
+    friction: Range = (0.7, 1.3)
+    damping: Range = (0.7, 1.3)
+    armature: Range = (0.7, 1.3)
+    gain: Range = (0.8, 1.2)
+    box_offset: float = 0.005
+    ft_force_noise: float = 0.5
+    ft_torque_noise: float = 0.02
+    latency_prob: float = 0.3
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict."""
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> RandomizationConfig:
+        """Inverse of :meth:`to_dict`; unknown keys are an error."""
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = set(data) - known
+        if unknown:
+            raise ValueError(f"unknown randomization config keys: {sorted(unknown)}")
+        data = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
         return cls(**data)
 
 

@@ -19,6 +19,8 @@ from gymnasium.vector.utils import batch_space
 
 from mjx_arm.envs.backend import make_batched_env
 from mjx_arm.envs.base import check_action
+from mjx_arm.envs.mjx_physics import batched_where
+from mjx_arm.envs.physics_config import PhysicsConfig
 from mjx_arm.task import observation as obs_lib
 from mjx_arm.task.config import REWARD_TERMS, TaskConfig, task_config
 
@@ -30,6 +32,8 @@ class ArmVectorEnv(VectorEnv):
         task: the task configuration.
         num_envs: batch size.
         backend: "auto" (MJX on an accelerator, C MuJoCo on a CPU), "mjx" or "mujoco".
+        physics: the MJX implementation (``mjx`` only; default ``impl="auto"``: Warp on a GPU
+            where it is installed).
     """
 
     metadata: ClassVar[dict[str, Any]] = {
@@ -37,16 +41,22 @@ class ArmVectorEnv(VectorEnv):
         "render_modes": [],
     }
 
-    def __init__(self, task: TaskConfig, num_envs: int, backend: str = "auto") -> None:
+    def __init__(
+        self,
+        task: TaskConfig,
+        num_envs: int,
+        backend: str = "auto",
+        physics: PhysicsConfig | None = None,
+    ) -> None:
         self.task, self.num_envs = task, num_envs
-        self.env = make_batched_env(task, backend)
+        self.env = make_batched_env(task, backend, physics, batch_size=num_envs)
         self.single_observation_space = obs_lib.observation_space(task.force_clip)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.single_action_space = gym.spaces.Box(-1.0, 1.0, (6,), np.float32)
         self.action_space = batch_space(self.single_action_space, num_envs)
         self._reset = jax.jit(jax.vmap(self.env.reset))
         self._step = jax.jit(jax.vmap(self.env.step))
-        self._select = jax.jit(_select_done)
+        self._select = jax.jit(self._merge)
         self._state = None
         self._steps = np.zeros(num_envs, np.int64)
         self._key = jax.random.PRNGKey(0)
@@ -69,6 +79,7 @@ class ArmVectorEnv(VectorEnv):
             raise ValueError(f"actions must have shape ({self.num_envs}, 6), got {actions.shape}")
         actions = np.stack([check_action(a) for a in actions])
         state = self._step(self._state, jnp.asarray(actions))
+        self.env.physics.check_overflow(state.metrics["physics_overflow"])
         self._steps += 1
         terminated = np.asarray(state.done) > 0
         truncated = (self._steps >= self.task.episode_steps) & ~terminated
@@ -88,6 +99,14 @@ class ArmVectorEnv(VectorEnv):
         self._state = state
         return obs, rewards, terminated, truncated, info
 
+    def _merge(self, done: jax.Array, fresh, state):
+        """Per env: the ``fresh`` state where done, else ``state`` (the physics merges data)."""
+        data = self.env.physics.where(done, fresh.pipeline_state, state.pipeline_state)
+        rest = batched_where(
+            done, fresh.replace(pipeline_state=None), state.replace(pipeline_state=None)
+        )
+        return rest.replace(pipeline_state=data)
+
     def _obs(self, flat) -> dict[str, np.ndarray]:
         flat = np.asarray(flat, dtype=np.float32)
         return {k: np.ascontiguousarray(v) for k, v in obs_lib.unflatten_obs(flat).items()}
@@ -104,22 +123,13 @@ class ArmVectorEnv(VectorEnv):
         return info
 
 
-def _select_done(done: jax.Array, fresh, state):
-    """Per env: ``fresh`` where done, else ``state`` (pytrees with a leading batch axis)."""
-
-    def pick(new, old):
-        mask = jnp.reshape(done, done.shape + (1,) * (old.ndim - 1))
-        return jnp.where(mask, new, old)
-
-    return jax.tree.map(pick, fresh, state)
-
-
 def make_vector_env(
     task_name: str,
     num_envs: int = 1,
     task: TaskConfig | dict | None = None,
     backend: str = "auto",
     max_episode_steps: int | None = None,
+    physics: PhysicsConfig | dict | None = None,
     **kwargs: Any,
 ) -> ArmVectorEnv:
     """Vector entry point of the registered ids (``max_episode_steps`` sets the episode length)."""
@@ -128,4 +138,6 @@ def make_vector_env(
     cfg = task if isinstance(task, TaskConfig) else task_config(task_name, **(task or {}))
     if max_episode_steps is not None:
         cfg = cfg.replace(episode_steps=int(max_episode_steps))
-    return ArmVectorEnv(cfg, num_envs, backend)
+    if isinstance(physics, dict):
+        physics = PhysicsConfig.from_dict(physics)
+    return ArmVectorEnv(cfg, num_envs, backend, physics)

@@ -17,6 +17,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from mjx_arm.envs.physics_config import PhysicsConfig, RandomizationConfig
+
+# Nested sections of the config: name -> type (``--set physics.impl=warp``).
+SECTIONS = {"physics": PhysicsConfig, "randomization": RandomizationConfig}
+
 
 @dataclass(frozen=True)
 class TrainConfig:
@@ -24,8 +29,11 @@ class TrainConfig:
 
     Attributes:
         task: "reach" or "touch".
-        task_overrides: fields of the task config to change (e.g. {"action_scale": 0.4}).
+        task_overrides: fields of the task config to change (e.g. {"action_scale": 0.4};
+            {"variant": "seed"} picks the seed document's Touch).
         backend: "auto", "mjx" or "mujoco" (C MuJoCo through a host callback, CPU).
+        physics: the MJX implementation (jax or warp) and its buffers.
+        randomization: domain randomisation of the training envs (evaluation stays nominal).
         num_timesteps: env steps to train for.
         num_envs: parallel envs in the rollout.
         unroll_length: steps per env per rollout (the PPO sequence length).
@@ -39,6 +47,8 @@ class TrainConfig:
         num_evals: evaluations over the run (metrics are written at each).
         num_eval_envs: envs per evaluation (one episode each).
         checkpoint_every: save a checkpoint every this many evaluations (and at the end).
+        stop_at_success: stop once an evaluation's success rate reaches this (its checkpoint
+            is saved); 0 trains all ``num_timesteps``.
         seed: PRNG seed.
         max_devices: use at most this many local devices (0: all; Brax pmaps over them).
     """
@@ -46,6 +56,8 @@ class TrainConfig:
     task: str = "reach"
     task_overrides: dict[str, Any] = field(default_factory=dict)
     backend: str = "auto"
+    physics: PhysicsConfig = field(default_factory=PhysicsConfig)
+    randomization: RandomizationConfig = field(default_factory=RandomizationConfig)
     num_timesteps: int = 5_000_000
     num_envs: int = 2048
     unroll_length: int = 20
@@ -66,6 +78,7 @@ class TrainConfig:
     num_evals: int = 10
     num_eval_envs: int = 128
     checkpoint_every: int = 1
+    stop_at_success: float = 0.0
     seed: int = 0
     max_devices: int = 0
 
@@ -83,7 +96,8 @@ class TrainConfig:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
-        """Inverse of :meth:`to_dict`; unknown keys are an error."""
+        """Inverse of :meth:`to_dict`; unknown keys are an error. Sections missing from older
+        files take their defaults."""
         known = {f.name for f in dataclasses.fields(cls)}
         unknown = set(data) - known
         if unknown:
@@ -92,6 +106,9 @@ class TrainConfig:
         for key in ("policy_hidden", "value_hidden"):
             if key in data:
                 data[key] = tuple(data[key])
+        for key, kind in SECTIONS.items():
+            if isinstance(data.get(key), dict):
+                data[key] = kind.from_dict(data[key])
         return cls(**data)
 
     def validate(self) -> None:
@@ -107,8 +124,9 @@ class TrainConfig:
             )
 
 
-# The seed document's PPO settings mapped onto a GPU batch.
-SEED = TrainConfig()
+# The seed document's PPO settings mapped onto a GPU batch, on the seed document's task (Touch
+# succeeds on the first in-band step; no force or speed terms) and without randomisation.
+SEED = TrainConfig(task_overrides={"variant": "seed"})
 
 # Fastest to a solved task on one GPU: a large batch, fewer and larger updates, a higher learning
 # rate (a large batch gives low-variance gradients), a shorter horizon (these tasks end in under
@@ -146,6 +164,8 @@ PRESETS = {"seed": SEED, "fast": FAST, "cpu": CPU}
 
 def _coerce(text: str, kind: Any) -> Any:
     """Parse a ``--set`` value for a field of type ``kind``."""
+    if isinstance(kind, str):  # an alias such as Range, unresolved
+        kind = tuple
     origin = typing.get_origin(kind)
     if kind is bool:
         if text.lower() in ("1", "true", "yes", "on"):
@@ -155,8 +175,10 @@ def _coerce(text: str, kind: Any) -> Any:
         raise ValueError(f"not a boolean: {text!r}")
     if kind in (int, float, str):
         return kind(float(text)) if kind is int else kind(text)
-    if origin is tuple:
-        return tuple(int(v) for v in text.strip("()[] ").split(",") if v.strip())
+    if origin is tuple or kind is tuple:
+        args = typing.get_args(kind)
+        number = float if args and args[0] is float else int
+        return tuple(number(v) for v in text.strip("()[] ").split(",") if v.strip())
     return json.loads(text)
 
 
@@ -164,20 +186,34 @@ def apply_overrides(config: TrainConfig, items: list[str]) -> TrainConfig:
     """Apply ``key=value`` overrides; ``task.KEY=value`` goes to ``task_overrides``."""
     hints = typing.get_type_hints(TrainConfig)
     changes: dict[str, Any] = {}
+    sections = {name: {} for name in SECTIONS}
     task_changes = dict(config.task_overrides)
     for item in items:
         key, sep, value = item.partition("=")
         if not sep:
             raise ValueError(f"--set expects key=value, got {item!r}")
-        if key.startswith("task."):
+        section, dot, field_name = key.partition(".")
+        if dot and section == "task":
             try:
-                task_changes[key[5:]] = json.loads(value)
+                task_changes[field_name] = json.loads(value)
             except json.JSONDecodeError:
-                task_changes[key[5:]] = value
+                task_changes[field_name] = value
+            continue
+        if dot and section in SECTIONS:
+            section_hints = typing.get_type_hints(SECTIONS[section])
+            if field_name not in section_hints:
+                raise ValueError(
+                    f"unknown config key {key!r}; known: "
+                    f"{sorted(f'{section}.{k}' for k in section_hints)}"
+                )
+            sections[section][field_name] = _coerce(value, section_hints[field_name])
             continue
         if key not in hints:
             raise ValueError(f"unknown config key {key!r}; known: {sorted(hints)}")
         changes[key] = _coerce(value, hints[key])
+    for name, values in sections.items():
+        if values:
+            changes[name] = dataclasses.replace(changes.get(name, getattr(config, name)), **values)
     return config.replace(task_overrides=task_changes, **changes)
 
 
@@ -191,7 +227,13 @@ def load_config(
     if file is not None:
         data = json.loads(Path(file).read_text())
         data = data.get("train", data)
-        config = TrainConfig.from_dict({**config.to_dict(), **data})
+        merged = config.to_dict()
+        for key, value in data.items():
+            if key in SECTIONS and isinstance(value, dict):
+                merged[key] = {**merged[key], **value}
+            else:
+                merged[key] = value
+        config = TrainConfig.from_dict(merged)
     config = apply_overrides(config, overrides or [])
     config.validate()
     return config

@@ -20,6 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from mjx_arm.envs.backend import make_batched_env, resolve_backend
+from mjx_arm.envs.mjx_physics import PhysicsOverflowError, overflow_message
 from mjx_arm.task.config import TaskConfig, task_config
 from mjx_arm.train import compat
 from mjx_arm.train.config import TrainConfig
@@ -41,8 +42,13 @@ class TrainResult:
     steps_per_second: float
 
 
-def full_config(config: TrainConfig, task: TaskConfig) -> dict[str, Any]:
-    """Every resolved setting of a run, as saved in ``config.json``."""
+def full_config(
+    config: TrainConfig, task: TaskConfig, physics: dict[str, Any] | None = None
+) -> dict[str, Any]:
+    """Every resolved setting of a run, as saved in ``config.json``.
+
+    ``physics``: what the env's physics reports of itself (implementation, buffer sizes).
+    """
     from mjx_arm import __version__
     from mjx_arm.envs.model_io import task_convert_config
 
@@ -53,9 +59,14 @@ def full_config(config: TrainConfig, task: TaskConfig) -> dict[str, Any]:
         "task": task.to_dict(),
         "convert": {k: v for k, v in vars(conversion).items() if k != "package_dirs"},
         "backend": resolve_backend(config.backend),
+        "physics_resolved": physics or {},
         "jax_backend": jax.default_backend(),
         "devices": [str(d) for d in jax.devices()],
     }
+
+
+class Solved(Exception):
+    """An evaluation reached ``stop_at_success``: training stops early."""
 
 
 class _Progress:
@@ -73,6 +84,7 @@ class _Progress:
         from tqdm import tqdm
 
         self.run, self.config, self.task = run, config, task
+        self.physics: dict[str, Any] = {}
         self.offset, self.total = step_offset, total
         self.bar = tqdm(
             total=total,
@@ -84,6 +96,8 @@ class _Progress:
             dynamic_ncols=True,
         )
         self.calls = 0
+        self.latest: tuple | None = None
+        self.saved_step = -1
         self.start = time.monotonic()
         self.times: list[tuple[float, int]] = []
         self.last_metrics: dict[str, float] = {}
@@ -105,18 +119,31 @@ class _Progress:
             reward=f"{row.get('eval/episode_reward', float('nan')):.1f}", success=f"{success:.2f}"
         )
         self.bar.refresh()
+        overflow = row.get("eval/episode_physics_overflow", 0.0)
+        if overflow > 0:
+            raise PhysicsOverflowError(overflow_message(overflow, self.physics))
+        goal = self.config.stop_at_success
+        if goal > 0 and success >= goal and step > 0:
+            if self.saved_step != global_step and self.latest is not None:
+                self._save(global_step, *self.latest)
+            raise Solved(global_step)
 
     def policy_params(self, step: int, make_policy, params) -> None:
         """Brax ``policy_params_fn``: a checkpoint every ``checkpoint_every`` calls and last."""
         self.calls += 1
         global_step = self.offset + int(step)
         last = global_step >= self.total
+        self.latest = (make_policy, params)
         if step == 0 or not (last or self.calls % self.config.checkpoint_every == 0):
             return
+        self._save(global_step, make_policy, params)
+
+    def _save(self, global_step: int, make_policy, params) -> None:
         params = jax.tree.map(np.asarray, params)
         folder = self.run.save_checkpoint(global_step, params, {"task": self.config.task})
         transitions = rollout_transitions(make_policy, params, self.task, seed=global_step)
         self.run.save_transitions(folder, transitions)
+        self.saved_step = global_step
 
     def close(self) -> None:
         self.bar.close()
@@ -185,23 +212,25 @@ def train(
             raise FileNotFoundError(f"no checkpoint to resume from in {run.path}")
         step_offset = int(RunDir.load_meta(latest)["step"])
         restore = restore_brax_params(RunDir.load_params(latest))
-    else:
-        run.save_config(full_config(config, task))
     remaining = config.num_timesteps - step_offset
     if remaining <= 0:
         raise ValueError(f"run already has {step_offset} of {config.num_timesteps} steps")
 
-    env = make_batched_env(task, config.backend)
+    env, eval_env = make_envs(config, task)
+    if not resume:
+        run.save_config(full_config(config, task, env.physics.describe()))
     network_factory = functools.partial(
         ppo_networks.make_ppo_networks,
         policy_hidden_layer_sizes=config.policy_hidden,
         value_hidden_layer_sizes=config.value_hidden,
     )
     progress = _Progress(run, config, task, step_offset, config.num_timesteps, quiet)
+    progress.physics = env.physics.describe()
     start = time.monotonic()
     try:
         brax_ppo.train(
             environment=env,
+            eval_env=eval_env,
             num_timesteps=remaining,
             episode_length=task.episode_steps,
             wrap_env_fn=wrap_for_training,
@@ -229,6 +258,8 @@ def train(
             policy_params_fn=progress.policy_params,
             restore_params=restore,
         )
+    except Solved:
+        pass
     finally:
         progress.close()
         run.close()
@@ -238,6 +269,19 @@ def train(
     return TrainResult(
         run.path, step_offset + trained, progress.last_metrics, compile_s, total, sps
     )
+
+
+def make_envs(config: TrainConfig, task: TaskConfig) -> tuple[Any, Any]:
+    """The training env (randomised as configured) and the evaluation env (nominal).
+
+    Warp's contact pool is sized for the larger of the training and evaluation batches.
+    """
+    batch = max(config.num_envs, config.num_eval_envs)
+    train_env = make_batched_env(task, config.backend, config.physics, batch, config.randomization)
+    if not config.randomization.enabled:
+        return train_env, train_env
+    eval_env = make_batched_env(task, config.backend, config.physics, config.num_eval_envs)
+    return train_env, eval_env
 
 
 def restore_brax_params(raw: Any) -> tuple:

@@ -1,0 +1,100 @@
+"""MJX on MuJoCo Warp: agreement with C MuJoCo and MJX-JAX, batching, buffer overflow, training.
+
+These run where warp-lang is installed (the ``gpu`` extra) and a GPU is present; Warp also runs
+on a CPU, slowly (a few minutes of kernel and XLA compilation): set ``MJX_ARM_TEST_WARP_CPU=1``
+to run them there. Tolerances are stated beside the figures measured (CPU, warp-lang 1.19.0,
+mujoco-mjx 3.17.0; the GPU figures are in ``benchmarks/results/agreement_*.json``).
+"""
+
+from __future__ import annotations
+
+import os
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from mjx_arm.envs.physics_config import PhysicsConfig, warp_available
+
+pytestmark = [
+    pytest.mark.gpu,
+    pytest.mark.skipif(not warp_available(), reason="warp-lang is not installed"),
+    pytest.mark.skipif(
+        jax.default_backend() == "cpu" and os.environ.get("MJX_ARM_TEST_WARP_CPU") != "1",
+        reason="no GPU (set MJX_ARM_TEST_WARP_CPU=1 to run Warp on the CPU)",
+    ),
+]
+
+WARP = PhysicsConfig(impl="warp")
+
+
+@pytest.fixture(scope="module")
+def figures():
+    from mjx_arm.envs.agreement import agreement
+
+    return agreement(("warp", "jax"), n_fk=16, n_open=8, seconds=1.0)
+
+
+def test_forward_kinematics_agree(figures):
+    """ee point at 16 random joint configurations, MJX (float32) vs C MuJoCo (float64)."""
+    for impl in ("warp", "jax"):
+        assert figures[impl]["fk_max_m"] < 1e-6  # measured 1.2e-7 (warp), 1.4e-7 (jax) m
+
+
+def test_open_loop_joint_state_agrees(figures):
+    """Joint angles after 1 s of the same open-loop actions (free motion, 8 sequences)."""
+    warp, jax_ = figures["warp"], figures["jax"]
+    assert warp["open_loop_qpos_median_rad"] < 1e-2  # measured 1.5e-3 rad
+    assert warp["open_loop_qpos_max_rad"] < 2e-2  # measured 3.2e-3 rad
+    assert jax_["open_loop_qpos_median_rad"] < 1e-2  # measured 5.1e-3 rad
+    for impl in ("warp", "jax"):  # tared F/T in free motion
+        assert figures[impl]["open_loop_free_motion_force_max_n"] < 1e-3  # measured 6e-7 N
+
+
+def test_press_force_agrees(figures):
+    """Tared |F| while pressing the box (mean of the last 10 of 60 steps, 4 box positions).
+
+    Warp runs C MuJoCo's contact and solver algorithms; MJX-JAX its own capsule-box collision
+    and a fixed-iteration solver, which press measurably differently.
+    """
+    assert figures["warp"]["press_force_max_rel"] < 0.05  # measured 1e-4
+    assert figures["jax"]["press_force_max_rel"] < 0.5  # measured 0.30
+    assert all(1.0 <= f <= 50.0 for f in figures["warp"]["press_force_mjx_n"])
+
+
+def test_warp_env_batches_and_restarts():
+    """A Warp batch steps once-compiled, restarts finished envs, and keeps the contact pool."""
+    from mjx_arm.envs.backend import make_batched_env
+    from mjx_arm.envs.wrappers import wrap_for_training
+    from mjx_arm.task import touch_config
+
+    batch = 4
+    env = make_batched_env(touch_config(episode_steps=3), "mjx", WARP, batch)
+    assert env.physics.impl == "warp"
+    assert env.physics.describe()["naconmax"] == env.physics.describe()["model_contacts"] * batch
+    wrapped = wrap_for_training(env, episode_length=3)
+    state = jax.jit(wrapped.reset)(jax.random.split(jax.random.PRNGKey(0), batch))
+    step = jax.jit(wrapped.step)
+    first = np.asarray(state.info["first_pipeline_state"].qpos)
+    actions = jnp.full((batch, 6), 0.5)
+    for _ in range(3):  # the episode limit ends every env at step 3: all restart
+        state = step(state, actions)
+    np.testing.assert_allclose(np.asarray(state.pipeline_state.qpos), first, atol=1e-6)
+    assert np.isfinite(np.asarray(state.obs)).all()
+    assert not np.asarray(state.metrics["physics_overflow"]).any()
+
+
+def test_overflow_is_an_error_not_a_silent_drop():
+    """A contact pool of one contact per env overflows while pressing: the vector env raises."""
+    from mjx_arm.envs.mjx_physics import PhysicsOverflowError
+    from mjx_arm.envs.vector import ArmVectorEnv
+    from mjx_arm.task import touch_config
+
+    tiny = PhysicsConfig(impl="warp", naconmax_per_env=1, njmax=4)
+    env = ArmVectorEnv(touch_config(), 2, "mjx", tiny)
+    env.reset(seed=0)
+    down = np.tile(np.array([0.0, 1.0, -1.0, 0.0, 0.0, 0.0], np.float32), (2, 1))
+    with pytest.raises(PhysicsOverflowError, match="naconmax_per_env"):
+        for _ in range(60):  # shoulder and elbow drive the tool into the table
+            env.step(down)
