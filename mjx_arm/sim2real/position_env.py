@@ -1,0 +1,243 @@
+"""Position-controlled copies of the CPU envs: the same task, a position servo on each joint.
+
+A real UR5e takes joint position targets (URScript ``servoj``, or a ROS 2 position controller)
+where the training envs take velocity targets. These envs keep everything of the contract
+(observation, reward, success, termination, sampling: all from :class:`BaseRobotEnv`) and change
+only the actuation: the action is a vector of joint position targets (rad).
+
+The servo is a position loop around the env's own velocity servo, as in an industrial joint
+drive (position loop, velocity loop, current loop)::
+
+    torque = clip(kv * (K * (q_target - q) - qdot), +-effort)
+
+``kv`` is the velocity actuator's gain of the converted model (the smallest apparent joint
+inertia over the joint ranges divided by ``sim_dt``, see
+:class:`mjx_arm.urdf.convert.ConvertConfig`), ``effort`` the URDF torque cap and ``K`` the
+position-loop gain (1/s) of :class:`ServoConfig`. So ``kp = K * kv`` and the damping is the
+velocity loop's own ``kv``. Gravity compensation, joint damping and armature are the velocity
+model's. In MuJoCo the loop is a ``position`` actuator (``kp``, ``kv``), made by editing the
+compiled task model's actuators in place (the model's ids and sensors are those of the velocity
+env); in PyBullet it is applied as torques at every substep, like the velocity servo there.
+
+Why ``K = 40 /s``: around one joint of inertia ``I`` the loop is ``I s^2 + kv s + kv K``. With
+``b = kv / I`` (the velocity loop's bandwidth: 240 /s at the smallest inertia, about 100 /s for
+the shoulder lift at the home pose, where its inertia is 2.4 times the smallest), the damping
+ratio is ``0.5 * sqrt(b / K)``: 0.79 for the shoulder lift at home and 1.2 at the wrists, so no
+joint rings. The steady lag behind a ramp is ``v / K``: 0.04 rad at the policies' top speed of
+1.57 rad/s. A higher ``K`` cuts the lag but leaves the heavy joints under-damped when the arm
+is stretched out; the explicit ``kp`` term stays stable (``sqrt(K * sim_dt) = 0.41 < 1``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+import pybullet
+
+from mjx_arm.envs.arm import ArmInfo
+from mjx_arm.envs.base import DEFAULT_HEIGHT, DEFAULT_WIDTH
+from mjx_arm.envs.mujoco_env import MujocoArmEnv
+from mjx_arm.task.config import TaskConfig
+from pybullet_ref.env import PybulletArmEnv
+
+ENGINES = ("mujoco", "pybullet")
+
+
+@dataclass(frozen=True)
+class ServoConfig:
+    """The position servo of the position-controlled envs.
+
+    Attributes:
+        position_gain: ``K`` (1/s), the position loop's gain around the velocity servo: a
+            position error ``e`` asks for the joint velocity ``K * e``.
+    """
+
+    position_gain: float = 40.0
+
+
+@dataclass(frozen=True)
+class ServoGains:
+    """Per-joint gains of the position servo, contract joint order.
+
+    Attributes:
+        kp: position gain (N m/rad), ``(6,)``.
+        kv: velocity gain (N m s/rad), ``(6,)``.
+        effort: torque cap (N m), ``(6,)``.
+    """
+
+    kp: np.ndarray
+    kv: np.ndarray
+    effort: np.ndarray
+
+    def to_dict(self, names: tuple[str, ...]) -> dict[str, dict[str, float]]:
+        """``{joint: {kp, kv, effort}}``, JSON-ready."""
+        return {
+            name: {"kp": float(p), "kv": float(v), "effort": float(e)}
+            for name, p, v, e in zip(names, self.kp, self.kv, self.effort, strict=True)
+        }
+
+
+def servo_gains(kv: np.ndarray, effort: np.ndarray, config: ServoConfig) -> ServoGains:
+    """The position servo around velocity servos of gains ``kv (6,)`` and caps ``effort (6,)``."""
+    kv = np.asarray(kv, dtype=np.float64)
+    return ServoGains(kp=config.position_gain * kv, kv=kv, effort=np.asarray(effort, np.float64))
+
+
+def use_position_servos(
+    model: mujoco.MjModel, actuators: np.ndarray, arm: ArmInfo, config: ServoConfig
+) -> ServoGains:
+    """Turn the velocity actuators ``actuators (6,)`` of ``model`` into position servos.
+
+    In place: gain ``kp``, bias ``(0, -kp, -kv)`` (MuJoCo's ``position`` actuator with ``kv``),
+    control range = the URDF joint range. The force range (the URDF effort) is kept.
+
+    Raises:
+        ValueError: an actuator is not the converter's velocity actuator.
+    """
+    kv = model.actuator_gainprm[actuators, 0].copy()
+    bias = model.actuator_biasprm[actuators, :3]
+    if not np.allclose(bias, np.stack([np.zeros_like(kv), np.zeros_like(kv), -kv], axis=1)):
+        raise ValueError(f"expected velocity actuators (bias 0, 0, -kv), got biasprm {bias}")
+    gains = servo_gains(kv, model.actuator_forcerange[actuators, 1], config)
+    model.actuator_gainprm[actuators, 0] = gains.kp
+    model.actuator_biasprm[actuators, 1] = -gains.kp
+    model.actuator_biasprm[actuators, 2] = -gains.kv
+    model.actuator_ctrlrange[actuators] = np.stack([arm.lower, arm.upper], axis=1)
+    return gains
+
+
+class _PositionActions:
+    """The action of a position-controlled env: joint position targets (rad).
+
+    Mixed in before the engine's env class; the engine supplies
+    ``_physics_set_position_targets``.
+    """
+
+    arm: ArmInfo
+
+    def _position_action_space(self) -> gym.spaces.Box:
+        return gym.spaces.Box(self.arm.lower, self.arm.upper, dtype=np.float64)
+
+    def apply_action(self, action) -> np.ndarray:
+        """Check joint position targets ``(6,)`` (rad), clip them into the URDF joint range
+        and command them; return the targets sent.
+
+        Raises:
+            ValueError: wrong shape, or NaN / inf entries.
+        """
+        q = np.array(action, dtype=np.float64)
+        if q.shape != (6,):
+            raise ValueError(f"position targets must have shape (6,), got {q.shape}")
+        if not np.isfinite(q).all():
+            raise ValueError(f"position targets contain NaN or inf: {q.tolist()}")
+        q = np.clip(q, self.arm.lower, self.arm.upper)
+        self._physics_set_position_targets(q)
+        return q
+
+    def measured_qpos(self) -> np.ndarray:
+        """Joint angles (rad, not wrapped) as the joint encoders read them now, ``(6,)``."""
+        return self._physics_read().qpos
+
+
+class MujocoPositionArmEnv(_PositionActions, MujocoArmEnv):
+    """:class:`MujocoArmEnv` with position servos: the action is joint position targets (rad).
+
+    Args:
+        task: the task configuration (default: Touch).
+        urdf: the arm URDF (default: the shipped arm).
+        servo: the position servo (default: :class:`ServoConfig()`).
+        render_mode, width, height: as for :class:`MujocoArmEnv`.
+    """
+
+    def __init__(
+        self,
+        task: TaskConfig | None = None,
+        urdf: str | Path | None = None,
+        servo: ServoConfig | None = None,
+        render_mode: str | None = None,
+        width: int = DEFAULT_WIDTH,
+        height: int = DEFAULT_HEIGHT,
+    ) -> None:
+        super().__init__(task, urdf, render_mode, width, height)
+        self.servo_config = servo or ServoConfig()
+        self.gains = use_position_servos(
+            self.model, self.ids.actuators, self.arm, self.servo_config
+        )
+        self.action_space = self._position_action_space()
+
+    def _physics_reset(self, qpos: np.ndarray, target_body_pos: np.ndarray) -> None:
+        super()._physics_reset(qpos, target_body_pos)
+        self._physics_set_position_targets(qpos)  # hold the start pose
+
+    def _physics_set_position_targets(self, q_target: np.ndarray) -> None:
+        self._ctrl[self._act] = q_target
+
+
+class PybulletPositionArmEnv(_PositionActions, PybulletArmEnv):
+    """:class:`PybulletArmEnv` with position servos: the action is joint position targets (rad).
+
+    The torque law at every substep is the velocity servo's with the velocity target
+    ``K * (q_target - q)``: ``clip(kv * (K * (q_target - q) - qdot), +-effort) - d * qdot
+    + g(q)``, the same law as MuJoCo's position actuator with its joint damping and gravity
+    compensation.
+
+    Args:
+        task: the task configuration (default: Touch).
+        urdf: the arm URDF (default: the shipped arm).
+        servo: the position servo (default: :class:`ServoConfig()`).
+        render_mode, width, height: as for :class:`PybulletArmEnv`.
+    """
+
+    def __init__(
+        self,
+        task: TaskConfig | None = None,
+        urdf: str | Path | None = None,
+        servo: ServoConfig | None = None,
+        render_mode: str | None = None,
+        width: int = DEFAULT_WIDTH,
+        height: int = DEFAULT_HEIGHT,
+    ) -> None:
+        # the parent's constructor resets the world, which steps the servo: set it up first
+        self.servo_config = servo or ServoConfig()
+        self._q_target: list[float] = []
+        super().__init__(task, urdf, render_mode, width, height)
+        self.gains = servo_gains(self.servo.kv, self.servo.effort, self.servo_config)
+        self.action_space = self._position_action_space()
+
+    def _physics_reset(self, qpos: np.ndarray, target_body_pos: np.ndarray) -> None:
+        self._physics_set_position_targets(qpos)  # hold the start pose
+        super()._physics_reset(qpos, target_body_pos)
+
+    def _physics_set_position_targets(self, q_target: np.ndarray) -> None:
+        self._q_target = [float(v) for v in q_target]
+
+    def _physics_step(self, n_substeps: int) -> None:
+        # PybulletArmEnv._physics_step with the position loop in front of the velocity servo
+        calls, body, joints, zeros = self._calls, self.body, self.ids.joints, self._zeros
+        gain = self.servo_config.position_gain
+        for i in range(n_substeps):
+            states = calls.get_joint_states(body, joints)
+            q = [s[0] for s in states]
+            gravity = calls.inverse_dynamics(body, q, zeros, zeros)
+            u = [gain * (t - x) for t, x in zip(self._q_target, q, strict=True)]
+            torque = self.servo.torque(u, [s[1] for s in states], gravity)
+            calls.set_motors(body, joints, pybullet.TORQUE_CONTROL, forces=torque)
+            if i == n_substeps - 1:
+                self._tool_before = self._tool_velocity()
+            calls.step()
+
+
+def make_position_env(
+    task: TaskConfig, engine: str, servo: ServoConfig | None = None, **kwargs
+) -> gym.Env:
+    """A position-controlled env of ``task`` on ``engine`` ("mujoco" or "pybullet"), truncated
+    at ``task.episode_steps`` like the registered envs."""
+    classes = {"mujoco": MujocoPositionArmEnv, "pybullet": PybulletPositionArmEnv}
+    if engine not in classes:
+        raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
+    env = classes[engine](task, servo=servo, **kwargs)
+    return gym.wrappers.TimeLimit(env, task.episode_steps)
