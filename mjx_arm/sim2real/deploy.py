@@ -8,7 +8,9 @@ env with the same episode seeds, and the two are compared.
 
 from __future__ import annotations
 
+import json
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -41,6 +43,11 @@ class DeployConfig:
     servo: ServoConfig = field(default_factory=ServoConfig)
     lookahead_time: float = 0.1
     gain: float = 300.0
+
+    def __post_init__(self) -> None:
+        if not self.tau >= 0:
+            raise ValueError(f"tau must be >= 0, got {self.tau}")
+        ServojConfig(t=1.0, lookahead_time=self.lookahead_time, gain=self.gain)  # range checks
 
 
 @dataclass
@@ -159,8 +166,8 @@ def deploy_sim(
         rate with its 95 % interval, return, steps to success), ``tracking_error_rad``
         (position run: the arm against the commands), ``ee_deviation_m`` (position run against
         the velocity run), ``limiter_clips``, the servo gains, the settings, and
-        ``"first_episode"``: the commands of the position run's first episode (not JSON: numpy
-        arrays, for :func:`write_commands`).
+        ``"commands"``: the position run's longest episode (its ``index`` and ``seed``, and
+        :meth:`EpisodeCommands.arrays`: numpy arrays, for :func:`write_commands`).
     """
     config = config or DeployConfig()
     task = task or eval_task(policy)[0]
@@ -176,6 +183,7 @@ def deploy_sim(
     finally:
         chain.close()
     base = chain.unwrapped
+    longest = max(range(episodes), key=lambda i: len(chain.episodes[i].commands))
     return {
         "engine": engine,
         "task": task.task,
@@ -188,14 +196,23 @@ def deploy_sim(
         "limiter_clips": chain.limiter.clip_summary(),
         "servo_gains": base.gains.to_dict(base.arm.joint_names),
         "settings": asdict(config),
-        "first_episode": chain.episodes[0].arrays(),
+        "commands": {
+            "index": longest,
+            "seed": seed + longest,
+            **chain.episodes[longest].arrays(),
+        },
         "joint_names": list(base.arm.joint_names),
         "ctrl_dt": task.ctrl_dt,
     }
 
 
-def write_commands(report: dict[str, Any], config: DeployConfig, script_path, trajectory_path):
-    """Write the first episode's commands as a URScript program and/or a JointTrajectory JSON.
+def write_commands(
+    report: dict[str, Any],
+    config: DeployConfig,
+    script_path: str | Path | None,
+    trajectory_path: str | Path | None,
+) -> None:
+    """Write one episode's commands as a URScript program and/or a JointTrajectory JSON.
 
     Args:
         report: :func:`deploy_sim`'s result.
@@ -203,13 +220,10 @@ def write_commands(report: dict[str, Any], config: DeployConfig, script_path, tr
         script_path: ``.script`` file to write, or None.
         trajectory_path: ``.json`` file to write, or None.
     """
-    import json
-    from pathlib import Path
-
-    first, names, dt = report["first_episode"], report["joint_names"], report["ctrl_dt"]
+    episode, names, dt = report["commands"], report["joint_names"], report["ctrl_dt"]
     if script_path is not None:
         servoj = ServojConfig(t=dt, lookahead_time=config.lookahead_time, gain=config.gain)
-        Path(script_path).write_text(urscript_program(first["commands"], servoj, names))
+        Path(script_path).write_text(urscript_program(episode["commands"], servoj, names))
     if trajectory_path is not None:
-        msg = joint_trajectory_msg(first["commands"], dt, names, first["velocities"])
+        msg = joint_trajectory_msg(episode["commands"], dt, names, episode["velocities"])
         Path(trajectory_path).write_text(json.dumps(msg, indent=1))

@@ -51,6 +51,10 @@ class LimiterConfig:
     velocity_scale: float = 1.0
     acceleration: float = 40.0
 
+    def __post_init__(self) -> None:
+        if not (self.position_margin >= 0 and self.velocity_scale > 0 and self.acceleration > 0):
+            raise ValueError(f"need margin >= 0, velocity_scale > 0, acceleration > 0: {self}")
+
 
 @dataclass(frozen=True)
 class JointLimits:

@@ -58,6 +58,10 @@ class ServoConfig:
 
     position_gain: float = 40.0
 
+    def __post_init__(self) -> None:
+        if not self.position_gain > 0:
+            raise ValueError(f"position_gain must be positive, got {self.position_gain}")
+
 
 @dataclass(frozen=True)
 class ServoGains:
