@@ -204,6 +204,8 @@ class SafetyLimiter:
         )
         v = np.minimum(np.maximum(v_want, bounds_lo.max(axis=0)), bounds_hi.min(axis=0))
         q = np.clip(self._q + v * dt, lim.lower, lim.upper)
+        # nothing bound and nothing to catch up on: send the target itself, not a rounding of it
+        q = np.where((v == v_want) & (self._ref == self._q), ref, q)
         self._record(target, ref, v_want, bounds_hi, bounds_lo)
         self._v = (q - self._q) / dt
         self._q, self._ref = q, ref
