@@ -176,6 +176,11 @@ class MujocoPositionArmEnv(_PositionActions, MujocoArmEnv):
     def _physics_reset(self, qpos: np.ndarray, target_body_pos: np.ndarray) -> None:
         super()._physics_reset(qpos, target_body_pos)
         self._physics_set_position_targets(qpos)  # hold the start pose
+        # the parent's forward pass saw ctrl = 0, a pull towards q = 0 that moves the
+        # accelerations (and so the F/T reading): redo it with the servo holding qpos
+        mujoco.mj_forward(self.model, self.data)
+        mujoco.mj_rnePostConstraint(self.model, self.data)
+        mujoco.mj_sensorAcc(self.model, self.data)
 
     def _physics_set_position_targets(self, q_target: np.ndarray) -> None:
         self._ctrl[self._act] = q_target
