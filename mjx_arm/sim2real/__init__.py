@@ -9,8 +9,9 @@ velocities.
 - :mod:`mjx_arm.sim2real.deploy`: the chain closed around a position-controlled sim arm
   (``mjx-arm deploy-sim``); :mod:`mjx_arm.sim2real.ros2_node`: a ROS 2 node (needs ``rclpy``).
 
-Importing this package needs numpy only (and the project's URDF reader); the envs, the deploy
-run and the ROS 2 node are imported from their modules.
+Importing this package loads neither MuJoCo, PyBullet, JAX nor ROS: numpy and what ``mjx_arm``
+itself imports (Gymnasium). The envs, the deploy run and the ROS 2 node are imported from their
+modules.
 """
 
 from mjx_arm.sim2real.adapter import VelocityToPositionAdapter

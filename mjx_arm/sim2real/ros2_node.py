@@ -25,6 +25,8 @@ from __future__ import annotations
 
 try:
     import rclpy
+    from builtin_interfaces.msg import Duration
+    from geometry_msgs.msg import WrenchStamped
     from rclpy.node import Node
     from rclpy.time import Time
     from sensor_msgs.msg import JointState
@@ -38,8 +40,6 @@ except ImportError as exc:  # pragma: no cover - depends on the machine
     ) from exc
 
 import numpy as np
-from builtin_interfaces.msg import Duration
-from geometry_msgs.msg import WrenchStamped
 
 from mjx_arm.envs.base import check_action
 from mjx_arm.evaluate import eval_task
