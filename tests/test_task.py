@@ -89,10 +89,22 @@ def test_presets_and_overrides() -> None:
     reach, touch = config_lib.task_config("Reach"), config_lib.task_config("touch")
     assert (reach.task, reach.success_distance, reach.reward.contact) == ("reach", 0.02, 0.0)
     assert (touch.task, touch.success_distance, touch.force_band) == ("touch", 0.05, (1.0, 50.0))
-    assert touch.reward == RewardConfig()
+    assert touch.variant == "gentle" and touch.reward == config_lib.GENTLE_REWARD
+    seed = config_lib.task_config("touch", variant="seed")
+    assert seed.reward == RewardConfig() and seed.success_hold_steps == 1
+    assert not (seed.fail_on_overforce or seed.terminate_on_overforce)
+    assert (touch.success_hold_steps, touch.fail_on_overforce, touch.terminate_on_overforce) == (
+        3,
+        True,
+        True,
+    )
     assert not reach.uses_contact and touch.uses_contact
     with pytest.raises(ValueError, match="unknown task"):
         config_lib.task_config("push")
+    with pytest.raises(ValueError, match="unknown touch variant"):
+        config_lib.task_config("touch", variant="rough")
+    with pytest.raises(ValueError, match="single variant"):
+        config_lib.task_config("reach", variant="gentle")
 
 
 # ----------------------------------------------------------------------------- reward
@@ -194,6 +206,75 @@ def test_success_and_reward_batched() -> None:
     np.testing.assert_array_equal(reward_lib.is_success(np, d, f, cfg), [True, False, False])
     ee = np.array([[0.0, 0.0, 0.0], [0.3, 0.4, 0.0]])
     np.testing.assert_allclose(reward_lib.target_distance(np, ee, np.zeros(3)), [0.0, 0.5])
+
+
+def test_gentle_terms_hand_worked() -> None:
+    """A strike at 80 N while closing in at 0.6 m/s, with an action change of 0.5."""
+    cfg = touch_config()
+    d, f = np.asarray(0.03), np.asarray(80.0)
+    motion = reward_lib.Motion(prev_distance=0.05, action_change=0.5)
+    terms = reward_lib.reward_terms(
+        np, d, f, np.zeros(6), np.zeros(6), UNIT_LIMITS, False, False, cfg, motion
+    )
+    assert float(terms["force_excess"]) == pytest.approx(30.0 / 50.0)
+    assert float(terms["overforce"]) == 1.0
+    assert float(terms["approach_speed"]) == pytest.approx(0.02 * 30)  # (0.05 - 0.03) / (1/30)
+    assert float(terms["action_rate"]) == 0.5
+    assert float(terms["contact"]) == 0.0
+    expected = (
+        -10 * (1 - math.exp(-0.3)) - 100 * 0.6 - 20 * 0.6 - 0.05 * 0.5 - 200 * 1.0
+    )  # -274.6173
+    assert float(reward_lib.total_reward(terms, cfg)) == pytest.approx(expected, abs=1e-9)
+    # moving away and far from the box: no approach term
+    away = reward_lib.Motion(prev_distance=0.02, action_change=0.0)
+    far = reward_lib.Motion(prev_distance=0.3, action_change=0.0)
+    for dist, mot in ((0.03, away), (0.2, far)):
+        t = reward_lib.reward_terms(
+            np, np.asarray(dist), np.asarray(0.0), np.zeros(6), np.zeros(6), UNIT_LIMITS,
+            False, False, cfg, mot,
+        )  # fmt: skip
+        assert float(t["approach_speed"]) == 0.0
+
+
+def _run_rule(cfg, forces, distance=0.01):
+    """Advance the success rule over a force sequence; (successes, overs, terminations)."""
+    progress = reward_lib.start_progress(np)
+    out = []
+    for force in forces:
+        progress, success, over = reward_lib.advance(
+            np, progress, np.asarray(distance), np.asarray(force), cfg
+        )
+        done = reward_lib.ends_episode(bool(success), bool(over), False, cfg)
+        out.append((bool(success), bool(over), bool(done)))
+    return out
+
+
+def test_gentle_success_needs_a_hold_without_a_strike() -> None:
+    cfg = touch_config()
+    # three in-band steps in a row: success on the third
+    assert [s for s, _, _ in _run_rule(cfg, [10, 10, 10])] == [False, False, True]
+    # a gap resets the hold
+    assert [s for s, _, _ in _run_rule(cfg, [10, 10, 0, 10, 10])] == [False] * 5
+    # a strike ends the episode at once and rules success out
+    assert _run_rule(cfg, [10, 60])[-1] == (False, True, True)
+    keep_going = touch_config(terminate_on_overforce=False)
+    assert [s for s, _, _ in _run_rule(keep_going, [60, 10, 10, 10, 10])] == [False] * 5
+    # the seed variant: first in-band step, strikes allowed
+    seed = touch_config("seed")
+    assert _run_rule(seed, [60, 10]) == [(False, True, False), (True, False, True)]
+
+
+def test_success_rule_batched_matches_single_envs() -> None:
+    cfg = touch_config()
+    forces = np.array([[10, 10, 10], [10, 60, 10], [0, 10, 10], [10, 10, 10]], float)
+    distance = np.array([0.01, 0.01, 0.01, 0.07])
+    progress = reward_lib.start_progress(np, (4,))
+    for step in range(3):
+        progress, success, _ = reward_lib.advance(np, progress, distance, forces[:, step], cfg)
+    np.testing.assert_array_equal(success, [True, False, False, False])
+    for i in range(4):
+        single = _run_rule(cfg, forces[i], distance[i])
+        assert single[-1][0] == bool(success[i])
 
 
 # ----------------------------------------------------------------------------- observation

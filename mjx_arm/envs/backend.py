@@ -1,9 +1,10 @@
-"""Which physics steps the batched JAX env: MJX or C MuJoCo behind a host callback."""
+"""Which physics steps the batched JAX env: MJX (JAX or Warp) or C MuJoCo behind a host callback."""
 
 from __future__ import annotations
 
 import jax
 
+from mjx_arm.envs.physics_config import PhysicsConfig
 from mjx_arm.task.config import TaskConfig
 
 BACKENDS = ("auto", "mjx", "mujoco")
@@ -18,12 +19,27 @@ def resolve_backend(name: str) -> str:
     return "mjx" if jax.default_backend() in ("gpu", "cuda", "rocm", "tpu") else "mujoco"
 
 
-def make_batched_env(task: TaskConfig, backend: str = "auto"):
-    """The single-env JAX env (``MjxArmEnv``) with the physics of ``backend``."""
+def make_batched_env(
+    task: TaskConfig,
+    backend: str = "auto",
+    physics: PhysicsConfig | None = None,
+    batch_size: int = 1,
+    randomization=None,
+):
+    """The single-env JAX env (``MjxArmEnv``) with the physics of ``backend``.
+
+    Args:
+        task: the task configuration.
+        backend: "auto", "mjx" or "mujoco" (C MuJoCo through a host callback).
+        physics: the MJX implementation and buffers (``mjx`` only; default ``impl="auto"``).
+        batch_size: the largest batch stepped at once (sizes Warp's shared contact pool).
+        randomization: domain randomisation
+            (:class:`mjx_arm.envs.randomization.RandomizationConfig`; default off).
+    """
     from mjx_arm.envs.mjx_env import MjxArmEnv
 
     if resolve_backend(backend) == "mujoco":
         from mjx_arm.envs.mujoco_batch import MujocoCallbackPhysics
 
-        return MjxArmEnv(task, physics_factory=MujocoCallbackPhysics)
-    return MjxArmEnv(task)
+        return MjxArmEnv(task, physics_factory=MujocoCallbackPhysics, randomization=randomization)
+    return MjxArmEnv(task, physics=physics, batch_size=batch_size, randomization=randomization)

@@ -85,7 +85,6 @@ class BaseRobotEnv(gym.Env):
         self.observation_space = obs_lib.observation_space(self.task.force_clip)
         # constants of the per-step evaluation, computed once
         self._n_substeps = self.task.n_substeps
-        self._terminate_on_success = bool(self.task.terminate_on_success)
         # a * (action_scale * v_max): bit-identical to (a * action_scale) * v_max for the
         # power-of-two scales of the presets, within one rounding otherwise
         self._qdot_scale = self.task.action_scale * self.arm.v_max
@@ -93,6 +92,10 @@ class BaseRobotEnv(gym.Env):
         self._bounds = obs_lib.state_bounds(self.task.force_clip)
         self._reading: PhysicsReading | None = None
         self._last_obs: dict[str, np.ndarray] | None = None
+        # what the success rule and the motion terms remember within an episode
+        self._progress = reward_lib.start_progress(np)
+        self._action = np.zeros(6, np.float32)
+        self._distance = 0.0
 
     # ------------------------------------------------------------------ engine hooks
 
@@ -131,6 +134,9 @@ class BaseRobotEnv(gym.Env):
         self._reading = reading = self._physics_read()
         _, state, d, force = self._measure(reading)
         self._last_obs = obs = obs_lib.unflatten_obs(state.astype(np.float32))
+        self._progress = reward_lib.start_progress(np)
+        self._action = np.zeros(6, np.float32)
+        self._distance = d
         info = {"is_success": False, "distance": d, "contact_force_norm": force, "reward_terms": {}}
         return obs, info
 
@@ -138,16 +144,19 @@ class BaseRobotEnv(gym.Env):
         """Apply one action for ``ctrl_dt``: (obs, reward, terminated, truncated, info)."""
         if self._reading is None:
             raise RuntimeError("call reset() before step()")
-        self.apply_action(action)
+        clipped = check_action(action)
+        self._physics_set_velocity_targets(clipped * self._qdot_scale)
         self._physics_step(self._n_substeps)
         reading = self._physics_read()
-        result = self._evaluate(reading)
+        change = float(reward_lib.action_change(np, clipped, self._action))
+        self._action = clipped
+        result = self._evaluate(reading, change=change)
         if result is None:  # non-finite: keep the last finite reading and observation, and stop
-            _, reward, _, info = self._evaluate(self._reading, nonfinite=True)
+            _, reward, _, info = self._evaluate(self._reading, nonfinite=True, change=change)
             return self._last_obs, reward, True, False, info
         self._reading = reading
-        self._last_obs, reward, success, info = result
-        return result[0], reward, success and self._terminate_on_success, False, info
+        self._last_obs, reward, done, info = result
+        return result[0], reward, done, False, info
 
     def render(self):
         """The current frame (rgb_array) or None after drawing it (human)."""
@@ -173,11 +182,14 @@ class BaseRobotEnv(gym.Env):
         return qdot
 
     def is_success(self) -> bool:
-        """Success rule of the task on the current state."""
+        """Whether the episode has succeeded: the success condition held for
+        ``success_hold_steps`` control steps (and, where configured, no strike)."""
         if self._reading is None:
             return False
-        _, _, d, force = self._measure(self._reading)
-        return bool(reward_lib.is_success(np, d, force, self.task))
+        success = self._progress.hold >= self.task.success_hold_steps
+        if self.task.fail_on_overforce:
+            success = success and not self._progress.over
+        return bool(success)
 
     # ------------------------------------------------------------------ helpers
 
@@ -191,19 +203,24 @@ class BaseRobotEnv(gym.Env):
         force = float(reward_lib.contact_force_norm(np, state[obs_lib.FORCE_SLICE]))
         return raw, state, d, force
 
-    def _evaluate(self, reading: PhysicsReading, nonfinite: bool = False) -> _Evaluation | None:
-        """Observation, reward, success and info of a reading, everything computed once.
+    def _evaluate(
+        self, reading: PhysicsReading, nonfinite: bool = False, change: float = 0.0
+    ) -> _Evaluation | None:
+        """Observation, reward, termination and info of a reading, everything computed once.
+
+        Advances the episode's success rule and motion memory, unless it returns None.
 
         Args:
             reading: the physics read-out after a control step.
             nonfinite: score ``reading`` (the last finite one) for a step whose physics went
-                non-finite: no success, the ``nonfinite`` term set.
+                non-finite: no success, the ``nonfinite`` term set, the episode ends.
+            change: sum of the squared action change since the previous step.
 
         Returns:
-            The evaluation, or None when ``reading`` is not finite (and ``nonfinite`` is False).
-            Every quantity of the reading shows in the unclipped state (the quaternion through
-            its norm, the joint angles through sin/cos) except the joint velocities, which show
-            in the joint velocity term (a sum of magnitudes).
+            (obs, reward, terminated, info), or None when ``reading`` is not finite (and
+            ``nonfinite`` is False). Every quantity of the reading shows in the unclipped state
+            (the quaternion through its norm, the joint angles through sin/cos) except the joint
+            velocities, which show in the joint velocity term (a sum of magnitudes).
         """
         task = self.task
         raw, state, d, force = self._measure(reading)
@@ -211,24 +228,29 @@ class BaseRobotEnv(gym.Env):
         # which the exact test then rules out
         if not (nonfinite or math.isfinite(raw.dot(raw)) or np.isfinite(raw).all()):
             return None
-        success = not nonfinite and bool(reward_lib.is_success(np, d, force, task))
         qpos, qvel = reading.qpos, reading.qvel
+        progress, success, over_now = reward_lib.advance(np, self._progress, d, force, task)
+        success = bool(success) and not nonfinite
+        motion = reward_lib.Motion(self._distance, change)
         terms = reward_lib.band_reward_terms(
-            np, d, force, qpos, qvel, self._band, success, nonfinite, task
+            np, d, force, qpos, qvel, self._band, success, nonfinite, task, motion
         )
         terms = {name: float(value) for name, value in terms.items()}
         joint_velocity = terms["joint_velocity"]
         if not (nonfinite or math.isfinite(joint_velocity) or np.isfinite(qvel).all()):
             return None
+        self._progress, self._distance = progress, d
         info = {
             "is_success": success,
             "distance": d,
             "contact_force_norm": force,
             "reward_terms": terms,
             "nonfinite": nonfinite,
+            "overforce": bool(over_now),
         }
         obs = obs_lib.unflatten_obs(state.astype(np.float32))
-        return obs, float(reward_lib.total_reward(terms, task)), success, info
+        done = bool(reward_lib.ends_episode(success, bool(over_now), nonfinite, task))
+        return obs, float(reward_lib.total_reward(terms, task)), done, info
 
     def _show(self, frame: np.ndarray) -> None:
         """Draw a frame in a window (needs a display and matplotlib)."""

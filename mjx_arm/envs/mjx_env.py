@@ -2,8 +2,14 @@
 
 The env follows Brax's ``Env`` interface (``brax.envs.base.State``: pipeline_state, obs, reward,
 done, metrics, info), so Brax PPO trains on it directly. Physics sits behind a small interface
-(:class:`MjxPhysics`): ``init``, ``step`` and ``read``; everything else (observation, reward,
-success, termination) comes from :mod:`mjx_arm.task`, the same code the CPU envs run.
+(:class:`~mjx_arm.envs.mjx_physics.MjxPhysics` on MJX's JAX or Warp implementation, or the C
+MuJoCo backend): ``init``, ``step``, ``read``, ``where`` and ``overflow``; everything else
+(observation, reward, success, termination) comes from :mod:`mjx_arm.task`, the same code the
+CPU envs run. Domain randomisation (:mod:`mjx_arm.envs.randomization`) is applied here, per env
+and episode, when configured.
+
+``state.info`` per env: ``rng``; ``task`` (:class:`TaskMemory`: the success rule's progress, the
+previous action and distance); ``episode`` (the episode's randomisation draw).
 """
 
 from __future__ import annotations
@@ -16,87 +22,43 @@ import jax.numpy as jnp
 import mujoco
 from brax.envs.base import Env, State
 from flax import struct
-from mujoco import mjx
 
-from mjx_arm.envs.arm import ArmInfo, validated_arm_info
-from mjx_arm.envs.model_io import SensorReader, arm_model
+from mjx_arm.envs.arm import validated_arm_info
+from mjx_arm.envs.mjx_physics import MjxPhysics, Reading
+from mjx_arm.envs.model_io import arm_model
+from mjx_arm.envs.physics_config import PhysicsConfig
+from mjx_arm.envs.randomization import (
+    Episode,
+    RandomizationConfig,
+    ft_noise,
+    sample_episode,
+)
 from mjx_arm.task import observation as obs_lib
 from mjx_arm.task import reward as reward_lib
 from mjx_arm.task import sampling
 from mjx_arm.task.config import REWARD_TERMS, TaskConfig, touch_config
-from mjx_arm.urdf.scene import TARGET_BODY
+
+__all__ = ["MjxArmEnv", "Reading", "TaskMemory"]
 
 
 @struct.dataclass
-class Reading:
-    """What the contract reads from the physics, one env (add a leading batch axis under vmap).
+class TaskMemory:
+    """What the task remembers between control steps of one env.
 
     Attributes:
-        ee_pos ``(3,)``, ee_quat ``(4,)`` (w, x, y, z), qpos ``(6,)``, qvel ``(6,)``,
-        target_pos ``(3,)``, wrench ``(6,)`` (tared, ee frame, unclipped).
+        progress: the success rule's progress (consecutive holds, strike seen).
+        prev_action: the previous action, ``(6,)`` (also the delayed action under latency).
+        prev_distance: d at the previous step (m), ``()``.
     """
 
-    ee_pos: jax.Array
-    ee_quat: jax.Array
-    qpos: jax.Array
-    qvel: jax.Array
-    target_pos: jax.Array
-    wrench: jax.Array
+    progress: reward_lib.Progress
+    prev_action: jax.Array
+    prev_distance: jax.Array
 
-
-class MjxPhysics:
-    """MJX physics of the task model: ``n_substeps`` ``mjx.step`` per control step.
-
-    Args:
-        mj_model: the compiled task model (arm + scene).
-        arm: the arm facts (joint names, tool mass properties).
-        task: the task configuration (substeps, target geometry).
-    """
-
-    def __init__(self, mj_model: mujoco.MjModel, arm: ArmInfo, task: TaskConfig) -> None:
-        self.mj_model = mj_model
-        self.model = mjx.put_model(mj_model)
-        self.ids = SensorReader(mj_model, arm)
-        self.task = task
-        self.mocap = int(mj_model.body_mocapid[mj_model.body(TARGET_BODY).id])
-        self.n_substeps = task.n_substeps
-
-    def init(self, qpos: jax.Array, target_body: jax.Array) -> mjx.Data:
-        """Data at rest at joint angles ``qpos (6,)`` with the target body at ``(3,)``."""
-        data = mjx.make_data(self.model)
-        data = data.replace(
-            qpos=data.qpos.at[self.ids.qpos_adr].set(qpos),
-            mocap_pos=data.mocap_pos.at[self.mocap].set(target_body),
-        )
-        return mjx.forward(self.model, data)
-
-    def set_target(self, data: mjx.Data, target_body: jax.Array) -> mjx.Data:
-        """Move the target body; takes effect in the next step's collision detection."""
-        return data.replace(mocap_pos=data.mocap_pos.at[self.mocap].set(target_body))
-
-    def step(self, data: mjx.Data, ctrl: jax.Array) -> mjx.Data:
-        """One control step: hold ``ctrl (6,)`` for ``n_substeps`` physics steps."""
-        data = data.replace(ctrl=data.ctrl.at[self.ids.actuators].set(ctrl))
-
-        def substep(d: mjx.Data, _: Any) -> tuple[mjx.Data, None]:
-            return mjx.step(self.model, d), None
-
-        data, _ = jax.lax.scan(substep, data, None, length=self.n_substeps)
-        # kinematics and sensors stay those of the last substep's forward pass (1/240 s before
-        # the integrated qpos/qvel), as in the CPU env: no extra forward per control step
-        return data
-
-    def read(self, data: mjx.Data) -> Reading:
-        """The contract's read-out of ``data``."""
-        ids = self.ids
-        return Reading(
-            ee_pos=data.site_xpos[ids.ee_site],
-            ee_quat=data.xquat[ids.ee_body],
-            qpos=data.qpos[ids.qpos_adr],
-            qvel=data.qvel[ids.dof_adr],
-            target_pos=sampling.target_point(jnp, data.mocap_pos[self.mocap], self.task),
-            wrench=ids.wrench(jnp, data.sensordata),
-        )
+    @staticmethod
+    def start(distance: jax.Array) -> TaskMemory:
+        """The memory at the start of an episode at distance ``d``."""
+        return TaskMemory(reward_lib.start_progress(jnp), jnp.zeros(6), distance)
 
 
 class MjxArmEnv(Env):
@@ -105,22 +67,33 @@ class MjxArmEnv(Env):
     Args:
         task: the task configuration (default: Touch).
         urdf: the arm URDF (default: the shipped arm); validated before use.
-        physics_factory: builds the physics from (mj_model, arm, task); default MJX.
+        physics_factory: builds the physics from (mj_model, arm, task); default: MJX with
+            ``physics`` and ``batch_size``.
         mj_model: a task model converted with other settings (benchmark sweeps); default: the
             task's model from :func:`mjx_arm.envs.model_io.arm_model`.
+        physics: MJX implementation and buffers (default: ``impl="auto"``).
+        batch_size: the largest batch stepped at once (sizes Warp's contact pool).
+        randomization: domain randomisation (default: off).
     """
 
     def __init__(
         self,
         task: TaskConfig | None = None,
         urdf: str | Path | None = None,
-        physics_factory=MjxPhysics,
+        physics_factory=None,
         mj_model: mujoco.MjModel | None = None,
+        physics: PhysicsConfig | None = None,
+        batch_size: int = 1,
+        randomization: RandomizationConfig | None = None,
     ) -> None:
         self.task = task or touch_config()
         self.arm = validated_arm_info(urdf, "mujoco")
         self.mj_model = mj_model if mj_model is not None else arm_model(self.arm.urdf, self.task)
-        self.physics = physics_factory(self.mj_model, self.arm, self.task)
+        if physics_factory is None:
+            self.physics = MjxPhysics(self.mj_model, self.arm, self.task, physics, batch_size)
+        else:
+            self.physics = physics_factory(self.mj_model, self.arm, self.task)
+        self.randomization = randomization or RandomizationConfig()
         self._v_scale = jnp.asarray(self.task.action_scale * self.arm.v_max, jnp.float32)
         self._limits = (jnp.asarray(self.arm.lower), jnp.asarray(self.arm.upper))
 
@@ -149,75 +122,106 @@ class MjxArmEnv(Env):
 
     def reset(self, rng: jax.Array) -> State:
         """A new episode from ``rng`` (a single PRNG key)."""
-        rng, key = jax.random.split(rng)
+        rng, key, key_rand = jax.random.split(rng, 3)
         qpos, target_body = self.sample_episode(key)
-        data = self.physics.init(qpos, target_body)
+        episode = sample_episode(key_rand, self.randomization)
+        data = self.physics.init(qpos, target_body + episode.box_offset)
         reading = self.physics.read(data)
+        d, force = self._distance_and_force(reading)
         zero = jnp.zeros(())
         metrics = {f"reward/{name}": zero for name in REWARD_TERMS}
-        metrics.update(self._measures(*self._distance_and_force(reading), zero))
+        metrics.update(self._measures(d, force, zero, zero, zero))
         return State(
             pipeline_state=data,
-            obs=self.observe(reading),
+            obs=self.observe(reading, episode),
             reward=zero,
             done=zero,
             metrics=metrics,
-            info={"rng": rng},
+            info={"rng": rng, "task": TaskMemory.start(d), "episode": episode},
         )
 
     def step(self, state: State, action: jax.Array) -> State:
         """Apply ``action (6,)`` for one control step."""
-        ctrl = jnp.clip(action, -1.0, 1.0) * self._v_scale
-        data = self.physics.step(state.pipeline_state, ctrl)
+        memory: TaskMemory = state.info["task"]
+        episode: Episode = state.info["episode"]
+        action = jnp.clip(action, -1.0, 1.0)
+        applied = jnp.where(episode.latency > 0, memory.prev_action, action)
+        dynamics = episode.dynamics if self.randomization.enabled else None
+        data = self.physics.step(state.pipeline_state, applied * self._v_scale, dynamics)
         reading = self.physics.read(data)
         finite = _all_finite(reading)
         reading = jax.tree.map(lambda x: jnp.where(finite, x, jnp.zeros_like(x)), reading)
-        obs = jnp.where(finite, self.observe(reading), state.obs)
+        info = dict(state.info)
+        noise = jnp.zeros(6)
+        if self.randomization.enabled:
+            info["rng"], key = jax.random.split(state.info["rng"])
+            noise = ft_noise(key, self.randomization)
+        obs = jnp.where(finite, self.observe(reading, episode, noise), state.obs)
         d, force = self._distance_and_force(reading)
-        success = reward_lib.is_success(jnp, d, force, self.task) & finite
-        terms = reward_lib.reward_terms(
-            jnp, d, force, reading.qpos, reading.qvel, self._limits, success, ~finite, self.task
+        progress, success, over = reward_lib.advance(jnp, memory.progress, d, force, self.task)
+        success = success & finite
+        motion = reward_lib.Motion(
+            memory.prev_distance, reward_lib.action_change(jnp, action, memory.prev_action)
         )
+        terms = reward_lib.reward_terms(
+            jnp, d, force, reading.qpos, reading.qvel, self._limits, success, ~finite,
+            self.task, motion,
+        )  # fmt: skip
         # strong float32 everywhere: a weak type would change the State's type and retrace
         terms = {
             k: jnp.where(finite | (k == "nonfinite"), v, 0.0).astype(jnp.float32)
             for k, v in terms.items()
         }
         reward = reward_lib.total_reward(terms, self.task).astype(jnp.float32)
-        done = ~finite | (success & self.task.terminate_on_success)
+        done = reward_lib.ends_episode(success, over & finite, ~finite, self.task)
+        info["task"] = TaskMemory(progress, action, jnp.where(finite, d, memory.prev_distance))
         metrics = dict(state.metrics)  # keep keys wrappers added (EvalWrapper's "reward")
         metrics.update({f"reward/{name}": value for name, value in terms.items()})
-        metrics.update(self._measures(d, force, success))
+        metrics.update(self._measures(d, force, success, over, self.physics.overflow(data)))
         return state.replace(
             pipeline_state=data,
             obs=obs,
             reward=reward,
             done=done.astype(jnp.float32),
             metrics=metrics,
+            info=info,
         )
 
-    def retarget(self, data: Any, rng: jax.Array) -> tuple[Any, jax.Array]:
-        """The same start state with a new target from ``rng``: (data, obs ``(22,)``).
+    def restart(self, data: Any, rng: jax.Array) -> tuple[Any, jax.Array, dict[str, Any]]:
+        """The same start state with a new target (and randomisation) from ``rng``.
 
         Automatic resets use it: restarting from the first state of an env (as Brax does)
         keeps each env's start pose but draws a new target every episode, so a small batch
         still trains on many targets.
-        """
-        _, target_body = self.sample_episode(rng)
-        data = self.physics.set_target(data, target_body)
-        return data, self.observe(self.physics.read(data))
 
-    def observe(self, reading: Reading) -> jax.Array:
-        """The flat observation ``state (22,)`` of a reading."""
+        Returns:
+            (data, obs ``(22,)``, the ``info`` entries of a new episode: task, episode).
+        """
+        key, key_rand = jax.random.split(rng)
+        _, target_body = self.sample_episode(key)
+        episode = sample_episode(key_rand, self.randomization)
+        data = self.physics.set_target(data, target_body + episode.box_offset)
+        reading = self.physics.read(data)
+        d, _ = self._distance_and_force(reading)
+        obs = self.observe(reading, episode)
+        return data, obs, {"task": TaskMemory.start(d), "episode": episode}
+
+    def observe(
+        self, reading: Reading, episode: Episode | None = None, noise: jax.Array | None = None
+    ) -> jax.Array:
+        """The flat observation ``state (22,)`` of a reading.
+
+        Args:
+            reading: the physics read-out.
+            episode: the episode's randomisation: the observed target omits its box offset.
+            noise: added to the observed wrench, ``(6,)``.
+        """
+        target = reading.target_pos if episode is None else reading.target_pos - episode.box_offset
+        wrench = reading.wrench if noise is None else reading.wrench + noise
         return obs_lib.flat_obs(
-            jnp,
-            reading.ee_pos,
-            reading.ee_quat,
-            reading.qpos,
-            reading.target_pos,
-            reading.wrench,
+            jnp, reading.ee_pos, reading.ee_quat, reading.qpos, target, wrench,
             self.task.force_clip,
-        )
+        )  # fmt: skip
 
     def _distance_and_force(self, reading: Reading) -> tuple[jax.Array, jax.Array]:
         d = reward_lib.target_distance(jnp, reading.ee_pos, reading.target_pos)
@@ -226,11 +230,14 @@ class MjxArmEnv(Env):
         return d, force
 
     @staticmethod
-    def _measures(d: jax.Array, force: jax.Array, success: jax.Array) -> dict[str, jax.Array]:
+    def _measures(d, force, success, over, overflow) -> dict[str, jax.Array]:
+        """Per-step measures beside the reward terms (Brax sums them over an eval episode)."""
         return {
             "distance": d.astype(jnp.float32),
             "contact_force": force.astype(jnp.float32),
             "success": jnp.asarray(success).astype(jnp.float32),
+            "overforce": jnp.asarray(over).astype(jnp.float32),
+            "physics_overflow": jnp.asarray(overflow).astype(jnp.float32),
         }
 
 

@@ -15,6 +15,7 @@ control steps (each control step starts it cold).
 
 from __future__ import annotations
 
+import copy
 import os
 import threading
 
@@ -26,6 +27,7 @@ from flax import struct
 from mujoco import rollout as mj_rollout
 
 from mjx_arm.envs.arm import ArmInfo
+from mjx_arm.envs.mjx_physics import Dynamics, Reading, batched_where
 from mjx_arm.envs.model_io import SensorReader
 from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
@@ -50,22 +52,65 @@ class CState:
     sensordata: jax.Array
 
 
+def dynamics_row(dyn: Dynamics) -> jax.Array:
+    """The multipliers as one row ``(19,)``: friction, damping (6), armature (6), gain (6)."""
+    return jnp.concatenate([jnp.reshape(dyn.friction, (1,)), dyn.damping, dyn.armature, dyn.gain])
+
+
+class _ModelCopies:
+    """One model per batch row, with the dynamics multipliers of :func:`dynamics_row` applied."""
+
+    def __init__(self, model: mujoco.MjModel, dofs: np.ndarray, actuators: np.ndarray) -> None:
+        self.base, self.dofs, self.act = model, dofs, actuators
+        self.models: list[mujoco.MjModel] = []
+        self.applied = np.zeros((0, 19))
+
+    def __call__(self, rows: np.ndarray) -> list[mujoco.MjModel]:
+        """The models of ``rows (n, 19)``, each updated where its row changed."""
+        while len(self.models) < len(rows):
+            self.models.append(copy.copy(self.base))
+            self.applied = np.concatenate([self.applied, np.full((1, 19), np.nan)])
+        changed = np.flatnonzero((self.applied[: len(rows)] != rows).any(axis=1))
+        for i in changed:
+            self._apply(self.models[i], rows[i])
+            self.applied[i] = rows[i]
+        return self.models[: len(rows)]
+
+    def _apply(self, m: mujoco.MjModel, row: np.ndarray) -> None:
+        base, dofs, act = self.base, self.dofs, self.act
+        m.geom_friction[:] = base.geom_friction * row[0]
+        m.dof_damping[dofs] = base.dof_damping[dofs] * row[1:7]
+        m.dof_armature[dofs] = base.dof_armature[dofs] * row[7:13]
+        m.actuator_gainprm[act, 0] = base.actuator_gainprm[act, 0] * row[13:19]
+        m.actuator_biasprm[act, 2] = base.actuator_biasprm[act, 2] * row[13:19]
+
+
 class _Stepper:
     """Host side: a thread pool of MjData stepping batches with ``mujoco.rollout``."""
 
-    def __init__(self, model: mujoco.MjModel, nthread: int) -> None:
+    def __init__(self, model: mujoco.MjModel, nthread: int, copies: _ModelCopies) -> None:
         self.model = model
         self.nthread = nthread
         self.datas = [mujoco.MjData(model) for _ in range(nthread)]
         self.rollout = mj_rollout.Rollout(nthread=nthread)
+        self.copies = copies
         self.lock = threading.Lock()
 
-    def __call__(self, state: np.ndarray, ctrl: np.ndarray, mocap: np.ndarray, nstep: int):
+    def __call__(
+        self,
+        state: np.ndarray,
+        ctrl: np.ndarray,
+        mocap: np.ndarray,
+        nstep: int,
+        dynamics: np.ndarray | None = None,
+    ):
         """Advance each row of ``state`` by ``nstep`` steps; return (state, sensordata).
 
         Args:
             state: ``(..., nstate)``; ctrl: ``(..., nu)``; mocap: ``(..., 3)``.
             nstep: physics steps to take; the sensors returned are those at the final state.
+            dynamics: per-row multipliers ``(..., 19)`` (:func:`dynamics_row`), or None for
+                the nominal model.
         """
         lead = state.shape[:-1]
         state2 = np.ascontiguousarray(state.reshape(-1, state.shape[-1]), dtype=np.float64)
@@ -75,8 +120,11 @@ class _Stepper:
         # step k, so the last step's sensors lag the returned state by one substep, exactly as
         # the CPU env reads them. nstep == 0 runs one step only for its sensors (at ``state``).
         with self.lock:
+            model = self.model
+            if dynamics is not None:
+                model = self.copies(np.asarray(dynamics, np.float64).reshape(-1, 19))
             states, sensors = self.rollout.rollout(
-                self.model,
+                model,
                 self.datas,
                 state2,
                 control,
@@ -108,7 +156,9 @@ class MujocoCallbackPhysics:
         self.task = task
         self.n_substeps = task.n_substeps
         self.mocap = int(mj_model.body_mocapid[mj_model.body(TARGET_BODY).id])
-        self.stepper = _Stepper(mj_model, nthread or os.cpu_count() or 1)
+        copies = _ModelCopies(mj_model, self.ids.dof_adr, self.ids.actuators)
+        self.stepper = _Stepper(mj_model, nthread or os.cpu_count() or 1, copies)
+        self.impl = "c"
         data = mujoco.MjData(mj_model)
         template = np.zeros(mujoco.mj_stateSize(mj_model, STATE_SPEC))
         mujoco.mj_getState(mj_model, data, template, STATE_SPEC)
@@ -117,16 +167,18 @@ class MujocoCallbackPhysics:
         self._qvel_slice = slice(1 + mj_model.nq, 1 + mj_model.nq + mj_model.nv)
         self._nsensor = mj_model.nsensordata
 
-    def _call(self, state: jax.Array, ctrl: jax.Array, mocap: jax.Array, nstep: int):
+    def _call(self, state: jax.Array, ctrl: jax.Array, mocap: jax.Array, nstep: int, dyn=None):
         shapes = (
             jax.ShapeDtypeStruct(state.shape, jnp.float32),
             jax.ShapeDtypeStruct((*state.shape[:-1], self._nsensor), jnp.float32),
         )
+        args = (state, ctrl, mocap) if dyn is None else (state, ctrl, mocap, dyn)
 
-        def host(s, c, m):
-            return self.stepper(np.asarray(s), np.asarray(c), np.asarray(m), nstep)
+        def host(s, c, m, d=None):
+            d = None if d is None else np.asarray(d)
+            return self.stepper(np.asarray(s), np.asarray(c), np.asarray(m), nstep, d)
 
-        return jax.pure_callback(host, shapes, state, ctrl, mocap, vmap_method="broadcast_all")
+        return jax.pure_callback(host, shapes, *args, vmap_method="broadcast_all")
 
     def init(self, qpos: jax.Array, target_body: jax.Array) -> CState:
         """State at rest at ``qpos (6,)`` with the target body at ``(3,)``; sensors filled."""
@@ -140,16 +192,30 @@ class MujocoCallbackPhysics:
         """Move the target body (sensors unaffected: the target carries none)."""
         return data.replace(mocap_pos=target_body.astype(jnp.float32))
 
-    def step(self, data: CState, ctrl: jax.Array) -> CState:
-        """One control step of ``n_substeps`` physics steps with ``ctrl (6,)``."""
+    def step(self, data: CState, ctrl: jax.Array, dynamics: Dynamics | None = None) -> CState:
+        """One control step of ``n_substeps`` physics steps with ``ctrl (6,)``.
+
+        ``dynamics``: per-env multipliers (domain randomisation), or None for the model.
+        """
         full = jnp.zeros(self.mj_model.nu, jnp.float32).at[self.ids.actuators].set(ctrl)
-        state, sensors = self._call(data.state, full, data.mocap_pos, self.n_substeps)
+        dyn = None if dynamics is None else dynamics_row(dynamics).astype(jnp.float32)
+        state, sensors = self._call(data.state, full, data.mocap_pos, self.n_substeps, dyn)
         return data.replace(state=state, sensordata=sensors)
 
-    def read(self, data: CState):
-        """The contract's read-out (see ``mjx_env.Reading``)."""
-        from mjx_arm.envs.mjx_env import Reading
+    def overflow(self, data: CState) -> jax.Array:
+        """Always False: C MuJoCo grows its buffers as needed."""
+        return jnp.zeros((), bool)
 
+    def where(self, done: jax.Array, new: CState, old: CState) -> CState:
+        """Per env: ``new`` where ``done (B,)`` else ``old``."""
+        return batched_where(done, new, old)
+
+    def describe(self) -> dict:
+        """Implementation facts, for run configs and benchmark JSON."""
+        return {"impl": self.impl, "nthread": self.stepper.nthread}
+
+    def read(self, data: CState) -> Reading:
+        """The contract's read-out (see :class:`mjx_arm.envs.mjx_physics.Reading`)."""
         ids, s = self.ids, data.sensordata
         return Reading(
             ee_pos=s[ids.sensor_slices["ee_pos"]],

@@ -26,7 +26,11 @@ class RewardConfig:
     ``distance`` = 1 - exp(-d / distance_length), ``contact`` = 1 when the tool presses the target
     inside the force band, ``joint_limit`` = number of joints beyond ``soft_limit`` of their range,
     ``joint_velocity`` = sum |qdot| (rad/s), ``success`` = 1 on the success step,
-    ``nonfinite`` = 1 when the physics state is not finite.
+    ``nonfinite`` = 1 when the physics state is not finite,
+    ``force_excess`` = (F - F_max) / F_max where the contact force F is above the band, else 0,
+    ``approach_speed`` = how fast d shrinks (m/s) while d < ``approach_radius``,
+    ``action_rate`` = sum (a_t - a_{t-1})^2 over the six action entries,
+    ``overforce`` = 1 on a step whose contact force is above the band.
     """
 
     distance: float = -10.0
@@ -35,15 +39,41 @@ class RewardConfig:
     joint_velocity: float = -0.1
     success: float = 0.0
     nonfinite: float = -100.0
+    force_excess: float = 0.0
+    approach_speed: float = 0.0
+    action_rate: float = 0.0
+    overforce: float = 0.0
     distance_length: float = 0.1
     soft_limit: float = 0.95
+    approach_radius: float = 0.1
 
     def weights(self) -> dict[str, float]:
         """Weight of each named term."""
         return {name: getattr(self, name) for name in REWARD_TERMS}
 
 
-REWARD_TERMS = ("distance", "contact", "joint_limit", "joint_velocity", "success", "nonfinite")
+REWARD_TERMS = (
+    "distance",
+    "contact",
+    "joint_limit",
+    "joint_velocity",
+    "success",
+    "nonfinite",
+    "force_excess",
+    "approach_speed",
+    "action_rate",
+    "overforce",
+)
+
+# Touch's default reward ("gentle"): the seed terms, plus penalties that make a soft touch the
+# optimum. A strike (force over the band) costs its excess and ends the episode as a protective
+# stop would on a real arm; closing in fast near the box and jerky actions cost a little.
+GENTLE_REWARD = RewardConfig(
+    force_excess=-100.0,
+    approach_speed=-20.0,
+    action_rate=-0.05,
+    overforce=-200.0,
+)
 
 
 @dataclass(frozen=True)
@@ -63,6 +93,13 @@ class TaskConfig:
             touch only x and y are used: the box stands on the table at z = 0.
         success_distance: d (m) below which the ee point counts as at the target.
         force_band: (min, max) contact force norm (N) of a successful touch.
+        success_hold_steps: consecutive control steps the success condition must hold (near the
+            target, and for Touch the force inside the band) before the episode succeeds.
+        fail_on_overforce: a force reading above the band at any step of the episode rules out
+            success for the rest of it.
+        terminate_on_overforce: end the episode at the first reading above the band (a
+            protective stop).
+        variant: "seed" (the seed document's task) or "gentle" (Touch's default: hold, no strike).
         force_clip: bound (N and N m) of each contact_force component.
         reward: weights of the reward terms.
     """
@@ -79,6 +116,10 @@ class TaskConfig:
     target_high: tuple[float, float, float] = (0.65, 0.25, 0.45)
     success_distance: float = 0.05
     force_band: tuple[float, float] = (1.0, 50.0)
+    success_hold_steps: int = 1
+    fail_on_overforce: bool = False
+    terminate_on_overforce: bool = False
+    variant: str = "seed"
     force_clip: float = 100.0
     reward: RewardConfig = field(default_factory=RewardConfig)
 
@@ -92,6 +133,8 @@ class TaskConfig:
             )
         if len(self.home_qpos) != 6:
             raise ValueError("home_qpos needs 6 joint angles")
+        if self.success_hold_steps < 1:
+            raise ValueError("success_hold_steps must be >= 1")
 
     @property
     def n_substeps(self) -> int:
@@ -136,15 +179,42 @@ def reach_config(**overrides: Any) -> TaskConfig:
     return base.replace(**overrides)
 
 
-def touch_config(**overrides: Any) -> TaskConfig:
-    """Touch (the seed task): press the top of a 5 cm box with 1-50 N, within 5 cm of its centre."""
-    return TaskConfig(task="touch").replace(**overrides)
+def touch_config(variant: str = "gentle", **overrides: Any) -> TaskConfig:
+    """Touch: press the top of a 5 cm box with 1-50 N, within 5 cm of its centre.
+
+    Args:
+        variant: "gentle" (default): the force must stay in the band for 3 control steps, a
+            reading above the band ends the episode without success, and the reward adds
+            the terms of :data:`GENTLE_REWARD`. "seed": the seed document's task (success on
+            the first in-band step, no force or speed terms).
+        overrides: fields to change.
+    """
+    if variant == "seed":
+        base = TaskConfig(task="touch", variant="seed")
+    elif variant == "gentle":
+        base = TaskConfig(
+            task="touch",
+            variant="gentle",
+            success_hold_steps=3,
+            fail_on_overforce=True,
+            terminate_on_overforce=True,
+            reward=GENTLE_REWARD,
+        )
+    else:
+        raise ValueError(f"unknown touch variant {variant!r}; choose 'gentle' or 'seed'")
+    return base.replace(**overrides)
 
 
 def task_config(name: str, **overrides: Any) -> TaskConfig:
-    """The preset of task ``name`` ("reach" or "touch", any case), with overrides."""
-    presets = {"reach": reach_config, "touch": touch_config}
+    """The preset of task ``name`` ("reach" or "touch", any case), with overrides.
+
+    ``variant`` among the overrides picks Touch's variant ("gentle" or "seed"); Reach has one.
+    """
     key = name.lower()
-    if key not in presets:
-        raise ValueError(f"unknown task {name!r}; choose one of {sorted(presets)}")
-    return presets[key](**overrides)
+    if key == "reach":
+        if overrides.get("variant", "seed") != "seed":
+            raise ValueError("reach has a single variant, 'seed'")
+        return reach_config(**{k: v for k, v in overrides.items() if k != "variant"})
+    if key == "touch":
+        return touch_config(**overrides)
+    raise ValueError(f"unknown task {name!r}; choose one of {sorted(TASKS)}")

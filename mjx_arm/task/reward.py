@@ -77,15 +77,96 @@ def force_in_band(xp: Any, force_norm, cfg: TaskConfig):
 
 
 def is_success(xp: Any, distance, force_norm, cfg: TaskConfig):
-    """Success flag (bool array): Reach d < success_distance; Touch also force in band."""
+    """The success condition of one step (bool array): Reach d < success_distance; Touch also
+    the force in the band. The episode succeeds once it has held for ``success_hold_steps``
+    (see :func:`advance`)."""
     near = distance < cfg.success_distance
     if cfg.uses_contact:
         return near & (force_in_band(xp, force_norm, cfg) > 0)
     return near
 
 
+def over_band(force_norm, cfg: TaskConfig):
+    """True where the contact force norm (N) is above the force band."""
+    return force_norm > cfg.force_band[1]
+
+
+class Progress(NamedTuple):
+    """What the success rule remembers within an episode (per env).
+
+    Attributes:
+        hold: consecutive control steps the success condition has held, float ``(...)``.
+        over: whether a force reading above the band has been seen, bool ``(...)``.
+    """
+
+    hold: Any
+    over: Any
+
+
+def start_progress(xp: Any, shape: tuple[int, ...] = ()) -> Progress:
+    """The progress at the start of an episode."""
+    return Progress(xp.zeros(shape), xp.zeros(shape, dtype=bool))
+
+
+def advance(xp: Any, progress: Progress, distance, force_norm, cfg: TaskConfig):
+    """One step of the success rule.
+
+    Args:
+        xp: ``numpy`` or ``jax.numpy``.
+        progress: the progress before this step.
+        distance: d (m), ``(...)``; force_norm: contact force norm (N), ``(...)``.
+        cfg: the task configuration.
+
+    Returns:
+        (progress after the step, success flag, over-band flag of this step), bool ``(...)``.
+    """
+    holds = is_success(xp, distance, force_norm, cfg)
+    over_now = over_band(force_norm, cfg) if cfg.uses_contact else xp.zeros_like(holds)
+    hold = xp.where(holds, progress.hold + 1.0, 0.0)
+    over = progress.over | over_now
+    success = hold >= cfg.success_hold_steps
+    if cfg.fail_on_overforce:
+        success = success & ~over
+    return Progress(hold, over), success, over_now
+
+
+def ends_episode(success, over_now, nonfinite, cfg: TaskConfig):
+    """Termination (bool ``(...)``): a non-finite state, success or a strike, as configured."""
+    done = nonfinite | (success & cfg.terminate_on_success)
+    if cfg.terminate_on_overforce:
+        done = done | over_now
+    return done
+
+
+class Motion(NamedTuple):
+    """What the motion terms compare with the previous control step (per env).
+
+    Attributes:
+        prev_distance: d at the previous step (m), ``(...)``.
+        action_change: sum over the six entries of (a_t - a_{t-1})^2, ``(...)``.
+    """
+
+    prev_distance: Any
+    action_change: Any
+
+
+def action_change(xp: Any, action, prev_action):
+    """sum (a_t - a_{t-1})^2 over the last axis: ``(..., 6) -> (...)``."""
+    delta = action - prev_action
+    return xp.vecdot(delta, delta)
+
+
 def reward_terms(
-    xp: Any, distance, force_norm, qpos, qvel, joint_limits, success, nonfinite, cfg: TaskConfig
+    xp: Any,
+    distance,
+    force_norm,
+    qpos,
+    qvel,
+    joint_limits,
+    success,
+    nonfinite,
+    cfg: TaskConfig,
+    motion: Motion | None = None,
 ) -> dict:
     """Raw (unweighted) reward terms by name.
 
@@ -99,16 +180,28 @@ def reward_terms(
         success: success flag, shape ``(...)``.
         nonfinite: flag of a non-finite physics state, shape ``(...)``.
         cfg: the task configuration.
+        motion: the previous step's distance and the action change (None: both terms 0).
 
     Returns:
         Dict term name -> float array, shape ``(...)``; keys are ``REWARD_TERMS``.
     """
     band = joint_band(joint_limits, cfg)
-    return band_reward_terms(xp, distance, force_norm, qpos, qvel, band, success, nonfinite, cfg)
+    return band_reward_terms(
+        xp, distance, force_norm, qpos, qvel, band, success, nonfinite, cfg, motion
+    )
 
 
 def band_reward_terms(
-    xp: Any, distance, force_norm, qpos, qvel, band: JointBand, success, nonfinite, cfg: TaskConfig
+    xp: Any,
+    distance,
+    force_norm,
+    qpos,
+    qvel,
+    band: JointBand,
+    success,
+    nonfinite,
+    cfg: TaskConfig,
+    motion: Motion | None = None,
 ) -> dict:
     """:func:`reward_terms` with the joint limits as a precomputed :class:`JointBand`.
 
@@ -122,13 +215,23 @@ def band_reward_terms(
         success: success flag (bool), shape ``(...)``.
         nonfinite: flag (bool) of a non-finite physics state, shape ``(...)``.
         cfg: the task configuration.
+        motion: the previous step's distance and the action change (None: both terms 0).
 
     Returns:
         Dict term name -> float array, shape ``(...)``; keys are ``REWARD_TERMS``.
     """
     beyond = xp.abs(qpos - band.mid) > band.reach
     near = distance < cfg.success_distance
-    contact = force_in_band(xp, force_norm, cfg) * near if cfg.uses_contact else 0.0 * distance
+    zero = 0.0 * distance
+    contact = force_in_band(xp, force_norm, cfg) * near if cfg.uses_contact else zero
+    high = cfg.force_band[1]
+    excess = xp.maximum(force_norm - high, 0.0) / high if cfg.uses_contact else zero
+    if motion is None:
+        closing, change = zero, zero
+    else:
+        closing = xp.maximum(motion.prev_distance - distance, 0.0) / cfg.ctrl_dt
+        closing = closing * (distance < cfg.reward.approach_radius)
+        change = motion.action_change + zero
     terms = {
         "distance": 1.0 - xp.exp(-distance / cfg.reward.distance_length),
         "contact": contact,
@@ -136,6 +239,10 @@ def band_reward_terms(
         "joint_velocity": _sum_last(xp.abs(qvel)),
         "success": success * 1.0,
         "nonfinite": nonfinite * 1.0,
+        "force_excess": excess,
+        "approach_speed": closing,
+        "action_rate": change,
+        "overforce": (excess > 0) * 1.0,
     }
     assert tuple(terms) == REWARD_TERMS
     return terms

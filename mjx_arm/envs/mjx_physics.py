@@ -1,0 +1,273 @@
+"""MJX physics of the task model, on MJX's JAX implementation or on MuJoCo Warp.
+
+:class:`MjxPhysics` is what the batched env steps: ``init``, ``step``, ``read``, plus ``where``
+(per-env select of two batched states) and ``overflow`` (per-env flag of a dropped contact or
+constraint). The implementation is a setting (:class:`~mjx_arm.envs.physics_config.
+PhysicsConfig`); everything above this layer is the same for both.
+
+What differs under Warp, and how this layer handles it:
+
+- Contacts live in one pool that all envs of a batch share (``naconmax`` contacts in all);
+  constraint rows are per env (``njmax``). Both are sized here from the model's own bound (every
+  collision pair it allows, with its largest contact count, and all joint limits), times the
+  batch for the pool, unless the config sets them.
+- Pool fields carry no batch axis, so batched states are merged field by field with Warp's own
+  table of which fields are per env (:meth:`MjxPhysics.where`).
+- Warp counts an overflow per env in a bitmask. Dropped contacts or constraint rows raise
+  :class:`PhysicsOverflowError` where the batch is read on the host (trainer, vector env,
+  benchmarks); the solver's iteration limits are not errors here (the model runs a fixed, small
+  number of iterations on purpose), and Warp's own per-env warning prints are switched off.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+from flax import struct
+from mujoco import mjx
+
+from mjx_arm.envs.arm import ArmInfo
+from mjx_arm.envs.model_io import SensorReader
+from mjx_arm.envs.physics_config import PhysicsConfig, resolve_impl
+from mjx_arm.task import sampling
+from mjx_arm.task.config import TaskConfig
+from mjx_arm.urdf.scene import TARGET_BODY
+
+# Warp's overflow bits (mujoco_warp OverflowType) that mean contacts or constraint rows were
+# dropped: nefc > njmax (1), Jacobian non-zeros (2), broadphase (4), narrowphase (8), islands
+# (128). Iteration limits (512, 1024) are expected with a fixed 2-iteration solver.
+DROPPED_BITS = 1 | 2 | 4 | 8 | 128
+
+
+class PhysicsOverflowError(RuntimeError):
+    """Warp dropped contacts or constraint rows: its buffers are too small for the batch."""
+
+
+@struct.dataclass
+class Reading:
+    """What the contract reads from the physics, one env (add a leading batch axis under vmap).
+
+    Attributes:
+        ee_pos ``(3,)``, ee_quat ``(4,)`` (w, x, y, z), qpos ``(6,)``, qvel ``(6,)``,
+        target_pos ``(3,)``, wrench ``(6,)`` (tared, ee frame, unclipped).
+    """
+
+    ee_pos: jax.Array
+    ee_quat: jax.Array
+    qpos: jax.Array
+    qvel: jax.Array
+    target_pos: jax.Array
+    wrench: jax.Array
+
+
+@struct.dataclass
+class Dynamics:
+    """Per-env multipliers of the model's dynamics (domain randomisation); 1 is the model.
+
+    Attributes:
+        friction: of every geom's friction coefficients, ``()``.
+        damping: of the six joints' damping, ``(6,)``.
+        armature: of the six joints' rotor inertia, ``(6,)``.
+        gain: of the six velocity servos' gain, ``(6,)``.
+    """
+
+    friction: jax.Array
+    damping: jax.Array
+    armature: jax.Array
+    gain: jax.Array
+
+    @staticmethod
+    def nominal() -> Dynamics:
+        """All multipliers 1."""
+        return Dynamics(jnp.ones(()), jnp.ones(6), jnp.ones(6), jnp.ones(6))
+
+
+def model_bounds(mj_model: mujoco.MjModel) -> tuple[int, int]:
+    """(contacts, constraint rows) one env of ``mj_model`` can produce at most.
+
+    MJX's JAX implementation sizes its arrays statically for exactly this: every geom pair that
+    the contact filters allow, with the largest contact count of its collision function, and
+    every limited joint.
+    """
+    data = mjx.make_data(mjx.put_model(mj_model, impl="jax"), impl="jax")
+    return int(data._impl.contact.dist.shape[0]), int(data._impl.efc_J.shape[0])
+
+
+class MjxPhysics:
+    """MJX physics of the task model: ``n_substeps`` ``mjx.step`` per control step.
+
+    Args:
+        mj_model: the compiled task model (arm + scene).
+        arm: the arm facts (joint names, tool mass properties).
+        task: the task configuration (substeps, target geometry).
+        config: implementation and buffer sizes (default: ``impl="auto"``).
+        batch_size: the largest batch stepped at once (sizes Warp's shared contact pool).
+    """
+
+    def __init__(
+        self,
+        mj_model: mujoco.MjModel,
+        arm: ArmInfo,
+        task: TaskConfig,
+        config: PhysicsConfig | None = None,
+        batch_size: int = 1,
+    ) -> None:
+        self.mj_model = mj_model
+        self.config = config or PhysicsConfig()
+        self.impl = resolve_impl(self.config.impl)
+        self.ids = SensorReader(mj_model, arm)
+        self.task = task
+        self.mocap = int(mj_model.body_mocapid[mj_model.body(TARGET_BODY).id])
+        self.n_substeps = task.n_substeps
+        self.batch_size = max(int(batch_size), 1)
+        self.buffers: dict[str, int] = {}
+        if self.impl == "warp":
+            self.model, self._template = self._warp_model_and_data()
+        else:
+            self.model = mjx.put_model(mj_model, impl="jax")
+            self._template = mjx.make_data(self.model, impl="jax")
+        self._joint_dofs = jnp.asarray(self.ids.dof_adr)
+        self._actuators = jnp.asarray(self.ids.actuators)
+
+    def _warp_model_and_data(self) -> tuple[Any, Any]:
+        contacts, rows = model_bounds(self.mj_model)
+        per_env = self.config.naconmax_per_env or contacts
+        njmax = self.config.njmax or rows
+        self.buffers = {
+            "naconmax_per_env": per_env,
+            "naconmax": per_env * self.batch_size,
+            "njmax": njmax,
+            "model_contacts": contacts,
+            "model_rows": rows,
+        }
+        model = mjx.put_model(self.mj_model, impl="warp")
+        # Warp prints a warning per env and substep on any overflow; this layer reads the bits.
+        opt_impl = model.opt._impl.replace(warn_overflow=0)
+        model = model.replace(opt=model.opt.replace(_impl=opt_impl))
+        data = mjx.make_data(
+            self.mj_model, impl="warp", naconmax=per_env * self.batch_size, njmax=njmax
+        )
+        return model, data
+
+    def describe(self) -> dict[str, Any]:
+        """Implementation and buffer sizes, for run configs and benchmark JSON."""
+        return {"impl": self.impl, "batch_size": self.batch_size, **self.buffers}
+
+    # ------------------------------------------------------------------ state
+
+    def init(self, qpos: jax.Array, target_body: jax.Array) -> Any:
+        """Data at rest at joint angles ``qpos (6,)`` with the target body at ``(3,)``."""
+        data = self._template
+        data = data.replace(
+            qpos=data.qpos.at[self.ids.qpos_adr].set(qpos),
+            mocap_pos=data.mocap_pos.at[self.mocap].set(target_body),
+        )
+        return mjx.forward(self.model, data)
+
+    def set_target(self, data: Any, target_body: jax.Array) -> Any:
+        """Move the target body; takes effect in the next step's collision detection."""
+        return data.replace(mocap_pos=data.mocap_pos.at[self.mocap].set(target_body))
+
+    def step(self, data: Any, ctrl: jax.Array, dynamics: Dynamics | None = None) -> Any:
+        """One control step: hold ``ctrl (6,)`` for ``n_substeps`` physics steps.
+
+        Args:
+            data: one env's state (vmap for a batch).
+            ctrl: joint velocity targets (rad/s), ``(6,)``.
+            dynamics: per-env multipliers of friction, damping, armature and servo gain;
+                None steps the model as built.
+        """
+        model = self.model if dynamics is None else self.randomized(dynamics)
+        data = data.replace(ctrl=data.ctrl.at[self._actuators].set(ctrl))
+
+        def substep(d: Any, _: Any) -> tuple[Any, None]:
+            return mjx.step(model, d), None
+
+        data, _ = jax.lax.scan(substep, data, None, length=self.n_substeps)
+        # kinematics and sensors stay those of the last substep's forward pass (1/240 s before
+        # the integrated qpos/qvel), as in the CPU env: no extra forward per control step
+        return data
+
+    def randomized(self, dyn: Dynamics) -> Any:
+        """The model with ``dyn``'s multipliers applied (one env; batched under vmap)."""
+        m, dofs, act = self.model, self._joint_dofs, self._actuators
+        gain = m.actuator_gainprm.at[act, 0].multiply(dyn.gain)
+        bias = m.actuator_biasprm.at[act, 2].multiply(dyn.gain)  # velocity servo: -kv * qdot
+        return m.replace(
+            geom_friction=m.geom_friction * dyn.friction,
+            dof_damping=m.dof_damping.at[dofs].multiply(dyn.damping),
+            dof_armature=m.dof_armature.at[dofs].multiply(dyn.armature),
+            actuator_gainprm=gain,
+            actuator_biasprm=bias,
+        )
+
+    def read(self, data: Any) -> Reading:
+        """The contract's read-out of ``data``."""
+        ids = self.ids
+        return Reading(
+            ee_pos=data.site_xpos[ids.ee_site],
+            ee_quat=data.xquat[ids.ee_body],
+            qpos=data.qpos[ids.qpos_adr],
+            qvel=data.qvel[ids.dof_adr],
+            target_pos=sampling.target_point(jnp, data.mocap_pos[self.mocap], self.task),
+            wrench=ids.wrench(jnp, data.sensordata),
+        )
+
+    # ------------------------------------------------------------------ batches
+
+    def overflow(self, data: Any) -> jax.Array:
+        """True where Warp dropped contacts or constraint rows (one env; vmap for a batch)."""
+        if self.impl != "warp":
+            return jnp.zeros((), bool)
+        return (data._impl.overflow & DROPPED_BITS) != 0
+
+    def where(self, done: jax.Array, new: Any, old: Any) -> Any:
+        """Per env: ``new`` where ``done (B,)`` else ``old``, for batched states.
+
+        Under Warp the contact pool has no batch axis and belongs to the stepped state: it is
+        kept from ``old``.
+        """
+        if self.impl != "warp":
+            return batched_where(done, new, old)
+        from mujoco.mjx._src.types import tree_path_to_attr_str
+        from mujoco.mjx.warp import types as warp_types
+
+        per_env = warp_types._BATCH_DIM["Data"]
+
+        def pick(path: Any, n: jax.Array, o: jax.Array) -> jax.Array:
+            if not per_env.get(tree_path_to_attr_str(path), True):
+                return o
+            return _where_rows(done, n, o)
+
+        return jax.tree_util.tree_map_with_path(pick, new, old)
+
+    def check_overflow(self, flags: Any) -> None:
+        """Raise :class:`PhysicsOverflowError` if any env of ``flags`` (host array) overflowed."""
+        flags = np.asarray(flags)
+        if flags.any():
+            raise PhysicsOverflowError(overflow_message(int(flags.sum()), self.describe()))
+
+
+def overflow_message(count: float, buffers: dict[str, Any]) -> str:
+    """The error text of a Warp buffer overflow in ``count`` envs (or env-steps)."""
+    return (
+        f"MuJoCo Warp dropped contacts or constraint rows in {count:g} env(s): its buffers "
+        f"(naconmax_per_env={buffers.get('naconmax_per_env')}, njmax={buffers.get('njmax')}) "
+        "are too small for this model and batch. Raise them with --set "
+        "physics.naconmax_per_env=N physics.njmax=N (0 = the model's bound), or use "
+        "physics.impl=jax."
+    )
+
+
+def _where_rows(done: jax.Array, new: jax.Array, old: jax.Array) -> jax.Array:
+    mask = jnp.reshape(done > 0, done.shape + (1,) * (old.ndim - done.ndim))
+    return jnp.where(mask, new, old)
+
+
+def batched_where(done: jax.Array, new: Any, old: Any) -> Any:
+    """Per env: ``new`` where ``done (B,)`` else ``old`` (pytrees with a leading batch axis)."""
+    return jax.tree.map(lambda n, o: _where_rows(done, n, o), new, old)
