@@ -17,10 +17,10 @@ from test_policy import trained_run_dir
 from mjx_arm.cli import EXIT_INVALID, EXIT_OK, main
 from mjx_arm.envs.mujoco_env import MujocoArmEnv
 from mjx_arm.policy import export_policy, load
-from mjx_arm.sim2real.deploy import DeployConfig, VelocityCommandChain, deploy_sim
+from mjx_arm.sim2real.deploy import DeployConfig, deploy_sim
 from mjx_arm.sim2real.limiter import JointLimits
 from mjx_arm.sim2real.observation import ObservationBuilder
-from mjx_arm.sim2real.position_env import ServoConfig, make_position_env
+from mjx_arm.sim2real.position_env import ChainConfig, ServoConfig, make_position_env
 from mjx_arm.task.config import task_config
 from pybullet_ref.env import PybulletArmEnv
 
@@ -47,45 +47,57 @@ def policy_path(tmp_path_factory) -> Path:
 # --------------------------------------------------------------------------- position envs
 
 
+STILL = np.zeros(6, np.float32)
+
+
 @pytest.mark.parametrize("engine", ENGINES)
 def test_position_env_keeps_the_contract(engine: str):
-    """Same observation space and the same first observation as the velocity env."""
+    """Same spaces, the same first observation and the same info as the velocity env."""
     position = make_position_env(REACH, engine)
     velocity = VELOCITY_ENVS[engine](REACH)
     try:
         assert position.observation_space == velocity.observation_space
+        assert position.action_space == velocity.action_space
         obs_p, info_p = position.reset(seed=3)
         obs_v, info_v = velocity.reset(seed=3)
         for key in obs_v:
             np.testing.assert_array_equal(obs_p[key], obs_v[key])
         assert info_p.keys() == info_v.keys()
-        q = position.unwrapped.measured_qpos()
-        _, reward, _, truncated, info = position.step(q)
-        assert set(info["reward_terms"]) == set(REACH.reward.weights())
-        assert np.isfinite(reward) and not truncated
-        assert position.observation_space.contains(position.step(q)[0])
+        action = np.array([0.3, -0.2, 0.1, 0.0, 0.5, -0.4], np.float32)
+        obs_p, reward_p, _, truncated, info_p = position.step(action)
+        _, _, _, _, info_v = velocity.step(action)
+        assert info_p.keys() == info_v.keys()
+        assert info_p["reward_terms"].keys() == info_v["reward_terms"].keys()
+        assert np.isfinite(reward_p) and not truncated
+        assert position.observation_space.contains(obs_p)
+        with pytest.raises(ValueError, match="NaN or inf"):
+            position.step(np.full(6, np.nan))
     finally:
         position.close()
         velocity.close()
 
 
 @pytest.mark.parametrize("engine", ENGINES)
-def test_position_servo_holds_and_settles(engine: str):
-    """Holding the start pose drifts < 1e-6 rad; a 0.1 rad step on every joint settles
-    within 1e-3 rad in 15 control steps (0.5 s). Measured: within 2e-4 rad after 8 steps."""
+def test_position_servo_holds_and_follows_the_commands(engine: str):
+    """Still actions hold the start pose (drift < 1e-6 rad). After 10 steps at half speed
+    the arm settles within 1e-3 rad of the last command in 15 still steps (0.5 s)."""
     env = make_position_env(REACH, engine)
     try:
         env.reset(seed=0)
         base = env.unwrapped
         q0 = base.measured_qpos()
         for _ in range(10):
-            env.step(q0)
+            env.step(STILL)
         np.testing.assert_allclose(base.measured_qpos(), q0, atol=1e-6)
+        for _ in range(10):
+            env.step(np.full(6, 0.5, np.float32))
         for _ in range(15):
-            env.step(q0 + 0.1)
-        np.testing.assert_allclose(base.measured_qpos(), q0 + 0.1, atol=1e-3)
-        with pytest.raises(ValueError, match="NaN or inf"):
-            env.step(np.full(6, np.nan))
+            env.step(STILL)
+        command = base.limiter.command
+        assert np.abs(command - q0).min() > 0.2  # it moved: about 0.26 rad per joint
+        np.testing.assert_allclose(base.measured_qpos(), command, atol=1e-3)
+        log = base.episodes[-1].arrays()
+        assert log["commands"].shape == log["measured"].shape == (35, 6)
     finally:
         env.close()
 
@@ -93,7 +105,8 @@ def test_position_servo_holds_and_settles(engine: str):
 def test_servo_gains_wrap_the_velocity_servo():
     """kp = K * kv with the velocity actuator's kv; force capped at the URDF effort."""
     velocity = MujocoArmEnv(REACH)
-    position = make_position_env(REACH, "mujoco", ServoConfig(position_gain=25.0)).unwrapped
+    config = ChainConfig(servo=ServoConfig(position_gain=25.0))
+    position = make_position_env(REACH, "mujoco", config).unwrapped
     act = velocity.ids.actuators
     kv = velocity.model.actuator_gainprm[act, 0]
     np.testing.assert_allclose(position.gains.kv, kv)
@@ -118,17 +131,18 @@ def test_observation_builder_matches_the_env():
         builder(np.full(6, np.nan), np.zeros(3))
 
 
-def test_chain_with_a_still_policy_holds_the_start_pose():
-    """Zero velocity actions: the commands stay at the measured start, no clip."""
-    chain = VelocityCommandChain(make_position_env(REACH, "mujoco"), 0.02, JointLimits.from_urdf())
-    chain.reset(seed=1)
-    q0 = chain.unwrapped.measured_qpos()
-    for _ in range(20):
-        chain.step(np.zeros(6, np.float32))
-    commands = chain.episodes[-1].arrays()["commands"]
-    np.testing.assert_array_equal(commands, np.tile(q0, (20, 1)))
-    assert chain.limiter.total_clips == 0
-    chain.close()
+def test_chain_starts_each_episode_at_the_measured_pose():
+    """Zero velocity actions: the commands stay at the measured start of each episode."""
+    env = make_position_env(REACH, "mujoco")
+    for seed in (1, 2):
+        env.reset(seed=seed)
+        q0 = env.unwrapped.measured_qpos()
+        for _ in range(20):
+            env.step(STILL)
+        commands = env.unwrapped.episodes[-1].arrays()["commands"]
+        np.testing.assert_array_equal(commands, np.tile(q0, (20, 1)))
+    assert env.unwrapped.limiter.total_clips == 0 and len(env.unwrapped.episodes) == 2
+    env.close()
 
 
 # --------------------------------------------------------------------------- deploy-sim

@@ -2,8 +2,12 @@
 
 A real UR5e takes joint position targets (URScript ``servoj``, or a ROS 2 position controller)
 where the training envs take velocity targets. These envs keep everything of the contract
-(observation, reward, success, termination, sampling: all from :class:`BaseRobotEnv`) and change
-only the actuation: the action is a vector of joint position targets (rad).
+(spaces, observation, reward, success, termination, sampling: all from :class:`BaseRobotEnv`)
+and change only the actuation. The action is still the contract's velocity action; the env's
+velocity hook passes the joint velocity targets through the sim-to-real chain,
+:class:`VelocityToPositionAdapter` then :class:`SafetyLimiter`, and the limiter's command becomes
+the position servos' target. A policy runs on these envs unchanged, and what the robot would
+have been sent is logged per episode (:attr:`episodes`).
 
 The servo is a position loop around the env's own velocity servo, as in an industrial joint
 drive (position loop, velocity loop, current loop)::
@@ -30,7 +34,7 @@ is stretched out; the explicit ``kp`` term stays stable (``sqrt(K * sim_dt) = 0.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import gymnasium as gym
@@ -41,6 +45,8 @@ import pybullet
 from mjx_arm.envs.arm import ArmInfo
 from mjx_arm.envs.base import DEFAULT_HEIGHT, DEFAULT_WIDTH
 from mjx_arm.envs.mujoco_env import MujocoArmEnv
+from mjx_arm.sim2real.adapter import VelocityToPositionAdapter
+from mjx_arm.sim2real.limiter import JointLimits, LimiterConfig, SafetyLimiter
 from mjx_arm.task.config import TaskConfig
 from pybullet_ref.env import PybulletArmEnv
 
@@ -114,46 +120,106 @@ def use_position_servos(
     return gains
 
 
-class _PositionActions:
-    """The action of a position-controlled env: joint position targets (rad).
+@dataclass(frozen=True)
+class ChainConfig:
+    """The command chain and servo of a position-controlled env.
+
+    Attributes:
+        tau: time constant (s) of the adapter's low-pass filter. 0.02 s (0.6 control periods)
+            smooths the 30 Hz staircase of targets and a policy's bang-bang switches while
+            adding only 20 ms of lag.
+        limiter: how the limiter's limits are derived from the URDF.
+        servo: the position servo.
+    """
+
+    tau: float = 0.02
+    limiter: LimiterConfig = field(default_factory=LimiterConfig)
+    servo: ServoConfig = field(default_factory=ServoConfig)
+
+    def __post_init__(self) -> None:
+        if not self.tau >= 0:
+            raise ValueError(f"tau must be >= 0, got {self.tau}")
+
+
+@dataclass
+class EpisodeCommands:
+    """What the chain sent in one episode and what the arm did.
+
+    Attributes:
+        commands: the limiter's position commands (rad), one ``(6,)`` per step.
+        velocities: their velocities (rad/s), one ``(6,)`` per step.
+        measured: joint angles (rad) one control period after each command.
+    """
+
+    commands: list[np.ndarray] = field(default_factory=list)
+    velocities: list[np.ndarray] = field(default_factory=list)
+    measured: list[np.ndarray] = field(default_factory=list)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The three lists as ``(T, 6)`` arrays."""
+        return {k: np.array(getattr(self, k)).reshape(-1, 6) for k in asdict(self)}
+
+
+class _ChainActuation:
+    """Velocity targets -> adapter -> limiter -> position servo targets.
 
     Mixed in before the engine's env class; the engine supplies
-    ``_physics_set_position_targets``.
+    ``_physics_set_position_targets``. The velocity hook is ignored while ``_holding`` (an
+    engine's reset may command zero velocity while it rebuilds the world).
     """
 
     arm: ArmInfo
+    task: TaskConfig
 
-    def _position_action_space(self) -> gym.spaces.Box:
-        return gym.spaces.Box(self.arm.lower, self.arm.upper, dtype=np.float64)
+    def _setup_chain(self, config: ChainConfig) -> None:
+        self.chain_config = config
+        self.limits = JointLimits.from_urdf(self.arm.urdf, config.limiter)
+        home = np.asarray(self.task.home_qpos, dtype=np.float64)
+        dt, lim = self.task.ctrl_dt, self.limits
+        self.adapter = VelocityToPositionAdapter(dt, config.tau, home, lim.lower, lim.upper)
+        self.limiter = SafetyLimiter(lim, dt, home)
+        self.episodes: list[EpisodeCommands] = []
+        self._holding = False
 
-    def apply_action(self, action) -> np.ndarray:
-        """Check joint position targets ``(6,)`` (rad), clip them into the URDF joint range
-        and command them; return the targets sent.
+    def _physics_set_velocity_targets(self, qdot_target: np.ndarray) -> None:
+        if not self._holding:
+            self._physics_set_position_targets(self.limiter(self.adapter.step(qdot_target)))
 
-        Raises:
-            ValueError: wrong shape, or NaN / inf entries.
-        """
-        q = np.array(action, dtype=np.float64)
-        if q.shape != (6,):
-            raise ValueError(f"position targets must have shape (6,), got {q.shape}")
-        if not np.isfinite(q).all():
-            raise ValueError(f"position targets contain NaN or inf: {q.tolist()}")
-        q = np.clip(q, self.arm.lower, self.arm.upper)
+    def _start_chain(self) -> None:
+        """Start adapter and limiter at the measured joint angles; the servo holds them."""
+        q = self.measured_qpos()
+        self.adapter.reset(q)
+        self.limiter.reset(q)
         self._physics_set_position_targets(q)
-        return q
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """Reset the episode (see :meth:`BaseRobotEnv.reset`) and start a new command log."""
+        result = super().reset(seed=seed, options=options)
+        self.episodes.append(EpisodeCommands())
+        return result
+
+    def step(self, action):
+        """One contract action through the chain (see :meth:`BaseRobotEnv.step`), logged."""
+        result = super().step(action)
+        if self.episodes:
+            log = self.episodes[-1]
+            log.commands.append(self.limiter.command)
+            log.velocities.append(self.limiter.velocity)
+            log.measured.append(self.measured_qpos())
+        return result
 
     def measured_qpos(self) -> np.ndarray:
         """Joint angles (rad, not wrapped) as the joint encoders read them now, ``(6,)``."""
         return self._physics_read().qpos
 
 
-class MujocoPositionArmEnv(_PositionActions, MujocoArmEnv):
-    """:class:`MujocoArmEnv` with position servos: the action is joint position targets (rad).
+class MujocoPositionArmEnv(_ChainActuation, MujocoArmEnv):
+    """:class:`MujocoArmEnv` driven through the chain into position servos.
 
     Args:
         task: the task configuration (default: Touch).
         urdf: the arm URDF (default: the shipped arm).
-        servo: the position servo (default: :class:`ServoConfig()`).
+        config: the chain and the servo (default: :class:`ChainConfig()`).
         render_mode, width, height: as for :class:`MujocoArmEnv`.
     """
 
@@ -161,23 +227,21 @@ class MujocoPositionArmEnv(_PositionActions, MujocoArmEnv):
         self,
         task: TaskConfig | None = None,
         urdf: str | Path | None = None,
-        servo: ServoConfig | None = None,
+        config: ChainConfig | None = None,
         render_mode: str | None = None,
         width: int = DEFAULT_WIDTH,
         height: int = DEFAULT_HEIGHT,
     ) -> None:
         super().__init__(task, urdf, render_mode, width, height)
-        self.servo_config = servo or ServoConfig()
-        self.gains = use_position_servos(
-            self.model, self.ids.actuators, self.arm, self.servo_config
-        )
-        self.action_space = self._position_action_space()
+        config = config or ChainConfig()
+        self._setup_chain(config)
+        self.gains = use_position_servos(self.model, self.ids.actuators, self.arm, config.servo)
 
     def _physics_reset(self, qpos: np.ndarray, target_body_pos: np.ndarray) -> None:
         super()._physics_reset(qpos, target_body_pos)
-        self._physics_set_position_targets(qpos)  # hold the start pose
+        self._start_chain()
         # the parent's forward pass saw ctrl = 0, a pull towards q = 0 that moves the
-        # accelerations (and so the F/T reading): redo it with the servo holding qpos
+        # accelerations (and so the F/T reading): redo it with the servo holding the start
         mujoco.mj_forward(self.model, self.data)
         mujoco.mj_rnePostConstraint(self.model, self.data)
         mujoco.mj_sensorAcc(self.model, self.data)
@@ -186,8 +250,8 @@ class MujocoPositionArmEnv(_PositionActions, MujocoArmEnv):
         self._ctrl[self._act] = q_target
 
 
-class PybulletPositionArmEnv(_PositionActions, PybulletArmEnv):
-    """:class:`PybulletArmEnv` with position servos: the action is joint position targets (rad).
+class PybulletPositionArmEnv(_ChainActuation, PybulletArmEnv):
+    """:class:`PybulletArmEnv` driven through the chain into position servos.
 
     The torque law at every substep is the velocity servo's with the velocity target
     ``K * (q_target - q)``: ``clip(kv * (K * (q_target - q) - qdot), +-effort) - d * qdot
@@ -197,7 +261,7 @@ class PybulletPositionArmEnv(_PositionActions, PybulletArmEnv):
     Args:
         task: the task configuration (default: Touch).
         urdf: the arm URDF (default: the shipped arm).
-        servo: the position servo (default: :class:`ServoConfig()`).
+        config: the chain and the servo (default: :class:`ChainConfig()`).
         render_mode, width, height: as for :class:`PybulletArmEnv`.
     """
 
@@ -205,21 +269,28 @@ class PybulletPositionArmEnv(_PositionActions, PybulletArmEnv):
         self,
         task: TaskConfig | None = None,
         urdf: str | Path | None = None,
-        servo: ServoConfig | None = None,
+        config: ChainConfig | None = None,
         render_mode: str | None = None,
         width: int = DEFAULT_WIDTH,
         height: int = DEFAULT_HEIGHT,
     ) -> None:
         # the parent's constructor resets the world, which steps the servo: set it up first
-        self.servo_config = servo or ServoConfig()
+        config = config or ChainConfig()
+        self._gain = config.servo.position_gain
         self._q_target: list[float] = []
+        self._holding = True
         super().__init__(task, urdf, render_mode, width, height)
-        self.gains = servo_gains(self.servo.kv, self.servo.effort, self.servo_config)
-        self.action_space = self._position_action_space()
+        self._setup_chain(config)
+        self._start_chain()
+        self.gains = servo_gains(self.servo.kv, self.servo.effort, config.servo)
 
     def _physics_reset(self, qpos: np.ndarray, target_body_pos: np.ndarray) -> None:
-        self._physics_set_position_targets(qpos)  # hold the start pose
+        self._physics_set_position_targets(qpos)  # hold the start pose while the world settles
+        holding, self._holding = self._holding, True
         super()._physics_reset(qpos, target_body_pos)
+        self._holding = holding
+        if hasattr(self, "limiter"):  # not during the parent's constructor
+            self._start_chain()
 
     def _physics_set_position_targets(self, q_target: np.ndarray) -> None:
         self._q_target = [float(v) for v in q_target]
@@ -227,7 +298,7 @@ class PybulletPositionArmEnv(_PositionActions, PybulletArmEnv):
     def _physics_step(self, n_substeps: int) -> None:
         # PybulletArmEnv._physics_step with the position loop in front of the velocity servo
         calls, body, joints, zeros = self._calls, self.body, self.ids.joints, self._zeros
-        gain = self.servo_config.position_gain
+        gain = self._gain
         for i in range(n_substeps):
             states = calls.get_joint_states(body, joints)
             q = [s[0] for s in states]
@@ -240,13 +311,18 @@ class PybulletPositionArmEnv(_PositionActions, PybulletArmEnv):
             calls.step()
 
 
-def make_position_env(
-    task: TaskConfig, engine: str, servo: ServoConfig | None = None, **kwargs
-) -> gym.Env:
+def make_position_env(task: TaskConfig, engine: str, config: ChainConfig | None = None, **kwargs):
     """A position-controlled env of ``task`` on ``engine`` ("mujoco" or "pybullet"), truncated
-    at ``task.episode_steps`` like the registered envs."""
+    at ``task.episode_steps`` like the registered envs.
+
+    Args:
+        task: the task configuration.
+        engine: "mujoco" or "pybullet".
+        config: the chain and the servo.
+        kwargs: ``urdf``, ``render_mode``, ``width``, ``height``.
+    """
     classes = {"mujoco": MujocoPositionArmEnv, "pybullet": PybulletPositionArmEnv}
     if engine not in classes:
         raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
-    env = classes[engine](task, servo=servo, **kwargs)
+    env = classes[engine](task, config=config, **kwargs)
     return gym.wrappers.TimeLimit(env, task.episode_steps)
