@@ -43,8 +43,8 @@ class LimiterConfig:
             none. 40 rad/s^2 sits just below the torque-limited acceleration of the weakest
             joint at the home pose (shoulder lift: 150 N m over 3.26 kg m^2 = 46 rad/s^2), so
             the arm can follow every command it lets through. Measured with deploy-sim on a
-            Reach policy (MuJoCo, 50 episodes): no clip at 40; at 20, 601 clips and more lag;
-            at 10 the policy falls apart (16% success).
+            Reach policy (MuJoCo, 50 episodes): no clip at 40; at 20, 1221 clips and 98%
+            success; at 10 the policy falls apart (14% success).
     """
 
     position_margin: float = 0.05
