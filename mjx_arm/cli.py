@@ -397,6 +397,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_train)
     _add_policy_commands(sub)
+    from mjx_arm.sim2real.cli import register
+
+    register(sub)
     return parser
 
 

@@ -1,0 +1,172 @@
+"""``mjx-arm deploy-sim``: its parser (:func:`register`) and command (:func:`cmd_deploy_sim`)."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+EXIT_OK, EXIT_INVALID = 0, 2
+
+
+def apply_overrides(config: Any, items: list[str]) -> Any:
+    """A copy of a (nested) frozen dataclass with ``key=value`` or ``outer.inner=value`` set.
+
+    Values take the type of the field they replace.
+
+    Raises:
+        ValueError: an unknown key, a missing ``=``, or a value of the wrong type.
+    """
+    for item in items:
+        key, sep, text = item.partition("=")
+        if not sep:
+            raise ValueError(f"--set expects KEY=VALUE, got {item!r}")
+        config = _set_path(config, key.strip().split("."), text.strip())
+    return config
+
+
+def _set_path(config: Any, path: list[str], text: str) -> Any:
+    names = {f.name for f in dataclasses.fields(config)}
+    if path[0] not in names:
+        raise ValueError(f"unknown setting {path[0]!r}; choose one of {sorted(names)}")
+    current = getattr(config, path[0])
+    if dataclasses.is_dataclass(current):
+        if len(path) == 1:
+            raise ValueError(f"{path[0]!r} is a group; set one of its fields ({path[0]}.NAME)")
+        return dataclasses.replace(config, **{path[0]: _set_path(current, path[1:], text)})
+    if len(path) > 1:
+        raise ValueError(f"{path[0]!r} has no fields")
+    return dataclasses.replace(config, **{path[0]: type(current)(text)})
+
+
+def _settings(config: Any, prefix: str = "") -> list[str]:
+    """``name=value`` of every field (nested ones dotted), for the help text."""
+    out = []
+    for f in dataclasses.fields(config):
+        value = getattr(config, f.name)
+        if dataclasses.is_dataclass(value):
+            out += _settings(value, f"{prefix}{f.name}.")
+        else:
+            out.append(f"{prefix}{f.name}={value:g}")
+    return out
+
+
+def cmd_deploy_sim(args: argparse.Namespace) -> int:
+    """Run a policy through the sim-to-real chain against a position-controlled sim arm.
+
+    policy -> joint velocity targets -> velocity-to-position adapter (first-order filter) ->
+    safety limiter (position, velocity, acceleration) -> position servos of a copy of the sim
+    arm. The same policy also runs on the normal velocity-controlled env with the same
+    episodes. Prints both success rates, the position run's tracking error (joint angles
+    against the commands) and its end-effector deviation from the velocity run, and writes the
+    URScript (servoj) of the first episode.
+    """
+    from mjx_arm.evaluate import resolve_policy
+    from mjx_arm.sim2real.deploy import DeployConfig, deploy_sim, write_commands
+
+    try:
+        config = apply_overrides(DeployConfig(), args.set or [])
+        policy, source = resolve_policy(args.policy)
+    except (ValueError, FileNotFoundError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_INVALID
+    report = deploy_sim(policy, args.engine, args.episodes, args.seed, config)
+    write_commands(report, config, args.script, args.trajectory)
+    commands = report.pop("commands")
+    report = {
+        "policy": source,
+        **report,
+        "script": args.script,
+        "trajectory": args.trajectory,
+        "script_episode": {"index": commands["index"], "seed": commands["seed"]},
+        "script_steps": len(commands["commands"]),
+    }
+    print(format_report(report))
+    if args.output:
+        Path(args.output).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.output).write_text(json.dumps(report, indent=2))
+        print(f"results: {args.output}")
+    return EXIT_OK
+
+
+def format_report(report: dict[str, Any]) -> str:
+    """Human-readable lines of a deploy-sim report."""
+    s = report["settings"]
+    vel, pos = report["velocity_control"], report["position_control"]
+    track, dev = report["tracking_error_rad"], report["ee_deviation_m"]
+
+    def rate(summary: dict[str, Any]) -> str:
+        low, high = summary["success_ci95"]
+        return f"{summary['success_rate']:.3f} ({low:.3f}-{high:.3f})"
+
+    def num(value: float | None, fmt: str) -> str:
+        return "n/a" if value is None else format(value, fmt)
+
+    clips = sum(sum(kinds.values()) for kinds in report["limiter_clips"].values())
+
+    def row(name: str, key: str, fmt: str) -> str:
+        return f"  {name:<24}{num(vel[key], fmt):<22}{num(pos[key], fmt)}"
+
+    lines = [
+        f"deploy-sim {report['task']} on {report['engine']}: {report['episodes']} episodes "
+        f"(seed {report['seed']}); tau {s['tau']:g} s, acceleration limit "
+        f"{s['limiter']['acceleration']:g} rad/s^2, "
+        f"position gain {s['servo']['position_gain']:g} /s",
+        f"  {'':<24}{'velocity control':<22}position control (adapter + limiter)",
+        f"  {'success rate (95% CI)':<24}{rate(vel):<22}{rate(pos)}",
+        row("mean steps to success", "mean_steps_to_success", ".1f"),
+        row("mean return", "mean_return", ".2f"),
+        f"  tracking error (rad): max {num(track['max'], '.4f')}, mean {num(track['mean'], '.4f')}"
+        " (joint angles against the limiter's commands)",
+        f"  ee deviation (m): max {num(dev['max'], '.4f')}, mean {num(dev['mean'], '.4f')}"
+        " (position run against velocity run, same episodes)",
+        f"  limiter clips: {clips}"
+        + "".join(f"\n    {joint}: {kinds}" for joint, kinds in report["limiter_clips"].items()),
+    ]
+    if report.get("script"):
+        episode = report["script_episode"]
+        lines.append(
+            f"URScript: {report['script']} ({report['script_steps']} servoj lines: the longest "
+            f"episode, number {episode['index'] + 1}, seed {episode['seed']})"
+        )
+    if report.get("trajectory"):
+        lines.append(f"JointTrajectory: {report['trajectory']}")
+    return "\n".join(lines)
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``deploy-sim`` subcommand to the ``mjx-arm`` parser's subparsers ``sub``."""
+    from mjx_arm.sim2real.deploy import DeployConfig
+
+    p = sub.add_parser(
+        "deploy-sim",
+        help="run a policy through adapter + limiter on a position-controlled sim arm",
+        description=cmd_deploy_sim.__doc__,
+    )
+    p.add_argument("policy", help="policy file (.npz/.onnx) or run directory (newest checkpoint)")
+    p.add_argument(
+        "--engine",
+        choices=["mujoco", "pybullet"],
+        default="mujoco",
+        help="physics engine (default: mujoco)",
+    )
+    p.add_argument("--episodes", type=int, default=20, help="episodes per run (default: 20)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the first episode (default: 0)")
+    p.add_argument(
+        "--set",
+        action="extend",
+        nargs="+",
+        metavar="KEY=VALUE",
+        help="chain settings (defaults: " + ", ".join(_settings(DeployConfig())) + ")",
+    )
+    p.add_argument(
+        "--script",
+        default="deploy_sim.script",
+        help="URScript file of the longest episode's commands (default: deploy_sim.script)",
+    )
+    p.add_argument("--trajectory", help="also write them as a ROS 2 JointTrajectory JSON file")
+    p.add_argument("-o", "--output", help="JSON file for the results")
+    p.set_defaults(func=cmd_deploy_sim)

@@ -1,0 +1,165 @@
+"""``mjx-arm deploy-sim``: the whole command chain closed around a position-controlled sim arm.
+
+policy -> action -> joint velocity targets -> :class:`VelocityToPositionAdapter` ->
+:class:`SafetyLimiter` -> position targets -> position servos of a copy of the sim arm (the
+stand-in for the robot, :mod:`mjx_arm.sim2real.position_env`) -> observation -> policy. The same
+policy also runs on the normal, velocity-controlled env with the same episode seeds, and the two
+are compared.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mjx_arm.evaluate import EvalRun, Policy, eval_task, make_env, run_episodes, summarize
+from mjx_arm.sim2real.commands import ServojConfig, joint_trajectory_msg, urscript_program
+from mjx_arm.sim2real.limiter import LimiterConfig
+from mjx_arm.sim2real.position_env import (
+    ChainConfig,
+    EpisodeCommands,
+    ServoConfig,
+    make_position_env,
+)
+from mjx_arm.task.config import TaskConfig
+
+
+@dataclass(frozen=True)
+class DeployConfig:
+    """Settings of a deploy-sim run.
+
+    Attributes:
+        tau, limiter, servo: the command chain and the servo (see :class:`ChainConfig`).
+        lookahead_time, gain: the ``servoj`` arguments of the written URScript.
+    """
+
+    tau: float = 0.02
+    limiter: LimiterConfig = field(default_factory=LimiterConfig)
+    servo: ServoConfig = field(default_factory=ServoConfig)
+    lookahead_time: float = 0.1
+    gain: float = 300.0
+
+    def __post_init__(self) -> None:
+        self.chain()  # range checks
+        ServojConfig(t=1.0, lookahead_time=self.lookahead_time, gain=self.gain)
+
+    def chain(self) -> ChainConfig:
+        """The position env's chain and servo settings."""
+        return ChainConfig(tau=self.tau, limiter=self.limiter, servo=self.servo)
+
+
+def _stats(values: list[np.ndarray]) -> dict[str, float | None]:
+    flat = np.concatenate([np.ravel(v) for v in values]) if values else np.zeros(0)
+    if flat.size == 0:
+        return {"max": None, "mean": None}
+    return {"max": float(flat.max()), "mean": float(flat.mean())}
+
+
+def tracking_error(episodes: list[EpisodeCommands]) -> dict[str, float | None]:
+    """Max and mean of ``|measured - command|`` (rad) over every joint and step."""
+    errors = []
+    for e in episodes:
+        a = e.arrays()
+        errors.append(np.abs(a["measured"] - a["commands"]))
+    return _stats(errors)
+
+
+def ee_deviation(velocity_run: EvalRun, position_run: EvalRun) -> dict[str, float | None]:
+    """Max and mean distance (m) between the end-effector paths of the two runs, episode by
+    episode, over the steps both ran (episodes stop at success)."""
+    gaps = []
+    for tv, tp in zip(velocity_run.trajectories, position_run.trajectories, strict=True):
+        n = min(len(tv["ee_pos"]), len(tp["ee_pos"]))
+        gaps.append(np.linalg.norm(tv["ee_pos"][:n] - tp["ee_pos"][:n], axis=1))
+    return _stats(gaps)
+
+
+def deploy_sim(
+    policy: Policy,
+    engine: str = "mujoco",
+    episodes: int = 20,
+    seed: int = 0,
+    config: DeployConfig | None = None,
+    task: TaskConfig | None = None,
+) -> dict[str, Any]:
+    """Run ``policy`` through the chain on a position-controlled arm and on the normal env.
+
+    Episode ``i`` of both runs is reset with ``seed + i`` (same start pose and target).
+
+    Args:
+        policy: observation -> action, e.g. :func:`mjx_arm.policy.load`'s result.
+        engine: "mujoco" or "pybullet".
+        episodes: episodes per run.
+        seed: seed of the first episode.
+        config: the chain's settings.
+        task: the task (default: the one the policy was trained on).
+
+    Returns:
+        A JSON-ready report: ``velocity_control`` and ``position_control`` summaries (success
+        rate with its 95 % interval, return, steps to success), ``tracking_error_rad``
+        (position run: the arm against the commands), ``ee_deviation_m`` (position run against
+        the velocity run), ``limiter_clips``, the servo gains, the settings, and
+        ``"commands"``: the position run's longest episode (its ``index`` and ``seed``, and
+        :meth:`EpisodeCommands.arrays`: numpy arrays, for :func:`write_commands`).
+    """
+    config = config or DeployConfig()
+    task = task or eval_task(policy)[0]
+    velocity_env = make_env(task, engine)
+    try:
+        velocity_run = run_episodes(policy, velocity_env, episodes, seed)
+    finally:
+        velocity_env.close()
+    position_env = make_position_env(task, engine, config.chain())
+    try:
+        position_run = run_episodes(policy, position_env, episodes, seed)
+    finally:
+        position_env.close()
+    base = position_env.unwrapped
+    longest = max(range(episodes), key=lambda i: len(base.episodes[i].commands))
+    return {
+        "engine": engine,
+        "task": task.task,
+        "episodes": episodes,
+        "seed": seed,
+        "velocity_control": summarize(velocity_run.episodes),
+        "position_control": summarize(position_run.episodes),
+        "tracking_error_rad": tracking_error(base.episodes),
+        "ee_deviation_m": ee_deviation(velocity_run, position_run),
+        "limiter_clips": base.limiter.clip_summary(),
+        "servo_gains": base.gains.to_dict(base.arm.joint_names),
+        "settings": asdict(config),
+        "commands": {
+            "index": longest,
+            "seed": seed + longest,
+            **base.episodes[longest].arrays(),
+        },
+        "joint_names": list(base.arm.joint_names),
+        "ctrl_dt": task.ctrl_dt,
+    }
+
+
+def write_commands(
+    report: dict[str, Any],
+    config: DeployConfig,
+    script_path: str | Path | None,
+    trajectory_path: str | Path | None,
+) -> None:
+    """Write one episode's commands as a URScript program and/or a JointTrajectory JSON.
+
+    Args:
+        report: :func:`deploy_sim`'s result.
+        config: the chain's settings (the ``servoj`` arguments).
+        script_path: ``.script`` file to write, or None.
+        trajectory_path: ``.json`` file to write, or None.
+    """
+    episode, names, dt = report["commands"], report["joint_names"], report["ctrl_dt"]
+    if script_path is not None:
+        servoj = ServojConfig(t=dt, lookahead_time=config.lookahead_time, gain=config.gain)
+        Path(script_path).write_text(urscript_program(episode["commands"], servoj, names))
+    if trajectory_path is not None:
+        msg = joint_trajectory_msg(episode["commands"], dt, names, episode["velocities"])
+        Path(trajectory_path).write_text(json.dumps(msg, indent=1))

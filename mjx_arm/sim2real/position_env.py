@@ -1,0 +1,328 @@
+"""Position-controlled copies of the CPU envs: the same task, a position servo on each joint.
+
+A real UR5e takes joint position targets (URScript ``servoj``, or a ROS 2 position controller)
+where the training envs take velocity targets. These envs keep everything of the contract
+(spaces, observation, reward, success, termination, sampling: all from :class:`BaseRobotEnv`)
+and change only the actuation. The action is still the contract's velocity action; the env's
+velocity hook passes the joint velocity targets through the sim-to-real chain,
+:class:`VelocityToPositionAdapter` then :class:`SafetyLimiter`, and the limiter's command becomes
+the position servos' target. A policy runs on these envs unchanged, and what the robot would
+have been sent is logged per episode (:attr:`episodes`).
+
+The servo is a position loop around the env's own velocity servo, as in an industrial joint
+drive (position loop, velocity loop, current loop)::
+
+    torque = clip(kv * (K * (q_target - q) - qdot), +-effort)
+
+``kv`` is the velocity actuator's gain of the converted model (the smallest apparent joint
+inertia over the joint ranges divided by ``sim_dt``, see
+:class:`mjx_arm.urdf.convert.ConvertConfig`), ``effort`` the URDF torque cap and ``K`` the
+position-loop gain (1/s) of :class:`ServoConfig`. So ``kp = K * kv`` and the damping is the
+velocity loop's own ``kv``. Gravity compensation, joint damping and armature are the velocity
+model's. In MuJoCo the loop is a ``position`` actuator (``kp``, ``kv``), made by editing the
+compiled task model's actuators in place (the model's ids and sensors are those of the velocity
+env); in PyBullet it is applied as torques at every substep, like the velocity servo there.
+
+Why ``K = 40 /s``: around one joint of inertia ``I`` the loop is ``I s^2 + kv s + kv K``. With
+``b = kv / I`` (the velocity loop's bandwidth: 240 /s at the smallest inertia, about 100 /s for
+the shoulder lift at the home pose, where its inertia is 2.4 times the smallest), the damping
+ratio is ``0.5 * sqrt(b / K)``: 0.79 for the shoulder lift at home and 1.2 at the wrists, so no
+joint rings. The steady lag behind a ramp is ``v / K``: 0.04 rad at the policies' top speed of
+1.57 rad/s. A higher ``K`` cuts the lag but leaves the heavy joints under-damped when the arm
+is stretched out; the explicit ``kp`` term stays stable (``sqrt(K * sim_dt) = 0.41 < 1``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+import pybullet
+
+from mjx_arm.envs.arm import ArmInfo
+from mjx_arm.envs.base import DEFAULT_HEIGHT, DEFAULT_WIDTH
+from mjx_arm.envs.mujoco_env import MujocoArmEnv
+from mjx_arm.sim2real.adapter import VelocityToPositionAdapter
+from mjx_arm.sim2real.limiter import JointLimits, LimiterConfig, SafetyLimiter
+from mjx_arm.task.config import TaskConfig
+from pybullet_ref.env import PybulletArmEnv
+
+ENGINES = ("mujoco", "pybullet")
+
+
+@dataclass(frozen=True)
+class ServoConfig:
+    """The position servo of the position-controlled envs.
+
+    Attributes:
+        position_gain: ``K`` (1/s), the position loop's gain around the velocity servo: a
+            position error ``e`` asks for the joint velocity ``K * e``.
+    """
+
+    position_gain: float = 40.0
+
+    def __post_init__(self) -> None:
+        if not self.position_gain > 0:
+            raise ValueError(f"position_gain must be positive, got {self.position_gain}")
+
+
+@dataclass(frozen=True)
+class ServoGains:
+    """Per-joint gains of the position servo, contract joint order.
+
+    Attributes:
+        kp: position gain (N m/rad), ``(6,)``.
+        kv: velocity gain (N m s/rad), ``(6,)``.
+        effort: torque cap (N m), ``(6,)``.
+    """
+
+    kp: np.ndarray
+    kv: np.ndarray
+    effort: np.ndarray
+
+    def to_dict(self, names: tuple[str, ...]) -> dict[str, dict[str, float]]:
+        """``{joint: {kp, kv, effort}}``, JSON-ready."""
+        return {
+            name: {"kp": float(p), "kv": float(v), "effort": float(e)}
+            for name, p, v, e in zip(names, self.kp, self.kv, self.effort, strict=True)
+        }
+
+
+def servo_gains(kv: np.ndarray, effort: np.ndarray, config: ServoConfig) -> ServoGains:
+    """The position servo around velocity servos of gains ``kv (6,)`` and caps ``effort (6,)``."""
+    kv = np.asarray(kv, dtype=np.float64)
+    return ServoGains(kp=config.position_gain * kv, kv=kv, effort=np.asarray(effort, np.float64))
+
+
+def use_position_servos(
+    model: mujoco.MjModel, actuators: np.ndarray, arm: ArmInfo, config: ServoConfig
+) -> ServoGains:
+    """Turn the velocity actuators ``actuators (6,)`` of ``model`` into position servos.
+
+    In place: gain ``kp``, bias ``(0, -kp, -kv)`` (MuJoCo's ``position`` actuator with ``kv``),
+    control range = the URDF joint range. The force range (the URDF effort) is kept.
+
+    Raises:
+        ValueError: an actuator is not the converter's velocity actuator.
+    """
+    kv = model.actuator_gainprm[actuators, 0].copy()
+    bias = model.actuator_biasprm[actuators, :3]
+    if not np.allclose(bias, np.stack([np.zeros_like(kv), np.zeros_like(kv), -kv], axis=1)):
+        raise ValueError(f"expected velocity actuators (bias 0, 0, -kv), got biasprm {bias}")
+    gains = servo_gains(kv, model.actuator_forcerange[actuators, 1], config)
+    model.actuator_gainprm[actuators, 0] = gains.kp
+    model.actuator_biasprm[actuators, 1] = -gains.kp
+    model.actuator_biasprm[actuators, 2] = -gains.kv
+    model.actuator_ctrlrange[actuators] = np.stack([arm.lower, arm.upper], axis=1)
+    return gains
+
+
+@dataclass(frozen=True)
+class ChainConfig:
+    """The command chain and servo of a position-controlled env.
+
+    Attributes:
+        tau: time constant (s) of the adapter's low-pass filter. 0.02 s (0.6 control periods)
+            smooths the 30 Hz staircase of targets and a policy's bang-bang switches while
+            adding only 20 ms of lag.
+        limiter: how the limiter's limits are derived from the URDF.
+        servo: the position servo.
+    """
+
+    tau: float = 0.02
+    limiter: LimiterConfig = field(default_factory=LimiterConfig)
+    servo: ServoConfig = field(default_factory=ServoConfig)
+
+    def __post_init__(self) -> None:
+        if not self.tau >= 0:
+            raise ValueError(f"tau must be >= 0, got {self.tau}")
+
+
+@dataclass
+class EpisodeCommands:
+    """What the chain sent in one episode and what the arm did.
+
+    Attributes:
+        commands: the limiter's position commands (rad), one ``(6,)`` per step.
+        velocities: their velocities (rad/s), one ``(6,)`` per step.
+        measured: joint angles (rad) one control period after each command.
+    """
+
+    commands: list[np.ndarray] = field(default_factory=list)
+    velocities: list[np.ndarray] = field(default_factory=list)
+    measured: list[np.ndarray] = field(default_factory=list)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The three lists as ``(T, 6)`` arrays."""
+        return {k: np.array(getattr(self, k)).reshape(-1, 6) for k in asdict(self)}
+
+
+class _ChainActuation:
+    """Velocity targets -> adapter -> limiter -> position servo targets.
+
+    Mixed in before the engine's env class; the engine supplies
+    ``_physics_set_position_targets``. The velocity hook is ignored while ``_holding`` (an
+    engine's reset may command zero velocity while it rebuilds the world).
+    """
+
+    arm: ArmInfo
+    task: TaskConfig
+
+    def _setup_chain(self, config: ChainConfig) -> None:
+        self.chain_config = config
+        self.limits = JointLimits.from_urdf(self.arm.urdf, config.limiter)
+        home = np.asarray(self.task.home_qpos, dtype=np.float64)
+        dt, lim = self.task.ctrl_dt, self.limits
+        self.adapter = VelocityToPositionAdapter(dt, config.tau, home, lim.lower, lim.upper)
+        self.limiter = SafetyLimiter(lim, dt, home)
+        self.episodes: list[EpisodeCommands] = []
+        self._holding = False
+
+    def _physics_set_velocity_targets(self, qdot_target: np.ndarray) -> None:
+        if not self._holding:
+            self._physics_set_position_targets(self.limiter(self.adapter.step(qdot_target)))
+
+    def _start_chain(self) -> None:
+        """Start adapter and limiter at the measured joint angles; the servo holds them."""
+        q = self.measured_qpos()
+        self.adapter.reset(q)
+        self.limiter.reset(q)
+        self._physics_set_position_targets(q)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """Reset the episode (see :meth:`BaseRobotEnv.reset`) and start a new command log."""
+        result = super().reset(seed=seed, options=options)
+        self.episodes.append(EpisodeCommands())
+        return result
+
+    def step(self, action):
+        """One contract action through the chain (see :meth:`BaseRobotEnv.step`), logged."""
+        result = super().step(action)
+        if self.episodes:
+            log = self.episodes[-1]
+            log.commands.append(self.limiter.command)
+            log.velocities.append(self.limiter.velocity)
+            log.measured.append(self.measured_qpos())
+        return result
+
+    def measured_qpos(self) -> np.ndarray:
+        """Joint angles (rad, not wrapped) as the joint encoders read them now, ``(6,)``."""
+        return self._physics_read().qpos
+
+
+class MujocoPositionArmEnv(_ChainActuation, MujocoArmEnv):
+    """:class:`MujocoArmEnv` driven through the chain into position servos.
+
+    Args:
+        task: the task configuration (default: Touch).
+        urdf: the arm URDF (default: the shipped arm).
+        config: the chain and the servo (default: :class:`ChainConfig()`).
+        render_mode, width, height: as for :class:`MujocoArmEnv`.
+    """
+
+    def __init__(
+        self,
+        task: TaskConfig | None = None,
+        urdf: str | Path | None = None,
+        config: ChainConfig | None = None,
+        render_mode: str | None = None,
+        width: int = DEFAULT_WIDTH,
+        height: int = DEFAULT_HEIGHT,
+    ) -> None:
+        super().__init__(task, urdf, render_mode, width, height)
+        config = config or ChainConfig()
+        self._setup_chain(config)
+        self.gains = use_position_servos(self.model, self.ids.actuators, self.arm, config.servo)
+
+    def _physics_reset(self, qpos: np.ndarray, target_body_pos: np.ndarray) -> None:
+        super()._physics_reset(qpos, target_body_pos)
+        self._start_chain()
+        # the parent's forward pass saw ctrl = 0, a pull towards q = 0 that moves the
+        # accelerations (and so the F/T reading): redo it with the servo holding the start
+        mujoco.mj_forward(self.model, self.data)
+        mujoco.mj_rnePostConstraint(self.model, self.data)
+        mujoco.mj_sensorAcc(self.model, self.data)
+
+    def _physics_set_position_targets(self, q_target: np.ndarray) -> None:
+        self._ctrl[self._act] = q_target
+
+
+class PybulletPositionArmEnv(_ChainActuation, PybulletArmEnv):
+    """:class:`PybulletArmEnv` driven through the chain into position servos.
+
+    The torque law at every substep is the velocity servo's with the velocity target
+    ``K * (q_target - q)``: ``clip(kv * (K * (q_target - q) - qdot), +-effort) - d * qdot
+    + g(q)``, the same law as MuJoCo's position actuator with its joint damping and gravity
+    compensation.
+
+    Args:
+        task: the task configuration (default: Touch).
+        urdf: the arm URDF (default: the shipped arm).
+        config: the chain and the servo (default: :class:`ChainConfig()`).
+        render_mode, width, height: as for :class:`PybulletArmEnv`.
+    """
+
+    def __init__(
+        self,
+        task: TaskConfig | None = None,
+        urdf: str | Path | None = None,
+        config: ChainConfig | None = None,
+        render_mode: str | None = None,
+        width: int = DEFAULT_WIDTH,
+        height: int = DEFAULT_HEIGHT,
+    ) -> None:
+        # the parent's constructor resets the world, which steps the servo: set it up first
+        config = config or ChainConfig()
+        self._gain = config.servo.position_gain
+        self._q_target: list[float] = []
+        self._holding = True
+        super().__init__(task, urdf, render_mode, width, height)
+        self._setup_chain(config)
+        self._start_chain()
+        self.gains = servo_gains(self.servo.kv, self.servo.effort, config.servo)
+
+    def _physics_reset(self, qpos: np.ndarray, target_body_pos: np.ndarray) -> None:
+        self._physics_set_position_targets(qpos)  # hold the start pose while the world settles
+        holding, self._holding = self._holding, True
+        super()._physics_reset(qpos, target_body_pos)
+        self._holding = holding
+        if hasattr(self, "limiter"):  # not during the parent's constructor
+            self._start_chain()
+
+    def _physics_set_position_targets(self, q_target: np.ndarray) -> None:
+        self._q_target = [float(v) for v in q_target]
+
+    def _physics_step(self, n_substeps: int) -> None:
+        # PybulletArmEnv._physics_step with the position loop in front of the velocity servo
+        calls, body, joints, zeros = self._calls, self.body, self.ids.joints, self._zeros
+        gain = self._gain
+        for i in range(n_substeps):
+            states = calls.get_joint_states(body, joints)
+            q = [s[0] for s in states]
+            gravity = calls.inverse_dynamics(body, q, zeros, zeros)
+            u = [gain * (t - x) for t, x in zip(self._q_target, q, strict=True)]
+            torque = self.servo.torque(u, [s[1] for s in states], gravity)
+            calls.set_motors(body, joints, pybullet.TORQUE_CONTROL, forces=torque)
+            if i == n_substeps - 1:
+                self._tool_before = self._tool_velocity()
+            calls.step()
+
+
+def make_position_env(task: TaskConfig, engine: str, config: ChainConfig | None = None, **kwargs):
+    """A position-controlled env of ``task`` on ``engine`` ("mujoco" or "pybullet"), truncated
+    at ``task.episode_steps`` like the registered envs.
+
+    Args:
+        task: the task configuration.
+        engine: "mujoco" or "pybullet".
+        config: the chain and the servo.
+        kwargs: ``urdf``, ``render_mode``, ``width``, ``height``.
+    """
+    classes = {"mujoco": MujocoPositionArmEnv, "pybullet": PybulletPositionArmEnv}
+    if engine not in classes:
+        raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
+    env = classes[engine](task, config=config, **kwargs)
+    return gym.wrappers.TimeLimit(env, task.episode_steps)

@@ -1,0 +1,197 @@
+"""Position-controlled envs, the command chain and ``mjx-arm deploy-sim``.
+
+The deploy tests reuse the session's small trained Reach policy (``test_policy.trained_run_dir``,
+about 30-40 s of training on a CPU, shared with test_policy, test_evaluate and test_replay).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_policy import trained_run_dir
+
+from mjx_arm.cli import EXIT_INVALID, EXIT_OK, main
+from mjx_arm.envs.mujoco_env import MujocoArmEnv
+from mjx_arm.policy import export_policy, load
+from mjx_arm.sim2real.deploy import DeployConfig, deploy_sim
+from mjx_arm.sim2real.limiter import JointLimits
+from mjx_arm.sim2real.observation import ObservationBuilder
+from mjx_arm.sim2real.position_env import ChainConfig, ServoConfig, make_position_env
+from mjx_arm.task.config import task_config
+from pybullet_ref.env import PybulletArmEnv
+
+REACH = task_config("reach")
+VELOCITY_ENVS = {"mujoco": MujocoArmEnv, "pybullet": PybulletArmEnv}
+ENGINES = [
+    "mujoco",
+    pytest.param("pybullet", marks=pytest.mark.pybullet),
+]
+# Measured on the session's small policy (122,880 training steps), 20 episodes, seed 0:
+# success with velocity control / through the chain: MuJoCo 1.00 / 1.00, PyBullet 1.00 / 1.00
+# (before the hold-to-succeed rule came in: 0.90 / 0.95 and 0.95 / 0.95). The tests ask for
+# 0.75 through the chain, and no more than 0.15 below velocity control.
+POSITION_SUCCESS_MIN = 0.75
+SUCCESS_GAP_MAX = 0.15
+DEPLOY_EPISODES = 20
+
+
+@pytest.fixture(scope="module")
+def policy_path(tmp_path_factory) -> Path:
+    run_dir = trained_run_dir(tmp_path_factory)
+    return export_policy(run_dir, tmp_path_factory.mktemp("deploy") / "policy.npz")
+
+
+# --------------------------------------------------------------------------- position envs
+
+
+STILL = np.zeros(6, np.float32)
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_position_env_keeps_the_contract(engine: str):
+    """Same spaces, the same first observation and the same info as the velocity env."""
+    position = make_position_env(REACH, engine)
+    velocity = VELOCITY_ENVS[engine](REACH)
+    try:
+        assert position.observation_space == velocity.observation_space
+        assert position.action_space == velocity.action_space
+        obs_p, info_p = position.reset(seed=3)
+        obs_v, info_v = velocity.reset(seed=3)
+        for key in obs_v:
+            np.testing.assert_array_equal(obs_p[key], obs_v[key])
+        assert info_p.keys() == info_v.keys()
+        action = np.array([0.3, -0.2, 0.1, 0.0, 0.5, -0.4], np.float32)
+        obs_p, reward_p, _, truncated, info_p = position.step(action)
+        _, _, _, _, info_v = velocity.step(action)
+        assert info_p.keys() == info_v.keys()
+        assert info_p["reward_terms"].keys() == info_v["reward_terms"].keys()
+        assert np.isfinite(reward_p) and not truncated
+        assert position.observation_space.contains(obs_p)
+        with pytest.raises(ValueError, match="NaN or inf"):
+            position.step(np.full(6, np.nan))
+    finally:
+        position.close()
+        velocity.close()
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_position_servo_holds_and_follows_the_commands(engine: str):
+    """Still actions hold the start pose (drift < 1e-6 rad). After 10 steps at half speed
+    the arm settles within 1e-3 rad of the last command in 15 still steps (0.5 s)."""
+    env = make_position_env(REACH, engine)
+    try:
+        env.reset(seed=0)
+        base = env.unwrapped
+        q0 = base.measured_qpos()
+        for _ in range(10):
+            env.step(STILL)
+        np.testing.assert_allclose(base.measured_qpos(), q0, atol=1e-6)
+        for _ in range(10):
+            env.step(np.full(6, 0.5, np.float32))
+        for _ in range(15):
+            env.step(STILL)
+        command = base.limiter.command
+        assert np.abs(command - q0).min() > 0.2  # it moved: about 0.26 rad per joint
+        np.testing.assert_allclose(base.measured_qpos(), command, atol=1e-3)
+        log = base.episodes[-1].arrays()
+        assert log["commands"].shape == log["measured"].shape == (35, 6)
+    finally:
+        env.close()
+
+
+def test_servo_gains_wrap_the_velocity_servo():
+    """kp = K * kv with the velocity actuator's kv; force capped at the URDF effort."""
+    velocity = MujocoArmEnv(REACH)
+    config = ChainConfig(servo=ServoConfig(position_gain=25.0))
+    position = make_position_env(REACH, "mujoco", config).unwrapped
+    act = velocity.ids.actuators
+    kv = velocity.model.actuator_gainprm[act, 0]
+    np.testing.assert_allclose(position.gains.kv, kv)
+    np.testing.assert_allclose(position.gains.kp, 25.0 * kv)
+    np.testing.assert_allclose(position.model.actuator_biasprm[act, 1:3], -np.c_[25.0 * kv, kv])
+    np.testing.assert_allclose(position.model.actuator_forcerange[act, 1], position.arm.effort)
+    np.testing.assert_allclose(position.model.actuator_ctrlrange[act, 0], position.arm.lower)
+
+
+def test_observation_builder_matches_the_env():
+    """Forward kinematics from the joint angles gives the env's observation at reset (within
+    1e-6; after a step the env reads its sensors one substep before the final joint angles)."""
+    env = MujocoArmEnv(REACH)
+    builder = ObservationBuilder(REACH)
+    for seed in range(3):
+        obs, _ = env.reset(seed=seed)
+        q = env.data.qpos[env.ids.qpos_adr]
+        built = builder(q, env.data.site_xpos[env.ids.target_site], np.zeros(6))
+        for key in obs:
+            np.testing.assert_allclose(built[key], obs[key], atol=1e-6)
+    with pytest.raises(ValueError, match="6 finite"):
+        builder(np.full(6, np.nan), np.zeros(3))
+
+
+def test_chain_starts_each_episode_at_the_measured_pose():
+    """Zero velocity actions: the commands stay at the measured start of each episode."""
+    env = make_position_env(REACH, "mujoco")
+    for seed in (1, 2):
+        env.reset(seed=seed)
+        q0 = env.unwrapped.measured_qpos()
+        for _ in range(20):
+            env.step(STILL)
+        commands = env.unwrapped.episodes[-1].arrays()["commands"]
+        np.testing.assert_array_equal(commands, np.tile(q0, (20, 1)))
+    assert env.unwrapped.limiter.total_clips == 0 and len(env.unwrapped.episodes) == 2
+    env.close()
+
+
+# --------------------------------------------------------------------------- deploy-sim
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_deploy_sim_success_through_the_chain(policy_path: Path, engine: str):
+    report = deploy_sim(load(policy_path), engine, DEPLOY_EPISODES, seed=0)
+    vel = report["velocity_control"]["success_rate"]
+    pos = report["position_control"]["success_rate"]
+    print(f"\n[deploy-sim {engine}] velocity {vel:.2f}, position {pos:.2f}, {report}")
+    assert pos >= POSITION_SUCCESS_MIN
+    assert pos >= vel - SUCCESS_GAP_MAX
+    # measured: max 0.020 / 0.028 rad, mean 0.0051 / 0.0061 rad (MuJoCo / PyBullet)
+    assert report["tracking_error_rad"]["max"] < 0.1
+    assert report["tracking_error_rad"]["mean"] < 0.02
+    assert report["ee_deviation_m"]["mean"] < 0.03
+    commands = report["commands"]["commands"]
+    limits = JointLimits.from_urdf()
+    assert (commands >= limits.lower).all() and (commands <= limits.upper).all()
+
+
+def test_cli_deploy_sim_writes_the_urscript(policy_path: Path, tmp_path: Path, capsys):
+    script, trajectory, output = tmp_path / "p.script", tmp_path / "t.json", tmp_path / "r.json"
+    argv = ["deploy-sim", str(policy_path), "--episodes", "4", "--script", str(script)]
+    argv += ["--trajectory", str(trajectory), "-o", str(output), "--set", "tau=0.05"]
+    assert main(argv) == EXIT_OK
+    out = capsys.readouterr().out
+    assert "success rate" in out and "tracking error" in out
+    result = json.loads(output.read_text())
+    assert result["settings"]["tau"] == 0.05 and result["episodes"] == 4
+    lines = [line.strip() for line in script.read_text().splitlines()]
+    servoj = [line for line in lines if line.startswith("servoj(")]
+    assert len(servoj) == result["script_steps"] >= 1
+    assert all(re.fullmatch(r"servoj\(\[[^]]+\], 0, 0, 0\.033333, 0\.1, 300\)", s) for s in servoj)
+    msg = json.loads(trajectory.read_text())
+    first = [float(v) for v in servoj[0][8 : servoj[0].index("]")].split(",")]
+    np.testing.assert_allclose(first, msg["points"][0]["positions"], atol=5e-7)
+    assert len(msg["points"]) == len(servoj)
+
+
+def test_cli_deploy_sim_rejects_bad_settings(policy_path: Path, capsys):
+    assert main(["deploy-sim", str(policy_path), "--set", "limiter.speed=1"]) == EXIT_INVALID
+    assert "unknown setting 'speed'" in capsys.readouterr().err
+    assert main(["deploy-sim", str(policy_path), "--set", "gain=50"]) == EXIT_INVALID
+    assert "gain must be in [100, 2000]" in capsys.readouterr().err
+
+
+def test_deploy_config_validates():
+    with pytest.raises(ValueError, match="tau"):
+        DeployConfig(tau=-0.1)
