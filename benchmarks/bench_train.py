@@ -6,8 +6,11 @@ this script (imports included). Compile time (first training epoch minus its ste
 steady training throughput are reported apart. ``--devices N`` limits Brax to N local devices,
 for the 1-vs-2 GPU scaling measurement::
 
-    python benchmarks/bench_train.py --tasks reach touch --preset fast
-    python benchmarks/bench_train.py --tasks reach --preset fast --devices 1 --name scaling_1
+    python benchmarks/bench_train.py --tasks reach touch --preset fast --cold
+    python benchmarks/bench_train.py --tasks reach --preset fast --set physics.impl=jax
+
+``--cold`` points JAX's persistent compilation cache and Warp's kernel cache at new, empty
+folders, so the time includes every compilation, as on a fresh machine.
 """
 
 from __future__ import annotations
@@ -60,6 +63,7 @@ def run_task(task: str, args: argparse.Namespace, start: float) -> dict:
     """Train one task and return its timings."""
     from mjx_arm.train.config import load_config
     from mjx_arm.train.ppo import train
+    from mjx_arm.train.rundir import RunDir
 
     overrides = [f"task={task}", f"backend={args.backend}", *args.set]
     if args.devices:
@@ -68,9 +72,13 @@ def run_task(task: str, args: argparse.Namespace, start: float) -> dict:
     run_dir = args.out / f"{task}-{args.preset}-{int(time.time())}"
     result = train(config, run_dir, quiet=True)
     seconds, step, best = solve_time(run_dir, start)
+    resolved = RunDir(run_dir).load_config().get("physics_resolved", {})
     return {
         "task": task,
         "preset": args.preset,
+        "impl": resolved.get("impl"),
+        "physics": resolved,
+        "cold_cache": args.cold,
         "config": config.to_dict(),
         "time_to_solve_s": seconds,
         "solve_step": step,
@@ -95,7 +103,14 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("runs/bench"))
     parser.add_argument("--results-dir", type=Path, default=None)
     parser.add_argument("--name", default=None)
+    parser.add_argument("--cold", action="store_true", help="empty compilation caches")
     args = parser.parse_args()
+    if args.cold:
+        import os
+        import tempfile
+
+        os.environ["MJX_ARM_JAX_CACHE"] = tempfile.mkdtemp(prefix="jax_cache_")
+        os.environ["WARP_CACHE_PATH"] = tempfile.mkdtemp(prefix="warp_cache_")
 
     import jax
 
@@ -112,6 +127,7 @@ def main() -> None:
     meta["devices_used"] = args.devices or jax.local_device_count()
     headers = [
         "task",
+        "impl",
         "time to 95% (s)",
         "solve step",
         "best success",
@@ -125,6 +141,7 @@ def main() -> None:
         [
             [
                 r["task"],
+                r["impl"],
                 f"{r['time_to_solve_s']:.1f}"
                 if r["time_to_solve_s"] is not None
                 else "not reached",

@@ -218,12 +218,12 @@ def test_gentle_terms_hand_worked() -> None:
     )
     assert float(terms["force_excess"]) == pytest.approx(30.0 / 50.0)
     assert float(terms["overforce"]) == 1.0
-    assert float(terms["approach_speed"]) == pytest.approx(0.02 * 30)  # (0.05 - 0.03) / (1/30)
+    assert float(terms["approach_speed"]) == pytest.approx(0.6**2)  # ((0.05 - 0.03) * 30)^2
     assert float(terms["action_rate"]) == 0.5
     assert float(terms["contact"]) == 0.0
     expected = (
-        -10 * (1 - math.exp(-0.3)) - 100 * 0.6 - 20 * 0.6 - 0.05 * 0.5 - 200 * 1.0
-    )  # -274.6173
+        -10 * (1 - math.exp(-0.3)) - 100 * 0.6 - 10 * 0.36 - 0.05 * 0.5 - 200 * 1.0
+    )  # -266.2173
     assert float(reward_lib.total_reward(terms, cfg)) == pytest.approx(expected, abs=1e-9)
     # moving away and far from the box: no approach term
     away = reward_lib.Motion(prev_distance=0.02, action_change=0.0)

@@ -28,7 +28,7 @@ class RewardConfig:
     ``joint_velocity`` = sum |qdot| (rad/s), ``success`` = 1 on the success step,
     ``nonfinite`` = 1 when the physics state is not finite,
     ``force_excess`` = (F - F_max) / F_max where the contact force F is above the band, else 0,
-    ``approach_speed`` = how fast d shrinks (m/s) while d < ``approach_radius``,
+    ``approach_speed`` = (how fast d shrinks)^2 (m^2/s^2) while d < ``approach_radius``,
     ``action_rate`` = sum (a_t - a_{t-1})^2 over the six action entries,
     ``overforce`` = 1 on a step whose contact force is above the band.
     """
@@ -70,7 +70,7 @@ REWARD_TERMS = (
 # stop would on a real arm; closing in fast near the box and jerky actions cost a little.
 GENTLE_REWARD = RewardConfig(
     force_excess=-100.0,
-    approach_speed=-20.0,
+    approach_speed=-10.0,
     action_rate=-0.05,
     overforce=-200.0,
 )

@@ -229,8 +229,10 @@ def band_reward_terms(
     if motion is None:
         closing, change = zero, zero
     else:
+        # squared: the cost of an approach grows with its speed (a sum of plain speeds over
+        # the approach would be the distance closed over ctrl_dt, whatever the speed)
         closing = xp.maximum(motion.prev_distance - distance, 0.0) / cfg.ctrl_dt
-        closing = closing * (distance < cfg.reward.approach_radius)
+        closing = closing * closing * (distance < cfg.reward.approach_radius)
         change = motion.action_change + zero
     terms = {
         "distance": 1.0 - xp.exp(-distance / cfg.reward.distance_length),
