@@ -17,10 +17,11 @@ from test_policy import trained_run_dir
 from mjx_arm.cli import EXIT_INVALID, EXIT_OK, main
 from mjx_arm.envs.mujoco_env import MujocoArmEnv
 from mjx_arm.policy import export_policy, load
-from mjx_arm.sim2real.deploy import DeployConfig, deploy_sim
+from mjx_arm.sim2real.deploy import deploy_sim
 from mjx_arm.sim2real.limiter import JointLimits
 from mjx_arm.sim2real.observation import ObservationBuilder
-from mjx_arm.sim2real.position_env import ChainConfig, ServoConfig, make_position_env
+from mjx_arm.sim2real.position_env import make_position_env
+from mjx_arm.sim2real.settings import ChainConfig, DeployConfig, ServoConfig
 from mjx_arm.task.config import task_config
 from pybullet_ref.env import PybulletArmEnv
 

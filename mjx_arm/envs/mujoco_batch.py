@@ -206,6 +206,9 @@ class MujocoCallbackPhysics:
         """Always False: C MuJoCo grows its buffers as needed."""
         return jnp.zeros((), bool)
 
+    def check_overflow(self, flags: object) -> None:
+        """Nothing to check: C MuJoCo never drops contacts (``flags`` are all False)."""
+
     def where(self, done: jax.Array, new: CState, old: CState) -> CState:
         """Per env: ``new`` where ``done (B,)`` else ``old``."""
         return batched_where(done, new, old)

@@ -139,7 +139,7 @@ def format_report(report: dict[str, Any]) -> str:
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``deploy-sim`` subcommand to the ``mjx-arm`` parser's subparsers ``sub``."""
-    from mjx_arm.sim2real.deploy import DeployConfig
+    from mjx_arm.sim2real.settings import DeployConfig
 
     p = sub.add_parser(
         "deploy-sim",

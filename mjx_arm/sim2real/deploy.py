@@ -10,7 +10,7 @@ are compared.
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -18,38 +18,9 @@ import numpy as np
 
 from mjx_arm.evaluate import EvalRun, Policy, eval_task, make_env, run_episodes, summarize
 from mjx_arm.sim2real.commands import ServojConfig, joint_trajectory_msg, urscript_program
-from mjx_arm.sim2real.limiter import LimiterConfig
-from mjx_arm.sim2real.position_env import (
-    ChainConfig,
-    EpisodeCommands,
-    ServoConfig,
-    make_position_env,
-)
+from mjx_arm.sim2real.position_env import EpisodeCommands, make_position_env
+from mjx_arm.sim2real.settings import DeployConfig
 from mjx_arm.task.config import TaskConfig
-
-
-@dataclass(frozen=True)
-class DeployConfig:
-    """Settings of a deploy-sim run.
-
-    Attributes:
-        tau, limiter, servo: the command chain and the servo (see :class:`ChainConfig`).
-        lookahead_time, gain: the ``servoj`` arguments of the written URScript.
-    """
-
-    tau: float = 0.02
-    limiter: LimiterConfig = field(default_factory=LimiterConfig)
-    servo: ServoConfig = field(default_factory=ServoConfig)
-    lookahead_time: float = 0.1
-    gain: float = 300.0
-
-    def __post_init__(self) -> None:
-        self.chain()  # range checks
-        ServojConfig(t=1.0, lookahead_time=self.lookahead_time, gain=self.gain)
-
-    def chain(self) -> ChainConfig:
-        """The position env's chain and servo settings."""
-        return ChainConfig(tau=self.tau, limiter=self.limiter, servo=self.servo)
 
 
 def _stats(values: list[np.ndarray]) -> dict[str, float | None]:

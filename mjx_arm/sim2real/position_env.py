@@ -46,27 +46,12 @@ from mjx_arm.envs.arm import ArmInfo
 from mjx_arm.envs.base import DEFAULT_HEIGHT, DEFAULT_WIDTH
 from mjx_arm.envs.mujoco_env import MujocoArmEnv
 from mjx_arm.sim2real.adapter import VelocityToPositionAdapter
-from mjx_arm.sim2real.limiter import JointLimits, LimiterConfig, SafetyLimiter
+from mjx_arm.sim2real.limiter import JointLimits, SafetyLimiter
+from mjx_arm.sim2real.settings import ChainConfig, ServoConfig
 from mjx_arm.task.config import TaskConfig
 from pybullet_ref.env import PybulletArmEnv
 
 ENGINES = ("mujoco", "pybullet")
-
-
-@dataclass(frozen=True)
-class ServoConfig:
-    """The position servo of the position-controlled envs.
-
-    Attributes:
-        position_gain: ``K`` (1/s), the position loop's gain around the velocity servo: a
-            position error ``e`` asks for the joint velocity ``K * e``.
-    """
-
-    position_gain: float = 40.0
-
-    def __post_init__(self) -> None:
-        if not self.position_gain > 0:
-            raise ValueError(f"position_gain must be positive, got {self.position_gain}")
 
 
 @dataclass(frozen=True)
@@ -118,27 +103,6 @@ def use_position_servos(
     model.actuator_biasprm[actuators, 2] = -gains.kv
     model.actuator_ctrlrange[actuators] = np.stack([arm.lower, arm.upper], axis=1)
     return gains
-
-
-@dataclass(frozen=True)
-class ChainConfig:
-    """The command chain and servo of a position-controlled env.
-
-    Attributes:
-        tau: time constant (s) of the adapter's low-pass filter. 0.02 s (0.6 control periods)
-            smooths the 30 Hz staircase of targets and a policy's bang-bang switches while
-            adding only 20 ms of lag.
-        limiter: how the limiter's limits are derived from the URDF.
-        servo: the position servo.
-    """
-
-    tau: float = 0.02
-    limiter: LimiterConfig = field(default_factory=LimiterConfig)
-    servo: ServoConfig = field(default_factory=ServoConfig)
-
-    def __post_init__(self) -> None:
-        if not self.tau >= 0:
-            raise ValueError(f"tau must be >= 0, got {self.tau}")
 
 
 @dataclass
