@@ -400,6 +400,9 @@ def build_parser() -> argparse.ArgumentParser:
     from mjx_arm.sim2real.cli import register
 
     register(sub)
+    from mjx_arm.bench.cli import register as register_bench
+
+    register_bench(sub)
     return parser
 
 

@@ -1,0 +1,131 @@
+"""``mjx-arm bench``: its parser (:func:`register`) and the ``parity`` and ``transfer`` commands.
+
+The flags of each command come from its settings dataclass (:class:`~mjx_arm.bench.parity.
+ParityConfig`, :class:`~mjx_arm.bench.transfer.TransferConfig`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from mjx_arm.bench.settings import add_arguments, from_arguments
+
+EXIT_OK, EXIT_INVALID = 0, 2
+PARITY_OUT = Path("benchmarks/results/parity")
+TRANSFER_OUT = Path("benchmarks/results/transfer")
+
+
+def _enable_jax_cache() -> None:
+    from mjx_arm.cli import _enable_compilation_cache
+
+    _enable_compilation_cache()
+
+
+def _print_paths(paths: list[Path]) -> None:
+    for path in paths:
+        print(f"wrote {path}")
+
+
+def cmd_parity(args: argparse.Namespace) -> int:
+    """Engine parity: C MuJoCo, MJX and PyBullet on the same states and actions.
+
+    Forward kinematics at random joint angles; open-loop joint divergence over time (median and
+    95th percentile over the sequences); the tared F/T reading while pressing the box; jitter
+    while holding still, under a constant command and pressing, with the joint damping as
+    converted and zeroed. Writes parity.md, parity.json and three PNG plots into --out, with
+    each goal met or missed. MJX on a CPU takes several minutes (compilation); --quick is a
+    small run.
+    """
+    from mjx_arm.bench.parity import ParityConfig, run_parity
+    from mjx_arm.bench.parity_report import goals_table, write_report
+    from mjx_arm.bench.results import environment_metadata
+
+    try:
+        config = from_arguments(ParityConfig.quick() if args.quick else ParityConfig(), args)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_INVALID
+    if "mjx" in config.engines:
+        _enable_jax_cache()
+    meta = environment_metadata(accelerator="mjx" in config.engines)
+    result = run_parity(config)
+    print(goals_table(result))
+    _print_paths(write_report(result, meta, args.out))
+    return EXIT_OK
+
+
+def cmd_transfer(args: argparse.Namespace) -> int:
+    """Transfer matrix: one policy evaluated in every engine, beside the goals.
+
+    Success rate with its 95% Wilson interval, mean return, steps to success and mean peak
+    contact force per engine; goals: success >= 0.95 in every engine and, for Touch, a mean
+    peak force <= 50 N. Without a GPU, MJX is skipped with a note and the C MuJoCo batch runs
+    as the batched engine (--mjx-on-cpu runs MJX anyway). Writes NAME.md and NAME.json (and
+    NAME.png with --plot) into --out.
+    """
+    import jax
+
+    from mjx_arm.bench.results import environment_metadata
+    from mjx_arm.bench.transfer import TransferConfig, transfer_matrix, write_report
+    from mjx_arm.evaluate import eval_task, resolve_policy
+
+    try:
+        config = from_arguments(TransferConfig(), args)
+        policy, source = resolve_policy(args.policy)
+    except (ValueError, FileNotFoundError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_INVALID
+    _enable_jax_cache()
+    task, _ = eval_task(policy, args.task)
+    meta = environment_metadata(accelerator=True)
+    matrix = transfer_matrix(policy, task, config, jax.default_backend())
+    name = args.name or f"transfer_{task.task}"
+    paths = write_report(matrix, meta, args.out, name, source, args.trained_on, args.plot)
+    print(paths[1].read_text())
+    _print_paths(paths)
+    return EXIT_OK
+
+
+def register(sub) -> None:
+    """Add ``bench`` with its ``parity`` and ``transfer`` subcommands to ``sub``."""
+    bench = sub.add_parser(
+        "bench",
+        help="engine benchmarks: parity between engines, transfer of a policy",
+        description="Engine benchmarks that write a markdown table, JSON and PNG plots.",
+    )
+    commands = bench.add_subparsers(dest="bench_command", required=True, metavar="BENCH")
+
+    p = commands.add_parser(
+        "parity",
+        help="engine parity: FK, divergence, pressing, jitter",
+        description=cmd_parity.__doc__,
+    )
+    from mjx_arm.bench.parity import ParityConfig
+
+    add_arguments(p, ParityConfig)
+    p.add_argument("--quick", action="store_true", help="a small run (tests, a first look)")
+    p.add_argument("--out", type=Path, default=PARITY_OUT, help=f"output folder ({PARITY_OUT})")
+    p.set_defaults(func=cmd_parity)
+
+    p = commands.add_parser(
+        "transfer",
+        help="one policy evaluated in every engine, with goals",
+        description=cmd_transfer.__doc__,
+    )
+    from mjx_arm.bench.transfer import TransferConfig
+
+    p.add_argument("policy", help="policy file (.npz/.onnx) or run directory (newest checkpoint)")
+    add_arguments(p, TransferConfig)
+    p.add_argument(
+        "--task",
+        type=str.lower,
+        choices=["reach", "touch"],
+        help="task (default: the one the policy was trained on)",
+    )
+    p.add_argument("--trained-on", default="", help="where the policy was trained (text)")
+    p.add_argument("--name", help="file stem (default: transfer_TASK)")
+    p.add_argument("--plot", action="store_true", help="also write NAME.png")
+    p.add_argument("--out", type=Path, default=TRANSFER_OUT, help=f"output folder ({TRANSFER_OUT})")
+    p.set_defaults(func=cmd_transfer)
