@@ -7,14 +7,16 @@ figures of this run.
 
 from __future__ import annotations
 
-import mujoco
+from collections.abc import Callable
+
 import numpy as np
 import pytest
 
+from mjx_arm.bench.engines import MujocoEngine
+from mjx_arm.bench.parity import BOX_POSITIONS, random_joint_angles
 from mjx_arm.envs.base import BaseRobotEnv
 from mjx_arm.envs.mujoco_env import MujocoArmEnv
 from mjx_arm.task.config import reach_config, touch_config
-from mjx_arm.urdf.convert import EE_SITE
 from pybullet_ref import PybulletArmEnv
 
 pytestmark = pytest.mark.pybullet
@@ -23,19 +25,11 @@ N_CONFIGS = 20
 # Open-loop runs: 30 control steps (1 s) of piecewise-constant random actions, held 5 steps.
 OPEN_LOOP_SEEDS = (1, 2, 3, 4, 5, 6, 7, 8)  # seed 0 drives the arm into the table: left out
 OPEN_LOOP_STEPS, HOLD = 30, 5
-# Touch: box positions (bottom-face centre, m) and the press controller.
-BOX_POSITIONS = (
-    (0.5, 0.05, 0.0),
-    (0.4, -0.2, 0.0),
-    (0.6, 0.2, 0.0),
-    (0.45, 0.1, 0.0),
-    (0.55, -0.1, 0.0),
-    (0.4, 0.2, 0.0),
-    (0.6, -0.2, 0.0),
-    (0.5, 0.0, 0.0),
-)
+# Touch: the press controller (box positions: the parity benchmark's).
 PRESS_STEPS, PRESS_AVERAGE = 60, 10  # contact starts at step 48-50
 PRESS_DEPTH = 0.01  # the ee is driven this far below the top-face centre (m)
+# joint angles (6,) -> the ee position Jacobian (3, 6) of the MuJoCo model
+Jacobian = Callable[[np.ndarray], np.ndarray]
 
 
 def _pair(task) -> tuple[MujocoArmEnv, PybulletArmEnv]:
@@ -82,25 +76,7 @@ def _run_open_loop(env: BaseRobotEnv, seed: int) -> tuple[np.ndarray, np.ndarray
     return env._reading.qpos.copy(), peak
 
 
-class _Jacobian:
-    """Position Jacobian of the ee site from the MuJoCo model, at any joint angles."""
-
-    def __init__(self, env: MujocoArmEnv) -> None:
-        self.model, self.data = env.model, mujoco.MjData(env.model)
-        self.site = env.model.site(EE_SITE).id
-        self.qpos_adr, self.dof_adr = env.ids.qpos_adr, env.ids.dof_adr
-
-    def __call__(self, qpos: np.ndarray) -> np.ndarray:
-        """``(3, 6)`` Jacobian of the ee point w.r.t. the six joints at ``qpos``."""
-        self.data.qpos[self.qpos_adr] = qpos
-        mujoco.mj_kinematics(self.model, self.data)
-        mujoco.mj_comPos(self.model, self.data)
-        jacp = np.zeros((3, self.model.nv))
-        mujoco.mj_jacSite(self.model, self.data, jacp, None, self.site)
-        return jacp[:, self.dof_adr]
-
-
-def _press(env: BaseRobotEnv, jacobian: _Jacobian, box: tuple[float, ...]) -> np.ndarray:
+def _press(env: BaseRobotEnv, jacobian: Jacobian, box: tuple[float, ...]) -> np.ndarray:
     """Drive the ee ``PRESS_DEPTH`` below the box's top-face centre; return the wrench history.
 
     The same velocity controller for both engines: ``v = lstsq(J, 2 * err)`` with J from the
@@ -124,11 +100,8 @@ def _press(env: BaseRobotEnv, jacobian: _Jacobian, box: tuple[float, ...]) -> np
 def test_forward_kinematics_agree(reach_pair):
     """ee pose at 20 random joint configurations (joints set directly in both engines)."""
     mj, pb = reach_pair
-    rng = np.random.default_rng(0)
-    low, high = np.maximum(mj.arm.lower, -np.pi), np.minimum(mj.arm.upper, np.pi)
     position_err, angle_err = [], []
-    for _ in range(N_CONFIGS):
-        qpos = rng.uniform(low, high)
+    for qpos in random_joint_angles(mj.arm, N_CONFIGS, seed=0):
         poses = []
         for env in (mj, pb):
             env._physics_reset(qpos, np.array([0.5, 0.0, 0.2]))
@@ -196,7 +169,7 @@ def test_pybullet_ft_convention_at_rest(touch_pair):
 def test_press_force_agrees(touch_pair):
     """Both engines press the box top with the same commands: same force norm, in the band."""
     mj, pb = touch_pair
-    jacobian = _Jacobian(mj)
+    jacobian = MujocoEngine(mj).jacobian
     low, high = mj.task.force_band
     worst = 0.0
     for box in BOX_POSITIONS:

@@ -3,7 +3,7 @@
 These run where warp-lang is installed (the ``gpu`` extra) and a GPU is present; Warp also runs
 on a CPU, slowly (a few minutes of kernel and XLA compilation): set ``MJX_ARM_TEST_WARP_CPU=1``
 to run them there. Tolerances are stated beside the figures measured (CPU, warp-lang 1.19.0,
-mujoco-mjx 3.17.0; the GPU figures are in ``benchmarks/results/agreement_*.json``).
+mujoco-mjx 3.17.0; the GPU figures are in ``benchmarks/results/agreement/``).
 """
 
 from __future__ import annotations
@@ -31,25 +31,31 @@ WARP = PhysicsConfig(impl="warp")
 
 @pytest.fixture(scope="module")
 def figures():
-    from mjx_arm.envs.agreement import agreement
+    """Parity of C MuJoCo and both MJX implementations: 16 FK poses, 8 open-loop sequences of
+    1 s, 4 presses of 2 s."""
+    from mjx_arm.bench.parity import ParityConfig, run_parity
 
-    return agreement(("warp", "jax"), n_fk=16, n_open=8, seconds=1.0)
+    config = ParityConfig.quick(
+        engines=("mujoco", "mjx"), impls=("warp", "jax"), fk_poses=16, press_boxes=4
+    )
+    return run_parity(config, log=lambda _: None)["figures"]
 
 
 def test_forward_kinematics_agree(figures):
     """ee point at 16 random joint configurations, MJX (float32) vs C MuJoCo (float64)."""
     for impl in ("warp", "jax"):
-        assert figures[impl]["fk_max_m"] < 1e-6  # measured 1.2e-7 (warp), 1.4e-7 (jax) m
+        assert figures["fk_m"][f"mujoco vs mjx-{impl}"] < 1e-6  # measured 1.2e-7 / 1.4e-7 m
 
 
 def test_open_loop_joint_state_agrees(figures):
     """Joint angles after 1 s of the same open-loop actions (free motion, 8 sequences)."""
-    warp, jax_ = figures["warp"], figures["jax"]
-    assert warp["open_loop_qpos_median_rad"] < 1e-2  # measured 1.5e-3 rad
-    assert warp["open_loop_qpos_max_rad"] < 2e-2  # measured 3.2e-3 rad
-    assert jax_["open_loop_qpos_median_rad"] < 1e-2  # measured 5.1e-3 rad
+    pairs = figures["open_loop"]["pairs"]
+    warp, jax_ = pairs["mujoco vs mjx-warp"], pairs["mujoco vs mjx-jax"]
+    assert warp["at_goal_median"] < 1e-2  # measured 1.5e-3 rad
+    assert warp["max"] < 2e-2  # measured 3.2e-3 rad
+    assert jax_["at_goal_median"] < 1e-2  # measured 5.1e-3 rad
     for impl in ("warp", "jax"):  # tared F/T in free motion
-        assert figures[impl]["open_loop_free_motion_force_max_n"] < 1e-3  # measured 6e-7 N
+        assert figures["open_loop"]["free_motion_force_max_n"][f"mjx-{impl}"] < 1e-3  # 6e-7 N
 
 
 def test_press_force_agrees(figures):
@@ -58,9 +64,10 @@ def test_press_force_agrees(figures):
     Warp runs C MuJoCo's contact and solver algorithms; MJX-JAX its own capsule-box collision
     and a fixed-iteration solver, which press measurably differently.
     """
-    assert figures["warp"]["press_force_max_rel"] < 0.05  # measured 1e-4
-    assert figures["jax"]["press_force_max_rel"] < 0.5  # measured 0.30
-    assert all(1.0 <= f <= 50.0 for f in figures["warp"]["press_force_mjx_n"])
+    press = figures["press"]["engines"]
+    assert press["mjx-warp"]["rel_to_reference_max"] < 0.05  # measured 1e-4
+    assert press["mjx-jax"]["rel_to_reference_max"] < 0.5  # measured 0.30; 0.003 on the CPU
+    assert all(1.0 <= f <= 50.0 for f in press["mjx-warp"]["steady_n"])
 
 
 def test_warp_env_batches_and_restarts():

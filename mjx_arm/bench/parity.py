@@ -226,6 +226,9 @@ def open_loop_figures(traces: dict[str, Trace], ctrl_dt: float, goal_time: float
         "time_s": ctrl_dt * np.arange(1, steps + 1),
         "sequences": len(touched),
         "sequences_with_contact": int(touched.sum()),
+        "free_motion_force_max_n": {
+            name: float(t.force()[~touched].max(initial=0.0)) for name, t in traces.items()
+        },
         "pairs": {},
     }
     for a, b in pairs(list(traces)):
@@ -436,7 +439,8 @@ def run_parity(config: ParityConfig, log=print) -> dict[str, Any]:
         log(f"parity: running {name} ({len(inputs.reach)} Reach runs, {len(inputs.press)} presses)")
         label, result = run_engine(name, impl, inputs)
         results[label] = result
-        log(f"parity: {label} done in {sum(result.seconds.values()):.1f} s")
+        wall = sum(v for k, v in result.seconds.items() if k != "compile")
+        log(f"parity: {label} done in {wall:.1f} s (compilation {result.seconds['compile']:.1f} s)")
     figures = parity_figures(results, inputs, config)
     return {
         "config": config.to_dict(),

@@ -116,6 +116,9 @@ def markdown(result: dict[str, Any], meta: dict[str, Any]) -> str:
         "Largest joint-angle difference of the pair per sequence; median and 95th percentile "
         "over the sequences.\n",
         divergence_table(result),
+        "Largest tared |F| in free motion (the sequences that touch nothing): "
+        + ", ".join(f"{k} {v:.1e} N" for k, v in ol["free_motion_force_max_n"].items())
+        + ".\n",
         f"## Pressing the box ({config['press_boxes']} positions, commands recorded in "
         "C MuJoCo and replayed)\n",
         f"Steady |F|: the mean of the last {config['press_average_steps']} control steps.\n",
