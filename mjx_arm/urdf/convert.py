@@ -17,10 +17,11 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from mjx_arm.urdf.errors import ConversionError
+from mjx_arm.urdf.errors import ConversionError, one_line
 from mjx_arm.urdf.inertia import inertia_problem, inertia_tensor, repair_inertia
 from mjx_arm.urdf.meshes import resolve_mesh_filename
 from mjx_arm.urdf.model import RobotModel, parse_urdf
+from mjx_arm.urdf.safe_xml import read_xml
 from mjx_arm.urdf.scene import SCENES, add_scene
 
 # Collision bit masks. Scene geoms (table, target box) never collide with each other. Arm geoms
@@ -102,22 +103,51 @@ class ConvertConfig:
 
 
 def build_spec(urdf: str | Path, config: ConvertConfig | None = None) -> mujoco.MjSpec:
-    """Import a URDF and return the edited ``mujoco.MjSpec``.
+    """Check a URDF statically, import it and return the edited ``mujoco.MjSpec``.
+
+    The URDF first goes through the validator's static layers for MuJoCo
+    (:func:`mjx_arm.urdf.validate.validate` with ``native=False``), so a broken or hostile file
+    fails with the validator's named findings before MuJoCo's importer sees it.
 
     Args:
         urdf: path of the URDF file.
         config: conversion settings; defaults to :class:`ConvertConfig()`.
 
     Raises:
-        ConversionError: a mesh that cannot be found or read, an invalid inertia (without
-            ``repair_inertia``), a joint without effort or velocity limits, or an error of
-            MuJoCo's importer or compiler (a zero joint axis, an unreadable mesh), always naming
-            the file and quoting MuJoCo's message.
+        ConversionError: the validator's errors; a mesh that cannot be found or read, an
+            invalid inertia (without ``repair_inertia``), a joint without effort or velocity
+            limits, or an error of MuJoCo's importer or compiler (a zero joint axis, an
+            unreadable mesh), always naming the file and quoting MuJoCo's message.
     """
+    from mjx_arm.urdf.validate import validate
+
     config = config or ConvertConfig()
+    path = Path(urdf).resolve()
+    report = validate(
+        path,
+        engine="mujoco",
+        package_dirs=config.package_dirs,
+        native=False,
+        repair_inertia=config.repair_inertia,
+    )
+    if not report.ok:
+        raise ConversionError(report.format())
+    try:
+        return build_checked_spec(path, config)
+    except ConversionError:
+        raise
+    except Exception as exc:  # a bug: still a named error, never a bare traceback
+        raise ConversionError(
+            f"{path}: the converter failed unexpectedly: {type(exc).__name__}: {exc}; "
+            "report this as a bug in mjx_arm.urdf.convert"
+        ) from exc
+
+
+def build_checked_spec(path: Path, config: ConvertConfig) -> mujoco.MjSpec:
+    """:func:`build_spec` for a URDF that already passed the static checks (the validator's
+    native layer calls it). Raises ``ConversionError`` as :func:`build_spec` does."""
     if config.scene not in SCENES:
         raise ConversionError(f"unknown scene {config.scene!r}; choose one of {sorted(SCENES)}")
-    path = Path(urdf).resolve()
     model = parse_urdf(path)
     xml_text = _prepare_urdf_text(path, config)
     try:
@@ -160,26 +190,89 @@ def to_mjcf(urdf: str | Path, config: ConvertConfig | None = None, **overrides) 
 
     Returns:
         The MJCF document. The same input gives the same bytes.
+
+    Raises:
+        ConversionError: as :func:`build_spec`, or the model does not compile, has non-finite
+            values, or its MJCF text does not compile again.
     """
     config = (config or ConvertConfig()).replace(**overrides)
-    spec = build_spec(urdf, config)
-    try:
-        spec.compile()
-    except Exception as exc:
-        raise ConversionError(f"{urdf}: the converted model does not compile: {exc}") from exc
-    return spec.to_xml()
+    return mjcf_text(build_spec(urdf, config), urdf)
 
 
 def load_model(
     urdf: str | Path, config: ConvertConfig | None = None, **overrides
 ) -> mujoco.MjModel:
-    """Convert a URDF and compile it into a ``mujoco.MjModel``."""
+    """Convert a URDF and compile it into a ``mujoco.MjModel`` (errors as :func:`to_mjcf`)."""
     config = (config or ConvertConfig()).replace(**overrides)
-    spec = build_spec(urdf, config)
+    return compile_spec(build_spec(urdf, config), urdf)
+
+
+def compile_spec(spec: mujoco.MjSpec, urdf: str | Path) -> mujoco.MjModel:
+    """Compile a converted spec and check that the model's numbers are finite.
+
+    Raises:
+        ConversionError: the model does not compile or holds NaN or infinite values.
+    """
     try:
-        return spec.compile()
+        model = spec.compile()
     except Exception as exc:
         raise ConversionError(f"{urdf}: the converted model does not compile: {exc}") from exc
+    _check_finite(model, urdf)
+    return model
+
+
+def mjcf_text(spec: mujoco.MjSpec, urdf: str | Path) -> str:
+    """The MJCF text of a converted spec, checked to compile again as written.
+
+    MuJoCo writes about 6 significant digits per vector, so extreme values that compile from
+    the spec can fail from the text; that is a :class:`ConversionError` here, not a broken file.
+    """
+    compile_spec(spec, urdf)
+    text = spec.to_xml()
+    try:
+        mujoco.MjModel.from_xml_string(text)
+    except Exception as exc:
+        raise ConversionError(
+            f"{urdf}: the written MJCF does not compile again (MuJoCo keeps about 6 significant "
+            f"digits per vector; check the URDF for extreme values): {one_line(exc)}"
+        ) from exc
+    return text
+
+
+# Model arrays that must be finite, with the object each row belongs to.
+_FINITE_FIELDS = {
+    "body_pos": mujoco.mjtObj.mjOBJ_BODY,
+    "body_quat": mujoco.mjtObj.mjOBJ_BODY,
+    "body_ipos": mujoco.mjtObj.mjOBJ_BODY,
+    "body_mass": mujoco.mjtObj.mjOBJ_BODY,
+    "body_inertia": mujoco.mjtObj.mjOBJ_BODY,
+    "geom_size": mujoco.mjtObj.mjOBJ_GEOM,
+    "geom_pos": mujoco.mjtObj.mjOBJ_GEOM,
+    "jnt_range": mujoco.mjtObj.mjOBJ_JOINT,
+    "jnt_axis": mujoco.mjtObj.mjOBJ_JOINT,
+    "dof_damping": mujoco.mjtObj.mjOBJ_DOF,
+    "dof_armature": mujoco.mjtObj.mjOBJ_DOF,
+    "dof_frictionloss": mujoco.mjtObj.mjOBJ_DOF,
+    "actuator_gainprm": mujoco.mjtObj.mjOBJ_ACTUATOR,
+    "actuator_biasprm": mujoco.mjtObj.mjOBJ_ACTUATOR,
+    "actuator_ctrlrange": mujoco.mjtObj.mjOBJ_ACTUATOR,
+    "actuator_forcerange": mujoco.mjtObj.mjOBJ_ACTUATOR,
+}
+
+
+def _check_finite(model: mujoco.MjModel, urdf: str | Path) -> None:
+    """Raise a ConversionError naming the first model row that holds NaN or inf."""
+    for name, objtype in _FINITE_FIELDS.items():
+        values = np.asarray(getattr(model, name))
+        if values.size == 0:
+            continue
+        bad = np.flatnonzero(~np.isfinite(values.reshape(len(values), -1)).all(axis=1))
+        if bad.size:
+            owner = mujoco.mj_id2name(model, objtype, int(bad[0])) or f"#{int(bad[0])}"
+            raise ConversionError(
+                f"{urdf}: the converted model has non-finite {name} for {owner!r} (the URDF's "
+                "values are too large or too small to compute with)"
+            )
 
 
 # --------------------------------------------------------------------------- URDF text
@@ -187,8 +280,7 @@ def load_model(
 
 def _prepare_urdf_text(path: Path, config: ConvertConfig) -> str:
     """Resolve mesh paths, check inertias and tell the importer to keep every link apart."""
-    tree = ET.parse(path)
-    root = tree.getroot()
+    root = read_xml(path)
     for mesh in root.iter("mesh"):
         link = _enclosing_link_name(root, mesh)
         mesh.set(

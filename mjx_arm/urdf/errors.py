@@ -9,3 +9,8 @@ class UrdfError(ValueError):
 
 class ConversionError(UrdfError):
     """A URDF that MuJoCo's importer or compiler rejects, or that lacks what conversion needs."""
+
+
+def one_line(text: object) -> str:
+    """``text`` (an exception, a message) on one line: its non-empty lines joined by ``; ``."""
+    return "; ".join(part.strip() for part in str(text).splitlines() if part.strip())

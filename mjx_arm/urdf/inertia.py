@@ -26,8 +26,23 @@ def inertia_tensor(values: Mapping[str, float]) -> np.ndarray:
 
 
 def principal_moments(inertia: np.ndarray) -> np.ndarray:
-    """Eigenvalues of a symmetric inertia tensor, shape ``(3,)``, ascending."""
-    return np.linalg.eigvalsh(0.5 * (inertia + inertia.T))
+    """Eigenvalues of a symmetric inertia tensor, shape ``(3,)``, ascending.
+
+    The tensor is scaled to unit size first, so entries near the float limit (1e308) do not
+    overflow the eigen solver.
+    """
+    moments, _ = _scaled_eigh(inertia)
+    return moments
+
+
+def _scaled_eigh(inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Eigenvalues ``(3,)`` and eigenvectors ``(3, 3)`` of the symmetric part of a finite tensor."""
+    scale = float(np.abs(inertia).max())
+    if scale == 0.0:
+        return np.zeros(3), np.eye(3)
+    unit = inertia / scale
+    moments, axes = np.linalg.eigh(0.5 * (unit + unit.T))
+    return moments * scale, axes
 
 
 def inertia_problem(inertia: np.ndarray) -> str | None:
@@ -56,8 +71,7 @@ def repair_inertia(inertia: np.ndarray) -> np.ndarray:
     The principal axes are kept; the two smaller principal moments are raised together until
     their sum equals the largest one, and every moment is kept above a small positive floor.
     """
-    sym = 0.5 * (inertia + inertia.T)
-    moments, axes = np.linalg.eigh(sym)
+    moments, axes = _scaled_eigh(inertia)
     floor = max(1e-9, 1e-6 * float(np.abs(moments).max()))
     moments = np.maximum(moments, floor)
     deficit = moments[2] - (moments[0] + moments[1])

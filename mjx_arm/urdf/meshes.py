@@ -1,7 +1,14 @@
-"""Mesh file resolution: ``package://`` URIs, relative paths, and formats each engine reads."""
+"""Mesh and texture file resolution: ``package://`` URIs, relative paths, formats each engine reads.
+
+A URDF may only point at files inside its own folder tree, inside a folder given in
+``package_dirs``, or inside the folder of the ``package://`` package it names. A path that
+leaves those folders (``../../etc/passwd``, an absolute path elsewhere, a symbolic link out) is
+refused with a :class:`AssetPathError` before anything opens it.
+"""
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -11,49 +18,115 @@ from mjx_arm.urdf.errors import ConversionError
 # loaders only partly). Collada (.dae) is the usual ROS format that MuJoCo cannot read.
 MUJOCO_MESH_FORMATS = frozenset({".stl", ".obj", ".msh"})
 PYBULLET_MESH_FORMATS = frozenset({".stl", ".obj", ".dae"})
+PACKAGE_PREFIX = "package://"
+FILE_PREFIX = "file://"
+# An unnamed package is searched for in the URDF's folder and this many folders above it (a ROS
+# package holds its URDF one or two levels down; a workspace keeps packages side by side).
+PACKAGE_SEARCH_LEVELS = 3
+_PACKAGE_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.+-]*\Z")
+
+
+class AssetPathError(ConversionError):
+    """A mesh or texture filename that names an unknown package or points outside its folders.
+
+    Attributes:
+        problem: what is wrong with the filename.
+        fix: how to fix it.
+    """
+
+    def __init__(self, problem: str, fix: str) -> None:
+        super().__init__(f"{problem}; {fix}")
+        self.problem, self.fix = problem, fix
 
 
 def find_package_dir(package: str, urdf_path: Path, package_dirs: Mapping[str, str]) -> Path | None:
     """Directory of ROS package ``package``: from ``package_dirs``, else searched upwards.
 
-    The upward search looks, from the URDF's folder to the file system root, for a folder named
-    like the package, either the folder itself or a child of it.
+    The search looks, from the URDF's folder up :data:`PACKAGE_SEARCH_LEVELS` folders (never at
+    the file system root), for a folder named like the package, either the folder itself or a
+    child of it. A name that is not a plain folder name (``..``, ``a/b``) is never searched for.
     """
     if package in package_dirs:
         return Path(package_dirs[package]).expanduser().resolve()
-    for folder in [urdf_path.parent, *urdf_path.parent.parents]:
+    if not _PACKAGE_NAME.match(package) or set(package) == {"."}:
+        return None
+    folders = [urdf_path.parent, *urdf_path.parent.parents][: PACKAGE_SEARCH_LEVELS + 1]
+    for folder in folders:
+        if folder.parent == folder:  # the file system root
+            break
         if folder.name == package:
             return folder
-        if (folder / package).is_dir():
+        if _is_dir(folder / package):
             return folder / package
     return None
 
 
-def mesh_path(filename: str, urdf_path: Path, package_dirs: Mapping[str, str]) -> Path | None:
-    """Absolute path a URDF mesh ``filename`` points to, or None for an unknown package."""
-    if filename.startswith("package://"):
-        package, _, rest = filename[len("package://") :].partition("/")
+def resolve_asset(filename: str, urdf_path: Path, package_dirs: Mapping[str, str]) -> Path:
+    """Absolute path of a mesh or texture ``filename``, checked to lie inside its folder.
+
+    A ``package://NAME/...`` path must stay inside the package's folder; any other path (relative,
+    absolute or ``file://``) inside the URDF's folder or a folder of ``package_dirs``. Symbolic
+    links are followed before the check.
+
+    Raises:
+        AssetPathError: an unknown package, or a path outside those folders.
+    """
+    if filename.startswith(PACKAGE_PREFIX):
+        package, _, rest = filename[len(PACKAGE_PREFIX) :].partition("/")
         base = find_package_dir(package, urdf_path, package_dirs)
-        return None if base is None else (base / rest).resolve()
-    if filename.startswith("file://"):
-        filename = filename[len("file://") :]
-    path = Path(filename)
-    return path if path.is_absolute() else (urdf_path.parent / path).resolve()
+        if base is None:
+            raise AssetPathError(
+                f"names package {package!r}, which was not found above {urdf_path.parent}",
+                f"pass package_dirs={{'{package}': '/path'}} (CLI: --package {package}=/path)",
+            )
+        return _inside(base / rest, [base])
+    local = filename[len(FILE_PREFIX) :] if filename.startswith(FILE_PREFIX) else filename
+    path = Path(local)
+    roots = [urdf_path.parent, *(Path(d).expanduser().resolve() for d in package_dirs.values())]
+    return _inside(path if path.is_absolute() else urdf_path.parent / path, roots)
+
+
+def _inside(path: Path, roots: list[Path]) -> Path:
+    try:
+        resolved = path.resolve()
+    except (OSError, RuntimeError, ValueError) as exc:  # a symbolic link loop, a bad name
+        raise AssetPathError(f"cannot be resolved: {exc}", "give a plain file path") from exc
+    if any(resolved.is_relative_to(root) for root in roots):
+        return resolved
+    folders = " or ".join(str(root) for root in roots)
+    raise AssetPathError(
+        f"points to {resolved}, outside {folders}",
+        "keep meshes and textures inside the URDF's folder, or inside a package folder passed "
+        "as package_dirs (CLI: --package NAME=DIR) and referred to as package://NAME/...",
+    )
+
+
+def is_file(path: Path) -> bool:
+    """``path.is_file()``, False instead of an error for names the OS refuses (too long)."""
+    try:
+        return path.is_file()
+    except (OSError, ValueError):
+        return False
+
+
+def _is_dir(path: Path) -> bool:
+    try:
+        return path.is_dir()
+    except (OSError, ValueError):
+        return False
 
 
 def resolve_mesh_filename(
     filename: str, urdf_path: Path, link: str, package_dirs: Mapping[str, str]
 ) -> Path:
     """Resolve a mesh for MuJoCo or raise a :class:`ConversionError` that says how to fix it."""
-    path = mesh_path(filename, urdf_path, package_dirs)
-    if path is None:
-        package = filename[len("package://") :].split("/", 1)[0]
+    try:
+        path = resolve_asset(filename, urdf_path, package_dirs)
+    except AssetPathError as exc:
         raise ConversionError(
-            f"{urdf_path}: link {link!r}: mesh {filename!r} names package {package!r}, which was "
-            f"not found above {urdf_path.parent}; pass package_dirs={{'{package}': '/path'}} "
-            f"(CLI: --package {package}=/path)"
-        )
-    if not path.is_file():
+            f"{urdf_path}: link {link!r}: mesh {filename!r} {exc.problem}; {exc.fix}"
+        ) from exc
+    if not is_file(path):
         raise ConversionError(f"{urdf_path}: link {link!r}: mesh file {path} does not exist")
     if path.suffix.lower() not in MUJOCO_MESH_FORMATS:
         raise ConversionError(

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from mjx_arm.urdf.inertia import inertia_tensor
+from mjx_arm.urdf.safe_xml import parse_xml, read_xml
 
 
 @dataclass(frozen=True)
@@ -241,13 +242,17 @@ def _joint(elem: ET.Element) -> Joint:
 
 
 def parse_urdf(source: str | Path) -> RobotModel:
-    """Parse a URDF file path (or XML text starting with ``<``) into a :class:`RobotModel`."""
+    """Parse a URDF file path (or XML text starting with ``<``) into a :class:`RobotModel`.
+
+    Raises:
+        mjx_arm.urdf.safe_xml.XmlError: the XML is unsafe or not well-formed.
+    """
     text = str(source)
     if text.lstrip().startswith("<"):
-        root, path = ET.fromstring(text), None
+        root, path = parse_xml(text), None
     else:
         path = Path(source).resolve()
-        root = ET.parse(path).getroot()
+        root = read_xml(path)
     links = {link.name: link for link in map(_link, root.findall("link"))}
     joints = {joint.name: joint for joint in map(_joint, root.findall("joint"))}
     return RobotModel(root.get("name", "robot"), path, links, joints)

@@ -28,10 +28,17 @@ from pathlib import Path
 
 import numpy as np
 
-from mjx_arm.urdf.errors import UrdfError
+from mjx_arm.urdf.errors import UrdfError, one_line
 from mjx_arm.urdf.inertia import inertia_problem, inertia_tensor
-from mjx_arm.urdf.meshes import MUJOCO_MESH_FORMATS, PYBULLET_MESH_FORMATS, mesh_path
+from mjx_arm.urdf.meshes import (
+    MUJOCO_MESH_FORMATS,
+    PYBULLET_MESH_FORMATS,
+    AssetPathError,
+    is_file,
+    resolve_asset,
+)
 from mjx_arm.urdf.model import rpy_to_matrix
+from mjx_arm.urdf.safe_xml import XmlError, read_xml
 
 ENGINES: dict[str, tuple[str, ...]] = {
     "mujoco": ("mujoco",),
@@ -46,6 +53,11 @@ SHAPES = frozenset({"box", "sphere", "cylinder", "capsule", "mesh"})
 # factor (either way) is reported.
 SIZE_RATIO_LIMIT = 2.0
 _AXIS_EPS = 1e-9
+# Links (and joints) a URDF may have: far above any arm, low enough to keep every check and
+# native load well under a second.
+MAX_LINKS = 512
+# Largest ratio of two sizes of one primitive shape that survives MuJoCo's MJCF writer.
+MAX_SIZE_RATIO = 1e5
 
 # --------------------------------------------------------------------------- report types
 
@@ -194,6 +206,10 @@ def _numbers(text: str | None, n: int) -> tuple[float, ...] | None:
     return values
 
 
+def _fmt_values(values: list[float]) -> str:
+    return "(" + ", ".join(f"{v:.6g}" for v in values) + ")"
+
+
 def _number(elem: ET.Element | None, attr: str) -> float | str | None:
     """A float attribute: the value, None when absent, or the raw text when it is no number."""
     if elem is None or elem.get(attr) is None:
@@ -207,27 +223,11 @@ def _number(elem: ET.Element | None, attr: str) -> float | str | None:
 
 
 def _read_xml(path: Path, out: _Findings) -> ET.Element | None:
-    """Parse the file; a missing file or an XML syntax error becomes a finding."""
-    if not path.is_file():
-        what = "is a directory" if path.is_dir() else "does not exist"
-        out.error(1, "file", f"{path} {what}", "pass the path of a URDF file")
-        return None
+    """Parse the file safely (:mod:`mjx_arm.urdf.safe_xml`); any refusal becomes a finding."""
     try:
-        data = path.read_bytes()
-    except OSError as exc:
-        out.error(1, "file", f"cannot be read: {exc.strerror or exc}", "check the permissions")
-        return None
-    try:
-        return ET.fromstring(data)
-    except ET.ParseError as exc:
-        line, col = getattr(exc, "position", (0, 0))
-        reason = re.sub(r":? line \d+, column \d+$", "", str(exc))
-        out.error(
-            1,
-            f"XML at line {line}, column {col}",
-            f"is not well-formed XML: {reason}",
-            f"correct the XML syntax at line {line}, column {col}",
-        )
+        return read_xml(path)
+    except XmlError as exc:
+        out.error(1, exc.element, exc.problem, exc.fix)
         return None
 
 
@@ -248,6 +248,8 @@ def _check_tree(path: Path, root: ET.Element, out: _Findings) -> _Tree | None:
             "has no name (PyBullet refuses the file)",
             'give the root element a name: <robot name="my_arm">',
         )
+    if not _check_counts(root, out):
+        return None
     tree = _Tree(path, root)
     _collect_links(tree, out)
     _collect_joints(tree, out)
@@ -257,6 +259,22 @@ def _check_tree(path: Path, root: ET.Element, out: _Findings) -> _Tree | None:
     _check_joint_types(tree, out)
     _check_origins(tree, out)
     return tree
+
+
+def _check_counts(root: ET.Element, out: _Findings) -> bool:
+    """At most MAX_LINKS links and joints (the later checks and loaders scale with them)."""
+    fine = True
+    for tag in ("link", "joint"):
+        n = len(root.findall(tag))
+        if n > MAX_LINKS:
+            out.error(
+                1,
+                "robot",
+                f"has {n} <{tag}> elements, more than the {MAX_LINKS} this tool accepts",
+                f"remove <{tag}> elements the robot does not need",
+            )
+            fine = False
+    return fine
 
 
 def _collect_links(tree: _Tree, out: _Findings) -> None:
@@ -608,6 +626,22 @@ def _check_geometry(
                 if shape is not None:
                     shapes.append(shape)
         _check_sizes(name, shapes, out)
+    _check_textures(tree, package_dirs, out)
+
+
+def _check_textures(tree: _Tree, package_dirs: Mapping[str, str], out: _Findings) -> None:
+    """Every ``<texture filename>`` (PyBullet loads them) stays inside its folder."""
+    owners = [(_link(n), e) for n, e in tree.links.items()]
+    owners += [(f"material {m.get('name', '')!r}", m) for m in tree.root.findall("material")]
+    for element, elem in owners:
+        for texture in elem.iter("texture"):
+            filename = texture.get("filename")
+            if filename is None:
+                continue
+            try:
+                resolve_asset(filename, tree.path, package_dirs)
+            except AssetPathError as exc:
+                out.error(2, element, f"has texture {filename!r}: it {exc.problem}", exc.fix)
 
 
 def _check_shape(
@@ -663,6 +697,16 @@ def _primitive_box(link: str, role: str, shape: ET.Element, out: _Findings) -> n
             )
             return None
         sizes.extend(values)
+    if max(sizes) > MAX_SIZE_RATIO * min(sizes):
+        out.error(
+            2,
+            _link(link),
+            f"has a <{role}> <{shape.tag}> whose sizes {_fmt_values(sizes)} differ by more than "
+            f"a factor {MAX_SIZE_RATIO:.0e} (MuJoCo writes about 6 significant digits per "
+            "vector, so the small one would become 0)",
+            "check the units of the sizes (m)",
+        )
+        return None
     if shape.tag == "box":
         half = np.array(sizes) / 2
     elif shape.tag == "sphere":
@@ -715,6 +759,8 @@ def _check_mesh(
             "save the mesh as binary STL (e.g. trimesh.load(path).export(path)) or as .obj",
         )
         return None
+    if resolved.suffix.lower() not in _READ_FORMATS:  # only mesh files are ever opened
+        return None
     box = _mesh_box(str(resolved), *_stamp(resolved))
     return None if box is None else np.sort(box * np.array(scale), axis=0)
 
@@ -740,18 +786,12 @@ def _check_mesh_format(
 def _resolve_mesh(
     path: Path, link: str, role: str, filename: str, package_dirs: Mapping[str, str], out: _Findings
 ) -> Path | None:
-    resolved = mesh_path(filename, path, package_dirs)
-    if resolved is None:
-        package = filename[len("package://") :].split("/", 1)[0]
-        out.error(
-            2,
-            _link(link),
-            f"has <{role}> mesh {filename!r} in package {package!r}, which "
-            f"was not found above {path.parent}",
-            f"pass package_dirs={{'{package}': '/path'}} (CLI: --package {package}=/path)",
-        )
+    try:
+        resolved = resolve_asset(filename, path, package_dirs)
+    except AssetPathError as exc:
+        out.error(2, _link(link), f"has <{role}> mesh {filename!r}: it {exc.problem}", exc.fix)
         return None
-    if not resolved.is_file():
+    if not is_file(resolved):
         out.error(
             2,
             _link(link),
@@ -805,6 +845,7 @@ def _check_sizes(link: str, shapes: list[_Shape], out: _Findings) -> None:
 
 # --------------------------------------------------------------------------- mesh reading
 
+_READ_FORMATS = frozenset({".stl", ".obj"})  # the formats whose bounding box is read
 _STL_RECORD = np.dtype([("normal", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")])
 
 
@@ -979,28 +1020,25 @@ def _link_of_mesh(tree: _Tree, stem: str) -> str | None:
     return None
 
 
-def _one_line(text: str) -> str:
-    return "; ".join(part.strip() for part in str(text).splitlines() if part.strip())
-
-
 def _load_mujoco(
     tree: _Tree, package_dirs: Mapping[str, str], repair: bool, out: _Findings
 ) -> None:
-    """Convert with :func:`mjx_arm.urdf.convert.build_spec` and compile; report any failure.
+    """Convert with :func:`mjx_arm.urdf.convert.build_checked_spec`, compile and write the MJCF
+    (:func:`~mjx_arm.urdf.convert.mjcf_text`); report any failure.
 
     MuJoCo's own warnings (e.g. an OBJ's texture coordinates discarded) are dropped: they concern
     rendering, and MuJoCo's asset cache prints them only on the first load in a process, which
     would make the report depend on what ran before.
     """
-    from mjx_arm.urdf.convert import ConvertConfig, build_spec
+    from mjx_arm.urdf.convert import ConvertConfig, build_checked_spec, mjcf_text
 
     config = ConvertConfig(package_dirs=dict(package_dirs), repair_inertia=repair)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         try:
-            build_spec(tree.path, config).compile()
+            mjcf_text(build_checked_spec(tree.path, config), tree.path)
         except Exception as exc:
-            text = _one_line(exc)
+            text = one_line(exc)
             out.error(
                 3,
                 _native_element(tree, text),
@@ -1043,15 +1081,22 @@ def _flush_all() -> None:
 
 
 def _absolute_mesh_copy(tree: _Tree, package_dirs: Mapping[str, str], folder: str) -> Path:
-    """Write the URDF with absolute mesh and texture paths (PyBullet knows no package_dirs)."""
+    """Write the URDF with absolute mesh and texture paths (PyBullet knows no package_dirs).
+
+    A filename that does not resolve inside its folder loses its ``filename`` (PyBullet then
+    opens nothing for it); the static checks report such meshes and textures before this runs.
+    """
     root = ET.fromstring(ET.tostring(tree.root))
     for elem in [*root.iter("mesh"), *root.iter("texture")]:
         filename = elem.get("filename")
-        resolved = mesh_path(filename, tree.path, package_dirs) if filename else None
-        if resolved is not None:
-            elem.set("filename", str(resolved))
+        if filename is None:
+            continue
+        try:
+            elem.set("filename", str(resolve_asset(filename, tree.path, package_dirs)))
+        except AssetPathError:
+            del elem.attrib["filename"]
     copy = Path(folder) / tree.path.name
-    ET.ElementTree(root).write(copy, encoding="unicode")
+    copy.write_bytes(ET.tostring(root, encoding="utf-8"))
     return copy
 
 
@@ -1069,7 +1114,7 @@ def _load_pybullet(tree: _Tree, package_dirs: Mapping[str, str], out: _Findings)
         text = captured[0].replace(str(copy), str(tree.path)).replace(folder, str(tree.path.parent))
     messages = _attach_names(_bullet_messages(text), tree)
     if failure is not None:
-        detail = _one_line(" ".join([failure, *messages]))
+        detail = one_line(" ".join([failure, *messages]))
         out.error(
             3,
             _native_element(tree, detail),
@@ -1193,7 +1238,7 @@ def _guarded(out: _Findings, layer: int, check: Callable[[], _Tree | None]) -> _
         out.error(
             layer,
             "robot",
-            f"the validator failed unexpectedly: {type(exc).__name__}: {_one_line(exc)}",
+            f"the validator failed unexpectedly: {type(exc).__name__}: {one_line(exc)}",
             "report this as a bug in mjx_arm.urdf.validate",
         )
         return None
