@@ -228,6 +228,7 @@ def _run_op(op: str, path: Path, roots: Sequence[str], audit: _OpenAudit, log: _
 def _worker_main(conn, warmup: str) -> None:
     """Serve (op, path, roots) requests on ``conn`` until it closes."""
     out = Path(tempfile.mkdtemp(prefix="mjx_arm_fuzz_"))
+    os.chdir(out)  # MuJoCo writes MUJOCO_LOG.TXT into the working folder
     log = _Log(out)
     audit = _OpenAudit()
     sys.addaudithook(audit)

@@ -16,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import functools
+import math
 import os
 import re
 import sys
@@ -58,6 +59,8 @@ _AXIS_EPS = 1e-9
 MAX_LINKS = 512
 # Largest ratio of two sizes of one primitive shape that survives MuJoCo's MJCF writer.
 MAX_SIZE_RATIO = 1e5
+# Largest origin offset (m): a robot is metres across; beyond this, float rounding eats its shapes.
+MAX_OFFSET = 1e4
 
 # --------------------------------------------------------------------------- report types
 
@@ -441,19 +444,28 @@ def _check_joint_types(tree: _Tree, out: _Findings) -> None:
 
 
 def _check_origins(tree: _Tree, out: _Findings) -> None:
-    """Every <origin xyz rpy> of a link or joint holds three finite numbers."""
+    """Every <origin xyz rpy> of a link or joint holds three finite numbers; xyz within
+    MAX_OFFSET metres (larger offsets lose the link's geometry to float rounding)."""
     owners = [(_link(n), e) for n, e in tree.links.items()]
     owners += [(_joint(n), j.elem) for n, j in tree.joints.items()]
     for element, elem in owners:
         for origin in elem.iter("origin"):
             for attr in ("xyz", "rpy"):
                 text = origin.get(attr)
-                if text is not None and _numbers(text, 3) is None:
+                values = _numbers(text, 3)
+                if text is not None and values is None:
                     out.error(
                         1,
                         element,
                         f"has a malformed <origin {attr}={text!r}>",
                         f'give three numbers, e.g. {attr}="0 0 0"',
+                    )
+                elif attr == "xyz" and values and max(map(abs, values)) > MAX_OFFSET:
+                    out.error(
+                        1,
+                        element,
+                        f"has <origin xyz={text!r}>, more than {MAX_OFFSET:g} m from its frame",
+                        "give the offset in metres",
                     )
 
 
@@ -828,8 +840,8 @@ def _check_sizes(link: str, shapes: list[_Shape], out: _Findings) -> None:
         low = np.min([b[0] for b in boxes], axis=0)
         high = np.max([b[1] for b in boxes], axis=0)
         sizes[role] = float(np.linalg.norm(high - low))
-    if min(sizes.values()) <= 0:
-        return
+    if not all(math.isfinite(v) and v > 0 for v in sizes.values()):
+        return  # a degenerate or overflowing extent: nothing sensible to compare
     ratio = sizes["collision"] / sizes["visual"]
     if ratio > SIZE_RATIO_LIMIT or ratio < 1 / SIZE_RATIO_LIMIT:
         word = "larger" if ratio > 1 else "smaller"
