@@ -3,6 +3,13 @@
 The base class owns everything engine-neutral: spaces, action checking and scaling, episode
 sampling, observation assembly, reward, success and termination (all from :mod:`mjx_arm.task`).
 An engine subclass implements the five ``_physics_*`` / ``_render_frame`` hooks and nothing else.
+
+Divergence: after every control step the reading is checked. A NaN or infinite value, or a joint
+faster than ``TaskConfig.divergence_speed_factor`` times its URDF velocity limit, means the
+physics diverged. The step then returns the last sane observation (finite and inside the
+observation space), ``terminated=True``, ``info["diverged"] = True`` (also under its older name
+``info["nonfinite"]``) and the ``nonfinite`` reward term; the next ``reset()`` starts from a
+clean physics state.
 """
 
 from __future__ import annotations
@@ -89,6 +96,8 @@ class BaseRobotEnv(gym.Env):
         # power-of-two scales of the presets, within one rounding otherwise
         self._qdot_scale = self.task.action_scale * self.arm.v_max
         self._band = reward_lib.joint_band((self.arm.lower, self.arm.upper), self.task)
+        self._speed_limits = reward_lib.speed_limits(self.arm.v_max, self.task)
+        self._min_speed_limit = float(self._speed_limits.min())
         self._bounds = obs_lib.state_bounds(self.task.force_clip)
         self._reading: PhysicsReading | None = None
         self._last_obs: dict[str, np.ndarray] | None = None
@@ -151,8 +160,8 @@ class BaseRobotEnv(gym.Env):
         change = float(reward_lib.action_change(np, clipped, self._action))
         self._action = clipped
         result = self._evaluate(reading, change=change)
-        if result is None:  # non-finite: keep the last finite reading and observation, and stop
-            _, reward, _, info = self._evaluate(self._reading, nonfinite=True, change=change)
+        if result is None:  # diverged: keep the last sane reading and observation, and stop
+            _, reward, _, info = self._evaluate(self._reading, diverged=True, change=change)
             return self._last_obs, reward, True, False, info
         self._reading = reading
         self._last_obs, reward, done, info = result
@@ -204,7 +213,7 @@ class BaseRobotEnv(gym.Env):
         return raw, state, d, force
 
     def _evaluate(
-        self, reading: PhysicsReading, nonfinite: bool = False, change: float = 0.0
+        self, reading: PhysicsReading, diverged: bool = False, change: float = 0.0
     ) -> _Evaluation | None:
         """Observation, reward, termination and info of a reading, everything computed once.
 
@@ -212,32 +221,33 @@ class BaseRobotEnv(gym.Env):
 
         Args:
             reading: the physics read-out after a control step.
-            nonfinite: score ``reading`` (the last finite one) for a step whose physics went
-                non-finite: no success, the ``nonfinite`` term set, the episode ends.
+            diverged: score ``reading`` (the last sane one) for a step whose physics diverged:
+                no success, the ``nonfinite`` term set, ``info["diverged"]``, the episode ends.
             change: sum of the squared action change since the previous step.
 
         Returns:
-            (obs, reward, terminated, info), or None when ``reading`` is not finite (and
-            ``nonfinite`` is False). Every quantity of the reading shows in the unclipped state
-            (the quaternion through its norm, the joint angles through sin/cos) except the joint
-            velocities, which show in the joint velocity term (a sum of magnitudes).
+            (obs, reward, terminated, info), or None when ``reading`` shows a diverged physics
+            (and ``diverged`` is False): a NaN or infinite value, or a joint faster than its
+            divergence limit (``TaskConfig.divergence_speed_factor``). Every quantity of the
+            reading shows in the unclipped state (the quaternion through its norm, the joint
+            angles through sin/cos) except the joint velocities, which show in the joint
+            velocity term (a sum of magnitudes).
         """
         task = self.task
         raw, state, d, force = self._measure(reading)
         # a sum of squares is finite exactly when every entry is, barring overflow (>1e154),
         # which the exact test then rules out
-        if not (nonfinite or math.isfinite(raw.dot(raw)) or np.isfinite(raw).all()):
+        if not (diverged or math.isfinite(raw.dot(raw)) or np.isfinite(raw).all()):
             return None
         qpos, qvel = reading.qpos, reading.qvel
         progress, success, over_now = reward_lib.advance(np, self._progress, d, force, task)
-        success = bool(success) and not nonfinite
+        success = bool(success) and not diverged
         motion = reward_lib.Motion(self._distance, change)
         terms = reward_lib.band_reward_terms(
-            np, d, force, qpos, qvel, self._band, success, nonfinite, task, motion
+            np, d, force, qpos, qvel, self._band, success, diverged, task, motion
         )
         terms = {name: float(value) for name, value in terms.items()}
-        joint_velocity = terms["joint_velocity"]
-        if not (nonfinite or math.isfinite(joint_velocity) or np.isfinite(qvel).all()):
+        if not diverged and self._runaway(terms["joint_velocity"], qvel):
             return None
         self._progress, self._distance = progress, d
         info = {
@@ -245,12 +255,25 @@ class BaseRobotEnv(gym.Env):
             "distance": d,
             "contact_force_norm": force,
             "reward_terms": terms,
-            "nonfinite": nonfinite,
+            "diverged": diverged,
+            "nonfinite": diverged,  # the older name of ``diverged``
             "overforce": bool(over_now),
         }
         obs = obs_lib.unflatten_obs(state.astype(np.float32))
-        done = bool(reward_lib.ends_episode(success, bool(over_now), nonfinite, task))
+        done = bool(reward_lib.ends_episode(success, bool(over_now), diverged, task))
         return obs, float(reward_lib.total_reward(terms, task)), done, info
+
+    def _runaway(self, speed_sum: float, qvel: np.ndarray) -> bool:
+        """Non-finite or runaway joint velocities ``qvel (6,)``; ``speed_sum`` = sum |qvel|.
+
+        The sum is already computed (the joint velocity term); no joint can pass its limit
+        while the sum stays below the smallest limit, so the per-joint test is rarely run.
+        """
+        if not (math.isfinite(speed_sum) or np.isfinite(qvel).all()):
+            return True
+        return speed_sum > self._min_speed_limit and bool(
+            reward_lib.runaway(np, qvel, self._speed_limits)
+        )
 
     def _show(self, frame: np.ndarray) -> None:
         """Draw a frame in a window (needs a display and matplotlib)."""

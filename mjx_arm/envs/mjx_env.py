@@ -10,6 +10,12 @@ and episode, when configured.
 
 ``state.info`` per env: ``rng``; ``task`` (:class:`TaskMemory`: the success rule's progress, the
 previous action and distance); ``episode`` (the episode's randomisation draw).
+
+Divergence: a step whose physics reads NaN or infinite values, or a joint faster than
+``TaskConfig.divergence_speed_factor`` times its URDF velocity limit, keeps the previous
+observation, sets ``done`` and the ``nonfinite`` reward term, and ``metrics["diverged"]`` = 1.
+The auto-reset wrappers (:mod:`mjx_arm.envs.wrappers`, the vector env) then replace that env's
+physics state; the other envs of the batch step on unaffected.
 """
 
 from __future__ import annotations
@@ -96,6 +102,7 @@ class MjxArmEnv(Env):
         self.randomization = randomization or RandomizationConfig()
         self._v_scale = jnp.asarray(self.task.action_scale * self.arm.v_max, jnp.float32)
         self._limits = (jnp.asarray(self.arm.lower), jnp.asarray(self.arm.upper))
+        self._speeds = jnp.asarray(reward_lib.speed_limits(self.arm.v_max, self.task), jnp.float32)
 
     @property
     def observation_size(self) -> int:
@@ -131,6 +138,7 @@ class MjxArmEnv(Env):
         zero = jnp.zeros(())
         metrics = {f"reward/{name}": zero for name in REWARD_TERMS}
         metrics.update(self._measures(d, force, zero, zero, zero))
+        metrics["diverged"] = zero
         return State(
             pipeline_state=data,
             obs=self.observe(reading, episode),
@@ -149,7 +157,7 @@ class MjxArmEnv(Env):
         dynamics = episode.dynamics if self.randomization.enabled else None
         data = self.physics.step(state.pipeline_state, applied * self._v_scale, dynamics)
         reading = self.physics.read(data)
-        finite = _all_finite(reading)
+        finite = _all_finite(reading) & ~reward_lib.runaway(jnp, reading.qvel, self._speeds)
         reading = jax.tree.map(lambda x: jnp.where(finite, x, jnp.zeros_like(x)), reading)
         info = dict(state.info)
         noise = jnp.zeros(6)
@@ -178,6 +186,7 @@ class MjxArmEnv(Env):
         metrics = dict(state.metrics)  # keep keys wrappers added (EvalWrapper's "reward")
         metrics.update({f"reward/{name}": value for name, value in terms.items()})
         metrics.update(self._measures(d, force, success, over, self.physics.overflow(data)))
+        metrics["diverged"] = (~finite).astype(jnp.float32)
         return state.replace(
             pipeline_state=data,
             obs=obs,

@@ -3,7 +3,10 @@
 ``gymnasium.make_vec("mjx_arm/Touch-v0", num_envs=N, vectorization_mode="vector_entry_point")``
 returns :class:`ArmVectorEnv`: numpy in and out, the contract's Dict observation, and the
 ``SAME_STEP`` autoreset mode (a finished env is reset inside the step that ends it; its last
-observation and info are in ``info["final_obs"]`` / ``info["final_info"]``).
+observation and info are in ``info["final_obs"]`` / ``info["final_info"]``). ``info["diverged"]``
+``(num_envs,)`` flags the envs whose physics diverged in this step (a NaN or infinite state, or a
+runaway joint speed); they are terminated and reset like any finished env, and the other envs
+step on unaffected.
 """
 
 from __future__ import annotations
@@ -119,6 +122,7 @@ class ArmVectorEnv(VectorEnv):
             "distance": m["distance"],
             "contact_force_norm": m["contact_force"],
             "reward_terms": {name: m[f"reward/{name}"] for name in REWARD_TERMS},
+            "diverged": m["diverged"] > 0,
         }
         return info
 

@@ -26,7 +26,8 @@ class RewardConfig:
     ``distance`` = 1 - exp(-d / distance_length), ``contact`` = 1 when the tool presses the target
     inside the force band, ``joint_limit`` = number of joints beyond ``soft_limit`` of their range,
     ``joint_velocity`` = sum |qdot| (rad/s), ``success`` = 1 on the success step,
-    ``nonfinite`` = 1 when the physics state is not finite,
+    ``nonfinite`` = 1 when the physics diverged (a NaN or infinite state, or a runaway joint
+    speed: see ``TaskConfig.divergence_speed_factor``),
     ``force_excess`` = (F - F_max) / F_max where the contact force F is above the band, else 0,
     ``approach_speed`` = (how fast d shrinks)^2 (m^2/s^2) while d < ``approach_radius``,
     ``action_rate`` = sum (a_t - a_{t-1})^2 over the six action entries,
@@ -101,6 +102,12 @@ class TaskConfig:
             protective stop).
         variant: "seed" (the seed document's task) or "gentle" (Touch's default: hold, no strike).
         force_clip: bound (N and N m) of each contact_force component.
+        divergence_speed_factor: the physics has diverged when a joint turns faster than this
+            multiple of its URDF velocity limit (or any value is NaN or infinite). The velocity
+            servos keep the joints near their limits, so a joint ten times faster means the
+            integration ran away: the episode ends with ``info["diverged"]`` and the
+            ``nonfinite`` reward term (PyBullet caps joint speeds at 100 rad/s, so its runaway
+            shows as speed, not as NaN).
         reward: weights of the reward terms.
     """
 
@@ -121,6 +128,7 @@ class TaskConfig:
     terminate_on_overforce: bool = False
     variant: str = "seed"
     force_clip: float = 100.0
+    divergence_speed_factor: float = 10.0
     reward: RewardConfig = field(default_factory=RewardConfig)
 
     def __post_init__(self) -> None:
@@ -135,6 +143,8 @@ class TaskConfig:
             raise ValueError("home_qpos needs 6 joint angles")
         if self.success_hold_steps < 1:
             raise ValueError("success_hold_steps must be >= 1")
+        if not self.divergence_speed_factor > 1:
+            raise ValueError("divergence_speed_factor must be > 1")
 
     @property
     def n_substeps(self) -> int:

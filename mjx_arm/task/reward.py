@@ -130,6 +130,22 @@ def advance(xp: Any, progress: Progress, distance, force_norm, cfg: TaskConfig):
     return Progress(hold, over), success, over_now
 
 
+def speed_limits(v_max, cfg: TaskConfig):
+    """Joint speeds (rad/s, ``(6,)``) above which the physics counts as diverged."""
+    return cfg.divergence_speed_factor * v_max
+
+
+def runaway(xp: Any, qvel, limits):
+    """Whether a joint turns faster than its divergence limit, bool ``(...)``.
+
+    Args:
+        xp: the array namespace.
+        qvel: joint velocities (rad/s), ``(..., 6)``; NaN compares False (test finiteness apart).
+        limits: :func:`speed_limits`, ``(6,)``.
+    """
+    return xp.any(xp.abs(qvel) > limits, axis=-1)
+
+
 def ends_episode(success, over_now, nonfinite, cfg: TaskConfig):
     """Termination (bool ``(...)``): a non-finite state, success or a strike, as configured."""
     done = nonfinite | (success & cfg.terminate_on_success)

@@ -343,6 +343,9 @@ def _set_options(spec: mujoco.MjSpec, config: ConvertConfig) -> None:
     spec.option.timestep = config.sim_dt
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_EULERDAMP
+    # A diverging simulation must show as a non-finite state that the envs flag: MuJoCo's
+    # automatic reset would silently put the arm back at qpos0 (all joints at 0) instead.
+    spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_AUTORESET
     spec.option.iterations = config.solver_iterations
     spec.option.ls_iterations = config.ls_iterations
     spec.compiler.autolimits = True
