@@ -85,12 +85,12 @@ def parse_xml(data: bytes | str) -> ET.Element:
     Raises:
         XmlError: as :func:`read_xml`, except for the file checks.
     """
-    raw = data.encode("utf-8") if isinstance(data, str) else data
-    if len(raw) > MAX_BYTES:
-        raise XmlError("file", _too_large(len(raw)), "remove what the URDF does not need")
-    _check_doctype(raw)
+    size = len(data.encode("utf-8", errors="replace")) if isinstance(data, str) else len(data)
+    if size > MAX_BYTES:
+        raise XmlError("file", _too_large(size), "remove what the URDF does not need")
+    _check_doctype(data)
     try:
-        root = ET.fromstring(raw)
+        root = ET.fromstring(data)
     except ET.ParseError as exc:
         line, col = getattr(exc, "position", (0, 0))
         reason = str(exc).split(": line ")[0]
@@ -113,7 +113,7 @@ def _too_large(size: int) -> str:
     return f"is {size / 2**20:.1f} MiB, above the {MAX_BYTES / 2**20:.0f} MiB a URDF may have"
 
 
-def _check_doctype(data: bytes) -> None:
+def _check_doctype(data: bytes | str) -> None:
     """Refuse a DOCTYPE that declares entities or names an external DTD.
 
     Expat reads the prolog only: the parse stops at the root element's start tag, before any
