@@ -84,7 +84,7 @@ def test_a_bare_doctype_is_accepted(tmp_path: Path):
          "XML tree", f"nested more than {MAX_DEPTH}"),
         (f'<robot name="{"n" * (MAX_ATTRIBUTE_CHARS + 1)}"/>', "<robot> attribute 'name'",
          "characters long"),
-        ('<?xml version="1.0" encoding="no-such-codec"?><robot/>', "XML declaration",
+        (b'<?xml version="1.0" encoding="no-such-codec"?><robot/>', "XML declaration",
          "cannot be decoded"),
         ('<robot name="\xff"/>'.encode("latin-1"), "XML at line 1, column 13",
          "not well-formed"),
@@ -104,6 +104,47 @@ def test_a_file_above_the_size_limit_is_not_read(tmp_path: Path):
         f.truncate(MAX_BYTES + 1)  # sparse: no disk space used
     with pytest.raises(XmlError, match="above the 8 MiB"):
         read_xml(path)
+
+
+# --------------------------------------------------------------------------- hostile values
+
+HOSTILE_VALUES = {
+    "huge_offset": (
+        ('<origin xyz="0 0 0.045" rpy="0 0 0"/>', '<origin xyz="0 -1e308 0.045" rpy="0 0 0"/>'),
+        "link 'base_link'",
+        "more than 10000 m from its frame",
+    ),
+    "size_ratio": (
+        ('<cylinder radius="0.075" length="0.09"/>', '<cylinder radius="3.4e38" length="0.09"/>'),
+        "link 'base_link'",
+        "differ by more than a factor 1e+05",
+    ),
+    "overflowing_inertia": (
+        ('ixx="0.008325" ixy="0"', 'ixx="0.008325" ixy="1.7976931348623157e308"'),
+        "link 'base_link'",
+        "is not positive definite",
+    ),
+    "self_mimic": (
+        ('<joint name="ft_sensor_joint" type="fixed">',
+         '<joint name="ft_sensor_joint" type="fixed"><mimic joint="ft_sensor_joint"/>'),
+        "joint 'ft_sensor_joint'",
+        "mimics itself",
+    ),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("case", sorted(HOSTILE_VALUES))
+def test_extreme_values_get_named_errors(case: str, tmp_path: Path):
+    (old, new), element, problem = HOSTILE_VALUES[case]
+    assert old in ARM
+    path = tmp_path / "arm.urdf"
+    path.write_text(ARM.replace(old, new, 1))
+    report = validate(path)
+    assert any(f.element == element and problem in f.problem for f in report.errors), (
+        report.format()
+    )
+    with pytest.raises(ConversionError, match=problem.replace("+", r"\+")):
+        to_mjcf(path)
 
 
 # --------------------------------------------------------------------------- outside files

@@ -429,7 +429,14 @@ def _check_joint_types(tree: _Tree, out: _Findings) -> None:
                 f"use one of {', '.join(sorted(JOINT_TYPES))}",
             )
         mimic = j.elem.find("mimic")
-        if mimic is not None and mimic.get("joint") not in tree.joints:
+        if mimic is not None and mimic.get("joint") == j.name:
+            out.error(
+                1,
+                _joint(j.name),
+                "mimics itself",
+                "name another joint in <mimic joint=...> or remove <mimic>",
+            )
+        elif mimic is not None and mimic.get("joint") not in tree.joints:
             target = mimic.get("joint")
             out.error(
                 1,
