@@ -78,9 +78,10 @@ def cmd_transfer(args: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_INVALID
     _enable_jax_cache()
-    task, _ = eval_task(policy, args.task)
+    task, task_notes = eval_task(policy, config.task or None)
     meta = environment_metadata(accelerator=True)
     matrix = transfer_matrix(policy, task, config, jax.default_backend())
+    matrix["notes"][:0] = task_notes
     name = args.name or f"transfer_{task.task}"
     paths = write_report(matrix, meta, args.out, name, source, args.trained_on, args.plot)
     print(paths[1].read_text())
@@ -88,8 +89,21 @@ def cmd_transfer(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _command(commands, func, help_text: str, config: type) -> argparse.ArgumentParser:
+    """The parser of ``func`` (named after it), with the flags of its settings ``config``."""
+    p = commands.add_parser(
+        func.__name__.removeprefix("cmd_"), help=help_text, description=func.__doc__
+    )
+    p.set_defaults(func=func)
+    add_arguments(p, config)
+    return p
+
+
 def register(sub) -> None:
     """Add ``bench`` with its ``parity`` and ``transfer`` subcommands to ``sub``."""
+    from mjx_arm.bench.parity import ParityConfig
+    from mjx_arm.bench.transfer import TransferConfig
+
     bench = sub.add_parser(
         "bench",
         help="engine benchmarks: parity between engines, transfer of a policy",
@@ -97,35 +111,13 @@ def register(sub) -> None:
     )
     commands = bench.add_subparsers(dest="bench_command", required=True, metavar="BENCH")
 
-    p = commands.add_parser(
-        "parity",
-        help="engine parity: FK, divergence, pressing, jitter",
-        description=cmd_parity.__doc__,
-    )
-    from mjx_arm.bench.parity import ParityConfig
-
-    add_arguments(p, ParityConfig)
+    p = _command(commands, cmd_parity, "engine parity: FK, divergence, force, jitter", ParityConfig)
     p.add_argument("--quick", action="store_true", help="a small run (tests, a first look)")
     p.add_argument("--out", type=Path, default=PARITY_OUT, help=f"output folder ({PARITY_OUT})")
-    p.set_defaults(func=cmd_parity)
 
-    p = commands.add_parser(
-        "transfer",
-        help="one policy evaluated in every engine, with goals",
-        description=cmd_transfer.__doc__,
-    )
-    from mjx_arm.bench.transfer import TransferConfig
-
+    p = _command(commands, cmd_transfer, "one policy in every engine, with goals", TransferConfig)
     p.add_argument("policy", help="policy file (.npz/.onnx) or run directory (newest checkpoint)")
-    add_arguments(p, TransferConfig)
-    p.add_argument(
-        "--task",
-        type=str.lower,
-        choices=["reach", "touch"],
-        help="task (default: the one the policy was trained on)",
-    )
     p.add_argument("--trained-on", default="", help="where the policy was trained (text)")
     p.add_argument("--name", help="file stem (default: transfer_TASK)")
     p.add_argument("--plot", action="store_true", help="also write NAME.png")
     p.add_argument("--out", type=Path, default=TRANSFER_OUT, help=f"output folder ({TRANSFER_OUT})")
-    p.set_defaults(func=cmd_transfer)

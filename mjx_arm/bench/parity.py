@@ -498,22 +498,24 @@ def _goal(check: str, subject: str, value: Any, met: bool, goal: Any) -> dict[st
     }
 
 
-# Why a goal is missed, measured on this model (see the README's parity section); keyed by
-# check prefix and a word of the subject.
+# Where a goal is missed: the difference between the engines that drives that figure, keyed by
+# check prefix and a word of the subject (the first match counts).
 CAUSES = {
     ("forward kinematics", "mjx"): (
-        "MJX computes in float32: about 1e-7 relative error per transform, summed over 8 bodies"
+        "MJX computes in float32: about 1e-7 relative rounding per transform, summed along the "
+        "chain of bodies"
     ),
     ("joint divergence", "pybullet"): (
-        "different integrators and joint drives: PyBullet applies the servo law explicitly "
-        "once per substep; MuJoCo integrates the velocity servo and damping implicitly"
+        "different integrators and contact solvers: PyBullet applies the servo law as an "
+        "explicit torque once per substep, MuJoCo integrates servo and damping implicitly"
     ),
     ("joint divergence", "mjx"): (
-        "float32 against float64: rounding differences grow along the open-loop trajectory"
+        "float32 against float64 (and, in sequences that touch the table, MJX's own collision "
+        "routines and fixed solver iterations): differences grow along the trajectory"
     ),
     ("steady press force", ""): (
-        "the replayed press commands were recorded in C MuJoCo; this engine resolves the "
-        "contact differently"
+        "the press commands were recorded in C MuJoCo; this engine resolves the contact "
+        "(solver, friction) differently"
     ),
 }
 

@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from mjx_arm.bench.parity import JITTER_SCENARIOS
+from mjx_arm.bench.parity import DAMPING, JITTER_SCENARIOS
 from mjx_arm.bench.results import fmt, markdown_table, save_results, verdict
 
 NAME = "parity"
@@ -19,7 +19,7 @@ EXTRA_TIMES = (0.5,)
 def _goal_text(goal: Any) -> str:
     if isinstance(goal, list | tuple):
         return f"{goal[0]:g}-{goal[1]:g} N"
-    return f"<= {goal:.0e}"
+    return f"<= {goal:.0e}".replace("e-0", "e-")
 
 
 def _value_text(value: Any) -> str:
@@ -77,7 +77,7 @@ def press_table(result: dict[str, Any]) -> str:
     headers = [
         "engine",
         "first contact (s)",
-        "steady |F| (N)",
+        "steady force (N)",
         "median (N)",
         f"max difference from {press['reference']}",
     ]
@@ -165,17 +165,21 @@ def plot_press(ax, result: dict[str, Any]) -> None:
 
 
 def plot_jitter(axes, result: dict[str, Any]) -> None:
-    """Acceleration spread per engine, damping as converted and zeroed, one panel a scenario."""
+    """Acceleration spread per engine, damping as converted and zeroed, one panel a scenario
+    (log scale; a run without any motion is marked 0 at the bottom)."""
     jitter = result["figures"]["jitter"]
     names = list(jitter)
     x = np.arange(len(names))
     for ax, scenario in zip(axes, JITTER_SCENARIOS, strict=True):
-        for j, damping in enumerate(("converted", "zeroed")):
-            values = [max(jitter[n][scenario][damping]["acc_std_max"], 1e-12) for n in names]
-            ax.bar(x + 0.4 * j, values, width=0.4, label=f"damping {damping}")
-        ax.set_yscale("log")
+        for j, damping in enumerate(DAMPING):
+            values = np.array([jitter[n][scenario][damping]["acc_std_max"] for n in names])
+            ax.bar(x + 0.4 * j, values, width=0.4, color=f"C{j}", label=f"damping {damping}")
+            for xi in x[values == 0.0]:
+                ax.annotate("0", (xi + 0.4 * j, 0), xycoords=("data", "axes fraction"), ha="center")
         ax.set_xticks(x + 0.2, names, fontsize="small")
-        ax.set(title=scenario, ylabel="joint acceleration std (rad/s^2)")
+        ax.set(title=scenario)
+    axes[-1].set_yscale("log")  # shared: the press panel always has data to scale
+    axes[0].set(ylabel="joint acceleration std (rad/s^2)")
     axes[0].legend(fontsize="small")
 
 
@@ -189,7 +193,7 @@ def save_plots(result: dict[str, Any], folder: Path) -> list[Path]:
     paths = []
     for name in PLOTS:
         if name == "jitter":
-            fig, axes = plt.subplots(1, len(JITTER_SCENARIOS), figsize=(14, 4))
+            fig, axes = plt.subplots(1, len(JITTER_SCENARIOS), figsize=(14, 4), sharey=True)
             plot_jitter(axes, result)
         else:
             fig, ax = plt.subplots(figsize=(8, 5))

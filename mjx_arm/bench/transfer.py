@@ -20,6 +20,7 @@ from typing import Any
 from mjx_arm.bench.results import fmt, markdown_table, save_results, verdict
 from mjx_arm.bench.settings import setting
 from mjx_arm.envs.physics_config import IMPLS
+from mjx_arm.evaluate import TASK_IDS
 from mjx_arm.task.config import TaskConfig
 
 
@@ -48,6 +49,7 @@ class TransferConfig:
     engines: tuple[str, ...] = setting(
         ("mjx", "mujoco", "pybullet"), "engines (rows)", tuple(TRANSFER_ENGINES)
     )
+    task: str = setting("", "task to evaluate in: reach or touch (default: the policy's own)")
     episodes: int = setting(200, "episodes per engine")
     seed: int = setting(1000, "first episode's seed (CPU engines) or the batch's seed")
     impl: str = setting("auto", "MJX implementation", IMPLS)
@@ -59,6 +61,8 @@ class TransferConfig:
         unknown = set(self.engines) - set(TRANSFER_ENGINES)
         if unknown or not self.engines:
             raise ValueError(f"engines must be some of {tuple(TRANSFER_ENGINES)}")
+        if self.task not in ("", *TASK_IDS):
+            raise ValueError(f"task must be one of {tuple(TASK_IDS)}, got {self.task!r}")
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict."""
@@ -164,7 +168,8 @@ def markdown(matrix: dict[str, Any], source: str, trained_on: str) -> str:
         ]
         for r in matrix["rows"]
     ]
-    title = f"Task {matrix['task']}; policy {source}; trained on {trained_on or 'see the run'}.\n"
+    trained = f"; trained on {trained_on}" if trained_on else ""
+    title = f"Task {matrix['task']}; policy {source}{trained}.\n"
     notes = "".join(f"\nNote: {n}\n" for n in matrix["notes"])
     return title + "\n" + markdown_table(headers, rows) + notes
 
