@@ -99,6 +99,8 @@ def test_goals_name_a_cause_when_missed():
 def test_config_rejects_bad_settings():
     with pytest.raises(ValueError, match="engines"):
         ParityConfig(engines=("gazebo",))
+    with pytest.raises(ValueError, match="two engines"):
+        ParityConfig(engines=("mujoco",))
     with pytest.raises(ValueError, match="goal_time"):
         ParityConfig(seconds=0.5, goal_time=1.0)
     with pytest.raises(ValueError, match="engines"):

@@ -29,7 +29,7 @@ import numpy as np
 from mjx_arm.bench.engines import ENGINES, Engine, Inputs, MujocoEngine, Trace, make_engine
 from mjx_arm.bench.settings import setting
 from mjx_arm.envs.arm import ArmInfo, arm_info
-from mjx_arm.envs.physics_config import IMPLS
+from mjx_arm.envs.physics_config import IMPLS, resolve_impl
 from mjx_arm.task import sampling
 from mjx_arm.task.config import HOME_QPOS, TaskConfig, reach_config, touch_config
 
@@ -83,6 +83,9 @@ class ParityConfig:
         unknown = set(self.engines) - set(ENGINES)
         if unknown or not self.engines:
             raise ValueError(f"engines must be some of {ENGINES}, got {self.engines}")
+        runs = len(self.engines) + (len(self.impls) - 1 if "mjx" in self.engines else 0)
+        if runs < 2:
+            raise ValueError("parity needs two engines (or MJX with two impls) to compare")
         if not 0 < self.goal_time <= self.seconds:
             raise ValueError("goal_time must lie in (0, seconds]")
         if not 1 <= self.press_boxes <= len(BOX_POSITIONS):
@@ -324,10 +327,12 @@ class ParityInputs:
 
 
 def engine_specs(config: ParityConfig) -> list[tuple[str, str]]:
-    """``(engine, MJX implementation)`` of every engine run, in the configured order."""
+    """``(engine, MJX implementation)`` of every engine run, in the configured order; ``auto``
+    is resolved, so an implementation runs once."""
     out = []
     for name in config.engines:
-        out += [(name, impl) for impl in config.impls] if name == "mjx" else [(name, "auto")]
+        impls = dict.fromkeys(resolve_impl(i) for i in config.impls) if name == "mjx" else ["auto"]
+        out += [(name, impl) for impl in impls]
     return out
 
 
@@ -373,7 +378,8 @@ def run_engine(name: str, impl: str, inputs: ParityInputs) -> tuple[str, EngineR
         seconds[phase] = seconds.get(phase, 0.0) + now - clock
         clock = now
 
-    engine: Engine = make_engine(name, inputs.reach_task, impl, len(inputs.reach))
+    batch = max(len(inputs.reach), len(inputs.fk_qpos))
+    engine: Engine = make_engine(name, inputs.reach_task, impl, batch)
     lap("build")
     ee = engine.fk(inputs.fk_qpos)
     lap("fk")
