@@ -110,7 +110,7 @@ def test_config_rejects_bad_settings():
 def test_flags_come_from_the_config():
     parser = argparse.ArgumentParser()
     add_arguments(parser, ParityConfig)
-    args = parser.parse_args(["--sequences", "7", "--engines", "mujoco", "--jitter-command", "1"])
+    args = parser.parse_args(["--jitter-command", "1"])
     with pytest.raises(ValueError, match="jitter_command"):
         from_arguments(ParityConfig(), args)
     args = parser.parse_args(["--sequences", "7", "--engines", "mujoco", "mjx", "--seconds", "1.5"])
