@@ -72,6 +72,13 @@ def _limits_passed_by(qpos: np.ndarray, arm) -> float:
     return float(np.max(np.maximum(arm.lower - qpos, qpos - arm.upper), initial=0.0))
 
 
+@pytest.fixture(autouse=True)
+def _in_tmp_path(tmp_path, monkeypatch) -> None:
+    """MuJoCo writes its warnings about the diverged states to MUJOCO_LOG.TXT in the working
+    folder: keep it out of the checkout."""
+    monkeypatch.chdir(tmp_path)
+
+
 # --------------------------------------------------------------------------- CPU envs
 
 
