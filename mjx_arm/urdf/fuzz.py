@@ -15,8 +15,9 @@ Each operation ends in one of :data:`STATUSES`:
 - ``hang``: it took longer than :data:`HANG_SECONDS`.
 
 While an operation runs, an audit hook (``sys.addaudithook``) records every file opened for
-reading outside the URDF's folder and the package folders (Python's own module files aside):
-``outside`` lists them. Native code (MuJoCo's and PyBullet's loaders) opens files without
+reading outside the URDF's folder and the package folders (Python's own module files, and
+folders opened to list them, as a temporary folder's clean-up does, aside): ``outside`` lists
+them. Native code (MuJoCo's and PyBullet's loaders) opens files without
 Python's audit events; the validator and converter hand it only paths they have checked (see
 :mod:`mjx_arm.urdf.meshes`).
 """
