@@ -157,36 +157,37 @@ class MjxArmEnv(Env):
         dynamics = episode.dynamics if self.randomization.enabled else None
         data = self.physics.step(state.pipeline_state, applied * self._v_scale, dynamics)
         reading = self.physics.read(data)
-        finite = _all_finite(reading) & ~reward_lib.runaway(jnp, reading.qvel, self._speeds)
-        reading = jax.tree.map(lambda x: jnp.where(finite, x, jnp.zeros_like(x)), reading)
+        # sane: finite, and no joint running away (else the physics diverged)
+        sane = _all_finite(reading) & ~reward_lib.runaway(jnp, reading.qvel, self._speeds)
+        reading = jax.tree.map(lambda x: jnp.where(sane, x, jnp.zeros_like(x)), reading)
         info = dict(state.info)
         noise = jnp.zeros(6)
         if self.randomization.enabled:
             info["rng"], key = jax.random.split(state.info["rng"])
             noise = ft_noise(key, self.randomization)
-        obs = jnp.where(finite, self.observe(reading, episode, noise), state.obs)
+        obs = jnp.where(sane, self.observe(reading, episode, noise), state.obs)
         d, force = self._distance_and_force(reading)
         progress, success, over = reward_lib.advance(jnp, memory.progress, d, force, self.task)
-        success = success & finite
+        success = success & sane
         motion = reward_lib.Motion(
             memory.prev_distance, reward_lib.action_change(jnp, action, memory.prev_action)
         )
         terms = reward_lib.reward_terms(
-            jnp, d, force, reading.qpos, reading.qvel, self._limits, success, ~finite,
+            jnp, d, force, reading.qpos, reading.qvel, self._limits, success, ~sane,
             self.task, motion,
         )  # fmt: skip
         # strong float32 everywhere: a weak type would change the State's type and retrace
         terms = {
-            k: jnp.where(finite | (k == "nonfinite"), v, 0.0).astype(jnp.float32)
+            k: jnp.where(sane | (k == "nonfinite"), v, 0.0).astype(jnp.float32)
             for k, v in terms.items()
         }
         reward = reward_lib.total_reward(terms, self.task).astype(jnp.float32)
-        done = reward_lib.ends_episode(success, over & finite, ~finite, self.task)
-        info["task"] = TaskMemory(progress, action, jnp.where(finite, d, memory.prev_distance))
+        done = reward_lib.ends_episode(success, over & sane, ~sane, self.task)
+        info["task"] = TaskMemory(progress, action, jnp.where(sane, d, memory.prev_distance))
         metrics = dict(state.metrics)  # keep keys wrappers added (EvalWrapper's "reward")
         metrics.update({f"reward/{name}": value for name, value in terms.items()})
         metrics.update(self._measures(d, force, success, over, self.physics.overflow(data)))
-        metrics["diverged"] = (~finite).astype(jnp.float32)
+        metrics["diverged"] = (~sane).astype(jnp.float32)
         return state.replace(
             pipeline_state=data,
             obs=obs,
