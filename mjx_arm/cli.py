@@ -84,8 +84,12 @@ def cmd_train(args: argparse.Namespace) -> int:
         run_dir = Path(args.resume)
         saved = json.loads((run_dir / "config.json").read_text())["train"]
         config = TrainConfig.from_dict(saved)
+        if args.devices is not None:  # a run resumes on any number of devices
+            config = config.replace(devices=args.devices)
     else:
         overrides = list(args.set or [])
+        if args.devices is not None:
+            overrides.insert(0, f"devices={args.devices}")
         if args.task:
             overrides.insert(0, f"task={args.task.lower()}")
         if args.backend:
@@ -383,6 +387,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--backend",
         choices=["auto", "mjx", "mujoco"],
         help="physics: mjx (GPU), mujoco (C MuJoCo, CPU), auto (default)",
+    )
+    p.add_argument(
+        "--devices",
+        type=int,
+        help="local devices to train on, the env batch split evenly over them "
+        "(default: all; also on --resume, which may change it)",
     )
     p.add_argument("--config", help="JSON file with training config fields")
     p.add_argument(

@@ -21,6 +21,7 @@ What differs under Warp, and how this layer handles it:
 
 from __future__ import annotations
 
+import copy
 from typing import Any
 
 import jax
@@ -86,6 +87,17 @@ class Dynamics:
         return Dynamics(jnp.ones(()), jnp.ones(6), jnp.ones(6), jnp.ones(6))
 
 
+def warp_compatible(mj_model: mujoco.MjModel) -> mujoco.MjModel:
+    """A copy of ``mj_model`` without the options MuJoCo Warp rejects.
+
+    The converter disables MuJoCo's automatic reset of a diverged state (so that divergence shows
+    as a non-finite state); Warp has no automatic reset and refuses the flag, so it is cleared.
+    """
+    model = copy.copy(mj_model)
+    model.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
+    return model
+
+
 def model_bounds(mj_model: mujoco.MjModel) -> tuple[int, int]:
     """(contacts, constraint rows) one env of ``mj_model`` can produce at most.
 
@@ -144,13 +156,12 @@ class MjxPhysics:
             "model_contacts": contacts,
             "model_rows": rows,
         }
-        model = mjx.put_model(self.mj_model, impl="warp")
+        mj_model = warp_compatible(self.mj_model)
+        model = mjx.put_model(mj_model, impl="warp")
         # Warp prints a warning per env and substep on any overflow; this layer reads the bits.
         opt_impl = model.opt._impl.replace(warn_overflow=0)
         model = model.replace(opt=model.opt.replace(_impl=opt_impl))
-        data = mjx.make_data(
-            self.mj_model, impl="warp", naconmax=per_env * self.batch_size, njmax=njmax
-        )
+        data = mjx.make_data(mj_model, impl="warp", naconmax=per_env * self.batch_size, njmax=njmax)
         return model, data
 
     def describe(self) -> dict[str, Any]:
@@ -244,6 +255,24 @@ class MjxPhysics:
             return _where_rows(done, n, o)
 
         return jax.tree_util.tree_map_with_path(pick, new, old)
+
+    def splits(self, path: tuple) -> bool:
+        """Whether the state leaf at ``path`` is cut into per-device slices by a device split.
+
+        Every leaf of a batched state has the batch axis first, except MuJoCo Warp's shared
+        buffers: its contact pool is cut too (each device keeps the pool of its own envs), its
+        counters and index tables are whole on every device.
+        """
+        if self.impl != "warp":
+            return True
+        names = [getattr(key, "name", None) for key in path]
+        if "_impl" not in names or names.index("_impl") + 1 >= len(names):
+            return True
+        field = names[names.index("_impl") + 1]
+        from mujoco.mjx.warp import types as warp_types
+
+        per_env = warp_types._BATCH_DIM["Data"]
+        return field.startswith("contact__") or per_env.get(field, True)
 
     def check_overflow(self, flags: Any) -> None:
         """Raise :class:`PhysicsOverflowError` if any env of ``flags`` (host array) overflowed."""

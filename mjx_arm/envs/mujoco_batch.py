@@ -209,6 +209,10 @@ class MujocoCallbackPhysics:
     def check_overflow(self, flags: object) -> None:
         """Nothing to check: C MuJoCo never drops contacts (``flags`` are all False)."""
 
+    def splits(self, path: tuple) -> bool:
+        """Every leaf of a batched C-backend state has the batch axis first."""
+        return True
+
     def where(self, done: jax.Array, new: CState, old: CState) -> CState:
         """Per env: ``new`` where ``done (B,)`` else ``old``."""
         return batched_where(done, new, old)

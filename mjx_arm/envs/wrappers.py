@@ -1,4 +1,4 @@
-"""Brax training wrappers: vmap, episode limit and an auto-reset that draws new targets."""
+"""Brax training wrappers: vmap, a per-device split, episode limit, auto-reset with new targets."""
 
 from __future__ import annotations
 
@@ -45,8 +45,69 @@ class AutoResetNewTarget(Wrapper):
         return state.replace(pipeline_state=data, obs=batched_where(done, fresh_obs, state.obs))
 
 
-def wrap_for_training(env: Env, episode_length: int, action_repeat: int = 1, **_) -> Wrapper:
-    """Vmap + episode limit + auto-reset with new targets (Brax's ``wrap_env_fn`` signature)."""
+def wrap_for_training(
+    env: Env,
+    episode_length: int,
+    action_repeat: int = 1,
+    mesh: jax.sharding.Mesh | None = None,
+    axis: str = "envs",
+    **_,
+) -> Wrapper:
+    """Vmap + episode limit + auto-reset with new targets (Brax's ``wrap_env_fn`` signature).
+
+    With a ``mesh``, the batched physics runs on each device's own slice of the batch
+    (:class:`DeviceSplit`, over mesh axis ``axis``).
+    """
     env = VmapWrapper(env)
+    if mesh is not None:
+        env = DeviceSplit(env, mesh, axis)
     env = EpisodeWrapper(env, episode_length, action_repeat)
     return AutoResetNewTarget(env)
+
+
+class DeviceSplit(Wrapper):
+    """Each device resets and steps its own slice of the batch (``jax.shard_map``).
+
+    Under ``jax.jit`` over a mesh XLA partitions MJX's JAX graph itself, but not MuJoCo Warp's
+    kernels (foreign function calls). Placed right above the ``VmapWrapper``, this runs the
+    batched physics once per device on its ``num_envs / D`` envs; the physics says which state
+    leaves are cut per device (``physics.splits``).
+
+    Args:
+        env: the batched env (a Brax ``VmapWrapper``).
+        mesh: the devices.
+        axis: the mesh axis the batch is split over.
+    """
+
+    def __init__(self, env: Env, mesh: jax.sharding.Mesh, axis: str) -> None:
+        super().__init__(env)
+        self.mesh, self.axis = mesh, axis
+
+    def _specs(self, tree):
+        splits = self.env.unwrapped.physics.splits
+        cut, whole = jax.sharding.PartitionSpec(self.axis), jax.sharding.PartitionSpec()
+        return jax.tree_util.tree_map_with_path(lambda p, _: cut if splits(p) else whole, tree)
+
+    def reset(self, rng: jax.Array) -> State:
+        """Reset ``rng (num_envs, 2)``, each device its own envs."""
+        specs = self._specs(jax.eval_shape(self.env.reset, rng))
+        split = jax.shard_map(
+            self.env.reset,
+            mesh=self.mesh,
+            in_specs=jax.sharding.PartitionSpec(self.axis),
+            out_specs=specs,
+            check_vma=False,
+        )
+        return split(rng)
+
+    def step(self, state: State, action: jax.Array) -> State:
+        """Step ``action (num_envs, 6)``, each device its own envs."""
+        specs = self._specs(state)
+        split = jax.shard_map(
+            self.env.step,
+            mesh=self.mesh,
+            in_specs=(specs, jax.sharding.PartitionSpec(self.axis)),
+            out_specs=specs,
+            check_vma=False,
+        )
+        return split(state, action)

@@ -19,6 +19,8 @@ from typing import Any
 
 from mjx_arm.envs.physics_config import PhysicsConfig, RandomizationConfig
 
+PARTITIONS = ("auto", "xla", "per_device")
+
 # Nested sections of the config: name -> type (``--set physics.impl=warp``).
 SECTIONS = {"physics": PhysicsConfig, "randomization": RandomizationConfig}
 
@@ -50,7 +52,12 @@ class TrainConfig:
         stop_at_success: stop once an evaluation's success rate reaches this (its checkpoint
             is saved); 0 trains all ``num_timesteps``.
         seed: PRNG seed.
-        max_devices: use at most this many local devices (0: all; Brax pmaps over them).
+        devices: local devices to train on (0: all of them). The env batch is split evenly
+            over them, so ``num_envs`` and ``batch_size`` must be multiples of the count.
+        partition: how the batched physics is spread over the devices: "xla" (XLA partitions
+            the jitted env graph), "per_device" (``shard_map``: each device steps its own
+            envs; needed for MuJoCo Warp, whose kernels XLA cannot partition) or "auto"
+            (per_device on Warp, xla otherwise).
     """
 
     task: str = "reach"
@@ -80,7 +87,8 @@ class TrainConfig:
     checkpoint_every: int = 1
     stop_at_success: float = 0.0
     seed: int = 0
-    max_devices: int = 0
+    devices: int = 0
+    partition: str = "auto"
 
     def samples_per_update(self) -> int:
         """Env steps consumed by one PPO update (one rollout batch)."""
@@ -99,10 +107,12 @@ class TrainConfig:
         """Inverse of :meth:`to_dict`; unknown keys are an error. Sections missing from older
         files take their defaults."""
         known = {f.name for f in dataclasses.fields(cls)}
+        data = dict(data)
+        if "max_devices" in data:  # the name in configs written before "devices"
+            data.setdefault("devices", data.pop("max_devices"))
         unknown = set(data) - known
         if unknown:
             raise ValueError(f"unknown training config keys: {sorted(unknown)}")
-        data = dict(data)
         for key in ("policy_hidden", "value_hidden"):
             if key in data:
                 data[key] = tuple(data[key])
@@ -112,16 +122,33 @@ class TrainConfig:
         return cls(**data)
 
     def validate(self) -> None:
-        """Check the batch arithmetic Brax PPO requires."""
+        """Check names and the batch arithmetic PPO requires."""
         if self.task not in ("reach", "touch"):
             raise ValueError(f"task must be reach or touch, got {self.task!r}")
         if self.backend not in ("auto", "mjx", "mujoco"):
             raise ValueError(f"backend must be auto, mjx or mujoco, got {self.backend!r}")
+        if self.partition not in PARTITIONS:
+            raise ValueError(f"partition must be one of {PARTITIONS}, got {self.partition!r}")
+        if self.devices < 0:
+            raise ValueError(f"devices must be >= 0 (0: all), got {self.devices}")
         if (self.batch_size * self.num_minibatches) % self.num_envs:
             raise ValueError(
                 f"batch_size * num_minibatches ({self.batch_size * self.num_minibatches}) must "
                 f"be a multiple of num_envs ({self.num_envs})"
             )
+
+    def check_devices(self, count: int) -> None:
+        """Check that the batches split evenly over ``count`` devices.
+
+        Raises:
+            ValueError: ``num_envs`` or ``batch_size`` is not a multiple of ``count``.
+        """
+        for name in ("num_envs", "batch_size"):
+            if getattr(self, name) % count:
+                raise ValueError(
+                    f"{name} ({getattr(self, name)}) must be a multiple of the device count "
+                    f"({count}); change it with --set {name}=N or choose --devices"
+                )
 
 
 # The seed document's PPO settings mapped onto a GPU batch, on the seed document's task (Touch

@@ -1,9 +1,11 @@
 """Brax PPO on the batched arm env, with a run directory, checkpoints and resume.
 
-``train(config, run_dir)`` is what ``mjx-arm train`` calls. Brax does the learning; this module
-builds the env, wires Brax's callbacks to the run directory (metrics, checkpoints, transitions,
-progress bar) and restores a run. Brax checkpoints hold params only (normaliser, policy, value):
-on resume the optimiser's moment estimates start from zero again (google/brax#655).
+``train(config, run_dir)`` is what ``mjx-arm train`` calls. Brax's PPO does the learning, on one
+device or several (:mod:`mjx_arm.train.loop`, :mod:`mjx_arm.train.learner`); this module builds
+the env, wires the callbacks to the run directory (metrics, checkpoints, transitions, progress
+bar) and restores a run. Checkpoints hold params only (normaliser, policy, value), in Brax's
+format: on resume the optimiser's moment estimates start from zero again (google/brax#655), and
+a run resumes on any number of devices.
 """
 
 from __future__ import annotations
@@ -22,8 +24,9 @@ import numpy as np
 from mjx_arm.envs.backend import make_batched_env, resolve_backend
 from mjx_arm.envs.mjx_physics import PhysicsOverflowError, overflow_message
 from mjx_arm.task.config import TaskConfig, task_config
-from mjx_arm.train import compat
 from mjx_arm.train.config import TrainConfig
+from mjx_arm.train.learner import local_devices
+from mjx_arm.train.loop import Callbacks, resolve_partition, run_ppo
 from mjx_arm.train.rundir import RunDir
 
 TRANSITIONS_KEPT = 100
@@ -61,7 +64,8 @@ def full_config(
         "backend": resolve_backend(config.backend),
         "physics_resolved": physics or {},
         "jax_backend": jax.default_backend(),
-        "devices": [str(d) for d in jax.devices()],
+        "devices": [str(d) for d in local_devices(config.devices)],
+        "partition": resolve_partition(config, (physics or {}).get("impl", "")),
     }
 
 
@@ -193,15 +197,9 @@ def train(
     Args:
         config: the resolved training config.
         run_dir: the run directory (created if missing).
-        resume: continue from the newest checkpoint in ``run_dir``.
+        resume: continue from the newest checkpoint in ``run_dir`` (on any device count).
         quiet: no progress bar.
     """
-    from brax.training.agents.ppo import networks as ppo_networks
-    from brax.training.agents.ppo import train as brax_ppo
-
-    from mjx_arm.envs.wrappers import wrap_for_training
-
-    compat.install()
     config.validate()
     task = task_config(config.task, **config.task_overrides)
     run = RunDir(run_dir)
@@ -217,46 +215,21 @@ def train(
         raise ValueError(f"run already has {step_offset} of {config.num_timesteps} steps")
 
     env, eval_env = make_envs(config, task)
-    if not resume:
-        run.save_config(full_config(config, task, env.physics.describe()))
-    network_factory = functools.partial(
-        ppo_networks.make_ppo_networks,
-        policy_hidden_layer_sizes=config.policy_hidden,
-        value_hidden_layer_sizes=config.value_hidden,
-    )
     progress = _Progress(run, config, task, step_offset, config.num_timesteps, quiet)
     progress.physics = env.physics.describe()
+    if not resume:
+        run.save_config(full_config(config, task, env.physics.describe()))
     start = time.monotonic()
     try:
-        brax_ppo.train(
-            environment=env,
-            eval_env=eval_env,
-            num_timesteps=remaining,
-            episode_length=task.episode_steps,
-            wrap_env_fn=wrap_for_training,
-            num_envs=config.num_envs,
-            unroll_length=config.unroll_length,
-            batch_size=config.batch_size,
-            num_minibatches=config.num_minibatches,
-            num_updates_per_batch=config.num_updates_per_batch,
-            learning_rate=config.learning_rate,
-            discounting=config.discounting,
-            gae_lambda=config.gae_lambda,
-            clipping_epsilon=config.clipping_epsilon,
-            vf_loss_coefficient=config.vf_loss_coefficient,
-            max_grad_norm=config.max_grad_norm,
-            entropy_cost=config.entropy_cost,
-            reward_scaling=config.reward_scaling,
-            normalize_observations=config.normalize_observations,
-            network_factory=network_factory,
-            num_evals=config.num_evals,
-            num_eval_envs=config.num_eval_envs,
-            deterministic_eval=True,
+        run_ppo(
+            config,
+            env,
+            eval_env,
+            task.episode_steps,
+            remaining,
+            Callbacks(progress.progress, progress.policy_params),
+            restore=restore,
             seed=config.seed + step_offset,
-            max_devices_per_host=config.max_devices or None,
-            progress_fn=progress.progress,
-            policy_params_fn=progress.policy_params,
-            restore_params=restore,
         )
     except Solved:
         pass
@@ -265,7 +238,7 @@ def train(
         run.close()
     total = time.monotonic() - start
     compile_s, sps = _timings(progress.times, config)
-    trained = progress.times[-1][1] if progress.times else remaining  # Brax rounds up to epochs
+    trained = progress.times[-1][1] if progress.times else remaining  # rounded up to epochs
     return TrainResult(
         run.path, step_offset + trained, progress.last_metrics, compile_s, total, sps
     )

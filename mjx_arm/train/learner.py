@@ -1,0 +1,294 @@
+"""Brax PPO as one jitted training epoch over a mesh of devices.
+
+Brax's ``ppo.train`` replicates its training step with ``jax.pmap``, and XLA crashes compiling
+MJX's graph under pmap on several GPUs (jax 0.11). This module keeps Brax's PPO (its networks,
+``compute_ppo_loss``, running-statistics normaliser, ``generate_unroll`` and the same optax
+optimiser) and compiles the epoch with ``jax.jit`` over a :class:`jax.sharding.Mesh` instead:
+
+- the env batch is sharded over the mesh axis ``envs`` (each device steps ``num_envs / D`` envs);
+- params, optimiser and normaliser state are replicated on every device;
+- each minibatch is split over the devices and XLA inserts the gradient all-reduce.
+
+The epoch is written on the global batch, so a run's numbers do not depend on the device count
+except through the order of floating-point sums: the same seed on one device or on several gives
+the same run within float32 rounding. The environment decides how its physics is partitioned
+(:class:`mjx_arm.envs.wrappers.DeviceSplit` runs physics XLA cannot partition, MuJoCo Warp's
+kernels, on each device's own slice).
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+from brax.training import acting, gradients
+from brax.training import types as brax_types
+from brax.training.acme import running_statistics, specs
+from brax.training.agents.ppo import losses as ppo_losses
+from brax.training.agents.ppo import networks as ppo_networks
+from brax.training.agents.ppo.train import TrainingState
+from jax.sharding import Mesh, NamedSharding
+from jax.sharding import PartitionSpec as P
+
+from mjx_arm.train.config import TrainConfig
+
+ENV_AXIS = "envs"
+# What the loss needs from each transition besides the policy's extras (Brax's names).
+STATE_EXTRAS = ("truncation", "episode_metrics", "episode_done")
+
+Params = tuple[Any, Any, Any]  # (normaliser state, policy params, value params)
+
+
+def local_devices(count: int = 0) -> list[jax.Device]:
+    """The first ``count`` local devices of the default backend (0: all of them).
+
+    Raises:
+        ValueError: more devices asked for than there are.
+    """
+    devices = jax.local_devices()
+    if count < 0 or count > len(devices):
+        raise ValueError(
+            f"asked for {count} devices, {len(devices)} available ({devices[0].platform})"
+        )
+    return devices[: count or len(devices)]
+
+
+def make_mesh(devices: list[jax.Device]) -> Mesh:
+    """A one-axis mesh (``envs``) over ``devices``."""
+    return Mesh(np.array(devices), (ENV_AXIS,))
+
+
+def batch_sharding(mesh: Mesh, tree: Any, batch: int) -> Any:
+    """Shardings for ``tree``: leaves with a leading axis of ``batch`` split over the devices.
+
+    Other leaves (MuJoCo Warp's contact pool, counters) are replicated here; inside the physics
+    :class:`mjx_arm.envs.wrappers.DeviceSplit` lays them out per device.
+    """
+    split, whole = NamedSharding(mesh, P(ENV_AXIS)), NamedSharding(mesh, P())
+
+    def pick(x: Any) -> NamedSharding:
+        return split if getattr(x, "ndim", 0) >= 1 and x.shape[0] == batch else whole
+
+    return jax.tree.map(pick, tree)
+
+
+@dataclass(frozen=True)
+class EpochSizes:
+    """How a training epoch is cut.
+
+    Attributes:
+        unrolls: env unrolls per training step (``batch_size * num_minibatches / num_envs``).
+        steps_per_epoch: training steps per epoch (one epoch between two evaluations).
+        env_steps_per_step: env steps per training step.
+    """
+
+    unrolls: int
+    steps_per_epoch: int
+    env_steps_per_step: int
+
+    @staticmethod
+    def of(config: TrainConfig, num_timesteps: int) -> EpochSizes:
+        """Brax's arithmetic: ``num_evals - 1`` epochs cover ``num_timesteps`` (rounded up)."""
+        per_step = config.batch_size * config.num_minibatches * config.unroll_length
+        evals_after_init = max(config.num_evals - 1, 1)
+        epoch = int(np.ceil(num_timesteps / (evals_after_init * per_step)))
+        unrolls = config.batch_size * config.num_minibatches // config.num_envs
+        return EpochSizes(unrolls, epoch, per_step)
+
+
+class Learner:
+    """Brax PPO's networks, loss and optimiser, and the jitted training epoch.
+
+    Args:
+        config: the training config (PPO settings, network sizes).
+        observation_size: size of the flat observation (22).
+        action_size: size of the action (6).
+        mesh: the devices; the env batch is split over its ``envs`` axis.
+    """
+
+    def __init__(
+        self, config: TrainConfig, observation_size: int, action_size: int, mesh: Mesh
+    ) -> None:
+        self.config, self.mesh = config, mesh
+        self.observation_size = observation_size
+        normalize = running_statistics.normalize if config.normalize_observations else None
+        self.network = ppo_networks.make_ppo_networks(
+            observation_size,
+            action_size,
+            preprocess_observations_fn=normalize or brax_types.identity_observation_preprocessor,
+            policy_hidden_layer_sizes=config.policy_hidden,
+            value_hidden_layer_sizes=config.value_hidden,
+        )
+        self.make_policy = ppo_networks.make_inference_fn(self.network)
+        self.optimizer = optax.chain(
+            optax.clip_by_global_norm(config.max_grad_norm), optax.adam(config.learning_rate)
+        )
+        loss = functools.partial(
+            ppo_losses.compute_ppo_loss,
+            ppo_network=self.network,
+            entropy_cost=config.entropy_cost,
+            discounting=config.discounting,
+            reward_scaling=config.reward_scaling,
+            gae_lambda=config.gae_lambda,
+            clipping_epsilon=config.clipping_epsilon,
+            normalize_advantage=True,
+            vf_coefficient=config.vf_loss_coefficient,
+        )
+        # pmap_axis_name=None: the loss is a mean over the global minibatch; under jit over the
+        # mesh XLA reduces the gradient across devices itself.
+        self._loss_and_grad = gradients.loss_and_pgrad(loss, pmap_axis_name=None, has_aux=True)
+        self.replicated = NamedSharding(mesh, P())
+
+    # ------------------------------------------------------------------ state
+
+    def init(self, key_policy: jax.Array, key_value: jax.Array) -> TrainingState:
+        """Fresh network params, optimiser and normaliser state, replicated on the mesh."""
+        params = ppo_losses.PPONetworkParams(
+            policy=self.network.policy_network.init(key_policy),
+            value=self.network.value_network.init(key_value),
+        )
+        obs_spec = specs.Array((self.observation_size,), jnp.dtype("float32"))
+        state = TrainingState(
+            optimizer_state=self.optimizer.init(params),
+            params=params,
+            normalizer_params=running_statistics.init_state(obs_spec),
+            env_steps=brax_types.UInt64(hi=0, lo=0),
+        )
+        return self.place(state)
+
+    def restore(self, state: TrainingState, params: Params) -> TrainingState:
+        """``state`` with the (normaliser, policy, value) of a checkpoint."""
+        normalizer, policy, value = params
+        state = state.replace(
+            normalizer_params=normalizer,
+            params=state.params.replace(policy=policy, value=value),
+        )
+        return self.place(state)
+
+    def place(self, tree: Any) -> Any:
+        """``tree`` replicated on every device of the mesh (weak types made strong)."""
+        tree = jax.tree.map(lambda x: jnp.asarray(x, jnp.asarray(x).dtype), tree)
+        return jax.device_put(tree, self.replicated)
+
+    @staticmethod
+    def params(state: TrainingState) -> Params:
+        """(normaliser, policy, value) of ``state`` as host numpy arrays."""
+        return jax.device_get((state.normalizer_params, state.params.policy, state.params.value))
+
+    # ------------------------------------------------------------------ training
+
+    def epoch_fn(self, env: Any, sizes: EpochSizes, env_shardings: Any) -> Callable:
+        """The jitted epoch ``(state, env_state, key) -> (state, env_state, metrics)``.
+
+        Args:
+            env: the batched training env (Brax wrappers), its batch axis first.
+            sizes: the epoch's cut.
+            env_shardings: shardings of the env state (see :func:`batch_sharding`).
+        """
+        step = functools.partial(self._training_step, env, sizes)
+
+        def epoch(state: TrainingState, env_state: Any, key: jax.Array):
+            (state, env_state, _), metrics = jax.lax.scan(
+                step, (state, env_state, key), (), length=sizes.steps_per_epoch
+            )
+            return state, env_state, jax.tree.map(jnp.mean, metrics)
+
+        rep = self.replicated
+        return jax.jit(
+            epoch,
+            in_shardings=(rep, env_shardings, rep),
+            out_shardings=(rep, env_shardings, rep),
+            donate_argnums=(0, 1),
+        )
+
+    def _training_step(self, env: Any, sizes: EpochSizes, carry: tuple, _: Any):
+        """One rollout of ``unrolls x unroll_length`` steps, then the PPO update on it."""
+        state, env_state, key = carry
+        key_sgd, key_unroll, key_next = jax.random.split(key, 3)
+        policy = self.make_policy(
+            (state.normalizer_params, state.params.policy, state.params.value)
+        )
+        env_state, data = self._rollout(env, env_state, policy, key_unroll, sizes.unrolls)
+        normalizer = running_statistics.update(state.normalizer_params, data.observation)
+        (optimizer_state, params, _), metrics = jax.lax.scan(
+            functools.partial(self._sgd_epoch, data=data, normalizer=normalizer),
+            (state.optimizer_state, state.params, key_sgd),
+            (),
+            length=self.config.num_updates_per_batch,
+        )
+        state = TrainingState(
+            optimizer_state=optimizer_state,
+            params=params,
+            normalizer_params=normalizer,
+            env_steps=state.env_steps + sizes.env_steps_per_step,
+        )
+        return (state, env_state, key_next), metrics
+
+    def _rollout(self, env: Any, env_state: Any, policy: Any, key: jax.Array, unrolls: int):
+        """``unrolls`` unrolls of every env; transitions as ``(num_envs * unrolls, T, ...)``."""
+        length = self.config.unroll_length
+
+        def unroll(carry: tuple, _: Any):
+            env_state, key = carry
+            key, key_next = jax.random.split(key)
+            env_state, data = acting.generate_unroll(
+                env, env_state, policy, key, length, extra_fields=STATE_EXTRAS
+            )
+            return (env_state, key_next), data
+
+        (env_state, _), data = jax.lax.scan(unroll, (env_state, key), (), length=unrolls)
+        # (unrolls, T, envs, ...) -> (envs, unrolls, T, ...) -> (envs * unrolls, T, ...): the
+        # env axis stays first, so each device keeps the transitions of its own envs.
+        data = jax.tree.map(lambda x: jnp.moveaxis(x, 2, 0), data)
+        data = jax.tree.map(lambda x: x.reshape((-1, *x.shape[2:])), data)
+        return env_state, data
+
+    def _sgd_epoch(self, carry: tuple, _: Any, data: Any, normalizer: Any):
+        """One pass over the rollout in ``num_minibatches`` shuffled minibatches."""
+        optimizer_state, params, key = carry
+        key, key_perm, key_grad = jax.random.split(key, 3)
+        count = self.config.num_minibatches
+        split = NamedSharding(self.mesh, P(None, ENV_AXIS))
+
+        def minibatches(x: jax.Array) -> jax.Array:
+            x = jax.random.permutation(key_perm, x)
+            x = x.reshape((count, -1, *x.shape[1:]))
+            return jax.lax.with_sharding_constraint(x, split)
+
+        (optimizer_state, params, _), metrics = jax.lax.scan(
+            functools.partial(self._minibatch_step, normalizer=normalizer),
+            (optimizer_state, params, key_grad),
+            jax.tree.map(minibatches, data),
+            length=count,
+        )
+        return (optimizer_state, params, key), metrics
+
+    def _minibatch_step(self, carry: tuple, batch: Any, normalizer: Any):
+        """One gradient step on one minibatch ``(batch_size, T, ...)``."""
+        optimizer_state, params, key = carry
+        key, key_loss = jax.random.split(key)
+        (_, metrics), grads = self._loss_and_grad(params, normalizer, batch, key_loss)
+        updates, optimizer_state = self.optimizer.update(grads, optimizer_state)
+        params = optax.apply_updates(params, updates)
+        metrics["learning_rate"] = jnp.asarray(self.config.learning_rate)
+        return (optimizer_state, params, key), metrics
+
+
+def evaluator(
+    learner: Learner, eval_env: Any, config: TrainConfig, episode_length: int, key: jax.Array
+) -> acting.Evaluator:
+    """Brax's evaluator (deterministic policy, one episode per env) on the default device."""
+    return acting.Evaluator(
+        eval_env,
+        functools.partial(learner.make_policy, deterministic=True),
+        num_eval_envs=config.num_eval_envs,
+        episode_length=episode_length,
+        action_repeat=1,
+        key=key,
+    )

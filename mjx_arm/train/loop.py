@@ -1,0 +1,132 @@
+"""The PPO run: devices, env batch, epochs between evaluations, and the callbacks.
+
+The order of events follows Brax's ``ppo.train``: an evaluation of the initial policy (when more
+than one evaluation is asked for), then ``num_evals - 1`` epochs, each followed by
+``policy_params_fn(step, make_policy, params)`` and ``progress_fn(step, metrics)``. Metric names
+are Brax's (``eval/...``, ``training/...``), so run directories read the same as before.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+from jax.sharding import NamedSharding
+from jax.sharding import PartitionSpec as P
+
+from mjx_arm.envs.wrappers import wrap_for_training
+from mjx_arm.task.observation import OBS_SIZE
+from mjx_arm.train.config import TrainConfig
+from mjx_arm.train.learner import (
+    ENV_AXIS,
+    EpochSizes,
+    Learner,
+    Params,
+    batch_sharding,
+    evaluator,
+    local_devices,
+    make_mesh,
+)
+
+ACTION_SIZE = 6
+
+
+@dataclass
+class Callbacks:
+    """What the run reports to: Brax's ``progress_fn`` and ``policy_params_fn`` signatures."""
+
+    progress: Callable[[int, dict[str, Any]], None]
+    policy_params: Callable[[int, Callable, Params], None]
+
+
+def resolve_partition(config: TrainConfig, impl: str) -> str:
+    """``auto``: ``xla`` for MJX-JAX; ``per_device`` for Warp and C MuJoCo (foreign calls)."""
+    if config.partition != "auto":
+        return config.partition
+    return "xla" if impl == "jax" else "per_device"
+
+
+def strong(tree: Any) -> Any:
+    """``tree`` without weak types (a weak type changes the jitted epoch's signature)."""
+    return jax.tree.map(lambda x: jnp.asarray(x).astype(jnp.asarray(x).dtype), tree)
+
+
+def run_ppo(
+    config: TrainConfig,
+    env: Any,
+    eval_env: Any,
+    episode_length: int,
+    num_timesteps: int,
+    callbacks: Callbacks,
+    restore: Params | None = None,
+    seed: int | None = None,
+) -> dict[str, Any]:
+    """Train ``num_timesteps`` env steps of PPO; return the run's facts (devices, partition).
+
+    Args:
+        config: PPO settings, devices and partition.
+        env, eval_env: the unwrapped training and evaluation envs (``MjxArmEnv``).
+        episode_length: control steps before an episode is truncated.
+        num_timesteps: env steps to train (rounded up to whole epochs, as Brax does).
+        callbacks: where evaluations and params go.
+        restore: (normaliser, policy, value) to start from.
+        seed: PRNG seed (default: ``config.seed``).
+    """
+    devices = local_devices(config.devices)
+    config.check_devices(len(devices))
+    mesh = make_mesh(devices)
+    partition = resolve_partition(config, env.physics.impl)
+    key = jax.random.PRNGKey(config.seed if seed is None else seed)
+    global_key, local_key = jax.random.split(key)
+    local_key, key_env, key_eval = jax.random.split(local_key, 3)
+    key_policy, key_value = jax.random.split(global_key)
+
+    split_mesh = mesh if partition == "per_device" else None
+    train_env = wrap_for_training(env, episode_length, mesh=split_mesh, axis=ENV_AXIS)
+    learner = Learner(config, OBS_SIZE, ACTION_SIZE, mesh)
+    state = learner.init(key_policy, key_value)
+    if restore is not None:
+        state = learner.restore(state, restore)
+    env_state, shardings = _reset(train_env, mesh, key_env, config.num_envs)
+    sizes = EpochSizes.of(config, num_timesteps)
+    epoch = learner.epoch_fn(train_env, sizes, shardings)
+    evaluate = evaluator(
+        learner, wrap_for_training(eval_env, episode_length), config, episode_length, key_eval
+    )
+
+    params = learner.params(state)
+    if config.num_evals > 1:
+        callbacks.progress(0, evaluate.run_evaluation(params, {}))
+    callbacks.policy_params(0, learner.make_policy, params)
+    walltime, step = 0.0, 0
+    for _ in range(max(config.num_evals - 1, 1)):
+        epoch_key, local_key = jax.random.split(local_key)
+        start = time.monotonic()
+        state, env_state, metrics = epoch(state, strong(env_state), epoch_key)
+        metrics = jax.device_get(metrics)
+        seconds = time.monotonic() - start
+        walltime += seconds
+        step += sizes.steps_per_epoch * sizes.env_steps_per_step
+        params = learner.params(state)
+        callbacks.policy_params(step, learner.make_policy, params)
+        training = {
+            "training/sps": sizes.steps_per_epoch * sizes.env_steps_per_step / seconds,
+            "training/walltime": walltime,
+            **{f"training/{name}": value for name, value in metrics.items()},
+        }
+        callbacks.progress(step, evaluate.run_evaluation(params, training))
+    return {"devices": [str(d) for d in devices], "partition": partition}
+
+
+def _reset(env: Any, mesh: Any, key: jax.Array, num_envs: int) -> tuple[Any, Any]:
+    """The first env state, its batch split over the mesh, and the state's shardings."""
+    keys = jax.random.split(key, num_envs)
+    shardings = batch_sharding(mesh, jax.eval_shape(env.reset, keys), num_envs)
+    reset = jax.jit(
+        env.reset, in_shardings=NamedSharding(mesh, P(ENV_AXIS)), out_shardings=shardings
+    )
+    return strong(reset(keys)), shardings
