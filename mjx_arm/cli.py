@@ -78,6 +78,7 @@ def cmd_train(args: argparse.Namespace) -> int:
 
     from mjx_arm.train.config import TrainConfig, load_config
     from mjx_arm.train.ppo import train
+    from mjx_arm.train.rundir import RunDirError
 
     _enable_compilation_cache()
     if args.resume:
@@ -98,7 +99,11 @@ def cmd_train(args: argparse.Namespace) -> int:
         stamp = time.strftime("%Y%m%d-%H%M%S")
         run_dir = Path(args.run_dir or Path("runs") / f"{config.task}-{stamp}")
     print(f"run directory: {run_dir}")
-    result = train(config, run_dir, resume=bool(args.resume), quiet=args.quiet)
+    try:
+        result = train(config, run_dir, resume=bool(args.resume), quiet=args.quiet)
+    except RunDirError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return EXIT_INVALID
     success = result.metrics.get("eval/episode_success", float("nan"))
     print(
         f"done: {result.steps} steps in {result.train_seconds:.1f} s "

@@ -41,13 +41,18 @@ def _params(run_dir: Path) -> list[np.ndarray]:
 
 
 def one_step_difference(out: Path) -> float:
-    """Largest difference of any parameter after one training step, 1 device vs 2."""
+    """Largest difference of any parameter array after one training step, 1 device vs 2,
+    relative to the array's largest magnitude."""
     runs = []
     for devices in (1, 2):
         sets = {**ONE_STEP, "devices": str(devices)}
         config = load_config("cpu", None, [f"{k}={v}" for k, v in sets.items()])
         runs.append(_params(train(config, out / f"one_step_{devices}", quiet=True).run_dir))
-    return max(float(np.abs(a - b).max()) for a, b in zip(*runs, strict=True))
+    return max(
+        float(np.abs(a - b).max() / max(np.abs(a).max(), 1e-12))
+        for a, b in zip(*runs, strict=True)
+        if a.size
+    )
 
 
 def learn_and_resume(out: Path, steps: int) -> dict:
@@ -82,7 +87,7 @@ def main() -> None:
     steps = int(sys.argv[2])
     figures = {
         "device_count": jax.local_device_count(),
-        "one_step_max_abs": one_step_difference(out),
+        "one_step_max_rel": one_step_difference(out),
         **learn_and_resume(out, steps),
     }
     print(json.dumps(figures))

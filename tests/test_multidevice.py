@@ -46,10 +46,12 @@ def figures(tmp_path_factory: pytest.TempPathFactory) -> dict:
 def test_two_devices_compute_what_one_does(figures: dict) -> None:
     """After one training step the params on 2 devices equal those on 1 within float32 sums.
 
-    Measured 3e-7 (params of magnitude 0.3): only the order of the cross-device sums differs.
+    Measured: at most 1.5e-5 relative to each array's largest entry (3e-7 absolute on weights
+    of about 0.3; the worst is a bias vector of about 0.008); only the order of the
+    cross-device sums differs.
     """
     assert figures["device_count"] == 2
-    assert figures["one_step_max_abs"] < 1e-5
+    assert figures["one_step_max_rel"] < 1e-4
 
 
 def test_two_devices_learn_reach(figures: dict) -> None:
@@ -64,7 +66,7 @@ def test_two_devices_learn_reach(figures: dict) -> None:
 def test_a_two_device_run_resumes_on_one(figures: dict) -> None:
     """Checkpoints hold params only: a run saved on 2 devices goes on on 1."""
     assert figures["kept_step"] < figures["steps"]
-    assert figures["resumed_steps"] >= figures["steps"]
+    assert figures["resumed_steps"] == figures["steps"]  # the same epochs as without a stop
     assert figures["resumed_success"] >= 0.8
 
 

@@ -92,6 +92,11 @@ class EpochSizes:
     steps_per_epoch: int
     env_steps_per_step: int
 
+    @property
+    def env_steps_per_epoch(self) -> int:
+        """Env steps between two evaluations."""
+        return self.steps_per_epoch * self.env_steps_per_step
+
     @staticmethod
     def of(config: TrainConfig, num_timesteps: int) -> EpochSizes:
         """Brax's arithmetic: ``num_evals - 1`` epochs cover ``num_timesteps`` (rounded up)."""

@@ -60,27 +60,29 @@ def run_ppo(
     env: Any,
     eval_env: Any,
     episode_length: int,
-    num_timesteps: int,
     callbacks: Callbacks,
     restore: Params | None = None,
-    seed: int | None = None,
+    step_offset: int = 0,
 ) -> dict[str, Any]:
-    """Train ``num_timesteps`` env steps of PPO; return the run's facts (devices, partition).
+    """Train PPO up to ``config.num_timesteps`` env steps; return the devices and partition.
+
+    The run is cut into ``num_evals - 1`` epochs of equal size (rounded up, as Brax does); a
+    resumed run (``step_offset`` > 0) runs the epochs that remain, so it ends at the same step
+    and logs the same steps as a run that was never stopped.
 
     Args:
         config: PPO settings, devices and partition.
         env, eval_env: the unwrapped training and evaluation envs (``MjxArmEnv``).
         episode_length: control steps before an episode is truncated.
-        num_timesteps: env steps to train (rounded up to whole epochs, as Brax does).
-        callbacks: where evaluations and params go.
+        callbacks: where evaluations and params go (steps are the run's global steps).
         restore: (normaliser, policy, value) to start from.
-        seed: PRNG seed (default: ``config.seed``).
+        step_offset: env steps already trained (a resumed run's checkpoint step).
     """
     devices = local_devices(config.devices)
     config.check_devices(len(devices))
     mesh = make_mesh(devices)
     partition = resolve_partition(config, env.physics.impl)
-    key = jax.random.PRNGKey(config.seed if seed is None else seed)
+    key = jax.random.PRNGKey(config.seed + step_offset)
     global_key, local_key = jax.random.split(key)
     local_key, key_env, key_eval = jax.random.split(local_key, 3)
     key_policy, key_value = jax.random.split(global_key)
@@ -92,29 +94,28 @@ def run_ppo(
     if restore is not None:
         state = learner.restore(state, restore)
     env_state, shardings = _reset(train_env, mesh, key_env, config.num_envs)
-    sizes = EpochSizes.of(config, num_timesteps)
+    sizes = EpochSizes.of(config, config.num_timesteps)
     epoch = learner.epoch_fn(train_env, sizes, shardings)
     evaluate = evaluator(
         learner, wrap_for_training(eval_env, episode_length), config, episode_length, key_eval
     )
 
     params = learner.params(state)
-    if config.num_evals > 1:
+    if config.num_evals > 1 and step_offset == 0:
         callbacks.progress(0, evaluate.run_evaluation(params, {}))
-    callbacks.policy_params(0, learner.make_policy, params)
-    walltime, step = 0.0, 0
-    for _ in range(max(config.num_evals - 1, 1)):
+    walltime, step = 0.0, step_offset
+    while step < config.num_timesteps:
         epoch_key, local_key = jax.random.split(local_key)
         start = time.monotonic()
         state, env_state, metrics = epoch(state, strong(env_state), epoch_key)
         metrics = jax.device_get(metrics)
         seconds = time.monotonic() - start
         walltime += seconds
-        step += sizes.steps_per_epoch * sizes.env_steps_per_step
+        step += sizes.env_steps_per_epoch
         params = learner.params(state)
         callbacks.policy_params(step, learner.make_policy, params)
         training = {
-            "training/sps": sizes.steps_per_epoch * sizes.env_steps_per_step / seconds,
+            "training/sps": sizes.env_steps_per_epoch / seconds,
             "training/walltime": walltime,
             **{f"training/{name}": value for name, value in metrics.items()},
         }

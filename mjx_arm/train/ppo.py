@@ -74,24 +74,23 @@ class Solved(Exception):
 
 
 class _Progress:
-    """Brax callbacks: metrics to the run dir, a progress bar, checkpoints at an interval."""
+    """Run callbacks: metrics to the run dir, a progress bar, checkpoints at an interval.
+
+    Steps are the run's global env steps. Each evaluation's metrics row is written before the
+    checkpoint of the same step, so a run killed between the two loses no row: it resumes from
+    the checkpoint before and drops the rows after it (:meth:`RunDir.truncate_metrics`).
+    """
 
     def __init__(
-        self,
-        run: RunDir,
-        config: TrainConfig,
-        task: TaskConfig,
-        step_offset: int,
-        total: int,
-        quiet: bool,
+        self, run: RunDir, config: TrainConfig, task: TaskConfig, step_offset: int, quiet: bool
     ) -> None:
         from tqdm import tqdm
 
         self.run, self.config, self.task = run, config, task
         self.physics: dict[str, Any] = {}
-        self.offset, self.total = step_offset, total
+        self.total = config.num_timesteps
         self.bar = tqdm(
-            total=total,
+            total=self.total,
             initial=step_offset,
             unit="step",
             unit_scale=True,
@@ -99,16 +98,17 @@ class _Progress:
             desc=f"train {config.task}",
             dynamic_ncols=True,
         )
-        self.calls = 0
+        self.evals = 0
         self.latest: tuple | None = None
-        self.saved_step = -1
-        self.start = time.monotonic()
         self.times: list[tuple[float, int]] = []
         self.last_metrics: dict[str, float] = {}
 
+    def policy_params(self, step: int, make_policy, params) -> None:
+        """Keep the newest params (saved by :meth:`progress` when a checkpoint is due)."""
+        self.latest = (make_policy, params)
+
     def progress(self, step: int, metrics: dict[str, Any]) -> None:
-        """Brax ``progress_fn``: log one evaluation."""
-        global_step = self.offset + int(step)
+        """Log one evaluation; save a checkpoint every ``checkpoint_every`` and at the end."""
         self.times.append((time.monotonic(), int(step)))
         row = {
             k: float(np.asarray(v).mean())
@@ -116,38 +116,34 @@ class _Progress:
             if k.startswith(LOGGED_PREFIXES)
         }
         self.last_metrics = row
-        self.run.log_metrics(global_step, row)
-        self.bar.n = global_step
-        success = row.get("eval/episode_success", float("nan"))
-        self.bar.set_postfix(
-            reward=f"{row.get('eval/episode_reward', float('nan')):.1f}", success=f"{success:.2f}"
-        )
-        self.bar.refresh()
+        self.run.log_metrics(step, row)
+        self._show(step, row)
         overflow = row.get("eval/episode_physics_overflow", 0.0)
         if overflow > 0:
             raise PhysicsOverflowError(overflow_message(overflow, self.physics))
         goal = self.config.stop_at_success
-        if goal > 0 and success >= goal and step > 0:
-            if self.saved_step != global_step and self.latest is not None:
-                self._save(global_step, *self.latest)
-            raise Solved(global_step)
-
-    def policy_params(self, step: int, make_policy, params) -> None:
-        """Brax ``policy_params_fn``: a checkpoint every ``checkpoint_every`` calls and last."""
-        self.calls += 1
-        global_step = self.offset + int(step)
-        last = global_step >= self.total
-        self.latest = (make_policy, params)
-        if step == 0 or not (last or self.calls % self.config.checkpoint_every == 0):
+        solved = goal > 0 and row.get("eval/episode_success", 0.0) >= goal
+        if not any("training/" in k for k in row):  # the evaluation before training
             return
-        self._save(global_step, make_policy, params)
+        self.evals += 1
+        due = self.evals % self.config.checkpoint_every == 0
+        if (due or solved or step >= self.total) and self.latest is not None:
+            self._save(step, *self.latest)
+        if solved:
+            raise Solved(step)
 
-    def _save(self, global_step: int, make_policy, params) -> None:
+    def _show(self, step: int, row: dict[str, float]) -> None:
+        self.bar.n = step
+        self.bar.set_postfix(
+            reward=f"{row.get('eval/episode_reward', float('nan')):.1f}",
+            success=f"{row.get('eval/episode_success', float('nan')):.2f}",
+        )
+        self.bar.refresh()
+
+    def _save(self, step: int, make_policy, params) -> None:
         params = jax.tree.map(np.asarray, params)
-        folder = self.run.save_checkpoint(global_step, params, {"task": self.config.task})
-        transitions = rollout_transitions(make_policy, params, self.task, seed=global_step)
-        self.run.save_transitions(folder, transitions)
-        self.saved_step = global_step
+        transitions = rollout_transitions(make_policy, params, self.task, seed=step)
+        self.run.save_checkpoint(step, params, {"task": self.config.task}, transitions)
 
     def close(self) -> None:
         self.bar.close()
@@ -210,26 +206,27 @@ def train(
             raise FileNotFoundError(f"no checkpoint to resume from in {run.path}")
         step_offset = int(RunDir.load_meta(latest)["step"])
         restore = restore_brax_params(RunDir.load_params(latest))
-    remaining = config.num_timesteps - step_offset
-    if remaining <= 0:
+    if step_offset >= config.num_timesteps:
         raise ValueError(f"run already has {step_offset} of {config.num_timesteps} steps")
+    run.check_writable()  # before any compilation
+    run.truncate_metrics(step_offset)  # rows a killed run wrote after its last checkpoint
 
     env, eval_env = make_envs(config, task)
-    progress = _Progress(run, config, task, step_offset, config.num_timesteps, quiet)
+    progress = _Progress(run, config, task, step_offset, quiet)
     progress.physics = env.physics.describe()
     if not resume:
         run.save_config(full_config(config, task, env.physics.describe()))
     start = time.monotonic()
+    progress.times.append((start, step_offset))
     try:
         run_ppo(
             config,
             env,
             eval_env,
             task.episode_steps,
-            remaining,
             Callbacks(progress.progress, progress.policy_params),
             restore=restore,
-            seed=config.seed + step_offset,
+            step_offset=step_offset,
         )
     except Solved:
         pass
@@ -238,10 +235,8 @@ def train(
         run.close()
     total = time.monotonic() - start
     compile_s, sps = _timings(progress.times, config)
-    trained = progress.times[-1][1] if progress.times else remaining  # rounded up to epochs
-    return TrainResult(
-        run.path, step_offset + trained, progress.last_metrics, compile_s, total, sps
-    )
+    steps = progress.times[-1][1]  # rounded up to whole epochs
+    return TrainResult(run.path, steps, progress.last_metrics, compile_s, total, sps)
 
 
 def make_envs(config: TrainConfig, task: TaskConfig) -> tuple[Any, Any]:
@@ -282,17 +277,21 @@ def restore_brax_params(raw: Any) -> tuple:
 
 
 def _timings(times: list[tuple[float, int]], config: TrainConfig) -> tuple[float, float]:
-    """(compile seconds, steady env steps/s) from the evaluation timestamps.
+    """(compile seconds, steady env steps/s) from ``(time, step)`` marks.
 
-    The first training epoch carries the compilation; later epochs are steady. Compile time is
-    the first epoch's time minus what its steps take at the steady rate (evaluation included).
+    The marks are the start, then every evaluation. The first trained epoch carries the
+    compilation (of the training epoch and of the evaluation); later epochs are steady. Compile
+    time is the time from the start to the end of the first trained epoch less what its steps
+    take at the steady rate (evaluations included).
     """
-    if len(times) < 3:
+    first = next((i for i, (_, s) in enumerate(times) if s > times[0][1]), None)
+    if first is None or len(times) < first + 2:
         return float("nan"), float("nan")
-    (t0, s0), (t1, s1) = times[0], times[1]
     steady = [
-        (b[1] - a[1]) / (b[0] - a[0]) for a, b in itertools.pairwise(times[1:]) if b[0] > a[0]
+        (b[1] - a[1]) / (b[0] - a[0])
+        for a, b in itertools.pairwise(times[first:])
+        if b[0] > a[0]
     ]
-    sps = float(np.median(steady)) if steady else float("nan")
-    compile_s = (t1 - t0) - (s1 - s0) / sps if steady else float("nan")
-    return max(compile_s, 0.0), sps
+    sps = float(np.median(steady))
+    (t0, s0), (t1, s1) = times[0], times[first]
+    return max((t1 - t0) - (s1 - s0) / sps, 0.0), sps

@@ -13,6 +13,8 @@ from __future__ import annotations
 import csv
 import json
 import math
+import os
+import shutil
 import time
 from pathlib import Path
 from typing import Any
@@ -20,6 +22,11 @@ from typing import Any
 import numpy as np
 
 CHECKPOINT_PREFIX = "step_"
+MIN_FREE_BYTES = 64 * 2**20  # a checkpoint of the default networks takes about 3 MiB
+
+
+class RunDirError(OSError):
+    """The run directory cannot hold a run (not writable, disk full)."""
 
 
 class RunDir:
@@ -27,7 +34,12 @@ class RunDir:
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
-        self.path.mkdir(parents=True, exist_ok=True)
+        try:
+            self.path.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise RunDirError(
+                f"cannot create the run directory {self.path}: {err.strerror or err}"
+            ) from err
         self.checkpoints = self.path / "checkpoints"
         self._tb = None
         self._csv_fields: list[str] | None = None
@@ -87,21 +99,85 @@ class RunDir:
                 for row in csv.DictReader(f)
             ]
 
+    def truncate_metrics(self, step: int) -> int:
+        """Drop metric rows after ``step`` and rows cut short by a kill; return how many.
+
+        A resumed run trains again from its last checkpoint (``step``); rows a killed run
+        logged after it would otherwise appear twice. TensorBoard's event files are append-only
+        and keep them; it shows the newest value per step.
+        """
+        path = self.path / "metrics.csv"
+        if not path.exists():
+            return 0
+        with path.open(newline="") as f:
+            reader = csv.DictReader(f)
+            fields, rows = reader.fieldnames or [], list(reader)
+        kept = [r for r in rows if _complete(r, fields) and float(r["step"]) <= step]
+        if len(kept) == len(rows):
+            return 0
+        partial = path.with_name(".partial-metrics.csv")
+        with partial.open("w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=fields)
+            writer.writeheader()
+            writer.writerows(kept)
+        os.replace(partial, path)
+        return len(rows) - len(kept)
+
+    def check_writable(self, free_bytes: int = MIN_FREE_BYTES) -> None:
+        """Fail early, with a clear message, where the run directory cannot take a run.
+
+        Raises:
+            RunDirError: the folder cannot be written, or its disk has less than
+                ``free_bytes`` free.
+        """
+        probe = self.path / ".write-probe"
+        try:
+            probe.write_bytes(b"0" * 4096)
+            probe.unlink()
+        except OSError as err:
+            raise RunDirError(
+                f"cannot write to the run directory {self.path}: {err.strerror or err}"
+            ) from err
+        free = shutil.disk_usage(self.path).free
+        if free < free_bytes:
+            raise RunDirError(
+                f"the disk of {self.path} has {free / 2**20:.0f} MiB free; a run needs at least "
+                f"{free_bytes / 2**20:.0f} MiB for its checkpoints and metrics"
+            )
+
     # ------------------------------------------------------------------ checkpoints
 
     def checkpoint_dir(self, step: int) -> Path:
         """Folder of the checkpoint at ``step``."""
         return self.checkpoints / f"{CHECKPOINT_PREFIX}{step:012d}"
 
-    def save_checkpoint(self, step: int, params: Any, meta: dict[str, Any]) -> Path:
-        """Save params (normalizer, policy, value) with orbax, plus ``meta.json``."""
+    def save_checkpoint(
+        self,
+        step: int,
+        params: Any,
+        meta: dict[str, Any],
+        transitions: dict[str, np.ndarray] | None = None,
+    ) -> Path:
+        """Save params (normaliser, policy, value) with orbax, ``meta.json`` and transitions.
+
+        Atomic: everything is written into a hidden folder that is then renamed to
+        ``step_N``, so a run killed mid-save never leaves a half-written checkpoint behind
+        under a name :meth:`latest_checkpoint` would take.
+        """
         import orbax.checkpoint as ocp
 
         folder = self.checkpoint_dir(step)
-        folder.mkdir(parents=True, exist_ok=True)
-        checkpointer = ocp.PyTreeCheckpointer()
-        checkpointer.save((folder / "params").resolve(), params, force=True)
-        (folder / "meta.json").write_text(json.dumps({"step": step, **meta}, indent=2))
+        partial = folder.with_name(f".partial-{folder.name}")
+        shutil.rmtree(partial, ignore_errors=True)
+        partial.mkdir(parents=True)
+        ocp.PyTreeCheckpointer().save((partial / "params").resolve(), params, force=True)
+        if transitions is not None:
+            self.save_transitions(partial, transitions)
+        (partial / "meta.json").write_text(json.dumps({"step": step, **meta}, indent=2))
+        _fsync_tree(partial)
+        if folder.exists():  # the same step saved again (a resumed run's last checkpoint)
+            shutil.rmtree(folder)
+        os.replace(partial, folder)
         return folder
 
     def latest_checkpoint(self) -> Path | None:
@@ -148,6 +224,25 @@ def _scalar(value: Any) -> float:
         return math.nan
 
 
+def _complete(row: dict[str, Any], fields: list[str]) -> bool:
+    """A CSV row with every field present and a numeric step (not cut short by a kill)."""
+    if any(row.get(k) is None for k in fields) or None in row:
+        return False
+    try:
+        float(row["step"])
+    except (TypeError, ValueError):
+        return False
+    return True
+
+
+def _fsync_tree(folder: Path) -> None:
+    """Flush every file under ``folder`` to disk before it is renamed into place."""
+    for path in folder.rglob("*"):
+        if path.is_file():
+            with path.open("rb") as f:
+                os.fsync(f.fileno())
+
+
 def _existing_fields(path: Path) -> list[str] | None:
     if not path.exists():
         return None
@@ -160,9 +255,11 @@ def _rewrite_header(path: Path, fields: list[str]) -> None:
     """Rewrite the CSV with a wider header when a new metric appears."""
     if not path.exists():
         return
-    with path.open() as f:
+    with path.open(newline="") as f:
         rows = list(csv.DictReader(f))
-    with path.open("w", newline="") as f:
+    partial = path.with_name(".partial-metrics.csv")
+    with partial.open("w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=fields)
         writer.writeheader()
         writer.writerows(rows)
+    os.replace(partial, path)  # a kill mid-rewrite leaves the old file whole
