@@ -3,7 +3,7 @@
 Trains each task with a preset and reads the run's ``metrics.csv``: the first evaluation whose
 ``eval/episode_success`` reaches the threshold gives the time to solve, measured from the start of
 this script (imports included). Compile time (first training epoch minus its steady share) and
-steady training throughput are reported apart. ``--devices N`` limits Brax to N local devices,
+steady training throughput are reported apart. ``--devices N`` trains on N local devices,
 for the 1-vs-2 GPU scaling measurement::
 
     python benchmarks/bench_train.py --tasks reach touch --preset fast --cold
@@ -67,7 +67,7 @@ def run_task(task: str, args: argparse.Namespace, start: float) -> dict:
 
     overrides = [f"task={task}", f"backend={args.backend}", *args.set]
     if args.devices:
-        overrides.append(f"max_devices={args.devices}")
+        overrides.append(f"devices={args.devices}")
     config = load_config(args.preset, None, overrides)
     run_dir = args.out / f"{task}-{args.preset}-{int(time.time())}"
     result = train(config, run_dir, quiet=True)
@@ -98,7 +98,7 @@ def main() -> None:
     parser.add_argument("--tasks", nargs="+", default=["reach", "touch"])
     parser.add_argument("--preset", default="fast")
     parser.add_argument("--backend", default="auto")
-    parser.add_argument("--devices", type=int, default=0, help="limit Brax to N devices")
+    parser.add_argument("--devices", type=int, default=0, help="train on N devices (0: all)")
     parser.add_argument("--set", nargs="*", default=[], help="config overrides key=value")
     parser.add_argument("--out", type=Path, default=Path("runs/bench"))
     parser.add_argument("--results-dir", type=Path, default=None)

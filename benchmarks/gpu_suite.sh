@@ -1,0 +1,53 @@
+#!/usr/bin/env bash
+# The GPU measurements of benchmarks/results, one stage per call, on a machine with JAX + CUDA.
+#
+#   bash benchmarks/gpu_suite.sh setup        # install the wheels in .whl/ (and Warp's) once
+#   bash benchmarks/gpu_suite.sh throughput   # Touch env steps/s, Warp against JAX, one GPU
+#   bash benchmarks/gpu_suite.sh solve        # time to 95% from a cold start, Reach and Touch
+#   bash benchmarks/gpu_suite.sh scaling      # Touch training steps/s on 1 GPU and on 2
+#
+# Results go to $OUT (default: benchmarks/results/gpu). Single-GPU stages use GPU 0 only.
+set -uo pipefail
+cd "$(dirname "$0")/.."
+OUT="${OUT:-benchmarks/results/gpu}"
+SITE="${SITE:-/tmp/site}"
+mkdir -p "$OUT"
+export PYTHONPATH="$SITE:$PWD" PYTHONUNBUFFERED=1 MUJOCO_GL="${MUJOCO_GL:-}"
+[ -z "$MUJOCO_GL" ] && unset MUJOCO_GL
+one_gpu() { CUDA_VISIBLE_DEVICES=0 "$@"; }
+
+case "${1:?stage}" in
+setup)
+  wheels=(.whl/*.whl)
+  [ -n "${WARP_WHEEL:-}" ] && wheels+=("$WARP_WHEEL")
+  python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
+    --target "$SITE" "${wheels[@]}" || exit 1
+  nvidia-smi --query-gpu=name,memory.total --format=csv
+  python3 -c "import jax, mujoco, warp; from mujoco import mjx; print(jax.devices(), mujoco.__version__, warp.__version__)"
+  ;;
+throughput)
+  one_gpu python3 benchmarks/bench_mjx_throughput.py --impls jax warp --batches 32768 131072 \
+    --steps 50 --results-dir "$OUT" --name mjx_throughput_touch_impls
+  ;;
+solve)
+  for impl in warp; do
+    one_gpu python3 benchmarks/bench_train.py --tasks reach touch --preset fast --cold \
+      --set "physics.impl=$impl" stop_at_success=0.99 num_evals=21 --devices 1 \
+      --out "$OUT/runs" --results-dir "$OUT" --name "train_fast_${impl}_h200_cold"
+  done
+  ;;
+scaling)
+  # Strong scaling: the same global batch (32768 envs) on 1 GPU, then split over 2.
+  sets=(num_envs=32768 batch_size=4096 num_minibatches=16 num_timesteps=30000000
+        num_evals=6 stop_at_success=0)
+  for devices in 1 2; do
+    python3 benchmarks/bench_train.py --tasks touch --preset fast --devices "$devices" \
+      --set "physics.impl=${IMPL:-warp}" "${sets[@]}" --out "$OUT/runs" --results-dir "$OUT" \
+      --name "scaling_touch_${IMPL:-warp}_${devices}gpu"
+  done
+  ;;
+*)
+  echo "unknown stage $1" >&2
+  exit 2
+  ;;
+esac
