@@ -101,7 +101,7 @@ def _command(commands, func, help_text: str, config: type) -> argparse.ArgumentP
 
 def register(sub) -> None:
     """Add ``bench`` with its ``parity`` and ``transfer`` subcommands to ``sub``."""
-    from mjx_arm.bench.parity import ParityConfig
+    from mjx_arm.bench.parity_config import ParityConfig
     from mjx_arm.bench.transfer import TransferConfig
 
     bench = sub.add_parser(

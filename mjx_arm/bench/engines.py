@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Protocol
 import mujoco
 import numpy as np
 
+from mjx_arm.bench.parity_config import ENGINES
 from mjx_arm.envs.arm import ArmInfo, arm_info
 from mjx_arm.envs.base import BaseRobotEnv, PhysicsReading
 from mjx_arm.envs.model_io import arm_model
@@ -33,7 +34,6 @@ from mjx_arm.urdf.convert import EE_SITE
 if TYPE_CHECKING:
     from mjx_arm.envs.mujoco_env import MujocoArmEnv
 
-ENGINES = ("mujoco", "mjx", "pybullet")
 # Target body used where the target does not matter (forward kinematics): on the table, clear
 # of the arm.
 FK_TARGET = (0.5, 0.0, 0.2)

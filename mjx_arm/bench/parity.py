@@ -26,83 +26,21 @@ from typing import Any
 
 import numpy as np
 
-from mjx_arm.bench.engines import ENGINES, Engine, Inputs, MujocoEngine, Trace, make_engine
-from mjx_arm.bench.settings import setting
+from mjx_arm.bench.engines import Engine, Inputs, MujocoEngine, Trace, make_engine
+from mjx_arm.bench.parity_config import (
+    BOX_POSITIONS,
+    CONTACT_N,
+    DAMPING,
+    FREE_SCENARIOS,
+    JITTER_SCENARIOS,
+    PRESS_GAIN,
+    REFERENCE,
+    ParityConfig,
+)
 from mjx_arm.envs.arm import ArmInfo, arm_info
-from mjx_arm.envs.physics_config import IMPLS, resolve_impl
+from mjx_arm.envs.physics_config import resolve_impl
 from mjx_arm.task import sampling
 from mjx_arm.task.config import HOME_QPOS, TaskConfig, reach_config, touch_config
-
-# Bottom-face centres (m) of the box in the pressing check, the first ``press_boxes`` are used.
-BOX_POSITIONS = (
-    (0.5, 0.05, 0.0),
-    (0.4, -0.2, 0.0),
-    (0.6, 0.2, 0.0),
-    (0.45, 0.1, 0.0),
-    (0.55, -0.1, 0.0),
-    (0.4, 0.2, 0.0),
-    (0.6, -0.2, 0.0),
-    (0.5, 0.0, 0.0),
-)
-PRESS_GAIN = 2.0  # 1/s: the recording controller's ee velocity per metre of error
-CONTACT_N = 1.0  # a tared force above this (N) in free motion means the arm touched something
-FREE_SCENARIOS = ("hold", "constant")  # jitter runs in free space (the Reach scene)
-JITTER_SCENARIOS = (*FREE_SCENARIOS, "press")
-DAMPING = {"converted": 1.0, "zeroed": 0.0}
-REFERENCE = "mujoco"  # the engine others are compared with where one reference is needed
-
-
-@dataclass(frozen=True)
-class ParityConfig:
-    """Settings of the parity run. Saved in the result JSON; the CLI flags come from here."""
-
-    engines: tuple[str, ...] = setting(ENGINES, "engines to compare", ENGINES)
-    impls: tuple[str, ...] = setting(("auto",), "MJX implementations (one MJX run each)", IMPLS)
-    fk_poses: int = setting(100, "random joint configurations for forward kinematics")
-    sequences: int = setting(128, "open-loop action sequences")
-    seconds: float = setting(2.0, "length of each open-loop and jitter run (s)")
-    hold_steps: int = setting(5, "control steps each random action level is held")
-    amplitude: float = setting(0.5, "largest |action| of the open-loop sequences")
-    press_boxes: int = setting(8, "box positions in the pressing check (at most 8)")
-    press_seconds: float = setting(3.0, "length of each press (s); contact starts near 1.6 s")
-    press_depth: float = setting(0.01, "how far below the box top the ee is driven (m)")
-    press_average_steps: int = setting(10, "control steps averaged for the steady press force")
-    jitter_window: float = setting(0.75, "end of each run the jitter figures use (s)")
-    jitter_command: tuple[float, ...] = setting(
-        (0.3, 0.0, 0.0, 0.3, 0.3, 0.3), "the constant action of the jitter check, (6,)"
-    )
-    goal_time: float = setting(1.0, "time (s) at which divergence goals are checked")
-    goal_fk_m: float = setting(1e-6, "goal: largest FK difference of any pair (m)")
-    goal_mjx_rad: float = setting(1e-2, "goal: median MJX vs C MuJoCo joint divergence (rad)")
-    goal_pybullet_rad: float = setting(
-        5e-2, "goal: median joint divergence of a pair with PyBullet (rad)"
-    )
-    seed: int = setting(0, "seed of the random poses and actions")
-
-    def __post_init__(self) -> None:
-        unknown = set(self.engines) - set(ENGINES)
-        if unknown or not self.engines:
-            raise ValueError(f"engines must be some of {ENGINES}, got {self.engines}")
-        runs = len(self.engines) + (len(self.impls) - 1 if "mjx" in self.engines else 0)
-        if runs < 2:
-            raise ValueError("parity needs two engines (or MJX with two impls) to compare")
-        if not 0 < self.goal_time <= self.seconds:
-            raise ValueError("goal_time must lie in (0, seconds]")
-        if not 1 <= self.press_boxes <= len(BOX_POSITIONS):
-            raise ValueError(f"press_boxes must be 1..{len(BOX_POSITIONS)}")
-        if len(self.jitter_command) != len(HOME_QPOS):
-            raise ValueError("jitter_command needs one action per joint")
-
-    @classmethod
-    def quick(cls, **changes: Any) -> ParityConfig:
-        """A small run for tests: few poses, sequences and boxes, short runs."""
-        small = {"fk_poses": 8, "sequences": 8, "seconds": 1.0, "press_boxes": 2}
-        return cls(**{**small, "press_seconds": 2.0, "jitter_window": 0.3, **changes})
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dict."""
-        return dataclasses.asdict(self)
-
 
 # --------------------------------------------------------------------------- inputs
 

@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from mjx_arm.bench.parity import DAMPING, JITTER_SCENARIOS
+from mjx_arm.bench.parity_config import DAMPING, JITTER_SCENARIOS
 from mjx_arm.bench.results import fmt, markdown_table, save_results, verdict
 
 NAME = "parity"
