@@ -4,9 +4,11 @@
 #   bash benchmarks/gpu_suite.sh setup        # install the wheels in .whl/ (and Warp's) once
 #   bash benchmarks/gpu_suite.sh throughput   # Touch env steps/s, Warp against JAX, one GPU
 #   bash benchmarks/gpu_suite.sh solve        # time to 95% from a cold start, Reach and Touch
+#   bash benchmarks/gpu_suite.sh gentle       # Touch (gentle) at a few action scales, long runs
 #   bash benchmarks/gpu_suite.sh scaling      # Touch training steps/s on 1 GPU and on 2
 #
-# Results go to $OUT (default: benchmarks/results/gpu). Single-GPU stages use GPU 0 only.
+# Results go to $OUT (default: benchmarks/results/gpu); the trained policies are exported to
+# $OUT/policies as .npz. Single-GPU stages use GPU 0 only.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 OUT="${OUT:-benchmarks/results/gpu}"
@@ -15,6 +17,14 @@ mkdir -p "$OUT"
 export PYTHONPATH="$SITE:$PWD" PYTHONUNBUFFERED=1 MUJOCO_GL="${MUJOCO_GL:-}"
 [ -z "$MUJOCO_GL" ] && unset MUJOCO_GL
 one_gpu() { CUDA_VISIBLE_DEVICES=0 "$@"; }
+# export_runs DIR PREFIX: each run under DIR (with a checkpoint) to $OUT/policies/PREFIX_RUN.npz
+export_runs() {
+  mkdir -p "$OUT/policies"
+  for run in "$1"/*/; do
+    [ -d "$run/checkpoints" ] || continue
+    python3 -m mjx_arm.cli export "$run" -o "$OUT/policies/$2_$(basename "$run").npz" || true
+  done
+}
 
 case "${1:?stage}" in
 setup)
@@ -30,10 +40,20 @@ throughput)
     --steps 50 --results-dir "$OUT" --name mjx_throughput_touch_impls
   ;;
 solve)
-  for impl in warp; do
-    one_gpu python3 benchmarks/bench_train.py --tasks reach touch --preset fast --cold \
-      --set "physics.impl=$impl" stop_at_success=0.99 num_evals=21 --devices 1 \
-      --out "$OUT/runs" --results-dir "$OUT" --name "train_fast_${impl}_h200_cold"
+  # Touch in the seed variant: the task whose time to solve the README compares across impls.
+  one_gpu python3 benchmarks/bench_train.py --tasks reach touch --preset fast --cold \
+    --set "physics.impl=${IMPL:-warp}" task.variant=seed stop_at_success=0.99 num_evals=21 \
+    --devices 1 --out "$OUT/runs" --results-dir "$OUT" --name "train_fast_${IMPL:-warp}_cold"
+  export_runs "$OUT/runs" "solve_${IMPL:-warp}"
+  ;;
+gentle)
+  # Gentle Touch (the default variant) at the given action scales, each run capped in time.
+  for scale in ${SCALES:-0.15 0.3}; do
+    one_gpu timeout "${RUN_LIMIT:-280}" python3 benchmarks/bench_train.py --tasks touch \
+      --preset fast --set "physics.impl=${IMPL:-warp}" "task.action_scale=$scale" \
+      num_timesteps="${STEPS:-150000000}" num_evals=16 stop_at_success=0.98 --devices 1 \
+      --out "$OUT/gentle_$scale" --results-dir "$OUT" --name "gentle_touch_scale_$scale"
+    export_runs "$OUT/gentle_$scale" "gentle_$scale"
   done
   ;;
 scaling)

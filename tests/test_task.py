@@ -92,6 +92,9 @@ def test_presets_and_overrides() -> None:
     assert touch.variant == "gentle" and touch.reward == config_lib.GENTLE_REWARD
     seed = config_lib.task_config("touch", variant="seed")
     assert seed.reward == RewardConfig() and seed.success_hold_steps == 1
+    # Gentle Touch moves slower than the seed (and than Reach), so the band is a wider action.
+    assert (touch.action_scale, seed.action_scale, reach.action_scale) == (0.15, 0.5, 0.5)
+    assert config_lib.task_config("touch", action_scale=0.3).action_scale == 0.3
     assert not (seed.fail_on_overforce or seed.terminate_on_overforce)
     assert (touch.success_hold_steps, touch.fail_on_overforce, touch.terminate_on_overforce) == (
         3,
@@ -111,7 +114,7 @@ def test_presets_and_overrides() -> None:
 
 
 def test_seed_preset_weights() -> None:
-    w = touch_config().reward.weights()
+    w = touch_config(variant="seed").reward.weights()
     assert tuple(w) == REWARD_TERMS
     assert (w["distance"], w["contact"], w["joint_limit"], w["joint_velocity"]) == (
         -10.0,
@@ -123,7 +126,7 @@ def test_seed_preset_weights() -> None:
 
 def test_reward_hand_worked_touch_in_contact() -> None:
     """d = 0.03 m, 10 N, two joints beyond the soft limit, sum |qdot| = 2.5 rad/s."""
-    cfg = touch_config()
+    cfg = touch_config(variant="seed")
     qpos = np.array([0.96, -0.97, 0.5, 0.0, 0.0, 0.94])  # 0.96 and -0.97 beyond 0.95
     qvel = np.array([1.0, -1.0, 0.5, 0.0, 0.0, 0.0])
     terms = terms_for(cfg, 0.03, 10.0, qpos, qvel)
@@ -141,7 +144,7 @@ def test_reward_hand_worked_touch_in_contact() -> None:
 
 def test_reward_hand_worked_touch_far_away() -> None:
     """d = 0.1 m (one length scale), no contact, arm at rest inside its limits."""
-    cfg = touch_config()
+    cfg = touch_config(variant="seed")
     terms = terms_for(cfg, 0.1, 0.0)
     assert float(reward_lib.total_reward(terms, cfg)) == pytest.approx(-10 * (1 - math.exp(-1)))
     assert float(reward_lib.total_reward(terms, cfg)) == pytest.approx(-6.3212056, abs=1e-6)
@@ -163,7 +166,7 @@ def test_reach_has_no_contact_reward() -> None:
 
 
 def test_nonfinite_penalty_and_custom_weights() -> None:
-    cfg = touch_config(reward={"distance": -1.0, "nonfinite": -100.0, "success": 7.0})
+    cfg = touch_config("seed", reward={"distance": -1.0, "nonfinite": -100.0, "success": 7.0})
     d, f = np.asarray(0.5), np.asarray(0.0)
     terms = reward_lib.reward_terms(
         np, d, f, np.zeros(6), np.zeros(6), UNIT_LIMITS, False, True, cfg
@@ -221,9 +224,10 @@ def test_gentle_terms_hand_worked() -> None:
     assert float(terms["approach_speed"]) == pytest.approx(0.6**2)  # ((0.05 - 0.03) * 30)^2
     assert float(terms["action_rate"]) == 0.5
     assert float(terms["contact"]) == 0.0
+    assert float(terms["proximity"]) == pytest.approx(math.exp(-3.0))  # 3 cm, length 1 cm
     expected = (
-        -10 * (1 - math.exp(-0.3)) - 100 * 0.6 - 10 * 0.36 - 0.05 * 0.5 - 200 * 1.0
-    )  # -266.2173
+        -10 * (1 - math.exp(-0.3)) + 10 * math.exp(-3.0) - 100 * 0.6 - 10 * 0.36 - 0.05 * 0.5
+    ) - 20 * 1.0  # -85.7189
     assert float(reward_lib.total_reward(terms, cfg)) == pytest.approx(expected, abs=1e-9)
     # moving away and far from the box: no approach term
     away = reward_lib.Motion(prev_distance=0.02, action_change=0.0)
@@ -236,6 +240,20 @@ def test_gentle_terms_hand_worked() -> None:
         assert float(t["approach_speed"]) == 0.0
 
 
+def test_gentle_weights_make_a_hold_beat_hovering_and_tapping() -> None:
+    """Per step: up to +10 near the target, +20 in the band; +1000 for the success.
+
+    With the cpu/fast presets' discount 0.97, hovering at the target for the rest of an episode
+    is worth at most 10 / 0.03 = 333, tapping (contact every other step) (10 + 20) / (1 - 0.97^2)
+    + 10 / 0.03 < 850; a 3-step hold is worth over 1000.
+    """
+    w = touch_config().reward
+    assert (w.distance, w.proximity, w.contact, w.success) == (-10.0, 10.0, 20.0, 1000.0)
+    hover = w.proximity / (1 - 0.97)
+    tap = (w.proximity + w.contact) / (1 - 0.97**2) + hover
+    assert w.success > max(hover, tap)
+
+
 def _run_rule(cfg, forces, distance=0.01):
     """Advance the success rule over a force sequence; (successes, overs, terminations)."""
     progress = reward_lib.start_progress(np)
@@ -244,7 +262,7 @@ def _run_rule(cfg, forces, distance=0.01):
         progress, success, over = reward_lib.advance(
             np, progress, np.asarray(distance), np.asarray(force), cfg
         )
-        done = reward_lib.ends_episode(bool(success), bool(over), False, cfg)
+        done = reward_lib.ends_episode(bool(success), np.asarray(force), False, cfg)
         out.append((bool(success), bool(over), bool(done)))
     return out
 
@@ -255,8 +273,12 @@ def test_gentle_success_needs_a_hold_without_a_strike() -> None:
     assert [s for s, _, _ in _run_rule(cfg, [10, 10, 10])] == [False, False, True]
     # a gap resets the hold
     assert [s for s, _, _ in _run_rule(cfg, [10, 10, 0, 10, 10])] == [False] * 5
-    # a strike ends the episode at once and rules success out
-    assert _run_rule(cfg, [10, 60])[-1] == (False, True, True)
+    # a reading over the band rules success out for the episode; over 100 N it also ends it
+    assert (
+        _run_rule(cfg, [10, 60, 10, 10, 10])
+        == [(False, False, False)] + [(False, True, False)] + [(False, False, False)] * 3
+    )
+    assert _run_rule(cfg, [10, 120])[-1] == (False, True, True)
     keep_going = touch_config(terminate_on_overforce=False)
     assert [s for s, _, _ in _run_rule(keep_going, [60, 10, 10, 10, 10])] == [False] * 5
     # the seed variant: first in-band step, strikes allowed
@@ -511,7 +533,7 @@ def test_tool_inertia_of_shipped_arm() -> None:
 def test_same_code_under_jax_numpy() -> None:
     """Reward, success, observation and wrench give the numpy values under jax.numpy."""
     jnp = pytest.importorskip("jax.numpy")
-    cfg = touch_config()
+    cfg = touch_config(variant="seed")
     qpos = np.array([0.96, -0.97, 0.5, 0.0, 0.0, 0.94])
     qvel = np.array([1.0, -1.0, 0.5, 0.0, 0.0, 0.0])
     t_np = terms_for(cfg, 0.03, 10.0, qpos, qvel)

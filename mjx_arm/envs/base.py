@@ -260,7 +260,7 @@ class BaseRobotEnv(gym.Env):
             "overforce": bool(over_now),
         }
         obs = obs_lib.unflatten_obs(state.astype(np.float32))
-        done = bool(reward_lib.ends_episode(success, bool(over_now), diverged, task))
+        done = bool(reward_lib.ends_episode(success, force, diverged, task))
         return obs, float(reward_lib.total_reward(terms, task)), done, info
 
     def _runaway(self, speed_sum: float, qvel: np.ndarray) -> bool:

@@ -182,7 +182,7 @@ class MjxArmEnv(Env):
             for k, v in terms.items()
         }
         reward = reward_lib.total_reward(terms, self.task).astype(jnp.float32)
-        done = reward_lib.ends_episode(success, over & sane, ~sane, self.task)
+        done = reward_lib.ends_episode(success, jnp.where(sane, force, 0.0), ~sane, self.task)
         info["task"] = TaskMemory(progress, action, jnp.where(sane, d, memory.prev_distance))
         metrics = dict(state.metrics)  # keep keys wrappers added (EvalWrapper's "reward")
         metrics.update({f"reward/{name}": value for name, value in terms.items()})

@@ -31,7 +31,9 @@ class RewardConfig:
     ``force_excess`` = (F - F_max) / F_max where the contact force F is above the band, else 0,
     ``approach_speed`` = (how fast d shrinks)^2 (m^2/s^2) while d < ``approach_radius``,
     ``action_rate`` = sum (a_t - a_{t-1})^2 over the six action entries,
-    ``overforce`` = 1 on a step whose contact force is above the band.
+    ``overforce`` = 1 on a step whose contact force is above the band,
+    ``proximity`` = exp(-d / proximity_length): 1 at the target, 0.37 one length away (a
+    near-field pull that ``distance``'s longer length scale lacks).
     """
 
     distance: float = -10.0
@@ -44,7 +46,9 @@ class RewardConfig:
     approach_speed: float = 0.0
     action_rate: float = 0.0
     overforce: float = 0.0
+    proximity: float = 0.0
     distance_length: float = 0.1
+    proximity_length: float = 0.01
     soft_limit: float = 0.95
     approach_radius: float = 0.1
 
@@ -64,16 +68,28 @@ REWARD_TERMS = (
     "approach_speed",
     "action_rate",
     "overforce",
+    "proximity",
 )
 
-# Touch's default reward ("gentle"): the seed terms, plus penalties that make a soft touch the
-# optimum. A strike (force over the band) costs its excess and ends the episode as a protective
-# stop would on a real arm; closing in fast near the box and jerky actions cost a little.
+# Touch's default reward ("gentle"): gentle contact is the optimum.
+# - The seed's distance charge guides the tool from afar; ``proximity`` (length 1 cm) pays up to
+#   +10 a step in the last centimetres, so resting the tip on the box beats hovering above it.
+#   With the velocity servo the steady force grows with the commanded speed into the box, so
+#   from a resting tip the band (1-50 N) is a small push away.
+# - Success (a 3-step hold in the band, no reading over it) pays 1000: more than resting at the
+#   target for the rest of the episode (10 / (1 - 0.97) = 333 at the fast and cpu presets'
+#   discount), and more than tapping the box for the in-band contact pay (20 a step).
+# - A reading over the band costs its excess (graded, so the policy learns how hard it pressed)
+#   and rules success out; a strike over 100 N also ends the episode. Closing in fast near the
+#   box and jerky actions cost a little.
 GENTLE_REWARD = RewardConfig(
+    proximity=10.0,
+    contact=20.0,
+    success=1000.0,
     force_excess=-100.0,
     approach_speed=-10.0,
     action_rate=-0.05,
-    overforce=-200.0,
+    overforce=-20.0,
 )
 
 
@@ -98,8 +114,11 @@ class TaskConfig:
             target, and for Touch the force inside the band) before the episode succeeds.
         fail_on_overforce: a force reading above the band at any step of the episode rules out
             success for the rest of it.
-        terminate_on_overforce: end the episode at the first reading above the band (a
-            protective stop).
+        terminate_on_overforce: end the episode at the first reading above ``strike_force``
+            (a protective stop).
+        strike_force: contact force norm (N) that ends the episode when
+            ``terminate_on_overforce``; 0 takes the top of ``force_band``. Any reading above the
+            band still rules success out when ``fail_on_overforce``.
         variant: "seed" (the seed document's task) or "gentle" (Touch's default: hold, no strike).
         force_clip: bound (N and N m) of each contact_force component.
         divergence_speed_factor: the physics has diverged when a joint turns faster than this
@@ -126,6 +145,7 @@ class TaskConfig:
     success_hold_steps: int = 1
     fail_on_overforce: bool = False
     terminate_on_overforce: bool = False
+    strike_force: float = 0.0
     variant: str = "seed"
     force_clip: float = 100.0
     divergence_speed_factor: float = 10.0
@@ -189,14 +209,25 @@ def reach_config(**overrides: Any) -> TaskConfig:
     return base.replace(**overrides)
 
 
+# Gentle Touch commands at most 0.15 of each joint's URDF speed (27 deg/s on a UR5e class arm;
+# one joint turning the tool at half a metre moves it at about 0.24 m/s, the order of the
+# 250 mm/s reduced speed of ISO 10218-1). Why: the velocity servo presses with a steady force
+# of about 1.2 kN per m/s of tool speed commanded into the box (the same in MuJoCo and
+# PyBullet), so at the seed's 0.5 the 1-50 N band is an action of about 0.001-0.05 along the
+# pressing direction, finer than PPO's exploration noise: policies learn to hover. At 0.15 the
+# band is 0.004-0.18 and Touch trains in both the C batch and MJX (README, "Gentle Touch").
+GENTLE_ACTION_SCALE = 0.15
+
+
 def touch_config(variant: str = "gentle", **overrides: Any) -> TaskConfig:
     """Touch: press the top of a 5 cm box with 1-50 N, within 5 cm of its centre.
 
     Args:
         variant: "gentle" (default): the force must stay in the band for 3 control steps, a
-            reading above the band ends the episode without success, and the reward adds
-            the terms of :data:`GENTLE_REWARD`. "seed": the seed document's task (success on
-            the first in-band step, no force or speed terms).
+            reading above the band rules success out for the episode, one above 100 N (a
+            strike) ends it, the reward is :data:`GENTLE_REWARD` and the joints move at most
+            :data:`GENTLE_ACTION_SCALE` of their URDF speed. "seed": the seed
+            document's task (success on the first in-band step, no force or speed terms).
         overrides: fields to change.
     """
     if variant == "seed":
@@ -208,6 +239,8 @@ def touch_config(variant: str = "gentle", **overrides: Any) -> TaskConfig:
             success_hold_steps=3,
             fail_on_overforce=True,
             terminate_on_overforce=True,
+            strike_force=100.0,
+            action_scale=GENTLE_ACTION_SCALE,
             reward=GENTLE_REWARD,
         )
     else:

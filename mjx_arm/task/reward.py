@@ -146,11 +146,19 @@ def runaway(xp: Any, qvel, limits):
     return xp.any(xp.abs(qvel) > limits, axis=-1)
 
 
-def ends_episode(success, over_now, nonfinite, cfg: TaskConfig):
-    """Termination (bool ``(...)``): a non-finite state, success or a strike, as configured."""
+def strike_limit(cfg: TaskConfig) -> float:
+    """Contact force norm (N) above which a Touch episode ends (a protective stop)."""
+    return cfg.strike_force or cfg.force_band[1]
+
+
+def ends_episode(success, force_norm, nonfinite, cfg: TaskConfig):
+    """Termination (bool ``(...)``): a non-finite state, success or a strike, as configured.
+
+    A strike is a contact force above :func:`strike_limit` while ``terminate_on_overforce``.
+    """
     done = nonfinite | (success & cfg.terminate_on_success)
-    if cfg.terminate_on_overforce:
-        done = done | over_now
+    if cfg.terminate_on_overforce and cfg.uses_contact:
+        done = done | (force_norm > strike_limit(cfg))
     return done
 
 
@@ -261,6 +269,7 @@ def band_reward_terms(
         "approach_speed": closing,
         "action_rate": change,
         "overforce": (excess > 0) * 1.0,
+        "proximity": xp.exp(-distance / cfg.reward.proximity_length),
     }
     assert tuple(terms) == REWARD_TERMS
     return terms

@@ -288,9 +288,7 @@ def _timings(times: list[tuple[float, int]], config: TrainConfig) -> tuple[float
     if first is None or len(times) < first + 2:
         return float("nan"), float("nan")
     steady = [
-        (b[1] - a[1]) / (b[0] - a[0])
-        for a, b in itertools.pairwise(times[first:])
-        if b[0] > a[0]
+        (b[1] - a[1]) / (b[0] - a[0]) for a, b in itertools.pairwise(times[first:]) if b[0] > a[0]
     ]
     sps = float(np.median(steady))
     (t0, s0), (t1, s1) = times[0], times[first]
