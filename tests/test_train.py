@@ -103,3 +103,21 @@ def test_same_seed_same_result_on_the_c_backend(tmp_path: Path) -> None:
     for x, y in zip(jax.tree.leaves(pa), jax.tree.leaves(pb), strict=True):
         np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
     assert a.metrics["eval/episode_reward"] == b.metrics["eval/episode_reward"]
+
+
+def test_task_and_reward_overrides_reach_the_task_config() -> None:
+    """``task.FIELD=`` and ``task.reward.TERM=`` change the task; unknown names are errors."""
+    from mjx_arm.task.config import GENTLE_REWARD, task_config
+
+    config = load_config(
+        "cpu",
+        None,
+        ["task=touch", "task.action_scale=0.2", "task.reward.approach_speed=-200"],
+    )
+    task = task_config(config.task, **config.task_overrides)
+    assert task.action_scale == 0.2 and task.reward.approach_speed == -200
+    assert task.reward.proximity == GENTLE_REWARD.proximity  # the other gentle weights stay
+    with pytest.raises(ValueError, match="task.reward.nope"):
+        load_config("cpu", None, ["task.reward.nope=1"])
+    with pytest.raises(ValueError, match="task.nope"):
+        load_config("cpu", None, ["task.nope=1"])

@@ -3,7 +3,7 @@
 These run where warp-lang is installed (the ``gpu`` extra) and a GPU is present; Warp also runs
 on a CPU, slowly (a few minutes of kernel and XLA compilation): set ``MJX_ARM_TEST_WARP_CPU=1``
 to run them there. Tolerances are stated beside the figures measured (CPU, warp-lang 1.19.0,
-mujoco-mjx 3.17.0; the GPU figures are in ``benchmarks/results/agreement/``).
+mujoco-mjx 3.17.0; the GPU figures are in ``benchmarks/results/parity_gpu/``).
 """
 
 from __future__ import annotations

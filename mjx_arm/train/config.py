@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from mjx_arm.envs.physics_config import PhysicsConfig, RandomizationConfig
+from mjx_arm.task.config import RewardConfig, TaskConfig
 
 PARTITIONS = ("auto", "xla", "per_device")
 
@@ -209,8 +210,32 @@ def _coerce(text: str, kind: Any) -> Any:
     return json.loads(text)
 
 
+def _set_task_field(task_changes: dict[str, Any], name: str, text: str) -> None:
+    """Put ``task.NAME=text`` into ``task_changes`` (``reward.TERM`` into its ``reward`` dict).
+
+    Raises:
+        ValueError: NAME is not a field of the task config or of its reward.
+    """
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError:
+        value = text
+    head, dot, term = name.partition(".")
+    if dot and head == "reward":
+        terms = {f.name for f in dataclasses.fields(RewardConfig)}
+        if term not in terms:
+            raise ValueError(f"unknown reward key 'task.{name}'; known: {sorted(terms)}")
+        task_changes["reward"] = {**task_changes.get("reward", {}), term: value}
+        return
+    fields = {f.name for f in dataclasses.fields(TaskConfig)}
+    if name not in fields:
+        raise ValueError(f"unknown task key 'task.{name}'; known: {sorted(fields)}")
+    task_changes[name] = value
+
+
 def apply_overrides(config: TrainConfig, items: list[str]) -> TrainConfig:
-    """Apply ``key=value`` overrides; ``task.KEY=value`` goes to ``task_overrides``."""
+    """Apply ``key=value`` overrides; ``task.KEY=value`` goes to ``task_overrides`` and
+    ``task.reward.TERM=value`` to its reward weights."""
     hints = typing.get_type_hints(TrainConfig)
     changes: dict[str, Any] = {}
     sections = {name: {} for name in SECTIONS}
@@ -221,10 +246,7 @@ def apply_overrides(config: TrainConfig, items: list[str]) -> TrainConfig:
             raise ValueError(f"--set expects key=value, got {item!r}")
         section, dot, field_name = key.partition(".")
         if dot and section == "task":
-            try:
-                task_changes[field_name] = json.loads(value)
-            except json.JSONDecodeError:
-                task_changes[field_name] = value
+            _set_task_field(task_changes, field_name, value)
             continue
         if dot and section in SECTIONS:
             section_hints = typing.get_type_hints(SECTIONS[section])
