@@ -405,7 +405,10 @@ def build_parser() -> argparse.ArgumentParser:
         action="extend",
         nargs="+",
         metavar="KEY=VALUE",
-        help="override config fields (KEY=VALUE ...; repeatable); task.FIELD=... for the task",
+        help=(
+            "override config fields (KEY=VALUE ...; repeatable); task.FIELD=... and "
+            "task.reward.TERM=... for the task, physics.FIELD=..., randomization.FIELD=..."
+        ),
     )
     p.add_argument("--run-dir", help="run directory (default: runs/TASK-TIMESTAMP)")
     p.add_argument("--resume", metavar="RUN_DIR", help="continue the run in RUN_DIR")

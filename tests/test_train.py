@@ -117,7 +117,7 @@ def test_task_and_reward_overrides_reach_the_task_config() -> None:
     task = task_config(config.task, **config.task_overrides)
     assert task.action_scale == 0.2 and task.reward.approach_speed == -200
     assert task.reward.proximity == GENTLE_REWARD.proximity  # the other gentle weights stay
-    with pytest.raises(ValueError, match="task.reward.nope"):
+    with pytest.raises(ValueError, match=r"task\.reward\.nope"):
         load_config("cpu", None, ["task.reward.nope=1"])
-    with pytest.raises(ValueError, match="task.nope"):
+    with pytest.raises(ValueError, match=r"task\.nope"):
         load_config("cpu", None, ["task.nope=1"])
