@@ -9,8 +9,9 @@ for the 1-vs-2 GPU scaling measurement::
     python benchmarks/bench_train.py --tasks reach touch --preset fast --cold
     python benchmarks/bench_train.py --tasks reach --preset fast --set physics.impl=jax
 
-``--cold`` points JAX's persistent compilation cache and Warp's kernel cache at new, empty
-folders, so the time includes every compilation, as on a fresh machine.
+``--cold`` points JAX's persistent compilation cache, Warp's kernel cache and the CUDA driver's
+JIT cache at new, empty folders, so the time includes every compilation, as on a fresh machine
+(for the later tasks of one run, the caches hold what the earlier ones compiled).
 """
 
 from __future__ import annotations
@@ -112,6 +113,7 @@ def main() -> None:
 
         os.environ["MJX_ARM_JAX_CACHE"] = tempfile.mkdtemp(prefix="jax_cache_")
         os.environ["WARP_CACHE_PATH"] = tempfile.mkdtemp(prefix="warp_cache_")
+        os.environ["CUDA_CACHE_PATH"] = tempfile.mkdtemp(prefix="cuda_cache_")
 
     import jax
 

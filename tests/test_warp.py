@@ -105,3 +105,19 @@ def test_overflow_is_an_error_not_a_silent_drop():
     with pytest.raises(PhysicsOverflowError, match="naconmax_per_env"):
         for _ in range(60):  # shoulder and elbow drive the tool into the table
             env.step(down)
+
+
+def test_precompile_list_is_what_a_step_loads():
+    """Each module :data:`STEP_MODULES` names is loaded once the Touch env has stepped, so the
+    precompile compiles nothing the step does not use; on a GPU it ran before the first step."""
+    from mjx_arm.envs import warp_compile
+    from mjx_arm.envs.backend import make_batched_env
+    from mjx_arm.task import touch_config
+
+    env = make_batched_env(touch_config(), "mjx", WARP, 2)
+    state = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(0), 2))
+    jax.block_until_ready(jax.jit(jax.vmap(env.step))(state, jnp.zeros((2, 6))))
+    loaded = warp_compile.loaded_modules()
+    assert set(warp_compile.STEP_MODULES) <= set(loaded), sorted(loaded)
+    if jax.default_backend() != "cpu":
+        assert env.physics.precompile_seconds > 0.0

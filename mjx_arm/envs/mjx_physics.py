@@ -31,6 +31,7 @@ import numpy as np
 from flax import struct
 from mujoco import mjx
 
+from mjx_arm.envs import warp_compile
 from mjx_arm.envs.arm import ArmInfo
 from mjx_arm.envs.model_io import SensorReader
 from mjx_arm.envs.physics_config import PhysicsConfig, resolve_impl
@@ -137,6 +138,7 @@ class MjxPhysics:
         self.n_substeps = task.n_substeps
         self.batch_size = max(int(batch_size), 1)
         self.buffers: dict[str, int] = {}
+        self.precompile_seconds = 0.0
         if self.impl == "warp":
             self.model, self._template = self._warp_model_and_data()
         else:
@@ -162,6 +164,7 @@ class MjxPhysics:
         opt_impl = model.opt._impl.replace(warn_overflow=0)
         model = model.replace(opt=model.opt.replace(_impl=opt_impl))
         data = mjx.make_data(mj_model, impl="warp", naconmax=per_env * self.batch_size, njmax=njmax)
+        self.precompile_seconds = warp_compile.precompile(self.config.compile_threads)
         return model, data
 
     def describe(self) -> dict[str, Any]:

@@ -26,17 +26,23 @@ class PhysicsConfig:
             allows, each with its largest contact count), so the pool cannot overflow.
         njmax: Warp only. Constraint rows per env; 0 takes the model's bound (all contacts
             and joint limits active at once).
+        compile_threads: Warp only. Threads that compile MuJoCo Warp's kernels before the first
+            step (:mod:`mjx_arm.envs.warp_compile`); 0 leaves Warp to compile each module on
+            first use, one at a time.
     """
 
     impl: str = "auto"
     naconmax_per_env: int = 0
     njmax: int = 0
+    compile_threads: int = 8
 
     def __post_init__(self) -> None:
         if self.impl not in IMPLS:
             raise ValueError(f"physics.impl must be one of {IMPLS}, got {self.impl!r}")
-        if self.naconmax_per_env < 0 or self.njmax < 0:
-            raise ValueError("physics.naconmax_per_env and physics.njmax must be >= 0")
+        if min(self.naconmax_per_env, self.njmax, self.compile_threads) < 0:
+            raise ValueError(
+                "physics.naconmax_per_env, physics.njmax and physics.compile_threads must be >= 0"
+            )
 
     def replace(self, **changes: Any) -> PhysicsConfig:
         """A copy with fields changed."""
