@@ -34,11 +34,16 @@ STEP_MODULES: tuple[str, ...] = (
 
 
 def _cuda_devices() -> list[Any]:
-    """Warp's CUDA devices that JAX uses (every local GPU)."""
+    """Warp's CUDA devices that JAX uses (every local GPU); empty without a GPU, where Warp is
+    not imported."""
     import jax
+
+    gpus = [d for d in jax.local_devices() if d.platform in ("gpu", "cuda")]
+    if not gpus:
+        return []
     import warp as wp
 
-    return [wp.device_from_jax(d) for d in jax.local_devices() if d.platform in ("gpu", "cuda")]
+    return [wp.device_from_jax(d) for d in gpus]
 
 
 def precompile(threads: int, names: tuple[str, ...] = STEP_MODULES) -> float:
