@@ -26,12 +26,16 @@ import json  # noqa: E402
 import os  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
-import tempfile  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.common import environment_metadata, markdown_table, save_results  # noqa: E402
+from benchmarks.common import (  # noqa: E402
+    empty_cache_env,
+    environment_metadata,
+    markdown_table,
+    save_results,
+)
 
 
 def _child(args: argparse.Namespace) -> dict:
@@ -68,8 +72,7 @@ def _child(args: argparse.Namespace) -> dict:
 def _run_variant(args: argparse.Namespace, threads: int, xla_flags: str) -> dict:
     """One variant in a new process with empty caches."""
     env = dict(os.environ)
-    env["WARP_CACHE_PATH"] = tempfile.mkdtemp(prefix="warp_cache_")
-    env["CUDA_CACHE_PATH"] = tempfile.mkdtemp(prefix="cuda_cache_")  # the driver's JIT cache
+    env.update(empty_cache_env())
     env["JAX_ENABLE_COMPILATION_CACHE"] = "false"
     if xla_flags:
         env["XLA_FLAGS"] = f"{env.get('XLA_FLAGS', '')} {xla_flags}".strip()

@@ -26,7 +26,12 @@ from pathlib import Path  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.common import environment_metadata, markdown_table, save_results  # noqa: E402
+from benchmarks.common import (  # noqa: E402
+    empty_cache_env,
+    environment_metadata,
+    markdown_table,
+    save_results,
+)
 
 THRESHOLD = 0.95
 # Goals on one H200 from a cold cache: seconds to 95% success and Brax training steps/s.
@@ -109,11 +114,8 @@ def main() -> None:
     args = parser.parse_args()
     if args.cold:
         import os
-        import tempfile
 
-        os.environ["MJX_ARM_JAX_CACHE"] = tempfile.mkdtemp(prefix="jax_cache_")
-        os.environ["WARP_CACHE_PATH"] = tempfile.mkdtemp(prefix="warp_cache_")
-        os.environ["CUDA_CACHE_PATH"] = tempfile.mkdtemp(prefix="cuda_cache_")
+        os.environ.update(empty_cache_env())
 
     import jax
 

@@ -147,6 +147,16 @@ def rss_mb() -> float:
         return int(out.stdout.strip()) / 1024
 
 
+def empty_cache_env() -> dict[str, str]:
+    """Environment variables that point every compilation cache at a new, empty folder: this
+    project's JAX cache, Warp's kernel cache and the CUDA driver's JIT cache (a cold start as on
+    a fresh machine). Set them before JAX first touches a device."""
+    import tempfile
+
+    folders = {"MJX_ARM_JAX_CACHE": "jax", "WARP_CACHE_PATH": "warp", "CUDA_CACHE_PATH": "cuda"}
+    return {var: tempfile.mkdtemp(prefix=f"{kind}_cache_") for var, kind in folders.items()}
+
+
 # --------------------------------------------------------------------------- output
 
 
