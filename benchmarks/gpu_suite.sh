@@ -8,6 +8,9 @@
 #   bash benchmarks/gpu_suite.sh scaling      # Touch training steps/s on 1 GPU and on 2
 #   bash benchmarks/gpu_suite.sh coldstart    # where a cold start's seconds go (Warp kernels)
 #   bash benchmarks/gpu_suite.sh parity       # C MuJoCo, MJX on Warp and MJX on JAX agree
+#   bash benchmarks/gpu_suite.sh sweep        # Touch over a few seeds per candidate (CANDIDATES)
+#   bash benchmarks/gpu_suite.sh seeds        # the fast preset as shipped, seeds 0-9, both tasks
+#   bash benchmarks/gpu_suite.sh coldseed     # one Touch seed with every cache empty
 #
 # Results go to $OUT (default: benchmarks/results/gpu); the trained policies are exported to
 # $OUT/policies as .npz. Single-GPU stages use GPU 0 only.
@@ -77,6 +80,34 @@ coldstart)
     one_gpu python3 benchmarks/bench_cold_start.py --task "$task" --threads ${THREADS:-0 8 16} \
       --results-dir "$OUT" --name "cold_start_$task"
   done
+  ;;
+sweep)
+  # Candidate changes to the fast preset, each trained on SWEEP_SEEDS (exploration: the
+  # reports say "with ..."). CANDIDATES: one quoted --set list per line.
+  n=0
+  while IFS= read -r sets; do
+    [ -z "$sets" ] && continue
+    n=$((n + 1))
+    # shellcheck disable=SC2086
+    one_gpu python3 -m mjx_arm.cli bench seeds --task "${TASK:-touch}" --preset fast \
+      --seeds "${SWEEP_SEEDS:-0-2}" --set $sets --name "sweep_${TASK:-touch}_$n" \
+      --runs "$OUT/sweep_runs_$n" --out "$OUT"
+  done <<< "${CANDIDATES:?one --set list per line}"
+  ;;
+seeds)
+  # The fast preset exactly as shipped, seeds one after another in one process per task.
+  for task in ${TASKS:-touch reach}; do
+    one_gpu python3 -m mjx_arm.cli bench seeds --task "$task" --preset fast \
+      --seeds "${SEEDS:-0-9}" --runs "$OUT/seeds_runs_$task" --out "$OUT"
+    export_runs "$OUT/seeds_runs_$task" "seeds_$task"
+  done
+  ;;
+coldseed)
+  # One Touch seed (not among 0-9) from a cold start: JAX, Warp and CUDA driver caches empty.
+  MJX_ARM_JAX_CACHE="$(mktemp -d)" WARP_CACHE_PATH="$(mktemp -d)" CUDA_CACHE_PATH="$(mktemp -d)" \
+    one_gpu python3 -m mjx_arm.cli bench seeds --task "${TASK:-touch}" --preset fast \
+    --seeds "${COLD_SEED:-10}" --name "seeds_${TASK:-touch}_fast_cold" \
+    --runs "$OUT/cold_runs" --out "$OUT"
   ;;
 parity)
   one_gpu python3 -m mjx_arm.cli bench parity --engines mujoco mjx --impls warp jax \

@@ -568,3 +568,29 @@ def test_same_code_under_jax_numpy() -> None:
     w_jx = external_wrench(jnp, *[jnp.asarray(a) for a in args], tool)
     np.testing.assert_allclose(np.asarray(w_jx), w_np, atol=1e-4)
     np.testing.assert_allclose(w_np[:3], rot_z(0.4) @ np.array([1.0, 2.0, 3.0]), atol=1e-12)
+
+
+@pytest.mark.parametrize(("hold", "expected"), [(0, 0.0), (1, 0.0), (2, 0.5), (3, 1.0), (7, 1.0)])
+def test_streak_pays_for_a_press_that_holds(hold: int, expected: float) -> None:
+    """Gentle Touch holds 3 steps: a one-step tap earns no streak, the second step in a row
+    half, the third (the success step) all of it; numpy and JAX agree."""
+    import jax.numpy as jnp
+
+    cfg = touch_config()
+    assert cfg.success_hold_steps == 3
+    assert float(reward_lib.streak(np, np.asarray(float(hold)), cfg)) == expected
+    assert float(reward_lib.streak(jnp, jnp.asarray(float(hold)), cfg)) == expected
+    # in the reward: streak weight times the term, on top of the in-band contact pay
+    motion = reward_lib.Motion(prev_distance=0.01, action_change=0.0, hold=float(hold))
+    terms = reward_lib.reward_terms(
+        np, np.asarray(0.01), np.asarray(10.0), np.zeros(6), np.zeros(6), UNIT_LIMITS,
+        False, False, cfg, motion,
+    )  # fmt: skip
+    assert float(terms["streak"]) == expected
+    assert cfg.reward.streak == 50.0
+
+
+def test_streak_is_zero_where_one_step_succeeds() -> None:
+    cfg = touch_config("seed")
+    assert cfg.success_hold_steps == 1
+    assert float(reward_lib.streak(np, np.asarray(5.0), cfg)) == 0.0

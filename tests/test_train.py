@@ -121,3 +121,18 @@ def test_task_and_reward_overrides_reach_the_task_config() -> None:
         load_config("cpu", None, ["task.reward.nope=1"])
     with pytest.raises(ValueError, match=r"task\.nope"):
         load_config("cpu", None, ["task.nope=1"])
+
+
+def test_presets_take_the_task_changes() -> None:
+    """Touch gets its own budget in the fast and cpu presets; Reach keeps the preset's base;
+    a later ``task=`` override decides which task's preset applies, and --set wins over both."""
+    from mjx_arm.train.config import CPU, FAST, TASK_PRESETS
+
+    touch = load_config("fast", None, ["task=touch"])
+    assert touch.num_timesteps == TASK_PRESETS[("fast", "touch")]["num_timesteps"]
+    assert touch.num_envs == FAST.num_envs and touch.stop_at_success == FAST.stop_at_success
+    reach = load_config("fast", None, ["task=touch", "task=reach"])
+    assert reach.task == "reach" and reach.num_timesteps == FAST.num_timesteps
+    cpu_touch = load_config("cpu", None, ["task=touch", "num_envs=128", "batch_size=128"])
+    assert cpu_touch.num_envs == 128 and cpu_touch.num_evals == 33
+    assert load_config("cpu", None, []).num_envs == CPU.num_envs  # Reach, the preset's task

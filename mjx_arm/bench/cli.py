@@ -1,4 +1,5 @@
-"""``mjx-arm bench``: its parser (:func:`register`) and the ``parity`` and ``transfer`` commands.
+"""``mjx-arm bench``: its parser (:func:`register`) and the ``parity``, ``transfer`` and ``seeds``
+commands.
 
 The flags of each command come from its settings dataclass (:class:`~mjx_arm.bench.parity.
 ParityConfig`, :class:`~mjx_arm.bench.transfer.TransferConfig`).
@@ -8,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 from pathlib import Path
 
 from mjx_arm.bench.settings import add_arguments, from_arguments
@@ -15,6 +17,7 @@ from mjx_arm.bench.settings import add_arguments, from_arguments
 EXIT_OK, EXIT_INVALID = 0, 2
 PARITY_OUT = Path("benchmarks/results/parity")
 TRANSFER_OUT = Path("benchmarks/results/transfer")
+SEEDS_OUT = Path("benchmarks/results/seeds")
 
 
 def _enable_jax_cache() -> None:
@@ -89,6 +92,41 @@ def cmd_transfer(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_seeds(args: argparse.Namespace) -> int:
+    """Seeds benchmark: train a preset as shipped once per seed, one seed after another.
+
+    For each seed: final and best evaluation success, steps and wall time (from that seed's
+    start, compilation included) to the first evaluation at --threshold, or "not reached".
+    Overall: the fraction of seeds solved and the median and interquartile range of the time
+    to the threshold, over all seeds and over the warm ones (all but the first, which pays
+    for any empty compilation cache). Writes NAME.md, NAME.json and NAME.png (success curves)
+    into --out; the runs go to --runs.
+    """
+    start = time.time()
+    from mjx_arm.bench.results import environment_metadata
+    from mjx_arm.bench.seeds import SeedsConfig, parse_seeds, run_seeds, write_report
+
+    try:
+        config = from_arguments(SeedsConfig(), args)
+        parse_seeds(config.seeds)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_INVALID
+    _enable_jax_cache()
+    meta = environment_metadata(accelerator=True)
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    runs_dir = args.runs or Path("runs") / f"seeds-{config.task}-{config.preset}-{stamp}"
+    overrides = tuple(args.set or ())
+    runs, configs = run_seeds(
+        config, runs_dir, overrides, start, log=lambda text: print(text, flush=True)
+    )
+    name = args.name or f"seeds_{config.task}_{config.preset}"
+    paths = write_report(config, runs, configs, meta, args.out, name, overrides)
+    print(paths[1].read_text())
+    _print_paths(paths)
+    return EXIT_OK
+
+
 def _command(commands, func, help_text: str, config: type) -> argparse.ArgumentParser:
     """The parser of ``func`` (named after it), with the flags of its settings ``config``."""
     p = commands.add_parser(
@@ -102,11 +140,12 @@ def _command(commands, func, help_text: str, config: type) -> argparse.ArgumentP
 def register(sub) -> None:
     """Add ``bench`` with its ``parity`` and ``transfer`` subcommands to ``sub``."""
     from mjx_arm.bench.parity_config import ParityConfig
+    from mjx_arm.bench.seeds import SeedsConfig
     from mjx_arm.bench.transfer import TransferConfig
 
     bench = sub.add_parser(
         "bench",
-        help="engine benchmarks: parity between engines, transfer of a policy",
+        help="benchmarks: engine parity, policy transfer, training over seeds",
         description="Engine benchmarks that write a markdown table, JSON and PNG plots.",
     )
     commands = bench.add_subparsers(dest="bench_command", required=True, metavar="BENCH")
@@ -121,3 +160,14 @@ def register(sub) -> None:
     p.add_argument("--name", help="file stem (default: transfer_TASK)")
     p.add_argument("--plot", action="store_true", help="also write NAME.png")
     p.add_argument("--out", type=Path, default=TRANSFER_OUT, help=f"output folder ({TRANSFER_OUT})")
+
+    p = _command(commands, cmd_seeds, "a preset over seeds: fraction solved, times", SeedsConfig)
+    p.add_argument(
+        "--set",
+        nargs="+",
+        metavar="KEY=VALUE",
+        help="change the preset (exploration; the report then says so, never 'as shipped')",
+    )
+    p.add_argument("--name", help="file stem (default: seeds_TASK_PRESET)")
+    p.add_argument("--runs", type=Path, help="where the runs go (default: runs/seeds-...)")
+    p.add_argument("--out", type=Path, default=SEEDS_OUT, help=f"output folder ({SEEDS_OUT})")

@@ -242,7 +242,7 @@ class BaseRobotEnv(gym.Env):
         qpos, qvel = reading.qpos, reading.qvel
         progress, success, over_now = reward_lib.advance(np, self._progress, d, force, task)
         success = bool(success) and not diverged
-        motion = reward_lib.Motion(self._distance, change)
+        motion = reward_lib.Motion(self._distance, change, progress.hold)
         terms = reward_lib.band_reward_terms(
             np, d, force, qpos, qvel, self._band, success, diverged, task, motion
         )

@@ -137,7 +137,8 @@ class MjxArmEnv(Env):
         d, force = self._distance_and_force(reading)
         zero = jnp.zeros(())
         metrics = {f"reward/{name}": zero for name in REWARD_TERMS}
-        metrics.update(self._measures(d, force, zero, zero, zero))
+        start = reward_lib.start_progress(jnp)
+        metrics.update(self._measures(d, force, start, zero, zero, zero))
         metrics["diverged"] = zero
         return State(
             pipeline_state=data,
@@ -170,7 +171,9 @@ class MjxArmEnv(Env):
         progress, success, over = reward_lib.advance(jnp, memory.progress, d, force, self.task)
         success = success & sane
         motion = reward_lib.Motion(
-            memory.prev_distance, reward_lib.action_change(jnp, action, memory.prev_action)
+            memory.prev_distance,
+            reward_lib.action_change(jnp, action, memory.prev_action),
+            progress.hold,
         )
         terms = reward_lib.reward_terms(
             jnp, d, force, reading.qpos, reading.qvel, self._limits, success, ~sane,
@@ -186,7 +189,8 @@ class MjxArmEnv(Env):
         info["task"] = TaskMemory(progress, action, jnp.where(sane, d, memory.prev_distance))
         metrics = dict(state.metrics)  # keep keys wrappers added (EvalWrapper's "reward")
         metrics.update({f"reward/{name}": value for name, value in terms.items()})
-        metrics.update(self._measures(d, force, success, over, self.physics.overflow(data)))
+        overflow = self.physics.overflow(data)
+        metrics.update(self._measures(d, force, progress, success, over, overflow))
         metrics["diverged"] = (~sane).astype(jnp.float32)
         return state.replace(
             pipeline_state=data,
@@ -239,15 +243,25 @@ class MjxArmEnv(Env):
         force = reward_lib.contact_force_norm(jnp, jnp.clip(reading.wrench, -clip, clip))
         return d, force
 
-    @staticmethod
-    def _measures(d, force, success, over, overflow) -> dict[str, jax.Array]:
-        """Per-step measures beside the reward terms (Brax sums them over an eval episode)."""
+    def _measures(self, d, force, progress, success, over, overflow) -> dict[str, jax.Array]:
+        """Per-step measures beside the reward terms (Brax sums them over an eval episode).
+
+        ``touching``: a contact reading of at least the band's lower end, anywhere;
+        ``streak``: the success condition has held for 2+ control steps running (a press
+        that stays in the band, where a tap shows as ``reward/contact`` without it);
+        ``strike``: the reading is above the strike limit (ends a gentle Touch episode).
+        """
+        f32 = jnp.float32
+        low = self.task.force_band[0]
         return {
-            "distance": d.astype(jnp.float32),
-            "contact_force": force.astype(jnp.float32),
-            "success": jnp.asarray(success).astype(jnp.float32),
-            "overforce": jnp.asarray(over).astype(jnp.float32),
-            "physics_overflow": jnp.asarray(overflow).astype(jnp.float32),
+            "distance": d.astype(f32),
+            "contact_force": force.astype(f32),
+            "success": jnp.asarray(success).astype(f32),
+            "overforce": jnp.asarray(over).astype(f32),
+            "physics_overflow": jnp.asarray(overflow).astype(f32),
+            "touching": (force >= low).astype(f32),
+            "streak": (progress.hold >= 2).astype(f32),
+            "strike": (force > reward_lib.strike_limit(self.task)).astype(f32),
         }
 
 

@@ -33,7 +33,9 @@ class RewardConfig:
     ``action_rate`` = sum (a_t - a_{t-1})^2 over the six action entries,
     ``overforce`` = 1 on a step whose contact force is above the band,
     ``proximity`` = exp(-d / proximity_length): 1 at the target, 0.37 one length away (a
-    near-field pull that ``distance``'s longer length scale lacks).
+    near-field pull that ``distance``'s longer length scale lacks),
+    ``streak`` = how far a press inside the band has held on: 0 on a one-step tap, 1 once it
+    has held ``success_hold_steps`` steps running (:func:`mjx_arm.task.reward.streak`).
     """
 
     distance: float = -10.0
@@ -47,6 +49,7 @@ class RewardConfig:
     action_rate: float = 0.0
     overforce: float = 0.0
     proximity: float = 0.0
+    streak: float = 0.0
     distance_length: float = 0.1
     proximity_length: float = 0.01
     soft_limit: float = 0.95
@@ -69,6 +72,7 @@ REWARD_TERMS = (
     "action_rate",
     "overforce",
     "proximity",
+    "streak",
 )
 
 # Touch's default reward ("gentle"): gentle contact is the optimum.
@@ -83,6 +87,7 @@ REWARD_TERMS = (
 #   and rules success out; a strike over 100 N also ends the episode. Closing in fast near the
 #   box and jerky actions cost a little.
 GENTLE_REWARD = RewardConfig(
+    streak=50.0,
     proximity=10.0,
     contact=20.0,
     success=1000.0,

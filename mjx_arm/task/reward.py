@@ -168,10 +168,23 @@ class Motion(NamedTuple):
     Attributes:
         prev_distance: d at the previous step (m), ``(...)``.
         action_change: sum over the six entries of (a_t - a_{t-1})^2, ``(...)``.
+        hold: consecutive steps the success condition has held, this step included
+            (``Progress.hold`` after :func:`advance`), ``(...)``.
     """
 
     prev_distance: Any
     action_change: Any
+    hold: Any = 0.0
+
+
+def streak(xp: Any, hold, cfg: TaskConfig):
+    """How far a press has held on past its first step: 0 on a one-step tap, rising linearly
+    to 1 once the success condition has held ``success_hold_steps`` steps running, shape
+    ``(...)``. Always 0 when one step is enough to succeed."""
+    steps = cfg.success_hold_steps
+    if steps < 2:
+        return 0.0 * hold
+    return (xp.clip(hold, 1.0, steps) - 1.0) / (steps - 1.0)
 
 
 def action_change(xp: Any, action, prev_action):
@@ -204,7 +217,8 @@ def reward_terms(
         success: success flag, shape ``(...)``.
         nonfinite: flag of a non-finite physics state, shape ``(...)``.
         cfg: the task configuration.
-        motion: the previous step's distance and the action change (None: both terms 0).
+        motion: the previous step's distance, the action change and the hold count (None: their
+            terms are 0).
 
     Returns:
         Dict term name -> float array, shape ``(...)``; keys are ``REWARD_TERMS``.
@@ -239,7 +253,8 @@ def band_reward_terms(
         success: success flag (bool), shape ``(...)``.
         nonfinite: flag (bool) of a non-finite physics state, shape ``(...)``.
         cfg: the task configuration.
-        motion: the previous step's distance and the action change (None: both terms 0).
+        motion: the previous step's distance, the action change and the hold count (None: their
+            terms are 0).
 
     Returns:
         Dict term name -> float array, shape ``(...)``; keys are ``REWARD_TERMS``.
@@ -251,8 +266,9 @@ def band_reward_terms(
     high = cfg.force_band[1]
     excess = xp.maximum(force_norm - high, 0.0) / high if cfg.uses_contact else zero
     if motion is None:
-        closing, change = zero, zero
+        closing, change, held = zero, zero, zero
     else:
+        held = streak(xp, motion.hold + zero, cfg)
         # squared: the cost of an approach grows with its speed (a sum of plain speeds over
         # the approach would be the distance closed over ctrl_dt, whatever the speed)
         closing = xp.maximum(motion.prev_distance - distance, 0.0) / cfg.ctrl_dt
@@ -270,6 +286,7 @@ def band_reward_terms(
         "action_rate": change,
         "overforce": (excess > 0) * 1.0,
         "proximity": xp.exp(-distance / cfg.reward.proximity_length),
+        "streak": held,
     }
     assert tuple(terms) == REWARD_TERMS
     return terms

@@ -1,0 +1,308 @@
+"""Seeds benchmark: a training claim over seeds, not one run.
+
+``mjx-arm bench seeds --task touch --preset fast --seeds 0-9`` trains the preset once per seed,
+one seed after another in this process (the compilation caches are warm after the first seed),
+and reads each run's ``metrics.csv``:
+
+- per seed: final and best evaluation success, the env steps and wall time from that seed's
+  start to the first evaluation at ``threshold`` (or "not reached"), compile time and training
+  steps/s;
+- overall: the fraction of seeds that reached ``threshold``, and the median and interquartile
+  range of the time to it, over every seed (a seed that never reached it counts as infinitely
+  slow, so a median over a minority of solved seeds reads "not reached") and over the warm
+  seeds (all but the first).
+
+It writes ``NAME.md``, ``NAME.json`` (with the resolved config of every seed and the machine)
+and ``NAME.png`` (each seed's success against wall time and against env steps).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mjx_arm.bench.results import fmt, markdown_table, save_results
+from mjx_arm.bench.settings import setting
+
+SUCCESS_KEY = "eval/episode_success"
+
+
+def parse_seeds(text: str) -> tuple[int, ...]:
+    """Seeds from ``"0-9"``, ``"0,3,7"`` or a mix (``"0-2,5"``); ranges are inclusive.
+
+    Raises:
+        ValueError: an empty list, a negative seed, a reversed range or a repeated seed.
+    """
+    seeds: list[int] = []
+    for part in filter(None, (p.strip() for p in text.split(","))):
+        low, dash, high = part.partition("-")
+        try:
+            first, last = int(low), int(high) if dash else int(low)
+        except ValueError:
+            raise ValueError(f"not a seed or range: {part!r} (use e.g. 0-9 or 0,3,7)") from None
+        if first < 0 or last < first:
+            raise ValueError(f"bad seed range {part!r}: seeds are >= 0, low-high with low <= high")
+        seeds.extend(range(first, last + 1))
+    if not seeds:
+        raise ValueError("no seeds given")
+    if len(set(seeds)) != len(seeds):
+        raise ValueError(f"a seed is listed twice: {text!r}")
+    return tuple(seeds)
+
+
+@dataclass(frozen=True)
+class SeedsConfig:
+    """Settings of ``mjx-arm bench seeds`` (each field is a flag)."""
+
+    task: str = setting("touch", "task to train", ("reach", "touch"))
+    preset: str = setting("fast", "training preset, as shipped", ("seed", "fast", "cpu"))
+    seeds: str = setting("0-9", "seeds: a range 0-9, a list 0,3,7 or both")
+    backend: str = setting("auto", "physics backend", ("auto", "mjx", "mujoco"))
+    threshold: float = setting(0.95, "evaluation success that counts as solved")
+    devices: int = setting(0, "local devices to train on (0: all)")
+
+
+@dataclass
+class SeedRun:
+    """One seed's result (times in seconds from that seed's own start)."""
+
+    seed: int
+    final_success: float
+    best_success: float
+    steps_to_threshold: int | None
+    time_to_threshold: float | None
+    total_steps: int
+    wall_s: float
+    compile_s: float
+    training_steps_per_s: float
+    curve: list[tuple[float, int, float]]  # (seconds, step, success) at each evaluation
+
+    @property
+    def solved(self) -> bool:
+        return self.time_to_threshold is not None
+
+
+def read_curve(run_dir: Path, start: float) -> list[tuple[float, int, float]]:
+    """``(seconds since start, step, success)`` of each evaluation in a run's metrics.csv."""
+    from mjx_arm.train.rundir import RunDir
+
+    rows = RunDir(run_dir).read_metrics()
+    return [(r["time"] - start, int(r["step"]), r.get(SUCCESS_KEY, 0.0)) for r in rows]
+
+
+def first_at(curve: list[tuple[float, int, float]], threshold: float) -> tuple[float, int] | None:
+    """(seconds, step) of the first evaluation at ``threshold`` or more, or None."""
+    return next(((t, s) for t, s, v in curve if v >= threshold), None)
+
+
+def train_seed(
+    config: SeedsConfig, seed: int, out: Path, overrides: tuple[str, ...] = (), start=None
+) -> tuple[SeedRun, dict[str, Any]]:
+    """Train ``config.preset`` on ``config.task`` with ``seed``; its result and full config.
+
+    Args:
+        config: the benchmark settings.
+        seed: the PRNG seed of the run.
+        out: folder of the run directories.
+        overrides: ``key=value`` changes to the preset (exploration; empty: as shipped).
+        start: ``time.time()`` the seed's times count from (default: now).
+    """
+    from mjx_arm.train.config import load_config
+    from mjx_arm.train.ppo import train
+    from mjx_arm.train.rundir import RunDir
+
+    items = [f"task={config.task}", f"backend={config.backend}", *overrides, f"seed={seed}"]
+    if config.devices:
+        items.append(f"devices={config.devices}")
+    train_config = load_config(config.preset, None, items)
+    run_dir = out / f"{config.task}-{config.preset}-seed{seed}"
+    start = time.time() if start is None else start
+    result = train(train_config, run_dir, quiet=True)
+    wall = time.time() - start
+    curve = read_curve(run_dir, start)
+    hit = first_at(curve, config.threshold)
+    run = SeedRun(
+        seed=seed,
+        final_success=curve[-1][2] if curve else math.nan,
+        best_success=max((v for _, _, v in curve), default=math.nan),
+        steps_to_threshold=hit[1] if hit else None,
+        time_to_threshold=hit[0] if hit else None,
+        total_steps=result.steps,
+        wall_s=wall,
+        compile_s=result.compile_seconds,
+        training_steps_per_s=result.steps_per_second,
+        curve=curve,
+    )
+    return run, RunDir(run_dir).load_config()
+
+
+def quartiles(times: list[float | None]) -> dict[str, float | None]:
+    """Median and interquartile range of times, a missing time counting as infinite.
+
+    Returns:
+        ``median``, ``q25``, ``q75`` (None where the quantile falls on an unsolved seed) and
+        ``n``.
+    """
+    if not times:
+        return {"median": None, "q25": None, "q75": None, "n": 0}
+    values = np.sort([math.inf if t is None else t for t in times])
+    # the median averages the middle pair (inf if either is unsolved); the quartiles take a
+    # sample ("lower"/"higher"), so an infinity never enters an interpolation as inf * 0
+    q = {
+        "median": float(np.median(values)),
+        "q25": float(np.quantile(values, 0.25, method="lower")),
+        "q75": float(np.quantile(values, 0.75, method="higher")),
+    }
+    out: dict[str, float | None] = {k: (v if math.isfinite(v) else None) for k, v in q.items()}
+    out["n"] = len(times)
+    return out
+
+
+def summarize(runs: list[SeedRun], threshold: float) -> dict[str, Any]:
+    """Fraction of seeds solved, time quartiles over all seeds and over the warm ones."""
+    times = [r.time_to_threshold for r in runs]
+    steps = [r.steps_to_threshold for r in runs if r.steps_to_threshold is not None]
+    return {
+        "threshold": threshold,
+        "seeds": len(runs),
+        "solved": sum(r.solved for r in runs),
+        "fraction_solved": sum(r.solved for r in runs) / len(runs) if runs else math.nan,
+        "time_to_threshold_all": quartiles(times),
+        "time_to_threshold_warm": quartiles(times[1:]),
+        "median_steps_to_threshold": float(np.median(steps)) if steps else None,
+        "median_training_steps_per_s": float(np.median([r.training_steps_per_s for r in runs])),
+    }
+
+
+def seeds_table(runs: list[SeedRun], summary: dict[str, Any]) -> str:
+    """The markdown table of every seed, then the summary lines."""
+    pct = f"{summary['threshold']:.2f}"
+    headers = [
+        "seed",
+        "final success",
+        "best success",
+        f"steps to {pct}",
+        f"time to {pct} (s)",
+        "wall (s)",
+        "compile (s)",
+        "training steps/s",
+    ]
+    rows = [
+        [
+            r.seed,
+            f"{r.final_success:.3f}",
+            f"{r.best_success:.3f}",
+            f"{r.steps_to_threshold:,}" if r.solved else "not reached",
+            fmt(r.time_to_threshold) if r.solved else "not reached",
+            f"{r.wall_s:.1f}",
+            fmt(r.compile_s),
+            f"{r.training_steps_per_s:,.0f}",
+        ]
+        for r in runs
+    ]
+    return markdown_table(headers, rows) + "\n" + summary_lines(summary)
+
+
+def _quartile_text(q: dict[str, float | None]) -> str:
+    def show(v: float | None) -> str:
+        return "not reached" if v is None else f"{v:.1f} s"
+
+    return f"median {show(q['median'])} (IQR {show(q['q25'])} to {show(q['q75'])}, n={q['n']})"
+
+
+def summary_lines(summary: dict[str, Any]) -> str:
+    """The summary as markdown list lines."""
+    return (
+        f"- solved (evaluation success >= {summary['threshold']:.2f}): "
+        f"{summary['solved']} of {summary['seeds']} seeds\n"
+        f"- time to {summary['threshold']:.2f}, all seeds: "
+        f"{_quartile_text(summary['time_to_threshold_all'])}\n"
+        f"- time to {summary['threshold']:.2f}, warm seeds (all but the first): "
+        f"{_quartile_text(summary['time_to_threshold_warm'])}\n"
+    )
+
+
+def plot_curves(runs: list[SeedRun], threshold: float, title: str, path: Path) -> Path:
+    """Each seed's success against wall time (left) and env steps (right), as a PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (by_time, by_step) = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
+    for run in runs:
+        t, s, v = zip(*run.curve, strict=True) if run.curve else ((), (), ())
+        by_time.plot(t, v, marker=".", label=f"seed {run.seed}")
+        by_step.plot(np.asarray(s) / 1e6, v, marker=".")
+    for ax, label in ((by_time, "seconds from the seed's start"), (by_step, "env steps (M)")):
+        ax.axhline(threshold, color="grey", linestyle="--", linewidth=1)
+        ax.set_xlabel(label)
+        ax.grid(alpha=0.3)
+    by_time.set_ylabel("evaluation success")
+    by_time.legend(fontsize=7, ncol=2)
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def run_seeds(
+    config: SeedsConfig,
+    runs_dir: Path,
+    overrides: tuple[str, ...] = (),
+    first_start: float | None = None,
+    log=print,
+) -> tuple[list[SeedRun], list[dict[str, Any]]]:
+    """Train every seed of ``config`` in turn; the results and each run's saved config.
+
+    The first seed's times count from ``first_start`` (the command's start: imports and any
+    cold compilation included), the others' from their own start.
+    """
+    seeds = parse_seeds(config.seeds)
+    runs, configs = [], []
+    for i, seed in enumerate(seeds):
+        log(f"seed {seed} ({i + 1} of {len(seeds)}): training {config.task} / {config.preset}")
+        start = first_start if i == 0 else None
+        run, saved = train_seed(config, seed, runs_dir, overrides, start)
+        runs.append(run)
+        configs.append(saved)
+        reached = fmt(run.time_to_threshold) + " s" if run.solved else "not reached"
+        log(
+            f"seed {seed}: final {run.final_success:.3f}, best {run.best_success:.3f}, "
+            f"{config.threshold:.2f} at {reached}, wall {run.wall_s:.1f} s"
+        )
+    return runs, configs
+
+
+def write_report(
+    config: SeedsConfig,
+    runs: list[SeedRun],
+    configs: list[dict[str, Any]],
+    meta: dict[str, Any],
+    out: Path,
+    name: str,
+    overrides: tuple[str, ...] = (),
+) -> list[Path]:
+    """Write NAME.json, NAME.md and NAME.png into ``out``; return their paths."""
+    summary = summarize(runs, config.threshold)
+    table = seeds_table(runs, summary)
+    changed = f", with {' '.join(overrides)}" if overrides else " as shipped"
+    title = f"{config.task}, preset {config.preset}{changed}, {meta['device']['kind']}"
+    payload = {
+        "meta": meta,
+        "settings": dataclasses.asdict(config),
+        "overrides": list(overrides),
+        "summary": summary,
+        "seeds": [dataclasses.asdict(r) for r in runs],
+        "configs": configs,
+    }
+    json_path, md_path = save_results(name, payload, f"# Seeds: {title}\n\n{table}", out)
+    png = plot_curves(runs, config.threshold, title, out / f"{name}.png")
+    return [json_path, md_path, png]

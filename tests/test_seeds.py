@@ -1,0 +1,103 @@
+"""The seeds benchmark: seed lists, the statistics over seeds, the report, and one tiny run."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pytest
+
+from mjx_arm.bench.seeds import (
+    SeedRun,
+    SeedsConfig,
+    first_at,
+    parse_seeds,
+    quartiles,
+    run_seeds,
+    summarize,
+    write_report,
+)
+
+
+def _run(seed: int, time_to: float | None, final: float = 0.97) -> SeedRun:
+    curve = [(1.0, 0, 0.0), (5.0, 1000, 0.5)]
+    if time_to is not None:
+        curve.append((time_to, 2000, 0.96))
+    return SeedRun(
+        seed=seed,
+        final_success=final,
+        best_success=max(v for _, _, v in curve),
+        steps_to_threshold=2000 if time_to is not None else None,
+        time_to_threshold=time_to,
+        total_steps=2000,
+        wall_s=10.0,
+        compile_s=2.0,
+        training_steps_per_s=1000.0,
+        curve=curve,
+    )
+
+
+@pytest.mark.parametrize(
+    ("text", "seeds"),
+    [("0-9", tuple(range(10))), ("3", (3,)), ("0,3,7", (0, 3, 7)), ("0-2, 5", (0, 1, 2, 5))],
+)
+def test_parse_seeds(text: str, seeds: tuple[int, ...]) -> None:
+    assert parse_seeds(text) == seeds
+
+
+@pytest.mark.parametrize("text", ["", "a", "5-2", "1,1", "-3", "0-2,2"])
+def test_parse_seeds_rejects(text: str) -> None:
+    with pytest.raises(ValueError):
+        parse_seeds(text)
+
+
+def test_first_at_takes_the_first_evaluation_at_the_threshold() -> None:
+    curve = [(1.0, 0, 0.2), (2.0, 10, 0.95), (3.0, 20, 0.99)]
+    assert first_at(curve, 0.95) == (2.0, 10)
+    assert first_at(curve, 0.995) is None
+
+
+def test_quartiles_count_unsolved_seeds_as_infinitely_slow() -> None:
+    # sorted: 10, 20, 30, inf -> median between 20 and 30; q75 falls on the unsolved seed
+    q = quartiles([30.0, None, 10.0, 20.0])
+    assert q["median"] == pytest.approx(25.0)
+    assert q["q25"] == pytest.approx(10.0)
+    assert q["q75"] is None and q["n"] == 4
+    # a majority unsolved: the median itself is "not reached"
+    assert quartiles([None, None, 5.0])["median"] is None
+    assert quartiles([])["median"] is None
+
+
+def test_summary_counts_solved_seeds_and_warm_times() -> None:
+    runs = [_run(0, 80.0), _run(1, 30.0), _run(2, None, final=0.4), _run(3, 40.0)]
+    summary = summarize(runs, 0.95)
+    assert summary["solved"] == 3 and summary["fraction_solved"] == pytest.approx(0.75)
+    warm = summary["time_to_threshold_warm"]  # seeds 1-3: 30, 40, inf
+    assert warm["median"] == pytest.approx(40.0) and warm["n"] == 3
+    assert summary["time_to_threshold_all"]["median"] == pytest.approx(60.0)  # (40 + 80) / 2
+
+
+def test_report_files(tmp_path: Path) -> None:
+    runs = [_run(0, 12.0), _run(1, None, final=0.1)]
+    meta = {"device": {"kind": "cpu"}}
+    paths = write_report(SeedsConfig(seeds="0-1"), runs, [{}, {}], meta, tmp_path, "s", ("a=1",))
+    data = json.loads(paths[0].read_text())
+    assert data["summary"]["solved"] == 1 and data["overrides"] == ["a=1"]
+    text = paths[1].read_text()
+    assert "not reached" in text and "1 of 2 seeds" in text and "with a=1" in text
+    assert paths[2].stat().st_size > 1000  # a PNG was drawn
+
+
+@pytest.mark.slow
+def test_two_tiny_seeds_on_the_c_backend(tmp_path: Path) -> None:
+    """Two seeds of a few thousand steps: each trains, its curve starts at step 0, and the
+    report sees the saved config of each seed (its own seed)."""
+    config = SeedsConfig(task="reach", preset="cpu", seeds="0,1", backend="mujoco")
+    sets = ("num_timesteps=2560", "num_evals=2", "num_eval_envs=8")
+    runs, configs = run_seeds(config, tmp_path, sets, log=lambda _: None)
+    assert [r.seed for r in runs] == [0, 1]
+    assert [c["train"]["seed"] for c in configs] == [0, 1]
+    for run in runs:
+        assert run.curve[0][1] == 0 and run.total_steps >= 2560
+        assert 0.0 <= run.final_success <= 1.0 and not math.isnan(run.wall_s)
