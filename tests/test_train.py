@@ -136,3 +136,30 @@ def test_presets_take_the_task_changes() -> None:
     cpu_touch = load_config("cpu", None, ["task=touch", "num_envs=128", "batch_size=128"])
     assert cpu_touch.num_envs == 128 and cpu_touch.num_evals == 33
     assert load_config("cpu", None, []).num_envs == CPU.num_envs  # Reach, the preset's task
+
+
+@pytest.mark.parametrize("keep_best", [True, False])
+def test_final_checkpoint_keeps_the_best_evaluation(tmp_path: Path, keep_best: bool) -> None:
+    """A run that ends on its budget saves its best evaluation's params as the last checkpoint
+    (keep_best), or the last params (keep_best=False). Checkpoints are captured, not written."""
+    from mjx_arm.task.config import task_config
+    from mjx_arm.train.ppo import _Progress
+
+    config = load_config("cpu", None, _tiny(30, checkpoint_every="10"))
+    config = config.replace(keep_best=keep_best)
+    progress = _Progress(RunDir(tmp_path / "run"), config, task_config("reach"), 0, quiet=True)
+    saved = []
+    progress._save = lambda step, make_policy, params, meta=None: saved.append(
+        (step, params, meta or {})
+    )
+    for step, success in ((10, 0.5), (20, 0.9), (30, 0.4)):
+        progress.policy_params(step, None, {"w": np.full(2, float(step))})
+        progress.progress(step, {"eval/episode_success": success, "training/sps": 1.0})
+    assert [s for s, _, _ in saved] == [30]  # only the final one is due (every 10 evals)
+    _, params, meta = saved[0]
+    if keep_best:
+        np.testing.assert_array_equal(params["w"], [20.0, 20.0])
+        assert meta == {"params_step": 20, "params_success": 0.9}
+    else:
+        np.testing.assert_array_equal(params["w"], [30.0, 30.0])
+        assert meta == {}

@@ -4,9 +4,10 @@
 one seed after another in this process (the compilation caches are warm after the first seed),
 and reads each run's ``metrics.csv``:
 
-- per seed: final and best evaluation success, the env steps and wall time from that seed's
-  start to the first evaluation at ``threshold`` (or "not reached"), compile time and training
-  steps/s;
+- per seed: the evaluation success of the run's final policy (its last checkpoint: the best
+  evaluation where the run ended on its budget, ``TrainConfig.keep_best``) and the best one,
+  the env steps and wall time from that seed's start to the first evaluation at ``threshold``
+  (or "not reached"), compile time and training steps/s;
 - overall: the fraction of seeds that reached ``threshold``, and the median and interquartile
   range of the time to it, over every seed (a seed that never reached it counts as infinitely
   slow, so a median over a minority of solved seeds reads "not reached") and over the warm
@@ -96,6 +97,18 @@ def read_curve(run_dir: Path, start: float) -> list[tuple[float, int, float]]:
     return [(r["time"] - start, int(r["step"]), r.get(SUCCESS_KEY, 0.0)) for r in rows]
 
 
+def final_policy_success(run_dir: Path, curve: list[tuple[float, int, float]]) -> float:
+    """Evaluation success of the params in the run's last checkpoint: the last evaluation's,
+    or the best one's where the run kept it (``TrainConfig.keep_best``)."""
+    from mjx_arm.train.rundir import RunDir
+
+    latest = RunDir(run_dir).latest_checkpoint()
+    meta = RunDir.load_meta(latest) if latest is not None else {}
+    if "params_success" in meta:
+        return float(meta["params_success"])
+    return curve[-1][2] if curve else math.nan
+
+
 def first_at(curve: list[tuple[float, int, float]], threshold: float) -> tuple[float, int] | None:
     """(seconds, step) of the first evaluation at ``threshold`` or more, or None."""
     return next(((t, s) for t, s, v in curve if v >= threshold), None)
@@ -129,7 +142,7 @@ def train_seed(
     hit = first_at(curve, config.threshold)
     run = SeedRun(
         seed=seed,
-        final_success=curve[-1][2] if curve else math.nan,
+        final_success=final_policy_success(run_dir, curve),
         best_success=max((v for _, _, v in curve), default=math.nan),
         steps_to_threshold=hit[1] if hit else None,
         time_to_threshold=hit[0] if hit else None,
@@ -185,7 +198,7 @@ def seeds_table(runs: list[SeedRun], summary: dict[str, Any]) -> str:
     pct = f"{summary['threshold']:.2f}"
     headers = [
         "seed",
-        "final success",
+        "final policy success",
         "best success",
         f"steps to {pct}",
         f"time to {pct} (s)",

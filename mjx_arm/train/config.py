@@ -52,6 +52,10 @@ class TrainConfig:
         checkpoint_every: save a checkpoint every this many evaluations (and at the end).
         stop_at_success: stop once an evaluation's success rate reaches this (its checkpoint
             is saved); 0 trains all ``num_timesteps``.
+        keep_best: a run that ends on its budget (``stop_at_success`` not reached) saves the
+            params of its best evaluation (the later one on a tie) as its final checkpoint,
+            with ``params_step`` in the checkpoint's meta.json, so the run's policy is the
+            best it evaluated rather than wherever PPO drifted last.
         seed: PRNG seed.
         devices: local devices to train on (0: all of them). The env batch is split evenly
             over them, so ``num_envs`` and ``batch_size`` must be multiples of the count.
@@ -87,6 +91,7 @@ class TrainConfig:
     num_eval_envs: int = 128
     checkpoint_every: int = 1
     stop_at_success: float = 0.0
+    keep_best: bool = True
     seed: int = 0
     devices: int = 0
     partition: str = "auto"

@@ -100,6 +100,8 @@ class _Progress:
         )
         self.evals = 0
         self.latest: tuple | None = None
+        # (success, step, params on the host) of the best evaluation after training started
+        self.best: tuple[float, int, Any] | None = None
         self.times: list[tuple[float, int]] = []
         self.last_metrics: dict[str, float] = {}
 
@@ -126,11 +128,32 @@ class _Progress:
         if not any("training/" in k for k in row):  # the evaluation before training
             return
         self.evals += 1
+        success = row.get("eval/episode_success", 0.0)
+        self._remember_best(step, success)
         due = self.evals % self.config.checkpoint_every == 0
         if (due or solved or step >= self.total) and self.latest is not None:
-            self._save(step, *self.latest)
+            make_policy, params = self.latest
+            meta: dict[str, Any] = {}
+            if step >= self.total and not solved and self._best_is_better(success):
+                best_success, best_step, params = self.best
+                meta = {"params_step": best_step, "params_success": best_success}
+                self.bar.write(
+                    f"the final checkpoint keeps the params of step {best_step} "
+                    f"(evaluation success {best_success:.3f}, last {success:.3f})"
+                )
+            self._save(step, make_policy, params, meta)
         if solved:
             raise Solved(step)
+
+    def _remember_best(self, step: int, success: float) -> None:
+        """Keep a host copy of the params of the best evaluation so far (ties: the later)."""
+        if not self.config.keep_best or self.latest is None:
+            return
+        if self.best is None or success >= self.best[0]:
+            self.best = (success, step, jax.tree.map(np.asarray, self.latest[1]))
+
+    def _best_is_better(self, success: float) -> bool:
+        return self.config.keep_best and self.best is not None and self.best[0] > success
 
     def _show(self, step: int, row: dict[str, float]) -> None:
         self.bar.n = step
@@ -140,10 +163,11 @@ class _Progress:
         )
         self.bar.refresh()
 
-    def _save(self, step: int, make_policy, params) -> None:
+    def _save(self, step: int, make_policy, params, meta: dict[str, Any] | None = None) -> None:
         params = jax.tree.map(np.asarray, params)
         transitions = rollout_transitions(make_policy, params, self.task, seed=step)
-        self.run.save_checkpoint(step, params, {"task": self.config.task}, transitions)
+        meta = {"task": self.config.task, **(meta or {})}
+        self.run.save_checkpoint(step, params, meta, transitions)
 
     def close(self) -> None:
         self.bar.close()
