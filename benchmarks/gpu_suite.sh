@@ -11,6 +11,7 @@
 #   bash benchmarks/gpu_suite.sh sweep        # Touch over a few seeds per candidate (CANDIDATES)
 #   bash benchmarks/gpu_suite.sh seeds        # the fast preset as shipped, seeds 0-9, both tasks
 #   bash benchmarks/gpu_suite.sh coldseed     # one Touch seed with every cache empty
+#   bash benchmarks/gpu_suite.sh transfer     # MJX rows of the transfer matrix, seeds' policies
 #
 # Results go to $OUT (default: benchmarks/results/gpu); the trained policies are exported to
 # $OUT/policies as .npz. Single-GPU stages use GPU 0 only.
@@ -106,8 +107,20 @@ coldseed)
   # One Touch seed (not among 0-9) from a cold start: JAX, Warp and CUDA driver caches empty.
   MJX_ARM_JAX_CACHE="$(mktemp -d)" WARP_CACHE_PATH="$(mktemp -d)" CUDA_CACHE_PATH="$(mktemp -d)" \
     one_gpu python3 -m mjx_arm.cli bench seeds --task "${TASK:-touch}" --preset fast \
-    --seeds "${COLD_SEED:-10}" --name "seeds_${TASK:-touch}_fast_cold" \
+    --seeds "${COLD_SEED:-10}" --name "seeds_${TASK:-touch}_fast_cold_seed${COLD_SEED:-10}" \
     --runs "$OUT/cold_runs" --out "$OUT"
+  ;;
+transfer)
+  # MJX rows of the transfer matrix (both implementations) for the exported Touch policies of
+  # TRANSFER_SEEDS (from the seeds stage); the CPU rows run where PyBullet is installed.
+  for seed in ${TRANSFER_SEEDS:-0 1 2}; do
+    for impl in warp jax; do
+      one_gpu python3 -m mjx_arm.cli bench transfer \
+        "$OUT/policies/seeds_touch_touch-fast-seed$seed.npz" --engines mjx --impl "$impl" \
+        --trained-on "MJX on Warp, H200, fast preset, seed $seed" \
+        --name "transfer_touch_fast_seed${seed}_mjx_$impl" --out "$OUT/transfer"
+    done
+  done
   ;;
 parity)
   one_gpu python3 -m mjx_arm.cli bench parity --engines mujoco mjx --impls warp jax \
