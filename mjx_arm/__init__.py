@@ -19,6 +19,9 @@ if (
 ):
     _os.environ["MUJOCO_GL"] = "egl"
 
+from mjx_arm import _quiet_mjx
 from mjx_arm.envs.registration import register_envs as _register_envs
+
+_quiet_mjx.install()  # no "Failed to import warp" notice where warp-lang is not installed
 
 _register_envs()

@@ -44,8 +44,12 @@ from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
-import pybullet
-from pybullet_utils.bullet_client import BulletClient
+
+from pybullet_ref.quiet import STDERR, STDOUT, native_output_silenced
+
+with native_output_silenced((STDOUT, STDERR)):  # "pybullet build time: ..."
+    import pybullet
+    from pybullet_utils.bullet_client import BulletClient
 
 from mjx_arm.envs.arm import ArmInfo
 from mjx_arm.envs.base import DEFAULT_HEIGHT, DEFAULT_WIDTH, BaseRobotEnv, PhysicsReading
@@ -199,7 +203,8 @@ class PybulletArmEnv(BaseRobotEnv):
     ) -> None:
         super().__init__(task, urdf, render_mode, width, height)
         self.servo = joint_servo(self.arm, self.task.sim_dt)
-        self.client = BulletClient(connection_mode=pybullet.DIRECT)
+        with native_output_silenced():  # "argv[0]="
+            self.client = BulletClient(connection_mode=pybullet.DIRECT)
         self._calls = _HotCalls.of(self.client)
         # without a render mode nothing is drawn: skip the visual shapes (halves the reset time)
         self._load_flags = 0 if render_mode else pybullet.URDF_IGNORE_VISUAL_SHAPES

@@ -44,14 +44,19 @@ def figures(tmp_path_factory: pytest.TempPathFactory) -> dict:
 
 
 def test_two_devices_compute_what_one_does(figures: dict) -> None:
-    """After one training step the params on 2 devices equal those on 1 within float32 sums.
+    """The PPO loss gradient of one minibatch, split over 2 devices, equals the one of 1 device
+    up to the order of its float32 sums: within 1e-5 of each array's largest entry (measured:
+    5e-7, a few ulps).
 
-    Measured: at most 1.5e-5 relative to each array's largest entry (3e-7 absolute on weights
-    of about 0.3; the worst is a bias vector of about 0.008); only the order of the
-    cross-device sums differs.
+    Params after a training step are not compared: Adam divides each gradient entry by the
+    root of its own running square, so an entry near zero whose sign the sum order flips moves
+    a whole learning-rate step either way (measured on a 2-core CPU: 1.3e-3 = 1.3 steps of
+    lr 1e-3, 3.4e-3 of the array's largest entry, after 8 updates, and as much after one).
+    How far that goes depends on the machine's XLA code, not on the code under test; the
+    learning check below covers the Adam-trained run.
     """
     assert figures["device_count"] == 2
-    assert figures["one_step_max_rel"] < 1e-4
+    assert figures["gradient_max_rel"] < 1e-5
 
 
 def test_two_devices_learn_reach(figures: dict) -> None:

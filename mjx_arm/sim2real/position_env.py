@@ -40,7 +40,6 @@ from pathlib import Path
 import gymnasium as gym
 import mujoco
 import numpy as np
-import pybullet
 
 from mjx_arm.envs.arm import ArmInfo
 from mjx_arm.envs.base import DEFAULT_HEIGHT, DEFAULT_WIDTH
@@ -49,7 +48,7 @@ from mjx_arm.sim2real.adapter import VelocityToPositionAdapter
 from mjx_arm.sim2real.limiter import JointLimits, SafetyLimiter
 from mjx_arm.sim2real.settings import ChainConfig, ServoConfig
 from mjx_arm.task.config import TaskConfig
-from pybullet_ref.env import PybulletArmEnv
+from pybullet_ref.env import PybulletArmEnv, pybullet  # pybullet imported quietly there
 
 ENGINES = ("mujoco", "pybullet")
 
