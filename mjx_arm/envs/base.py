@@ -25,7 +25,7 @@ import numpy as np
 from mjx_arm.envs.arm import ArmInfo, validated_arm_info
 from mjx_arm.task import observation as obs_lib
 from mjx_arm.task import reward as reward_lib
-from mjx_arm.task import sampling
+from mjx_arm.task import rules, sampling
 from mjx_arm.task.config import TaskConfig, touch_config
 
 DEFAULT_WIDTH, DEFAULT_HEIGHT = 640, 480
@@ -240,28 +240,25 @@ class BaseRobotEnv(gym.Env):
         if not (diverged or math.isfinite(raw.dot(raw)) or np.isfinite(raw).all()):
             return None
         qpos, qvel = reading.qpos, reading.qvel
-        progress, success, over_now = reward_lib.advance(np, self._progress, d, force, task)
-        success = bool(success) and not diverged
-        motion = reward_lib.Motion(self._distance, change, progress.hold)
-        terms = reward_lib.band_reward_terms(
-            np, d, force, qpos, qvel, self._band, success, diverged, task, motion
-        )
-        terms = {name: float(value) for name, value in terms.items()}
-        if not diverged and self._runaway(terms["joint_velocity"], qvel):
+        if not diverged and self._runaway(float(np.abs(qvel).sum()), qvel):
             return None
-        self._progress, self._distance = progress, d
+        score = rules.score_step(
+            np, task, self._progress, self._distance, change, d, force, qpos, qvel,
+            self._band, diverged,
+        )  # fmt: skip
+        self._progress, self._distance = score.progress, d
+        terms = {name: float(value) for name, value in score.terms.items()}
         info = {
-            "is_success": success,
+            "is_success": bool(score.success),
             "distance": d,
             "contact_force_norm": force,
             "reward_terms": terms,
             "diverged": diverged,
             "nonfinite": diverged,  # the older name of ``diverged``
-            "overforce": bool(over_now),
+            "overforce": bool(score.over),
         }
         obs = obs_lib.unflatten_obs(state.astype(np.float32))
-        done = bool(reward_lib.ends_episode(success, force, diverged, task))
-        return obs, float(reward_lib.total_reward(terms, task)), done, info
+        return obs, float(score.reward), bool(score.done), info
 
     def _runaway(self, speed_sum: float, qvel: np.ndarray) -> bool:
         """Non-finite or runaway joint velocities ``qvel (6,)``; ``speed_sum`` = sum |qvel|.

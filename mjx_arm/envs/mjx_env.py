@@ -41,7 +41,7 @@ from mjx_arm.envs.randomization import (
 )
 from mjx_arm.task import observation as obs_lib
 from mjx_arm.task import reward as reward_lib
-from mjx_arm.task import sampling
+from mjx_arm.task import rules, sampling
 from mjx_arm.task.config import REWARD_TERMS, TaskConfig, touch_config
 
 __all__ = ["MjxArmEnv", "Reading", "TaskMemory"]
@@ -101,7 +101,8 @@ class MjxArmEnv(Env):
             self.physics = physics_factory(self.mj_model, self.arm, self.task)
         self.randomization = randomization or RandomizationConfig()
         self._v_scale = jnp.asarray(self.task.action_scale * self.arm.v_max, jnp.float32)
-        self._limits = (jnp.asarray(self.arm.lower), jnp.asarray(self.arm.upper))
+        limits = (jnp.asarray(self.arm.lower), jnp.asarray(self.arm.upper))
+        self._band = reward_lib.joint_band(limits, self.task)
         self._speeds = jnp.asarray(reward_lib.speed_limits(self.arm.v_max, self.task), jnp.float32)
 
     @property
@@ -168,29 +169,21 @@ class MjxArmEnv(Env):
             noise = ft_noise(key, self.randomization)
         obs = jnp.where(sane, self.observe(reading, episode, noise), state.obs)
         d, force = self._distance_and_force(reading)
-        progress, success, over = reward_lib.advance(jnp, memory.progress, d, force, self.task)
-        success = success & sane
-        motion = reward_lib.Motion(
-            memory.prev_distance,
-            reward_lib.action_change(jnp, action, memory.prev_action),
-            progress.hold,
-        )
-        terms = reward_lib.reward_terms(
-            jnp, d, force, reading.qpos, reading.qvel, self._limits, success, ~sane,
-            self.task, motion,
+        change = reward_lib.action_change(jnp, action, memory.prev_action)
+        score = rules.score_step(
+            jnp, self.task, memory.progress, memory.prev_distance, change, d, force,
+            reading.qpos, reading.qvel, self._band, ~sane,
         )  # fmt: skip
+        progress, success = score.progress, score.success
         # strong float32 everywhere: a weak type would change the State's type and retrace
-        terms = {
-            k: jnp.where(sane | (k == "nonfinite"), v, 0.0).astype(jnp.float32)
-            for k, v in terms.items()
-        }
-        reward = reward_lib.total_reward(terms, self.task).astype(jnp.float32)
-        done = reward_lib.ends_episode(success, jnp.where(sane, force, 0.0), ~sane, self.task)
+        terms = {k: v.astype(jnp.float32) for k, v in score.terms.items()}
+        reward = score.reward.astype(jnp.float32)
+        done = score.done
         info["task"] = TaskMemory(progress, action, jnp.where(sane, d, memory.prev_distance))
         metrics = dict(state.metrics)  # keep keys wrappers added (EvalWrapper's "reward")
         metrics.update({f"reward/{name}": value for name, value in terms.items()})
         overflow = self.physics.overflow(data)
-        metrics.update(self._measures(d, force, progress, success, over, overflow))
+        metrics.update(self._measures(d, force, progress, success, score.over, overflow))
         metrics["diverged"] = (~sane).astype(jnp.float32)
         return state.replace(
             pipeline_state=data,

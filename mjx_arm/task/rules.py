@@ -1,0 +1,81 @@
+"""The step rules, composed once for every engine.
+
+After each control step an engine measures the distance ``d`` and the tared contact force, and
+decides whether its physics diverged; :func:`score_step` turns that into the episode's progress,
+success, the reward terms and their total, and termination. The CPU envs (numpy, one env) and
+the batched MJX env (``jax.numpy``, traced under ``jit``/``vmap``) both call it, so the rules
+cannot drift apart between engines.
+
+On a diverged step the reading is not physics: every reward term except ``nonfinite`` is zero,
+success is ruled out and the episode ends.
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+from mjx_arm.task import reward as reward_lib
+from mjx_arm.task.config import TaskConfig
+
+
+class StepScore(NamedTuple):
+    """What one control step scored (per env; shapes ``(...)``).
+
+    Attributes:
+        progress: the success rule's progress after the step.
+        success: the episode succeeded on this step (bool).
+        over: the contact force read above the band on this step (bool).
+        terms: raw reward terms by name (``REWARD_TERMS``), zero on a diverged step except
+            ``nonfinite``.
+        reward: the weighted sum of the terms.
+        done: the episode terminates (success, a strike or divergence, as configured).
+    """
+
+    progress: reward_lib.Progress
+    success: Any
+    over: Any
+    terms: dict[str, Any]
+    reward: Any
+    done: Any
+
+
+def score_step(
+    xp: Any,
+    cfg: TaskConfig,
+    progress: reward_lib.Progress,
+    prev_distance,
+    action_change,
+    distance,
+    force_norm,
+    qpos,
+    qvel,
+    band: reward_lib.JointBand,
+    diverged,
+) -> StepScore:
+    """Score one control step.
+
+    Args:
+        xp: ``numpy`` or ``jax.numpy``.
+        cfg: the task configuration.
+        progress: the success rule's progress before the step.
+        prev_distance: d at the previous step (m), ``(...)``.
+        action_change: sum of the squared action change since the previous step, ``(...)``.
+        distance: d after the step (m), ``(...)``.
+        force_norm: tared contact force norm after the step (N), ``(...)``.
+        qpos, qvel: joint angles (rad) and velocities (rad/s), ``(..., n)``.
+        band: the joint-limit band (:func:`mjx_arm.task.reward.joint_band`).
+        diverged: the physics diverged on this step (bool, ``(...)``).
+
+    Returns:
+        The :class:`StepScore`.
+    """
+    sane = xp.logical_not(diverged)
+    progress, success, over = reward_lib.advance(xp, progress, distance, force_norm, cfg)
+    success = xp.logical_and(success, sane)
+    motion = reward_lib.Motion(prev_distance, action_change, progress.hold)
+    terms = reward_lib.band_reward_terms(
+        xp, distance, force_norm, qpos, qvel, band, success, diverged, cfg, motion
+    )
+    terms = {k: v if k == "nonfinite" else xp.where(sane, v, 0.0) for k, v in terms.items()}
+    done = reward_lib.ends_episode(success, xp.where(sane, force_norm, 0.0), diverged, cfg)
+    return StepScore(progress, success, over, terms, reward_lib.total_reward(terms, cfg), done)
