@@ -6,6 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from mjx_arm import names
+
 EXIT_OK, EXIT_INVALID = 0, 2
 
 
@@ -265,7 +267,7 @@ def _add_policy_commands(sub) -> None:
     p.add_argument("policy", help="policy file (.npz/.onnx) or run directory (newest checkpoint)")
     p.add_argument(
         "--engine",
-        choices=["mujoco", "pybullet", "mjx"],
+        choices=names.EVAL_ENGINES,
         default="mujoco",
         help="mujoco or pybullet (Gymnasium env, CPU) or mjx (the batched MJX env; "
         "on a CPU it still runs MJX, only slowly: minutes to compile, about "
@@ -273,7 +275,7 @@ def _add_policy_commands(sub) -> None:
     )
     p.add_argument(
         "--impl",
-        choices=["auto", "jax", "warp"],
+        choices=names.IMPLS,
         default="auto",
         help="MJX implementation for --engine mjx (default: auto: Warp on a GPU where installed)",
     )
@@ -283,7 +285,7 @@ def _add_policy_commands(sub) -> None:
     p.add_argument(
         "--task",
         type=str.lower,
-        choices=["reach", "touch"],
+        choices=names.TASKS,
         help="task (default: the one the policy was trained on)",
     )
     p.add_argument("--video", help="video of the first episode (.mp4 or .gif)")
@@ -304,7 +306,7 @@ def _add_policy_commands(sub) -> None:
     p.add_argument(
         "--task",
         type=str.lower,
-        choices=["reach", "touch"],
+        choices=names.TASKS,
         help="scene to render (default: from the file or its run directory)",
     )
     p.set_defaults(func=cmd_replay)
@@ -379,18 +381,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--task",
         type=str.lower,
-        choices=["reach", "touch"],
+        choices=names.TASKS,
         help="task to train (default: the preset's)",
     )
     p.add_argument(
         "--preset",
-        choices=["seed", "fast", "cpu"],
+        choices=names.PRESET_NAMES,
         default="seed",
         help="hyperparameter preset (default: seed)",
     )
     p.add_argument(
         "--backend",
-        choices=["auto", "mjx", "mujoco"],
+        choices=names.BACKENDS,
         help="physics: mjx (GPU), mujoco (C MuJoCo, CPU), auto (default)",
     )
     p.add_argument(

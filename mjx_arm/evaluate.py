@@ -25,11 +25,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mjx_arm.names import EVAL_ENGINES as ENGINES
+from mjx_arm.names import TASK_IDS
 from mjx_arm.task.config import TaskConfig, task_config
 from mjx_arm.task.observation import OBS_KEYS, flatten_obs
 
-ENGINES = ("mujoco", "pybullet", "mjx")
-TASK_IDS = {"reach": "mjx_arm/Reach-v0", "touch": "mjx_arm/Touch-v0"}
 Z95 = 1.959963984540054
 # Fields of a task that change what an action does; kept from the policy's training config when
 # it is evaluated on the other task.

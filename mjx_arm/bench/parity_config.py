@@ -12,9 +12,8 @@ from typing import Any
 
 from mjx_arm.bench.settings import setting
 from mjx_arm.envs.physics_config import IMPLS
+from mjx_arm.names import PARITY_ENGINES as ENGINES
 from mjx_arm.task.config import HOME_QPOS
-
-ENGINES = ("mujoco", "mjx", "pybullet")
 
 # Bottom-face centres (m) of the box in the pressing check, the first ``press_boxes`` are used.
 BOX_POSITIONS = (

@@ -30,6 +30,7 @@ import numpy as np
 
 from mjx_arm.bench.results import fmt, markdown_table, save_results
 from mjx_arm.bench.settings import setting
+from mjx_arm.names import BACKENDS, PRESET_NAMES, TASKS
 
 SUCCESS_KEY = "eval/episode_success"
 
@@ -61,10 +62,10 @@ def parse_seeds(text: str) -> tuple[int, ...]:
 class SeedsConfig:
     """Settings of ``mjx-arm bench seeds`` (each field is a flag)."""
 
-    task: str = setting("touch", "task to train", ("reach", "touch"))
-    preset: str = setting("fast", "training preset, as shipped", ("seed", "fast", "cpu"))
+    task: str = setting("touch", "task to train", TASKS)
+    preset: str = setting("fast", "training preset, as shipped", PRESET_NAMES)
     seeds: str = setting("0-9", "seeds: a range 0-9, a list 0,3,7 or both")
-    backend: str = setting("auto", "physics backend", ("auto", "mjx", "mujoco"))
+    backend: str = setting("auto", "physics backend", BACKENDS)
     threshold: float = setting(0.95, "evaluation success that counts as solved")
     devices: int = setting(0, "local devices to train on (0: all)")
 

@@ -5,9 +5,8 @@ from __future__ import annotations
 import jax
 
 from mjx_arm.envs.physics_config import PhysicsConfig
+from mjx_arm.names import BACKENDS
 from mjx_arm.task.config import TaskConfig
-
-BACKENDS = ("auto", "mjx", "mujoco")
 
 
 def resolve_backend(name: str) -> str:

@@ -10,7 +10,7 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
-IMPLS = ("auto", "jax", "warp")
+from mjx_arm.names import IMPLS
 
 
 @dataclass(frozen=True)

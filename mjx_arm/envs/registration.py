@@ -10,10 +10,11 @@ from typing import Any
 
 import gymnasium as gym
 
+from mjx_arm.names import CPU_ENGINES as ENGINES
+from mjx_arm.names import TASK_IDS as _IDS_OF_TASKS
 from mjx_arm.task.config import TaskConfig, task_config
 
-ENGINES = ("mujoco", "pybullet")
-TASK_IDS = {"mjx_arm/Reach-v0": "reach", "mjx_arm/Touch-v0": "touch"}
+TASK_IDS = {env_id: task for task, env_id in _IDS_OF_TASKS.items()}  # id -> task
 
 
 def _task(name: str, task: TaskConfig | dict | None) -> TaskConfig:

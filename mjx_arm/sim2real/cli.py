@@ -9,6 +9,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from mjx_arm.names import CPU_ENGINES
+
 EXIT_OK, EXIT_INVALID = 0, 2
 
 
@@ -149,7 +151,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("policy", help="policy file (.npz/.onnx) or run directory (newest checkpoint)")
     p.add_argument(
         "--engine",
-        choices=["mujoco", "pybullet"],
+        choices=CPU_ENGINES,
         default="mujoco",
         help="physics engine (default: mujoco)",
     )

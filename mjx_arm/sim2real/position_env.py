@@ -44,13 +44,12 @@ import numpy as np
 from mjx_arm.envs.arm import ArmInfo
 from mjx_arm.envs.base import DEFAULT_HEIGHT, DEFAULT_WIDTH
 from mjx_arm.envs.mujoco_env import MujocoArmEnv
+from mjx_arm.names import CPU_ENGINES as ENGINES
 from mjx_arm.sim2real.adapter import VelocityToPositionAdapter
 from mjx_arm.sim2real.limiter import JointLimits, SafetyLimiter
 from mjx_arm.sim2real.settings import ChainConfig, ServoConfig
 from mjx_arm.task.config import TaskConfig
 from pybullet_ref.env import PybulletArmEnv, pybullet  # pybullet imported quietly there
-
-ENGINES = ("mujoco", "pybullet")
 
 
 @dataclass(frozen=True)

@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-TASKS = ("reach", "touch")
+from mjx_arm.names import TASKS
 
 # The arm's home pose: tool pointing down, about 0.37 m above the table, in front of the base.
 HOME_QPOS = (0.0, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0)

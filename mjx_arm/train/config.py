@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from mjx_arm.envs.physics_config import PhysicsConfig, RandomizationConfig
+from mjx_arm.names import BACKENDS, PRESET_NAMES, TASKS
 from mjx_arm.task.config import RewardConfig, TaskConfig
 
 PARTITIONS = ("auto", "xla", "per_device")
@@ -129,10 +130,10 @@ class TrainConfig:
 
     def validate(self) -> None:
         """Check names and the batch arithmetic PPO requires."""
-        if self.task not in ("reach", "touch"):
-            raise ValueError(f"task must be reach or touch, got {self.task!r}")
-        if self.backend not in ("auto", "mjx", "mujoco"):
-            raise ValueError(f"backend must be auto, mjx or mujoco, got {self.backend!r}")
+        if self.task not in TASKS:
+            raise ValueError(f"task must be one of {TASKS}, got {self.task!r}")
+        if self.backend not in BACKENDS:
+            raise ValueError(f"backend must be one of {BACKENDS}, got {self.backend!r}")
         if self.partition not in PARTITIONS:
             raise ValueError(f"partition must be one of {PARTITIONS}, got {self.partition!r}")
         if self.devices < 0:
@@ -200,6 +201,7 @@ CPU = TrainConfig(
 )
 
 PRESETS = {"seed": SEED, "fast": FAST, "cpu": CPU}
+assert tuple(PRESETS) == PRESET_NAMES
 
 # What a preset changes for one task: Touch needs more env steps than Reach (it must learn to
 # hold a press), so its budget and evaluation count are its own.

@@ -1,0 +1,23 @@
+"""The project's vocabulary: the names of tasks, engines, backends, MJX implementations and
+presets, defined once and used by the configs, the envs and the command line's choices.
+
+- engine: where one policy runs. ``mujoco`` and ``pybullet`` are the Gymnasium envs on a CPU
+  (:data:`CPU_ENGINES`); ``mjx`` is the batched JAX env.
+- backend: what steps the batched JAX env's physics (:data:`BACKENDS`): ``mjx`` (MuJoCo's MJX)
+  or ``mujoco`` (C MuJoCo behind a host callback, the CPU path); ``auto`` picks by device.
+- implementation: how MJX steps the model (:data:`IMPLS`): ``jax`` (XLA) or ``warp`` (MuJoCo
+  Warp's CUDA kernels); ``auto`` picks Warp where a GPU and warp-lang are present.
+"""
+
+from __future__ import annotations
+
+TASKS = ("reach", "touch")
+TASK_IDS = {"reach": "mjx_arm/Reach-v0", "touch": "mjx_arm/Touch-v0"}
+
+CPU_ENGINES = ("mujoco", "pybullet")
+EVAL_ENGINES = (*CPU_ENGINES, "mjx")
+PARITY_ENGINES = ("mujoco", "mjx", "pybullet")
+
+BACKENDS = ("auto", "mjx", "mujoco")
+IMPLS = ("auto", "jax", "warp")
+PRESET_NAMES = ("seed", "fast", "cpu")
