@@ -119,9 +119,9 @@ def main() -> None:
 
     import jax
 
-    from mjx_arm.cli import _enable_compilation_cache
+    from mjx_arm.jax_cache import enable_compilation_cache
 
-    _enable_compilation_cache()
+    enable_compilation_cache()
     rows = []
     for task in args.tasks:
         start = START if not rows else time.time()  # each task timed from its own start

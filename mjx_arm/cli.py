@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from mjx_arm import names
+from mjx_arm.jax_cache import enable_compilation_cache
 
 EXIT_OK, EXIT_INVALID = 0, 2
 
@@ -82,7 +83,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     from mjx_arm.train.ppo import train
     from mjx_arm.train.rundir import RunDirError
 
-    _enable_compilation_cache()
+    enable_compilation_cache()
     if args.resume:
         run_dir = Path(args.resume)
         saved = json.loads((run_dir / "config.json").read_text())["train"]
@@ -115,17 +116,6 @@ def cmd_train(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _enable_compilation_cache() -> None:
-    """JAX's persistent compilation cache under ~/.cache (MJX_ARM_JAX_CACHE overrides)."""
-    import os
-
-    import jax
-
-    folder = os.environ.get("MJX_ARM_JAX_CACHE", str(Path.home() / ".cache" / "mjx_arm" / "jax"))
-    jax.config.update("jax_compilation_cache_dir", folder)
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
-
-
 def cmd_export(args: argparse.Namespace) -> int:
     """Export a run's policy (normaliser, MLP, action scaling, contract version, config).
 
@@ -156,7 +146,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     from mjx_arm.replay import save_trajectory
 
     if args.engine == "mjx":
-        _enable_compilation_cache()
+        enable_compilation_cache()
         _warn_mjx_on_cpu()
     policy, source = resolve_policy(args.policy, args.step)
     task, notes = eval_task(policy, args.task)
@@ -232,7 +222,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     """
     from mjx_arm.demo import DemoError, run_demo
 
-    _enable_compilation_cache()
+    enable_compilation_cache()
     try:
         run_demo(args.out, quick=args.quick)
     except DemoError as exc:

@@ -21,9 +21,9 @@ SEEDS_OUT = Path("benchmarks/results/seeds")
 
 
 def _enable_jax_cache() -> None:
-    from mjx_arm.cli import _enable_compilation_cache
+    from mjx_arm.jax_cache import enable_compilation_cache
 
-    _enable_compilation_cache()
+    enable_compilation_cache()
 
 
 def _print_paths(paths: list[Path]) -> None:

@@ -23,20 +23,23 @@ def _task(name: str, task: TaskConfig | dict | None) -> TaskConfig:
     return task_config(name, **(task or {}))
 
 
+# The env class of each CPU engine, as an entry-point string: the PyBullet reference env lives
+# in its own top-level package, which is imported only when a PyBullet env is made.
+ENGINE_ENTRY_POINTS = {
+    "mujoco": "mjx_arm.envs.mujoco_env:MujocoArmEnv",
+    "pybullet": "pybullet_ref.env:PybulletArmEnv",
+}
+
+
 def make_env(
     task_name: str, engine: str = "mujoco", task: TaskConfig | dict | None = None, **kwargs: Any
 ) -> gym.Env:
     """Build one env of ``task_name`` on ``engine`` ("mujoco" or "pybullet")."""
-    cfg = _task(task_name, task)
-    if engine == "mujoco":
-        from mjx_arm.envs.mujoco_env import MujocoArmEnv
+    if engine not in ENGINE_ENTRY_POINTS:
+        raise ValueError(f"unknown engine {engine!r}; choose one of {ENGINES}")
+    from gymnasium.envs.registration import load_env_creator
 
-        return MujocoArmEnv(cfg, **kwargs)
-    if engine == "pybullet":
-        from pybullet_ref.env import PybulletArmEnv
-
-        return PybulletArmEnv(cfg, **kwargs)
-    raise ValueError(f"unknown engine {engine!r}; choose one of {ENGINES}")
+    return load_env_creator(ENGINE_ENTRY_POINTS[engine])(_task(task_name, task), **kwargs)
 
 
 def make_reach(**kwargs: Any) -> gym.Env:
