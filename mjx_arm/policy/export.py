@@ -179,25 +179,20 @@ def brax_policy(run_dir: str | Path, step: int | None = None) -> Callable[[Any],
     """The training code's own deterministic policy (JAX), for checking an export.
 
     Returns:
-        A function from ``state (22,)`` or ``(N, 22)`` to the action, as numpy float32.
+        A function from ``state (obs,)`` or ``(N, obs)`` to the action ``(..., act)``, numpy
+        float32 (22 and 6 for the shipped arm).
     """
     import jax
-    from brax.training import types
     from brax.training.acme import running_statistics
     from brax.training.agents.ppo import networks as ppo_networks
 
+    from mjx_arm.train.config import TrainConfig
+    from mjx_arm.train.networks import make_networks
+
     _, metadata, params = load_run(run_dir, step)
-    train = metadata["config"]["train"]
-    normalize = bool(train.get("normalize_observations", True))
-    networks = ppo_networks.make_ppo_networks(
-        22,
-        6,
-        preprocess_observations_fn=(
-            running_statistics.normalize if normalize else types.identity_observation_preprocessor
-        ),
-        policy_hidden_layer_sizes=tuple(train["policy_hidden"]),
-        value_hidden_layer_sizes=tuple(train["value_hidden"]),
-    )
+    train = TrainConfig.from_dict(metadata["config"]["train"])
+    obs_size = sum(size for _, size in metadata["obs_layout"])
+    networks = make_networks(train, obs_size, metadata["action_size"])
     normalizer = running_statistics.NestedMeanStd(
         mean=np.asarray(params[0]["mean"]), std=np.asarray(params[0]["std"])
     )

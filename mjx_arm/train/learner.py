@@ -37,6 +37,7 @@ from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
 from mjx_arm.train.config import TrainConfig
+from mjx_arm.train.networks import make_networks
 
 ENV_AXIS = "envs"
 # What the loss needs from each transition besides the policy's extras (Brax's names).
@@ -122,14 +123,7 @@ class Learner:
     ) -> None:
         self.config, self.mesh = config, mesh
         self.observation_size = observation_size
-        normalize = running_statistics.normalize if config.normalize_observations else None
-        self.network = ppo_networks.make_ppo_networks(
-            observation_size,
-            action_size,
-            preprocess_observations_fn=normalize or brax_types.identity_observation_preprocessor,
-            policy_hidden_layer_sizes=config.policy_hidden,
-            value_hidden_layer_sizes=config.value_hidden,
-        )
+        self.network = make_networks(config, observation_size, action_size)
         self.make_policy = ppo_networks.make_inference_fn(self.network)
         self.optimizer = optax.chain(
             optax.clip_by_global_norm(config.max_grad_norm), optax.adam(config.learning_rate)

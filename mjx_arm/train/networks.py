@@ -1,0 +1,34 @@
+"""Brax PPO's policy and value networks, built in one place for training and for checking an
+exported policy against the training code."""
+
+from __future__ import annotations
+
+from brax.training import types as brax_types
+from brax.training.acme import running_statistics
+from brax.training.agents.ppo import networks as ppo_networks
+
+from mjx_arm.train.config import TrainConfig
+
+
+def make_networks(
+    config: TrainConfig, observation_size: int, action_size: int
+) -> ppo_networks.PPONetworks:
+    """The PPO networks of ``config`` (layer sizes, observation normalisation).
+
+    Args:
+        config: the training config.
+        observation_size: size of the flat observation (22 for the shipped arm).
+        action_size: size of the action (6 for the shipped arm).
+    """
+    normalize = (
+        running_statistics.normalize
+        if config.normalize_observations
+        else brax_types.identity_observation_preprocessor
+    )
+    return ppo_networks.make_ppo_networks(
+        observation_size,
+        action_size,
+        preprocess_observations_fn=normalize,
+        policy_hidden_layer_sizes=config.policy_hidden,
+        value_hidden_layer_sizes=config.value_hidden,
+    )
