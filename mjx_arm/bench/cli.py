@@ -13,8 +13,8 @@ import time
 from pathlib import Path
 
 from mjx_arm.bench.settings import add_arguments, from_arguments
+from mjx_arm.names import EXIT_INVALID, EXIT_OK
 
-EXIT_OK, EXIT_INVALID = 0, 2
 PARITY_OUT = Path("benchmarks/results/parity")
 TRANSFER_OUT = Path("benchmarks/results/transfer")
 SEEDS_OUT = Path("benchmarks/results/seeds")

@@ -9,9 +9,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from mjx_arm.names import CPU_ENGINES
-
-EXIT_OK, EXIT_INVALID = 0, 2
+from mjx_arm.names import CPU_ENGINES, EXIT_INVALID, EXIT_OK
 
 
 def apply_overrides(config: Any, items: list[str]) -> Any:

@@ -1,0 +1,100 @@
+"""``mjx-arm train``: its command and parser."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from mjx_arm import names
+from mjx_arm.jax_cache import enable_compilation_cache
+from mjx_arm.names import EXIT_INVALID, EXIT_OK
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    """Train a PPO policy with Brax on the batched env and write a run directory."""
+    import json
+    import time
+
+    from mjx_arm.train.config import TrainConfig, load_config
+    from mjx_arm.train.ppo import train
+    from mjx_arm.train.rundir import RunDirError
+
+    enable_compilation_cache()
+    if args.resume:
+        run_dir = Path(args.resume)
+        saved = json.loads((run_dir / "config.json").read_text())["train"]
+        config = TrainConfig.from_dict(saved)
+        if args.devices is not None:  # a run resumes on any number of devices
+            config = config.replace(devices=args.devices)
+    else:
+        overrides = list(args.set or [])
+        if args.devices is not None:
+            overrides.insert(0, f"devices={args.devices}")
+        if args.task:
+            overrides.insert(0, f"task={args.task.lower()}")
+        if args.backend:
+            overrides.insert(0, f"backend={args.backend}")
+        config = load_config(args.preset, args.config, overrides)
+        stamp = time.strftime("%Y%m%d-%H%M%S")
+        run_dir = Path(args.run_dir or Path("runs") / f"{config.task}-{stamp}")
+    print(f"run directory: {run_dir}")
+    try:
+        result = train(config, run_dir, resume=bool(args.resume), quiet=args.quiet)
+    except RunDirError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return EXIT_INVALID
+    success = result.metrics.get("eval/episode_success", float("nan"))
+    print(
+        f"done: {result.steps} steps in {result.train_seconds:.1f} s "
+        f"(compile {result.compile_seconds:.1f} s, {result.steps_per_second:,.0f} steps/s), "
+        f"eval success {success:.3f}"
+    )
+    return EXIT_OK
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``train`` to ``sub``."""
+    p = sub.add_parser(
+        "train",
+        help="train a PPO policy (Brax) and write a run directory",
+        description=cmd_train.__doc__,
+    )
+    p.add_argument(
+        "--task",
+        type=str.lower,
+        choices=names.TASKS,
+        help="task to train (default: the preset's)",
+    )
+    p.add_argument(
+        "--preset",
+        choices=names.PRESET_NAMES,
+        default="seed",
+        help="hyperparameter preset (default: seed)",
+    )
+    p.add_argument(
+        "--backend",
+        choices=names.BACKENDS,
+        help="physics: mjx (GPU), mujoco (C MuJoCo, CPU), auto (default)",
+    )
+    p.add_argument(
+        "--devices",
+        type=int,
+        help="local devices to train on, the env batch split evenly over them "
+        "(default: all; also on --resume, which may change it)",
+    )
+    p.add_argument("--config", help="JSON file with training config fields")
+    p.add_argument(
+        "--set",
+        action="extend",
+        nargs="+",
+        metavar="KEY=VALUE",
+        help=(
+            "override config fields (KEY=VALUE ...; repeatable); task.FIELD=... and "
+            "task.reward.TERM=... for the task, physics.FIELD=..., randomization.FIELD=..."
+        ),
+    )
+    p.add_argument("--run-dir", help="run directory (default: runs/TASK-TIMESTAMP)")
+    p.add_argument("--resume", metavar="RUN_DIR", help="continue the run in RUN_DIR")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_train)

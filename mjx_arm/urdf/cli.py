@@ -1,0 +1,118 @@
+"""``mjx-arm validate`` and ``mjx-arm convert``: the URDF pipeline's commands."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from mjx_arm.names import EXIT_INVALID, EXIT_OK
+
+
+def _package_dirs(items: list[str]) -> dict[str, str]:
+    out = {}
+    for item in items or []:
+        name, sep, folder = item.partition("=")
+        if not sep:
+            raise SystemExit(f"--package expects NAME=DIR, got {item!r}")
+        out[name] = folder
+    return out
+
+
+def cmd_validate(args: argparse.Namespace) -> int:
+    """Validate a URDF in three layers and print every finding."""
+    from mjx_arm.urdf.validate import validate
+
+    report = validate(args.urdf, engine=args.engine, package_dirs=_package_dirs(args.package))
+    print(report.format())
+    return EXIT_OK if report.ok else EXIT_INVALID
+
+
+def cmd_convert(args: argparse.Namespace) -> int:
+    """Validate a URDF for MuJoCo, convert it to MJCF and write the XML."""
+    from mjx_arm.urdf import ConversionError, ConvertConfig, to_mjcf
+    from mjx_arm.urdf.validate import validate
+
+    package_dirs = _package_dirs(args.package)
+    report = validate(
+        args.urdf,
+        engine="mujoco",
+        package_dirs=package_dirs,
+        native=False,
+        repair_inertia=args.repair_inertia,
+    )
+    if not report.ok:
+        print(report.format(), file=sys.stderr)
+        return EXIT_INVALID
+    config = ConvertConfig(
+        scene=args.scene, package_dirs=package_dirs, repair_inertia=args.repair_inertia
+    )
+    try:
+        xml = to_mjcf(args.urdf, config)
+    except ConversionError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_INVALID
+    Path(args.output).write_text(xml)
+    print(_summary(args.output))
+    return EXIT_OK
+
+
+def _summary(mjcf_path: str) -> str:
+    import mujoco
+
+    model = mujoco.MjModel.from_xml_path(mjcf_path)
+    joints = [model.joint(i).name for i in range(model.njnt) if model.jnt_type[i] != 0]
+    lines = [
+        f"wrote {mjcf_path}",
+        f"  bodies {model.nbody}, joints {len(joints)}, velocity actuators {model.nu}, "
+        f"sensors {model.nsensor}, timestep {model.opt.timestep:.6f} s",
+        f"  joint damping {', '.join(f'{d:g}' for d in model.dof_damping)}",
+    ]
+    return "\n".join(lines)
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``validate`` and ``convert`` to ``sub``."""
+    p = sub.add_parser(
+        "validate",
+        help="validate a URDF (XML/tree, engine compatibility, physics)",
+        description=cmd_validate.__doc__,
+    )
+    p.add_argument("urdf", help="path of the URDF file")
+    p.add_argument(
+        "--engine",
+        choices=["mujoco", "pybullet", "all"],
+        default="all",
+        help="engine(s) to check compatibility with and load into (default: all)",
+    )
+    p.add_argument(
+        "--package",
+        action="append",
+        metavar="NAME=DIR",
+        help="directory of a package:// name (repeatable)",
+    )
+    p.set_defaults(func=cmd_validate)
+
+    p = sub.add_parser(
+        "convert", help="convert a URDF to an MJX-ready MJCF", description=cmd_convert.__doc__
+    )
+    p.add_argument("urdf", help="path of the URDF file")
+    p.add_argument("-o", "--output", required=True, help="MJCF file to write")
+    p.add_argument(
+        "--scene",
+        choices=["none", "reach", "touch"],
+        default="none",
+        help="add the task scene (floor, table, target) around the arm",
+    )
+    p.add_argument(
+        "--package",
+        action="append",
+        metavar="NAME=DIR",
+        help="directory of a package:// name (repeatable)",
+    )
+    p.add_argument(
+        "--repair-inertia",
+        action="store_true",
+        help="replace inertia tensors that break the triangle inequality",
+    )
+    p.set_defaults(func=cmd_convert)
