@@ -43,20 +43,38 @@ def figures(tmp_path_factory: pytest.TempPathFactory) -> dict:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def test_two_devices_compute_what_one_does(figures: dict) -> None:
-    """The PPO loss gradient of one minibatch, split over 2 devices, equals the one of 1 device
-    up to the order of its float32 sums: within 1e-5 of each array's largest entry (measured:
-    5e-7, a few ulps).
+# Allowed gradient difference, relative to each array's largest entry (derivation below).
+GRADIENT_TOLERANCE = 1e-4
 
-    Params after a training step are not compared: Adam divides each gradient entry by the
-    root of its own running square, so an entry near zero whose sign the sum order flips moves
-    a whole learning-rate step either way (measured on a 2-core CPU: 1.3e-3 = 1.3 steps of
-    lr 1e-3, 3.4e-3 of the array's largest entry, after 8 updates, and as much after one).
-    How far that goes depends on the machine's XLA code, not on the code under test; the
-    learning check below covers the Adam-trained run.
+
+def test_two_devices_compute_what_one_does(figures: dict) -> None:
+    """The PPO loss gradient of one minibatch, split over 2 devices, is the one of 1 device up
+    to float32 rounding; both are the float64 gradient up to float32 rounding.
+
+    The bound: a float32 sum of n terms, in any order, is within (n - 1) u of the sum of the
+    terms' magnitudes from the exact sum (u = 2^-24; Higham, Accuracy and Stability of
+    Numerical Algorithms, 2nd ed., eq. 4.4), so two orders differ by at most 2 (n - 1) u =
+    3.8e-5 of it for the n = 320 transitions here; XLA's blocked and tree sums have
+    log2(n) ~ 9 in place of n - 1, 1e-6. The tolerance, 1e-4 of each array's largest entry,
+    leaves room for the terms' mean magnitude to be 2.6 times that entry at the worst-case
+    bound, and for the other float32 steps (matmuls, tanh, exp), whose codegen may differ
+    with the shapes. The float64 check tests that premise on the machine that runs it.
+    Measured on a 2-core x86-64 CPU: 4.3e-7 between 1 and 2 devices, 1.3e-6 from float64.
+    A gradient that is not reduced across devices is off by 9.3 there, one summed instead of
+    averaged by 1.0.
+
+    Params after training steps are not compared: Adam divides each gradient entry by the
+    root of its own running square, so an entry whose gradient is rounding noise moves by up
+    to a learning-rate step either way. In Reach the contact-force inputs are ~0 (normaliser
+    mean ~1e-9, std at its 1e-6 floor), and the first layer's weights from them have such
+    gradients: one Adam update from the same rollout moved one of them +0.68 lr on 1 device
+    and -0.62 lr on 2 (3.5e-3 of the array's largest entry; 3.4e-3 after 8 updates), where
+    plain SGD moves them by 2e-6 lr on both. How far that goes depends on the machine's XLA code,
+    not on the code under test; the learning check below covers the Adam-trained run.
     """
     assert figures["device_count"] == 2
-    assert figures["gradient_max_rel"] < 1e-5
+    assert figures["gradient_float32_error"] < GRADIENT_TOLERANCE
+    assert figures["gradient_max_rel"] < GRADIENT_TOLERANCE
 
 
 def test_two_devices_learn_reach(figures: dict) -> None:
