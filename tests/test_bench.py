@@ -195,6 +195,7 @@ def test_parity_rejects_bad_flags(tmp_path: Path, capsys):
 # --------------------------------------------------------------------------- transfer
 
 
+@pytest.mark.slow
 @pytest.mark.pybullet
 def test_transfer_writes_the_matrix(tmp_path_factory, tmp_path: Path):
     """A small trained Reach policy; without a GPU the C MuJoCo batch stands in for MJX."""

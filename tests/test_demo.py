@@ -5,10 +5,13 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
+
 from mjx_arm.cli import EXIT_INVALID, EXIT_OK, main
 from mjx_arm.replay import rendering_available
 
 
+@pytest.mark.slow
 def test_demo_quick_end_to_end(tmp_path: Path, capsys):
     out = tmp_path / "demo"
     assert main(["demo", "--quick", "--out", str(out)]) == EXIT_OK

@@ -60,6 +60,7 @@ def _kill_after(process: subprocess.Popen, run_dir: Path, rows: int, delay: floa
     process.wait()
 
 
+@pytest.mark.slow
 def test_killed_three_times_the_run_finishes_as_if_never_stopped(tmp_path: Path) -> None:
     rng = random.Random(7)
     run_dir = tmp_path / "run"

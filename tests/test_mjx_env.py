@@ -38,6 +38,7 @@ def traced(env):
     return step, reset, count
 
 
+@pytest.mark.slow
 def test_step_compiles_once(traced):
     step, reset, count = traced
     state = reset(jax.random.split(jax.random.PRNGKey(0), BATCH))
@@ -51,6 +52,7 @@ def test_step_compiles_once(traced):
     assert bool(jnp.all(jnp.isfinite(state.obs)))
 
 
+@pytest.mark.slow
 def test_batched_env_equals_single_env(env, traced):
     """Env i of the batch follows the same trajectory as the single env with key i."""
     step, reset, _ = traced

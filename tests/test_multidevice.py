@@ -47,6 +47,7 @@ def figures(tmp_path_factory: pytest.TempPathFactory) -> dict:
 GRADIENT_TOLERANCE = 1e-4
 
 
+@pytest.mark.slow
 def test_two_devices_compute_what_one_does(figures: dict) -> None:
     """The PPO loss gradient of one minibatch, split over 2 devices, is the one of 1 device up
     to float32 rounding; both are the float64 gradient up to float32 rounding.
@@ -77,6 +78,7 @@ def test_two_devices_compute_what_one_does(figures: dict) -> None:
     assert figures["gradient_max_rel"] < GRADIENT_TOLERANCE
 
 
+@pytest.mark.slow
 def test_two_devices_learn_reach(figures: dict) -> None:
     """The cpu preset on 2 devices: 100% eval success from 123k steps (measured), as on 1."""
     assert figures["success"] >= 0.8
@@ -86,6 +88,7 @@ def test_two_devices_learn_reach(figures: dict) -> None:
         assert key in figures["columns"]
 
 
+@pytest.mark.slow
 def test_a_two_device_run_resumes_on_one(figures: dict) -> None:
     """Checkpoints hold params only: a run saved on 2 devices goes on on 1."""
     assert figures["kept_step"] < figures["steps"]

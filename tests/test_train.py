@@ -67,6 +67,7 @@ def test_reach_learns_on_the_c_backend(tmp_path: Path) -> None:
     assert set(transitions.files) >= {"obs", "action", "reward", "done"}
 
 
+@pytest.mark.slow
 def test_resume_continues_from_the_saved_step(tmp_path: Path) -> None:
     run_dir = tmp_path / "run"
     config = load_config("cpu", None, _tiny(4000))
@@ -92,6 +93,7 @@ def test_resume_without_checkpoint_is_a_clear_error(tmp_path: Path) -> None:
         train(load_config("cpu", None, _tiny(4000)), tmp_path / "empty", resume=True)
 
 
+@pytest.mark.slow
 def test_same_seed_same_result_on_the_c_backend(tmp_path: Path) -> None:
     config = load_config("cpu", None, _tiny(2000, num_evals="2"))
     a = train(config, tmp_path / "a", quiet=True)
