@@ -72,6 +72,7 @@ def test_batched_env_equals_single_env(env, traced):
         np.testing.assert_allclose(one.reward[0], batch.reward[i], rtol=1e-5, atol=1e-5)
 
 
+@pytest.mark.slow
 def test_nan_state_ends_episode_and_never_reaches_obs(env, traced):
     step, reset, _ = traced
     state = reset(jax.random.split(jax.random.PRNGKey(3), BATCH))
@@ -97,6 +98,7 @@ def test_auto_reset_replaces_nan_state(env):
     assert bool(jnp.all(jnp.isfinite(out.obs)))
 
 
+@pytest.mark.slow
 def test_reset_is_a_pure_function_of_the_key(env, traced):
     _, reset, _ = traced
     keys = jax.random.split(jax.random.PRNGKey(11), BATCH)
