@@ -133,9 +133,11 @@ def test_jax_npz_and_onnx_agree(run_dir: Path, exported: dict[str, Path]):
     npz = load(exported["npz"])
     obs = _probe_obs(npz)
     reference = brax_policy(run_dir)(obs)
-    np.testing.assert_allclose(npz(obs), reference, atol=1e-5, rtol=0)
+    # three float32 runtimes (XLA, numpy/BLAS, onnxruntime) sum each layer in their own order;
+    # measured up to 4.3e-6 on the wide probes (7e-7 on the near ones): 5e-5 leaves 10x margin
+    np.testing.assert_allclose(npz(obs), reference, atol=5e-5, rtol=0)
     if "onnx" in exported:
-        np.testing.assert_allclose(load(exported["onnx"])(obs), reference, atol=1e-5, rtol=0)
+        np.testing.assert_allclose(load(exported["onnx"])(obs), reference, atol=5e-5, rtol=0)
 
 
 def test_policy_reproduces_the_recorded_transitions(run_dir: Path, exported: dict[str, Path]):
@@ -156,9 +158,11 @@ def test_inputs_shapes_and_range(exported: dict[str, Path], kind: str):
     assert np.all(np.abs(batch) <= 1.0)
     single = policy(obs[3])
     assert single.shape == (6,)
-    np.testing.assert_allclose(single, batch[3], atol=1e-6)
-    np.testing.assert_allclose(policy(unflatten_obs(obs)), batch, atol=1e-6)
-    np.testing.assert_allclose(policy(unflatten_obs(obs[3])), single, atol=1e-6)
+    # one observation and a batch take different float32 code paths (matrix-vector against
+    # matrix-matrix); unsaturated actions differ by up to 8.4e-6 measured: 1e-4 bounds it
+    np.testing.assert_allclose(single, batch[3], atol=1e-4)
+    np.testing.assert_allclose(policy(unflatten_obs(obs)), batch, atol=1e-4)
+    np.testing.assert_allclose(policy(unflatten_obs(obs[3])), single, atol=1e-4)
     with pytest.raises(ValueError, match="shape"):
         policy(np.zeros(21))
 
