@@ -11,8 +11,16 @@ presets, defined once and used by the configs, the envs and the command line's c
 
 from __future__ import annotations
 
+# The built-in tasks, one file each (mjx_arm/task/NAME.py); mjx_arm.task.registry adds others.
 TASKS = ("reach", "touch")
-TASK_IDS = {"reach": "mjx_arm/Reach-v0", "touch": "mjx_arm/Touch-v0"}
+
+
+def env_id(task: str) -> str:
+    """The Gymnasium id of a task: ``reach`` -> ``mjx_arm/Reach-v0``."""
+    return f"mjx_arm/{task.capitalize()}-v0"
+
+
+TASK_IDS = {task: env_id(task) for task in TASKS}
 
 CPU_ENGINES = ("mujoco", "pybullet")
 EVAL_ENGINES = (*CPU_ENGINES, "mjx")

@@ -258,7 +258,7 @@ class PybulletArmEnv(BaseRobotEnv):
         table = c.loadURDF(str(asset("table.urdf")), useFixedBase=True, flags=self._load_flags)
         c.changeDynamics(table, BASE, lateralFriction=FRICTION)
         position = [float(v) for v in target_body_pos]
-        if self.task.uses_contact:
+        if self.task.spec.scene == "touch":  # the box stands on the table
             box = c.loadURDF(
                 str(asset("target_box.urdf")),
                 basePosition=position,

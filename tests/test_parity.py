@@ -16,7 +16,7 @@ from mjx_arm.bench.engines import MujocoEngine
 from mjx_arm.bench.parity import BOX_POSITIONS, random_joint_angles
 from mjx_arm.envs.base import BaseRobotEnv
 from mjx_arm.envs.mujoco_env import MujocoArmEnv
-from mjx_arm.task.config import reach_config, touch_config
+from mjx_arm.task import reach_config, touch_config
 from pybullet_ref import PybulletArmEnv
 
 pytestmark = pytest.mark.pybullet

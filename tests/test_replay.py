@@ -19,7 +19,7 @@ from mjx_arm.replay import (
     save_trajectory,
     trajectory_task,
 )
-from mjx_arm.task.config import reach_config, touch_config
+from mjx_arm.task import reach_config, touch_config
 
 # reading a video back starts ffmpeg: JAX warns about any fork, harmless here (exec follows)
 pytestmark = pytest.mark.filterwarnings("ignore:os.fork")

@@ -8,8 +8,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from mjx_arm.task import reach_config, touch_config
 from mjx_arm.task import reward as reward_lib
-from mjx_arm.task.config import REWARD_TERMS, reach_config, touch_config
+from mjx_arm.task.config import REWARD_TERMS
 from mjx_arm.task.rules import score_step
 
 N = 64

@@ -15,9 +15,10 @@ import pytest
 
 from mjx_arm.task import config as config_lib
 from mjx_arm.task import observation as obs_lib
+from mjx_arm.task import reach_config, sampling, touch_config
 from mjx_arm.task import reward as reward_lib
-from mjx_arm.task import sampling
-from mjx_arm.task.config import REWARD_TERMS, RewardConfig, TaskConfig, reach_config, touch_config
+from mjx_arm.task import touch as touch_lib
+from mjx_arm.task.config import REWARD_TERMS, RewardConfig, TaskConfig
 from mjx_arm.task.wrench import ToolInertia, external_wrench, tool_inertia
 from mjx_arm.urdf.scene import box_top_offset
 
@@ -89,7 +90,7 @@ def test_presets_and_overrides() -> None:
     reach, touch = config_lib.task_config("Reach"), config_lib.task_config("touch")
     assert (reach.task, reach.success_distance, reach.reward.contact) == ("reach", 0.02, 0.0)
     assert (touch.task, touch.success_distance, touch.force_band) == ("touch", 0.05, (1.0, 50.0))
-    assert touch.variant == "gentle" and touch.reward == config_lib.GENTLE_REWARD
+    assert touch.variant == "gentle" and touch.reward == touch_lib.GENTLE_REWARD
     seed = config_lib.task_config("touch", variant="seed")
     assert seed.reward == RewardConfig() and seed.success_hold_steps == 1
     # Gentle Touch moves slower than the seed (and than Reach), so the band is a wider action.

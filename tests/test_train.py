@@ -109,7 +109,8 @@ def test_same_seed_same_result_on_the_c_backend(tmp_path: Path) -> None:
 
 def test_task_and_reward_overrides_reach_the_task_config() -> None:
     """``task.FIELD=`` and ``task.reward.TERM=`` change the task; unknown names are errors."""
-    from mjx_arm.task.config import GENTLE_REWARD, task_config
+    from mjx_arm.task.config import task_config
+    from mjx_arm.task.touch import GENTLE_REWARD
 
     config = load_config(
         "cpu",

@@ -39,8 +39,8 @@ from mjx_arm.bench.parity_config import (
 )
 from mjx_arm.envs.arm import ArmInfo, arm_info
 from mjx_arm.envs.physics_config import resolve_impl
-from mjx_arm.task import sampling
-from mjx_arm.task.config import HOME_QPOS, TaskConfig, reach_config, touch_config
+from mjx_arm.task import reach_config, sampling, touch_config
+from mjx_arm.task.config import HOME_QPOS, TaskConfig
 
 # --------------------------------------------------------------------------- inputs
 

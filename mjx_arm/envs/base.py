@@ -26,7 +26,8 @@ from mjx_arm.envs.arm import ArmInfo, validated_arm_info
 from mjx_arm.task import observation as obs_lib
 from mjx_arm.task import reward as reward_lib
 from mjx_arm.task import rules, sampling
-from mjx_arm.task.config import TaskConfig, touch_config
+from mjx_arm.task.config import TaskConfig
+from mjx_arm.task.touch import touch_config
 
 DEFAULT_WIDTH, DEFAULT_HEIGHT = 640, 480
 

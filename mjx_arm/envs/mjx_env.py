@@ -42,7 +42,8 @@ from mjx_arm.envs.randomization import (
 from mjx_arm.task import observation as obs_lib
 from mjx_arm.task import reward as reward_lib
 from mjx_arm.task import rules, sampling
-from mjx_arm.task.config import REWARD_TERMS, TaskConfig, touch_config
+from mjx_arm.task.config import REWARD_TERMS, TaskConfig
+from mjx_arm.task.touch import touch_config
 
 __all__ = ["MjxArmEnv", "Reading", "TaskMemory"]
 

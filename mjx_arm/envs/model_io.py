@@ -20,7 +20,7 @@ from mjx_arm.urdf.scene import TARGET_SITE
 
 def task_convert_config(task: TaskConfig) -> ConvertConfig:
     """Conversion settings of a task model: its scene and time step, no self-collision."""
-    return ConvertConfig(scene=task.task, sim_dt=task.sim_dt, self_collision=False)
+    return ConvertConfig(scene=task.spec.scene, sim_dt=task.sim_dt, self_collision=False)
 
 
 def arm_model(urdf: Path, task: TaskConfig) -> mujoco.MjModel:

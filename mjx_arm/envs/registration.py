@@ -1,20 +1,22 @@
-"""Gymnasium ids of the tasks, registered on ``import mjx_arm``.
+"""Gymnasium ids of the tasks, registered on ``import mjx_arm``, and the one CPU env factory.
 
 ``gymnasium.make("mjx_arm/Touch-v0", engine="mujoco" | "pybullet")`` builds a CPU env;
 ``gymnasium.make_vec(id, num_envs=N, vectorization_mode="vector_entry_point")`` the MJX batch.
+A task added with :func:`mjx_arm.task.registry.register_task` gets its id from
+:func:`register_envs`.
 """
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import gymnasium as gym
 
 from mjx_arm.names import CPU_ENGINES as ENGINES
-from mjx_arm.names import TASK_IDS as _IDS_OF_TASKS
+from mjx_arm.names import env_id
 from mjx_arm.task.config import TaskConfig, task_config
-
-TASK_IDS = {env_id: task for task, env_id in _IDS_OF_TASKS.items()}  # id -> task
+from mjx_arm.task.registry import task_names
 
 
 def _task(name: str, task: TaskConfig | dict | None) -> TaskConfig:
@@ -34,7 +36,14 @@ ENGINE_ENTRY_POINTS = {
 def make_env(
     task_name: str, engine: str = "mujoco", task: TaskConfig | dict | None = None, **kwargs: Any
 ) -> gym.Env:
-    """Build one env of ``task_name`` on ``engine`` ("mujoco" or "pybullet")."""
+    """Build one env of ``task_name`` on ``engine`` ("mujoco" or "pybullet").
+
+    Args:
+        task_name: a registered task name.
+        engine: the CPU engine.
+        task: the task config, or overrides of the task's preset (None: the preset).
+        kwargs: passed to the env class (``urdf``, ``render_mode``, ...).
+    """
     if engine not in ENGINE_ENTRY_POINTS:
         raise ValueError(f"unknown engine {engine!r}; choose one of {ENGINES}")
     from gymnasium.envs.registration import load_env_creator
@@ -42,42 +51,21 @@ def make_env(
     return load_env_creator(ENGINE_ENTRY_POINTS[engine])(_task(task_name, task), **kwargs)
 
 
-def make_reach(**kwargs: Any) -> gym.Env:
-    """Entry point of ``mjx_arm/Reach-v0``."""
-    return make_env("reach", **kwargs)
-
-
-def make_touch(**kwargs: Any) -> gym.Env:
-    """Entry point of ``mjx_arm/Touch-v0``."""
-    return make_env("touch", **kwargs)
-
-
-def make_reach_vector(num_envs: int = 1, **kwargs: Any):
-    """Vector entry point of ``mjx_arm/Reach-v0``: the MJX batch."""
+def make_vector(task_name: str, num_envs: int = 1, **kwargs: Any):
+    """The MJX batch of ``num_envs`` envs of ``task_name`` (a Gymnasium vector env)."""
     from mjx_arm.envs.vector import make_vector_env
 
-    return make_vector_env("reach", num_envs=num_envs, **kwargs)
-
-
-def make_touch_vector(num_envs: int = 1, **kwargs: Any):
-    """Vector entry point of ``mjx_arm/Touch-v0``: the MJX batch."""
-    from mjx_arm.envs.vector import make_vector_env
-
-    return make_vector_env("touch", num_envs=num_envs, **kwargs)
+    return make_vector_env(task_name, num_envs=num_envs, **kwargs)
 
 
 def register_envs() -> None:
-    """Register both ids (idempotent)."""
-    entries = {
-        "mjx_arm/Reach-v0": (make_reach, make_reach_vector),
-        "mjx_arm/Touch-v0": (make_touch, make_touch_vector),
-    }
-    for env_id, (entry, vector_entry) in entries.items():
-        if env_id in gym.registry:
+    """Register the id of every registered task (idempotent; call again after adding one)."""
+    for name in task_names():
+        if env_id(name) in gym.registry:
             continue
         gym.register(
-            id=env_id,
-            entry_point=entry,
-            vector_entry_point=vector_entry,
+            id=env_id(name),
+            entry_point=functools.partial(make_env, name),
+            vector_entry_point=functools.partial(make_vector, name),
             max_episode_steps=TaskConfig().episode_steps,
         )

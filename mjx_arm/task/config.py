@@ -1,7 +1,8 @@
 """Typed configuration of a task: timing, action scaling, sampling, reward weights, success.
 
 One :class:`TaskConfig` drives every engine (CPU MuJoCo, PyBullet, MJX), so the numbers below are
-the contract. Presets: :func:`reach_config` and :func:`touch_config`.
+the contract. Each task's preset lives in its own file (:mod:`mjx_arm.task.reach`,
+:mod:`mjx_arm.task.touch`); :func:`task_config` picks one by name.
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from mjx_arm.names import TASKS
+from mjx_arm.task.registry import get_task, is_task, task_names
 
 # The arm's home pose: tool pointing down, about 0.37 m above the table, in front of the base.
 HOME_QPOS = (0.0, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0)
@@ -75,35 +76,14 @@ REWARD_TERMS = (
     "streak",
 )
 
-# Touch's default reward ("gentle"): gentle contact is the optimum.
-# - The seed's distance charge guides the tool from afar; ``proximity`` (length 1 cm) pays up to
-#   +10 a step in the last centimetres, so resting the tip on the box beats hovering above it.
-#   With the velocity servo the steady force grows with the commanded speed into the box, so
-#   from a resting tip the band (1-50 N) is a small push away.
-# - Success (a 3-step hold in the band, no reading over it) pays 1000: more than resting at the
-#   target for the rest of the episode (10 / (1 - 0.97) = 333 at the fast and cpu presets'
-#   discount), and more than tapping the box for the in-band contact pay (20 a step).
-# - A reading over the band costs its excess (graded, so the policy learns how hard it pressed)
-#   and rules success out; a strike over 100 N also ends the episode. Closing in fast near the
-#   box and jerky actions cost a little.
-GENTLE_REWARD = RewardConfig(
-    streak=50.0,
-    proximity=10.0,
-    contact=20.0,
-    success=1000.0,
-    force_excess=-100.0,
-    approach_speed=-10.0,
-    action_rate=-0.05,
-    overforce=-20.0,
-)
-
 
 @dataclass(frozen=True)
 class TaskConfig:
     """Everything that defines a task, identical in every engine.
 
     Attributes:
-        task: "reach" (point target, no contact) or "touch" (press the 5 cm box).
+        task: a registered task name (:mod:`mjx_arm.task.registry`): "reach" (point target, no
+            contact), "touch" (press the 5 cm box) or one added by a task file.
         ctrl_dt: control period (s); one action and one observation per period.
         sim_dt: physics step (s); ``ctrl_dt / sim_dt`` substeps per control step.
         action_scale: joint velocity target = action * action_scale * v_max (URDF velocity).
@@ -157,8 +137,8 @@ class TaskConfig:
     reward: RewardConfig = field(default_factory=RewardConfig)
 
     def __post_init__(self) -> None:
-        if self.task not in TASKS:
-            raise ValueError(f"task must be one of {TASKS}, got {self.task!r}")
+        if not is_task(self.task):
+            raise ValueError(f"task must be one of {list(task_names())}, got {self.task!r}")
         ratio = self.ctrl_dt / self.sim_dt
         if abs(ratio - round(ratio)) > 1e-6 or round(ratio) < 1:
             raise ValueError(
@@ -177,9 +157,14 @@ class TaskConfig:
         return round(self.ctrl_dt / self.sim_dt)
 
     @property
+    def spec(self) -> Any:
+        """The task's :class:`~mjx_arm.task.spec.Task` (its sampling, success and contact rules)."""
+        return get_task(self.task)
+
+    @property
     def uses_contact(self) -> bool:
         """True for tasks whose success needs a contact force."""
-        return self.task == "touch"
+        return self.spec.uses_contact
 
     def replace(self, **changes: Any) -> TaskConfig:
         """Return a copy with some fields changed (``reward`` takes a dict or a RewardConfig)."""
@@ -202,67 +187,10 @@ class TaskConfig:
         return cls(reward=reward, **data)
 
 
-def reach_config(**overrides: Any) -> TaskConfig:
-    """Reach: bring the tool tip within 2 cm of a point in the air; no contact term."""
-    base = TaskConfig(
-        task="reach",
-        success_distance=0.02,
-        target_low=(0.35, -0.25, 0.10),
-        target_high=(0.65, 0.25, 0.45),
-        reward=RewardConfig(contact=0.0),
-    )
-    return base.replace(**overrides)
-
-
-# Gentle Touch commands at most 0.15 of each joint's URDF speed (27 deg/s on a UR5e class arm;
-# one joint turning the tool at half a metre moves it at about 0.24 m/s, the order of the
-# 250 mm/s reduced speed of ISO 10218-1). Why: the velocity servo presses with a steady force
-# of about 1.2 kN per m/s of tool speed commanded into the box (the same in MuJoCo and
-# PyBullet), so at the seed's 0.5 the 1-50 N band is an action of about 0.001-0.05 along the
-# pressing direction, finer than PPO's exploration noise: policies learn to hover. At 0.15 the
-# band is 0.004-0.18 and Touch trains in both the C batch and MJX (README, "Gentle Touch").
-GENTLE_ACTION_SCALE = 0.15
-
-
-def touch_config(variant: str = "gentle", **overrides: Any) -> TaskConfig:
-    """Touch: press the top of a 5 cm box with 1-50 N, within 5 cm of its centre.
-
-    Args:
-        variant: "gentle" (default): the force must stay in the band for 3 control steps, a
-            reading above the band rules success out for the episode, one above 100 N (a
-            strike) ends it, the reward is :data:`GENTLE_REWARD` and the joints move at most
-            :data:`GENTLE_ACTION_SCALE` of their URDF speed. "seed": the seed
-            document's task (success on the first in-band step, no force or speed terms).
-        overrides: fields to change.
-    """
-    if variant == "seed":
-        base = TaskConfig(task="touch", variant="seed")
-    elif variant == "gentle":
-        base = TaskConfig(
-            task="touch",
-            variant="gentle",
-            success_hold_steps=3,
-            fail_on_overforce=True,
-            terminate_on_overforce=True,
-            strike_force=100.0,
-            action_scale=GENTLE_ACTION_SCALE,
-            reward=GENTLE_REWARD,
-        )
-    else:
-        raise ValueError(f"unknown touch variant {variant!r}; choose 'gentle' or 'seed'")
-    return base.replace(**overrides)
-
-
 def task_config(name: str, **overrides: Any) -> TaskConfig:
-    """The preset of task ``name`` ("reach" or "touch", any case), with overrides.
+    """The preset of task ``name`` (any case) from its task file, with overrides.
 
-    ``variant`` among the overrides picks Touch's variant ("gentle" or "seed"); Reach has one.
+    ``variant`` among the overrides picks a variant where the task has several (Touch:
+    "gentle" or "seed").
     """
-    key = name.lower()
-    if key == "reach":
-        if overrides.get("variant", "seed") != "seed":
-            raise ValueError("reach has a single variant, 'seed'")
-        return reach_config(**{k: v for k, v in overrides.items() if k != "variant"})
-    if key == "touch":
-        return touch_config(**overrides)
-    raise ValueError(f"unknown task {name!r}; choose one of {sorted(TASKS)}")
+    return get_task(name.lower()).config(**overrides)

@@ -16,6 +16,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from mjx_arm.task.config import REWARD_TERMS, TaskConfig
+from mjx_arm.task.registry import get_task
 
 
 class JointBand(NamedTuple):
@@ -77,18 +78,10 @@ def force_in_band(xp: Any, force_norm, cfg: TaskConfig):
 
 
 def is_success(xp: Any, distance, force_norm, cfg: TaskConfig):
-    """The success condition of one step (bool array): Reach d < success_distance; Touch also
-    the force in the band. The episode succeeds once it has held for ``success_hold_steps``
-    (see :func:`advance`)."""
-    near = distance < cfg.success_distance
-    if cfg.uses_contact:
-        return near & (force_in_band(xp, force_norm, cfg) > 0)
-    return near
-
-
-def over_band(force_norm, cfg: TaskConfig):
-    """True where the contact force norm (N) is above the force band."""
-    return force_norm > cfg.force_band[1]
+    """The success condition of one step (bool array), as the task defines it
+    (:meth:`mjx_arm.task.spec.Task.holds`). The episode succeeds once it has held for
+    ``success_hold_steps`` (see :func:`advance`)."""
+    return get_task(cfg.task).holds(xp, distance, force_norm, cfg)
 
 
 class Progress(NamedTuple):
@@ -120,8 +113,9 @@ def advance(xp: Any, progress: Progress, distance, force_norm, cfg: TaskConfig):
     Returns:
         (progress after the step, success flag, over-band flag of this step), bool ``(...)``.
     """
-    holds = is_success(xp, distance, force_norm, cfg)
-    over_now = over_band(force_norm, cfg) if cfg.uses_contact else xp.zeros_like(holds)
+    task = get_task(cfg.task)
+    holds = task.holds(xp, distance, force_norm, cfg)
+    over_now = task.over_band(xp, force_norm, cfg)
     hold = xp.where(holds, progress.hold + 1.0, 0.0)
     over = progress.over | over_now
     success = hold >= cfg.success_hold_steps
@@ -151,15 +145,14 @@ def strike_limit(cfg: TaskConfig) -> float:
     return cfg.strike_force or cfg.force_band[1]
 
 
-def ends_episode(success, force_norm, nonfinite, cfg: TaskConfig):
+def ends_episode(success, force_norm, nonfinite, cfg: TaskConfig, xp: Any = np):
     """Termination (bool ``(...)``): a non-finite state, success or a strike, as configured.
 
-    A strike is a contact force above :func:`strike_limit` while ``terminate_on_overforce``.
+    A strike is what the task calls one (:meth:`mjx_arm.task.spec.Task.strikes`; Touch: a
+    contact force above :func:`strike_limit` while ``terminate_on_overforce``).
     """
     done = nonfinite | (success & cfg.terminate_on_success)
-    if cfg.terminate_on_overforce and cfg.uses_contact:
-        done = done | (force_norm > strike_limit(cfg))
-    return done
+    return done | get_task(cfg.task).strikes(xp, force_norm, cfg)
 
 
 class Motion(NamedTuple):
@@ -205,24 +198,8 @@ def reward_terms(
     cfg: TaskConfig,
     motion: Motion | None = None,
 ) -> dict:
-    """Raw (unweighted) reward terms by name.
-
-    Args:
-        xp: ``numpy`` or ``jax.numpy``.
-        distance: d (m), shape ``(...)``.
-        force_norm: tared contact force norm (N), shape ``(...)``.
-        qpos: joint angles (rad), shape ``(..., 6)``.
-        qvel: joint velocities (rad/s), shape ``(..., 6)``.
-        joint_limits: (lower, upper) joint limits (rad), each shape ``(6,)``.
-        success: success flag, shape ``(...)``.
-        nonfinite: flag of a non-finite physics state, shape ``(...)``.
-        cfg: the task configuration.
-        motion: the previous step's distance, the action change and the hold count (None: their
-            terms are 0).
-
-    Returns:
-        Dict term name -> float array, shape ``(...)``; keys are ``REWARD_TERMS``.
-    """
+    """Raw (unweighted) reward terms by name: :func:`band_reward_terms` with the joint limits
+    given as ``(lower, upper)`` (rad, each ``(6,)``)."""
     band = joint_band(joint_limits, cfg)
     return band_reward_terms(
         xp, distance, force_norm, qpos, qvel, band, success, nonfinite, cfg, motion
@@ -261,19 +238,8 @@ def band_reward_terms(
     """
     beyond = xp.abs(qpos - band.mid) > band.reach
     near = distance < cfg.success_distance
-    zero = 0.0 * distance
-    contact = force_in_band(xp, force_norm, cfg) * near if cfg.uses_contact else zero
-    high = cfg.force_band[1]
-    excess = xp.maximum(force_norm - high, 0.0) / high if cfg.uses_contact else zero
-    if motion is None:
-        closing, change, held = zero, zero, zero
-    else:
-        held = streak(xp, motion.hold + zero, cfg)
-        # squared: the cost of an approach grows with its speed (a sum of plain speeds over
-        # the approach would be the distance closed over ctrl_dt, whatever the speed)
-        closing = xp.maximum(motion.prev_distance - distance, 0.0) / cfg.ctrl_dt
-        closing = closing * closing * (distance < cfg.reward.approach_radius)
-        change = motion.action_change + zero
+    contact, excess = get_task(cfg.task).contact_terms(xp, near, force_norm, cfg)
+    closing, change, held = _motion_terms(xp, distance, cfg, motion)
     terms = {
         "distance": 1.0 - xp.exp(-distance / cfg.reward.distance_length),
         "contact": contact,
@@ -290,6 +256,19 @@ def band_reward_terms(
     }
     assert tuple(terms) == REWARD_TERMS
     return terms
+
+
+def _motion_terms(xp: Any, distance, cfg: TaskConfig, motion: Motion | None):
+    """The ``approach_speed``, ``action_rate`` and ``streak`` terms, each ``(...)`` (0 without
+    ``motion``)."""
+    zero = 0.0 * distance
+    if motion is None:
+        return zero, zero, zero
+    # squared: the cost of an approach grows with its speed (a sum of plain speeds over the
+    # approach would be the distance closed over ctrl_dt, whatever the speed)
+    closing = xp.maximum(motion.prev_distance - distance, 0.0) / cfg.ctrl_dt
+    closing = closing * closing * (distance < cfg.reward.approach_radius)
+    return closing, motion.action_change + zero, streak(xp, motion.hold + zero, cfg)
 
 
 _WEIGHTS = operator.attrgetter(*REWARD_TERMS)  # RewardConfig -> the weights in term order

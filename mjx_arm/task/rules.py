@@ -77,5 +77,5 @@ def score_step(
         xp, distance, force_norm, qpos, qvel, band, success, diverged, cfg, motion
     )
     terms = {k: v if k == "nonfinite" else xp.where(sane, v, 0.0) for k, v in terms.items()}
-    done = reward_lib.ends_episode(success, xp.where(sane, force_norm, 0.0), diverged, cfg)
+    done = reward_lib.ends_episode(success, xp.where(sane, force_norm, 0.0), diverged, cfg, xp)
     return StepScore(progress, success, over, terms, reward_lib.total_reward(terms, cfg), done)

@@ -9,7 +9,7 @@ from __future__ import annotations
 from typing import Any
 
 from mjx_arm.task.config import TaskConfig
-from mjx_arm.urdf.scene import box_top_offset
+from mjx_arm.task.registry import get_task
 
 N_UNIFORMS = 9  # 6 for the start pose, 3 for the target
 
@@ -21,20 +21,11 @@ def initial_qpos(xp: Any, u6, cfg: TaskConfig):
 
 
 def target_body_pos(xp: Any, u3, cfg: TaskConfig):
-    """Position (m) of the target body; ``u3`` shape ``(..., 3)``.
-
-    Reach: the target point itself. Touch: the box's bottom-face centre, standing on the table
-    (z = 0); the target point is the top-face centre, see :func:`target_point`.
-    """
-    low, high = xp.asarray(cfg.target_low), xp.asarray(cfg.target_high)
-    pos = low + u3 * (high - low)
-    if cfg.uses_contact:
-        pos = pos * xp.asarray([1.0, 1.0, 0.0])
-    return pos
+    """Position (m) of the target body from uniform draws ``u3 (..., 3)``, as the task places
+    it (:meth:`mjx_arm.task.spec.Task.target_body_pos`; Touch: the box on the table)."""
+    return get_task(cfg.task).target_body_pos(xp, u3, cfg)
 
 
 def target_point(xp: Any, body_pos, cfg: TaskConfig):
-    """The point the ee must reach (m), shape ``(..., 3)``: for Touch the box's top-face centre."""
-    if cfg.uses_contact:
-        return body_pos + xp.asarray([0.0, 0.0, box_top_offset()])
-    return body_pos
+    """The point the ee must reach (m), ``(..., 3)`` (Touch: the box's top-face centre)."""
+    return get_task(cfg.task).target_point(xp, body_pos, cfg)

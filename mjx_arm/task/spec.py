@@ -1,0 +1,82 @@
+"""The small interface every task implements, written once against an array namespace ``xp``.
+
+A task owns its config preset, where its target is drawn, what counts as success on one step and
+what its contact force means (a strike, a force above the band, the contact reward terms). Every
+engine (the CPU MuJoCo and PyBullet envs, the MJX batch and the C batch) asks the task, so a new
+task is one new file: a subclass of :class:`Task` registered with
+:func:`mjx_arm.task.registry.register_task`.
+
+The defaults describe a point target in free space that nothing touches (Reach); a contact task
+overrides the force methods (see :mod:`mjx_arm.task.touch`). Every method works on one env
+(scalars and ``(3,)`` vectors) and on batches (leading shape ``(...)``), in numpy and under
+``jax.jit``.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+from mjx_arm import names
+from mjx_arm.task.config import TaskConfig
+
+SCENES = ("reach", "touch")  # what the converter can build around the arm (mjx_arm.urdf.scene)
+
+
+class Task:
+    """One task of the contract.
+
+    Class attributes:
+        name: the registry name and ``TaskConfig.task`` value (lower case).
+        scene: the scene built around the arm: ``"reach"`` (a marker the arm can pass through)
+            or ``"touch"`` (the 5 cm box standing on the table).
+        uses_contact: whether the success condition reads the contact force.
+    """
+
+    name: ClassVar[str]
+    scene: ClassVar[str] = "reach"
+    uses_contact: ClassVar[bool] = False
+
+    @property
+    def env_id(self) -> str:
+        """The task's Gymnasium id, ``mjx_arm/Name-v0``."""
+        return names.env_id(self.name)
+
+    def config(self, **overrides: Any) -> TaskConfig:
+        """The task's preset :class:`TaskConfig` with ``overrides`` applied."""
+        raise NotImplementedError
+
+    def target_body_pos(self, xp: Any, u3, cfg: TaskConfig):
+        """Where the target body goes (m, base frame), from uniform draws ``u3 (..., 3)``."""
+        low, high = xp.asarray(cfg.target_low), xp.asarray(cfg.target_high)
+        return low + u3 * (high - low)
+
+    def target_point(self, xp: Any, body_pos, cfg: TaskConfig):
+        """The point the ee must reach (m), ``(..., 3)``, given the target body's position."""
+        return body_pos
+
+    def holds(self, xp: Any, distance, force_norm, cfg: TaskConfig):
+        """The success condition of one step (bool ``(...)``): the ee within
+        ``success_distance`` of the target point. An episode succeeds once this has held
+        ``success_hold_steps`` steps running."""
+        return distance < cfg.success_distance
+
+    def over_band(self, xp: Any, force_norm, cfg: TaskConfig):
+        """Whether this step's contact force is above what the task allows, bool ``(...)``."""
+        return xp.zeros_like(force_norm, dtype=bool)
+
+    def strikes(self, xp: Any, force_norm, cfg: TaskConfig):
+        """Whether this step's contact force ends the episode (a protective stop), ``(...)``."""
+        return xp.zeros_like(force_norm, dtype=bool)
+
+    def contact_terms(self, xp: Any, near, force_norm, cfg: TaskConfig) -> tuple[Any, Any]:
+        """The raw ``contact`` and ``force_excess`` reward terms, each ``(...)``.
+
+        Args:
+            near: the ee is within ``success_distance`` of the target (bool ``(...)``).
+            force_norm: tared contact force norm (N), ``(...)``.
+        """
+        zero = 0.0 * force_norm
+        return zero, zero
+
+    def __repr__(self) -> str:
+        return f"<task {self.name} ({self.env_id})>"

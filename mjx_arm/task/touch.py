@@ -1,0 +1,116 @@
+"""Touch: press the top face of a 5 cm box on the table with a force inside the band."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from mjx_arm.task import reward as reward_lib
+from mjx_arm.task.config import RewardConfig, TaskConfig
+from mjx_arm.task.spec import Task
+from mjx_arm.urdf.scene import box_top_offset
+
+# Touch's default reward ("gentle"): gentle contact is the optimum.
+# - The seed's distance charge guides the tool from afar; ``proximity`` (length 1 cm) pays up to
+#   +10 a step in the last centimetres, so resting the tip on the box beats hovering above it.
+#   With the velocity servo the steady force grows with the commanded speed into the box, so
+#   from a resting tip the band (1-50 N) is a small push away.
+# - Success (a 3-step hold in the band, no reading over it) pays 1000: more than resting at the
+#   target for the rest of the episode (10 / (1 - 0.97) = 333 at the fast and cpu presets'
+#   discount), and more than tapping the box for the in-band contact pay (20 a step).
+# - A reading over the band costs its excess (graded, so the policy learns how hard it pressed)
+#   and rules success out; a strike over 100 N also ends the episode. Closing in fast near the
+#   box and jerky actions cost a little.
+GENTLE_REWARD = RewardConfig(
+    streak=50.0,
+    proximity=10.0,
+    contact=20.0,
+    success=1000.0,
+    force_excess=-100.0,
+    approach_speed=-10.0,
+    action_rate=-0.05,
+    overforce=-20.0,
+)
+
+# Gentle Touch commands at most 0.15 of each joint's URDF speed (27 deg/s on a UR5e class arm;
+# one joint turning the tool at half a metre moves it at about 0.24 m/s, the order of the
+# 250 mm/s reduced speed of ISO 10218-1). Why: the velocity servo presses with a steady force
+# of about 1.2 kN per m/s of tool speed commanded into the box (the same in MuJoCo and
+# PyBullet), so at the seed's 0.5 the 1-50 N band is an action of about 0.001-0.05 along the
+# pressing direction, finer than PPO's exploration noise: policies learn to hover. At 0.15 the
+# band is 0.004-0.18 and Touch trains in both the C batch and MJX (README, "Gentle Touch").
+GENTLE_ACTION_SCALE = 0.15
+
+
+class Touch(Task):
+    """The box stands on the table at a random spot; success is pressing its top face with a
+    force inside ``force_band``, within ``success_distance`` of the face centre."""
+
+    name = "touch"
+    scene = "touch"
+    uses_contact = True
+
+    def config(self, variant: str = "gentle", **overrides: Any) -> TaskConfig:
+        """The preset of ``variant`` ("gentle" or "seed", see :func:`touch_config`)."""
+        if variant == "seed":
+            base = TaskConfig(task="touch", variant="seed")
+        elif variant == "gentle":
+            base = TaskConfig(
+                task="touch",
+                variant="gentle",
+                success_hold_steps=3,
+                fail_on_overforce=True,
+                terminate_on_overforce=True,
+                strike_force=100.0,
+                action_scale=GENTLE_ACTION_SCALE,
+                reward=GENTLE_REWARD,
+            )
+        else:
+            raise ValueError(f"unknown touch variant {variant!r}; choose 'gentle' or 'seed'")
+        return base.replace(**overrides)
+
+    def target_body_pos(self, xp: Any, u3, cfg: TaskConfig):
+        """The box's bottom-face centre on the table (z = 0), x and y drawn from the target box."""
+        return super().target_body_pos(xp, u3, cfg) * xp.asarray([1.0, 1.0, 0.0])
+
+    def target_point(self, xp: Any, body_pos, cfg: TaskConfig):
+        """The centre of the box's top face."""
+        return body_pos + xp.asarray([0.0, 0.0, box_top_offset()])
+
+    def holds(self, xp: Any, distance, force_norm, cfg: TaskConfig):
+        """Near the top face and pressing it with a force inside the band."""
+        near = distance < cfg.success_distance
+        return near & (reward_lib.force_in_band(xp, force_norm, cfg) > 0)
+
+    def over_band(self, xp: Any, force_norm, cfg: TaskConfig):
+        """The contact force is above the band."""
+        return force_norm > cfg.force_band[1]
+
+    def strikes(self, xp: Any, force_norm, cfg: TaskConfig):
+        """A force above the strike limit, where the config makes that a protective stop."""
+        if not cfg.terminate_on_overforce:
+            return xp.zeros_like(force_norm, dtype=bool)
+        return force_norm > reward_lib.strike_limit(cfg)
+
+    def contact_terms(self, xp: Any, near, force_norm, cfg: TaskConfig) -> tuple[Any, Any]:
+        """``contact``: 1 when near and the force is in the band; ``force_excess``: the force
+        above the band as a fraction of its top, else 0."""
+        high = cfg.force_band[1]
+        contact = reward_lib.force_in_band(xp, force_norm, cfg) * near
+        return contact, xp.maximum(force_norm - high, 0.0) / high
+
+
+TOUCH = Touch()
+
+
+def touch_config(variant: str = "gentle", **overrides: Any) -> TaskConfig:
+    """Touch: press the top of a 5 cm box with 1-50 N, within 5 cm of its centre.
+
+    Args:
+        variant: "gentle" (default): the force must stay in the band for 3 control steps, a
+            reading above the band rules success out for the episode, one above 100 N (a
+            strike) ends it, the reward is :data:`GENTLE_REWARD` and the joints move at most
+            :data:`GENTLE_ACTION_SCALE` of their URDF speed. "seed": the seed
+            document's task (success on the first in-band step, no force or speed terms).
+        overrides: fields to change.
+    """
+    return TOUCH.config(variant, **overrides)
