@@ -12,6 +12,7 @@ from mjx_arm.envs.model_io import BLOCK as _BLOCK
 from mjx_arm.envs.model_io import EE_POS as _EE_POS
 from mjx_arm.envs.model_io import EE_QUAT as _EE_QUAT
 from mjx_arm.envs.model_io import SensorReader, arm_model, as_slice
+from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.wrench import sensor_wrench
 from mjx_arm.urdf.scene import TARGET_BODY
@@ -61,8 +62,9 @@ class MujocoArmEnv(BaseRobotEnv):
         mujoco.mj_forward(self.model, self.data)
         mujoco.mj_rnePostConstraint(self.model, self.data)
         mujoco.mj_sensorAcc(self.model, self.data)
-        # the target (a mocap body) only moves here: read its point once per episode
-        self._target_pos = self.data.site_xpos[self.ids.target_site].copy()
+        # the target (a mocap body) only moves here: its point is fixed for the episode, where
+        # the task puts it on the body (the C batch and MJX use the same rule)
+        self._target_pos = np.asarray(sampling.target_point(np, target_body_pos, self.task))
         self._target_pos.setflags(write=False)
 
     def _physics_set_velocity_targets(self, qdot_target: np.ndarray) -> None:
