@@ -61,10 +61,12 @@ def get_task(name: str) -> Any:
     Raises:
         ValueError: no task has that name (the message lists the names).
     """
-    if not is_task(name):
-        raise ValueError(f"unknown task {name!r}; choose one of {list(task_names())}")
-    entry = _TASKS[name]
-    if isinstance(entry, str):
-        module, _, attribute = entry.partition(":")
-        entry = _TASKS[name] = getattr(importlib.import_module(module), attribute)
+    entry = _TASKS.get(name)
+    if entry is None or isinstance(entry, str):
+        if not is_task(name):
+            raise ValueError(f"unknown task {name!r}; choose one of {list(task_names())}")
+        entry = _TASKS[name]
+        if isinstance(entry, str):
+            module, _, attribute = entry.partition(":")
+            entry = _TASKS[name] = getattr(importlib.import_module(module), attribute)
     return entry

@@ -65,8 +65,9 @@ class Task:
         return xp.zeros_like(force_norm, dtype=bool)
 
     def strikes(self, xp: Any, force_norm, cfg: TaskConfig):
-        """Whether this step's contact force ends the episode (a protective stop), ``(...)``."""
-        return xp.zeros_like(force_norm, dtype=bool)
+        """Whether this step's contact force ends the episode (a protective stop): bool
+        ``(...)``, or ``False`` for all (it is or-ed into the termination flags)."""
+        return False
 
     def contact_terms(self, xp: Any, near, force_norm, cfg: TaskConfig) -> tuple[Any, Any]:
         """The raw ``contact`` and ``force_excess`` reward terms, each ``(...)``.

@@ -89,7 +89,7 @@ class Touch(Task):
     def strikes(self, xp: Any, force_norm, cfg: TaskConfig):
         """A force above the strike limit, where the config makes that a protective stop."""
         if not cfg.terminate_on_overforce:
-            return xp.zeros_like(force_norm, dtype=bool)
+            return False
         return force_norm > reward_lib.strike_limit(cfg)
 
     def contact_terms(self, xp: Any, near, force_norm, cfg: TaskConfig) -> tuple[Any, Any]:
