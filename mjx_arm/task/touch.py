@@ -7,6 +7,7 @@ from typing import Any
 from mjx_arm.task import reward as reward_lib
 from mjx_arm.task.config import RewardConfig, TaskConfig
 from mjx_arm.task.spec import Task
+from mjx_arm.urdf.scene_shapes import box_top_offset
 
 # Touch's default reward ("gentle"): gentle contact is the optimum.
 # - The seed's distance charge guides the tool from afar; ``proximity`` (length 1 cm) pays up to
@@ -73,8 +74,6 @@ class Touch(Task):
 
     def target_point(self, xp: Any, body_pos, cfg: TaskConfig):
         """The centre of the box's top face."""
-        from mjx_arm.urdf.scene import box_top_offset
-
         return body_pos + xp.asarray([0.0, 0.0, box_top_offset()])
 
     def holds(self, xp: Any, distance, force_norm, cfg: TaskConfig):

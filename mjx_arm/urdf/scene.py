@@ -1,46 +1,43 @@
 """The task scene around the arm: floor, table, target and a camera, built on an ``MjSpec``.
 
-Table and box sizes come from ``assets/table.urdf`` and ``assets/target_box.urdf``, which the
-PyBullet reference env loads directly, so both engines see the same scene.
+Sizes and names come from :mod:`mjx_arm.urdf.scene_shapes` (no MuJoCo there), re-exported here.
 """
 
 from __future__ import annotations
 
-import functools
-
 import mujoco
 import numpy as np
 
-from mjx_arm.paths import asset
-from mjx_arm.urdf.model import Geometry, parse_urdf
+from mjx_arm.urdf.model import Geometry
+from mjx_arm.urdf.scene_shapes import (
+    CAMERA_EYE,
+    CAMERA_FOVY,
+    CAMERA_TARGET,
+    FLOOR_Z,
+    SCENE_CONAFFINITY,
+    SCENE_CONTYPE,
+    SCENES,
+    TARGET_BODY,
+    TARGET_GEOM,
+    TARGET_SITE,
+    box_top_offset,
+    scene_geometry,
+)
 
-SCENES = frozenset({"none", "reach", "touch"})
-TARGET_BODY = "target"
-TARGET_SITE = "target"
-TARGET_GEOM = "target_box"
-FLOOR_Z = -0.75
-
-# One camera for every engine: eye, look-at point (m, world frame) and vertical field of view.
-CAMERA_EYE = (1.45, -1.05, 0.85)
-CAMERA_TARGET = (0.35, 0.0, 0.1)
-CAMERA_FOVY = 45.0
-
-
-@functools.cache
-def scene_geometry() -> dict[str, tuple[Geometry, ...]]:
-    """Collision shapes of the table and the target box, from the shipped URDFs."""
-    table = parse_urdf(asset("table.urdf"))
-    box = parse_urdf(asset("target_box.urdf"))
-    return {
-        "table": table.links["table_top"].collisions,
-        "box": box.links["box"].collisions,
-    }
-
-
-def box_top_offset() -> float:
-    """Height (m) of the target box's top face above the box frame (its bottom face centre)."""
-    (geom,) = scene_geometry()["box"]
-    return geom.origin.xyz[2] + geom.size[2] / 2
+__all__ = [
+    "CAMERA_EYE",
+    "CAMERA_FOVY",
+    "CAMERA_TARGET",
+    "FLOOR_Z",
+    "SCENES",
+    "TARGET_BODY",
+    "TARGET_GEOM",
+    "TARGET_SITE",
+    "add_scene",
+    "box_top_offset",
+    "camera_quat",
+    "scene_geometry",
+]
 
 
 def camera_quat() -> np.ndarray:
@@ -60,8 +57,6 @@ def add_scene(spec: mujoco.MjSpec, scene: str) -> None:
     """Add floor, table, light, camera and (for reach/touch) the mocap target body."""
     if scene == "none":
         return
-    from mjx_arm.urdf.convert import SCENE_CONAFFINITY, SCENE_CONTYPE
-
     world = spec.worldbody
     light = world.add_light()
     light.pos = [0.5, -0.5, 2.5]

@@ -1,0 +1,329 @@
+"""Validation layer 2, geometry: shapes, sizes, origins and meshes each engine can read and
+collide.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import re
+import xml.etree.ElementTree as ET
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from mjx_arm.urdf.findings import (
+    MAX_SIZE_RATIO,
+    SHAPES,
+    SIZE_RATIO_LIMIT,
+    _Findings,
+    _fmt_values,
+    _link,
+    _numbers,
+    _Tree,
+)
+from mjx_arm.urdf.meshes import (
+    MUJOCO_MESH_FORMATS,
+    PYBULLET_MESH_FORMATS,
+    AssetPathError,
+    is_file,
+    resolve_asset,
+)
+from mjx_arm.urdf.model import rpy_to_matrix
+
+# --------------------------------------------------------------------------- layer 2: geometry
+
+
+@dataclass(frozen=True)
+class _Shape:
+    """One visual or collision shape, checked; ``box`` is its local bounding box or None."""
+
+    role: str
+    kind: str
+    box: np.ndarray | None
+
+
+def _check_geometry(
+    tree: _Tree, engines: tuple[str, ...], package_dirs: Mapping[str, str], out: _Findings
+) -> None:
+    for name, elem in tree.links.items():
+        shapes = []
+        for role in ("visual", "collision"):
+            for item in elem.findall(role):
+                shape = _check_shape(tree.path, name, role, item, engines, package_dirs, out)
+                if shape is not None:
+                    shapes.append(shape)
+        _check_sizes(name, shapes, out)
+    _check_textures(tree, package_dirs, out)
+
+
+def _check_textures(tree: _Tree, package_dirs: Mapping[str, str], out: _Findings) -> None:
+    """Every ``<texture filename>`` (PyBullet loads them) stays inside its folder."""
+    owners = [(_link(n), e) for n, e in tree.links.items()]
+    owners += [(f"material {m.get('name', '')!r}", m) for m in tree.root.findall("material")]
+    for element, elem in owners:
+        for texture in elem.iter("texture"):
+            filename = texture.get("filename")
+            if filename is None:
+                continue
+            try:
+                resolve_asset(filename, tree.path, package_dirs)
+            except AssetPathError as exc:
+                out.error(2, element, f"has texture {filename!r}: it {exc.problem}", exc.fix)
+
+
+def _check_shape(
+    path: Path,
+    link: str,
+    role: str,
+    item: ET.Element,
+    engines: tuple[str, ...],
+    package_dirs: Mapping[str, str],
+    out: _Findings,
+) -> _Shape | None:
+    geometry = item.find("geometry")
+    shapes = [] if geometry is None else list(geometry)
+    if len(shapes) != 1 or shapes[0].tag not in SHAPES:
+        found = ", ".join(f"<{s.tag}>" for s in shapes) or "nothing"
+        out.error(
+            2,
+            _link(link),
+            f"has a <{role}> whose <geometry> holds {found}",
+            f"give exactly one of {', '.join(f'<{s}>' for s in sorted(SHAPES))}",
+        )
+        return None
+    shape = shapes[0]
+    if shape.tag == "mesh":
+        box = _check_mesh(path, link, role, shape, engines, package_dirs, out)
+    else:
+        box = _primitive_box(link, role, shape, out)
+    if role == "collision" and shape.tag == "cylinder" and "mujoco" in engines:
+        out.warning(
+            2,
+            _link(link),
+            "has a cylinder collision shape, which MJX does not collide "
+            "with boxes, spheres or meshes",
+            "use a capsule (or a box) for collision",
+        )
+    if box is not None:
+        box = _placed_box(box, item.find("origin"))
+    return _Shape(role, shape.tag, box)
+
+
+def _primitive_box(link: str, role: str, shape: ET.Element, out: _Findings) -> np.ndarray | None:
+    """Local bounding box ``(2, 3)`` of a primitive, after checking its sizes are positive."""
+    attrs = {"box": ("size",), "sphere": ("radius",)}.get(shape.tag, ("radius", "length"))
+    sizes = []
+    for attr in attrs:
+        values = _numbers(shape.get(attr), 3 if attr == "size" else 1)
+        if values is None or min(values) <= 0:
+            out.error(
+                2,
+                _link(link),
+                f"has a <{role}> <{shape.tag}> with {attr}={shape.get(attr)!r}",
+                f"give {attr} as positive number(s) in m",
+            )
+            return None
+        sizes.extend(values)
+    if max(sizes) > MAX_SIZE_RATIO * min(sizes):
+        out.error(
+            2,
+            _link(link),
+            f"has a <{role}> <{shape.tag}> whose sizes {_fmt_values(sizes)} differ by more than "
+            f"a factor {MAX_SIZE_RATIO:.0e} (MuJoCo writes about 6 significant digits per "
+            "vector, so the small one would become 0)",
+            "check the units of the sizes (m)",
+        )
+        return None
+    if shape.tag == "box":
+        half = np.array(sizes) / 2
+    elif shape.tag == "sphere":
+        half = np.full(3, sizes[0])
+    else:
+        radius, length = sizes
+        cap = radius if shape.tag == "capsule" else 0.0
+        half = np.array([radius, radius, length / 2 + cap])
+    return np.stack([-half, half])
+
+
+def _check_mesh(
+    path: Path,
+    link: str,
+    role: str,
+    shape: ET.Element,
+    engines: tuple[str, ...],
+    package_dirs: Mapping[str, str],
+    out: _Findings,
+) -> np.ndarray | None:
+    """Resolve a mesh, check its format; return its scaled local bounding box or None."""
+    filename = shape.get("filename", "").strip()
+    if not filename:
+        out.error(
+            2,
+            _link(link),
+            f"has a <{role}> <mesh> without filename",
+            "set filename to the mesh file (relative to the URDF, or package://...)",
+        )
+        return None
+    _check_mesh_format(link, role, filename, engines, out)
+    resolved = _resolve_mesh(path, link, role, filename, package_dirs, out)
+    scale = _numbers(shape.get("scale", "1 1 1"), 3)
+    if scale is None:
+        out.error(
+            2,
+            _link(link),
+            f"has a <{role}> mesh with scale={shape.get('scale')!r}",
+            'give three numbers, e.g. scale="0.001 0.001 0.001"',
+        )
+        return None
+    if resolved is None:
+        return None
+    if resolved.suffix.lower() == ".stl" and _is_ascii_stl(str(resolved), *_stamp(resolved)):
+        out.error(
+            2,
+            _link(link),
+            f"has <{role}> mesh {filename!r}, an ASCII STL: MuJoCo and PyBullet read binary "
+            "STL only",
+            "save the mesh as binary STL (e.g. trimesh.load(path).export(path)) or as .obj",
+        )
+        return None
+    if resolved.suffix.lower() not in _READ_FORMATS:  # only mesh files are ever opened
+        return None
+    box = _mesh_box(str(resolved), *_stamp(resolved))
+    return None if box is None else np.sort(box * np.array(scale), axis=0)
+
+
+def _check_mesh_format(
+    link: str, role: str, filename: str, engines: tuple[str, ...], out: _Findings
+) -> None:
+    suffix = Path(filename).suffix.lower()
+    readable = {"mujoco": MUJOCO_MESH_FORMATS, "pybullet": PYBULLET_MESH_FORMATS}
+    blind = [e for e in engines if suffix not in readable[e]]
+    if blind:
+        who = " and ".join({"mujoco": "MuJoCo", "pybullet": "PyBullet"}[e] for e in blind)
+        out.error(
+            2,
+            _link(link),
+            f"has <{role}> mesh {filename!r} in format "
+            f"{suffix or '(none)'}, which {who} cannot read",
+            "convert the mesh to .stl or .obj (for example with trimesh or meshlab) and "
+            "point filename at it",
+        )
+
+
+def _resolve_mesh(
+    path: Path, link: str, role: str, filename: str, package_dirs: Mapping[str, str], out: _Findings
+) -> Path | None:
+    try:
+        resolved = resolve_asset(filename, path, package_dirs)
+    except AssetPathError as exc:
+        out.error(2, _link(link), f"has <{role}> mesh {filename!r}: it {exc.problem}", exc.fix)
+        return None
+    if not is_file(resolved):
+        out.error(
+            2,
+            _link(link),
+            f"has <{role}> mesh {filename!r}: file {resolved} does not exist",
+            "correct the filename or add the mesh file",
+        )
+        return None
+    return resolved
+
+
+def _stamp(path: Path) -> tuple[int, int]:
+    stat = path.stat()
+    return stat.st_mtime_ns, stat.st_size
+
+
+def _placed_box(box: np.ndarray, origin: ET.Element | None) -> np.ndarray:
+    """Axis-aligned box ``(2, 3)`` in the link frame of a local box placed at ``origin``."""
+    xyz = _numbers(origin.get("xyz"), 3) if origin is not None else None
+    rpy = _numbers(origin.get("rpy"), 3) if origin is not None else None
+    corners = np.array(
+        [[box[i, 0], box[j, 1], box[k, 2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)]
+    )
+    corners = corners @ rpy_to_matrix(rpy or (0.0, 0.0, 0.0)).T + np.array(xyz or (0.0, 0.0, 0.0))
+    return np.stack([corners.min(axis=0), corners.max(axis=0)])
+
+
+def _check_sizes(link: str, shapes: list[_Shape], out: _Findings) -> None:
+    """Warn when a link's collision geometry is much larger or smaller than its visual."""
+    sizes = {}
+    for role in ("visual", "collision"):
+        boxes = [s.box for s in shapes if s.role == role]
+        if not boxes or any(b is None for b in boxes):
+            return  # nothing to compare, or a shape whose extent is unknown
+        low = np.min([b[0] for b in boxes], axis=0)
+        high = np.max([b[1] for b in boxes], axis=0)
+        sizes[role] = float(np.linalg.norm(high - low))
+    if not all(math.isfinite(v) and v > 0 for v in sizes.values()):
+        return  # a degenerate or overflowing extent: nothing sensible to compare
+    ratio = sizes["collision"] / sizes["visual"]
+    if ratio > SIZE_RATIO_LIMIT or ratio < 1 / SIZE_RATIO_LIMIT:
+        word = "larger" if ratio > 1 else "smaller"
+        out.warning(
+            2,
+            _link(link),
+            f"has collision geometry {max(ratio, 1 / ratio):.1f}x {word} "
+            f"than its visual (bounding box diagonals {sizes['collision']:.3g} m vs "
+            f"{sizes['visual']:.3g} m)",
+            "check the mesh units and <mesh scale> (mm vs m) and the collision mesh file",
+        )
+
+
+# --------------------------------------------------------------------------- mesh reading
+
+_READ_FORMATS = frozenset({".stl", ".obj"})  # the formats whose bounding box is read
+_STL_RECORD = np.dtype([("normal", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")])
+
+
+@functools.lru_cache(maxsize=256)
+def _is_ascii_stl(path: str, mtime_ns: int, size: int) -> bool:
+    """True for a text STL (``solid ...`` and no consistent binary header)."""
+    del mtime_ns
+    try:
+        with open(path, "rb") as f:
+            head = f.read(84)
+    except OSError:
+        return False
+    binary = len(head) == 84 and size == 84 + 50 * int.from_bytes(head[80:84], "little")
+    return not binary and head.lstrip().startswith(b"solid")
+
+
+@functools.lru_cache(maxsize=256)
+def _mesh_box(path: str, mtime_ns: int, size: int) -> np.ndarray | None:
+    """Bounding box ``(2, 3)`` of an STL or OBJ file's vertices, or None when unreadable.
+
+    ``mtime_ns`` and ``size`` only key the cache.
+    """
+    del mtime_ns, size
+    try:
+        data = Path(path).read_bytes()
+        suffix = Path(path).suffix.lower()
+        vertices = _stl_vertices(data) if suffix == ".stl" else None
+        vertices = _obj_vertices(data) if suffix == ".obj" else vertices
+    except (OSError, ValueError):
+        return None
+    if vertices is None or len(vertices) == 0 or not np.all(np.isfinite(vertices)):
+        return None
+    return np.stack([vertices.min(axis=0), vertices.max(axis=0)])
+
+
+def _stl_vertices(data: bytes) -> np.ndarray | None:
+    """Vertices ``(n, 3)`` of a binary or ASCII STL."""
+    if len(data) >= 84:
+        count = int.from_bytes(data[80:84], "little")
+        exact = len(data) == 84 + 50 * count
+        if count and (exact or (not data.startswith(b"solid") and len(data) > 84 + 50 * count)):
+            records = np.frombuffer(data, dtype=_STL_RECORD, count=count, offset=84)
+            return records["v"].reshape(-1, 3).astype(float)
+    found = re.findall(rb"vertex\s+(\S+)\s+(\S+)\s+(\S+)", data)
+    return np.array(found, dtype=float) if found else None
+
+
+def _obj_vertices(data: bytes) -> np.ndarray | None:
+    """Vertices ``(n, 3)`` of a Wavefront OBJ (the ``v`` lines)."""
+    found = re.findall(rb"^[ \t]*v[ \t]+(\S+)[ \t]+(\S+)[ \t]+(\S+)", data, flags=re.MULTILINE)
+    return np.array(found, dtype=float) if found else None

@@ -1,0 +1,164 @@
+"""Validation layer 2, joints: types, axes, limits and damping each engine needs."""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+
+import numpy as np
+
+from mjx_arm.urdf.findings import (
+    _AXIS_EPS,
+    LIMITED_TYPES,
+    MOVABLE_TYPES,
+    _Findings,
+    _Joint,
+    _joint,
+    _number,
+    _numbers,
+    _Tree,
+)
+
+# --------------------------------------------------------------------------- layer 2: joints
+
+
+def _check_joints(
+    tree: _Tree, engines: tuple[str, ...], min_damping: float, out: _Findings
+) -> None:
+    for j in tree.joints.values():
+        if j.type in ("floating", "planar"):
+            _check_free_joint(j, engines, out)
+        if j.type not in MOVABLE_TYPES:
+            continue
+        _check_axis(j, out)
+        if j.type in LIMITED_TYPES:
+            _check_limit(j, out)
+        elif "mujoco" in engines:
+            _check_effort_velocity(j, j.elem.find("limit"), out, for_converter=True)
+        _check_damping(j, engines, min_damping, out)
+
+
+def _check_free_joint(j: _Joint, engines: tuple[str, ...], out: _Findings) -> None:
+    """Floating and planar joints: MuJoCo rejects a free joint below the root; none is actuated."""
+    fix = "use revolute, continuous, prismatic or fixed joints for an arm"
+    if j.type == "floating" and "mujoco" in engines:
+        out.error(
+            2,
+            _joint(j.name),
+            "is floating: MuJoCo allows a free joint only on a body attached to the world",
+            fix,
+        )
+    else:
+        out.warning(2, _joint(j.name), f"is {j.type}: the converter gives it no actuator", fix)
+
+
+def _check_axis(j: _Joint, out: _Findings) -> None:
+    axis_elem = j.elem.find("axis")
+    if axis_elem is None:
+        return  # URDF default (1, 0, 0)
+    axis = _numbers(axis_elem.get("xyz"), 3)
+    if axis is None:
+        out.error(
+            2,
+            _joint(j.name),
+            f"has a malformed <axis xyz={axis_elem.get('xyz')!r}>",
+            'give three numbers, e.g. xyz="0 0 1"',
+        )
+    elif float(np.linalg.norm(axis)) < _AXIS_EPS:
+        out.error(
+            2,
+            _joint(j.name),
+            "has a zero <axis> (MuJoCo refuses it: axis too small)",
+            'give the unit vector of the joint axis, e.g. xyz="0 0 1"',
+        )
+
+
+def _check_limit(j: _Joint, out: _Findings) -> None:
+    """Revolute and prismatic joints: <limit> with lower < upper, effort > 0, velocity > 0."""
+    limit = j.elem.find("limit")
+    if limit is None:
+        out.error(
+            2,
+            _joint(j.name),
+            f"is {j.type} but has no <limit> (MuJoCo silently makes it "
+            "unlimited and has no velocity limit of its own)",
+            "add <limit lower=... upper=... effort=... velocity=.../>",
+        )
+        return
+    lower, upper = _number(limit, "lower"), _number(limit, "upper")
+    if isinstance(lower, str) or isinstance(upper, str):
+        out.error(
+            2,
+            _joint(j.name),
+            f"has a non-numeric <limit> bound ({lower!r}, {upper!r})",
+            "give numbers in rad (revolute) or m (prismatic)",
+        )
+    elif lower is None or upper is None:
+        out.error(
+            2,
+            _joint(j.name),
+            "has a <limit> without lower and upper (URDF reads them as 0)",
+            "give both lower and upper, with lower < upper",
+        )
+    elif not lower < upper:
+        out.error(
+            2,
+            _joint(j.name),
+            f"has limit lower={lower:g} >= upper={upper:g}",
+            "set lower < upper (swap them if they are reversed)",
+        )
+    _check_effort_velocity(j, limit, out, for_converter=False)
+
+
+def _check_effort_velocity(
+    j: _Joint, limit: ET.Element | None, out: _Findings, for_converter: bool
+) -> None:
+    why = " (the converter sizes the joint's velocity actuator from them)" if for_converter else ""
+    if limit is None:
+        out.error(
+            2,
+            _joint(j.name),
+            f"has no <limit effort velocity>{why}",
+            "add <limit effort=... velocity=.../> with positive values",
+        )
+        return
+    for attr, unit in (("effort", "N m or N"), ("velocity", "rad/s or m/s")):
+        value = _number(limit, attr)
+        if value is None or isinstance(value, str) or value <= 0:
+            shown = "missing" if value is None else f"{value}"
+            out.error(
+                2,
+                _joint(j.name),
+                f"has <limit {attr}> {shown}, not > 0{why}",
+                f"set {attr} to the joint's positive maximum ({unit})",
+            )
+
+
+def _check_damping(j: _Joint, engines: tuple[str, ...], min_damping: float, out: _Findings) -> None:
+    value = _number(j.elem.find("dynamics"), "damping")
+    if isinstance(value, str) or (value is not None and value < 0):
+        out.error(
+            2,
+            _joint(j.name),
+            f"has invalid <dynamics damping={value!r}>",
+            "give a damping >= 0 (N m s/rad or N s/m)",
+        )
+        return
+    if not value:
+        engines_text = []
+        if "mujoco" in engines:
+            engines_text.append("the converter injects its default damping for MuJoCo")
+        if "pybullet" in engines:
+            engines_text.append("PyBullet runs it undamped, which jitters")
+        out.warning(
+            2,
+            _joint(j.name),
+            "has no <dynamics damping>: " + "; ".join(engines_text),
+            'add <dynamics damping="..."/> with the joint\'s real damping',
+        )
+    elif "pybullet" in engines and value < min_damping:
+        out.warning(
+            2,
+            _joint(j.name),
+            f"has damping {value:g} < {min_damping:g}: PyBullet jitters with so little damping",
+            f"raise <dynamics damping> to at least {min_damping:g}",
+        )

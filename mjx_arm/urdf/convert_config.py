@@ -1,0 +1,85 @@
+"""Conversion settings and the names every converted model carries (sites, sensors,
+collision bits).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+# Collision bit masks. Scene geoms (table, target box) never collide with each other. Arm geoms
+# collide with the scene, and with each other only when self_collision is on.
+ARM_CONTYPE, ARM_CONAFFINITY = 1, 3
+ARM_CONAFFINITY_NO_SELF = 2
+
+# Names the converted model always carries (the task code looks them up by name).
+EE_SITE = "ee"
+FT_SITE = "ft"
+TOOL_COM_SITE = "tool_com"
+SENSORS = (
+    "ft_force",
+    "ft_torque",
+    "tool_acc",
+    "tool_gyro",
+    "tool_angacc",
+    "ft_quat",
+    "ee_pos",
+    "ee_quat",
+)
+
+
+@dataclass(frozen=True)
+class ConvertConfig:
+    """How a URDF becomes an MJCF model. Saved with every run that uses it.
+
+    Attributes:
+        default_damping: joint damping (N m s/rad) for joints whose URDF gives none or zero.
+        armature_per_effort: reflected rotor inertia added to each actuated joint, per unit of
+            its URDF effort (kg m^2 per N m). Geared industrial joints carry a rotor inertia
+            times the gear ratio squared, which grows with the joint's size: 0.005 gives
+            0.75 kg m^2 on a 150 N m joint and 0.14 kg m^2 on a 28 N m wrist.
+        kv_factor: velocity gain of each actuator as a multiple of ``I_min / sim_dt``, where
+            ``I_min`` is the smallest apparent inertia ``1 / (M^-1)_jj`` of that joint over the
+            joint ranges (what the joint feels when the others move freely).
+            At 1.0 a substep halves the velocity error, and a torque-capped actuator cannot
+            chatter: MuJoCo drops the implicit derivative of a clamped actuator, and an
+            explicit step stays inside the error band while ``kv * dt / I <= 1``.
+        gravity_compensation: compensate the arm's weight through its actuators (inside the
+            effort limit), as an industrial arm's joint controllers do.
+        ee_link: link whose frame is the end-effector point; None picks ``ee_link`` if present,
+            else the deepest link of the tree.
+        ft_joint: fixed joint where the wrist force/torque reading is taken; None picks
+            ``ft_sensor_joint`` if present, else the joint above the end-effector body.
+        sim_dt: physics time step (s).
+        solver_iterations: constraint solver iterations (few, for MJX speed). On an H200 the
+            Touch scene steps 1.6M physics steps/s at 4 iterations (line search 8), 3.2M at
+            2 (4) and 5.0M at 1 (2), 32k envs (benchmarks/results/sweep_touch_*.json).
+        ls_iterations: line-search iterations of the Newton solver.
+        scene: "none", "reach" or "touch": the task scene added around the arm.
+        package_dirs: ``package://NAME`` -> directory; unnamed packages are searched for upwards
+            from the URDF's folder.
+        repair_inertia: replace inertia tensors that break the triangle inequality (or are not
+            positive definite) by the nearest valid one instead of failing.
+        self_collision: let non-neighbouring arm links collide with each other. The task
+            models turn it off: the tasks keep the arm near its home pose, and dropping the
+            self pairs cuts MJX's contact rows from 374 to about a quarter.
+    """
+
+    default_damping: float = 1.0
+    armature_per_effort: float = 0.005
+    kv_factor: float = 1.0
+    gravity_compensation: bool = True
+    ee_link: str | None = None
+    ft_joint: str | None = None
+    sim_dt: float = 1.0 / 240.0
+    solver_iterations: int = 2
+    ls_iterations: int = 4
+    scene: str = "none"
+    package_dirs: Mapping[str, str] = field(default_factory=dict)
+    repair_inertia: bool = False
+    self_collision: bool = True
+
+    def replace(self, **changes) -> ConvertConfig:
+        """Return a copy with some fields changed."""
+        return dataclasses.replace(self, **changes)

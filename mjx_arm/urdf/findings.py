@@ -1,0 +1,191 @@
+"""The validator's vocabulary: findings and reports, the limits it checks against, and the lenient
+parse tree every check reads.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+ENGINES: dict[str, tuple[str, ...]] = {
+    "mujoco": ("mujoco",),
+    "pybullet": ("pybullet",),
+    "all": ("mujoco", "pybullet"),
+}
+JOINT_TYPES = frozenset({"revolute", "continuous", "prismatic", "fixed", "floating", "planar"})
+MOVABLE_TYPES = frozenset({"revolute", "continuous", "prismatic"})
+LIMITED_TYPES = frozenset({"revolute", "prismatic"})
+SHAPES = frozenset({"box", "sphere", "cylinder", "capsule", "mesh"})
+# A collision shape whose bounding box diagonal differs from the visual's by more than this
+# factor (either way) is reported.
+SIZE_RATIO_LIMIT = 2.0
+_AXIS_EPS = 1e-9
+# Links (and joints) a URDF may have: far above any arm, low enough to keep every check and
+# native load well under a second.
+MAX_LINKS = 512
+# Largest ratio of two sizes of one primitive shape that survives MuJoCo's MJCF writer.
+MAX_SIZE_RATIO = 1e5
+# Largest origin offset (m): a robot is metres across; beyond this, float rounding eats its shapes.
+MAX_OFFSET = 1e4
+
+# --------------------------------------------------------------------------- report types
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One problem in a URDF.
+
+    Attributes:
+        severity: "error" (the file cannot be used) or "warning" (it can, with a caveat).
+        layer: 1 XML and tree, 2 engine compatibility, 3 physics and native loading.
+        file: the URDF path.
+        element: the offending element, e.g. ``joint 'elbow_joint'``, ``link 'tool_link'``.
+        problem: what is wrong.
+        fix: how to fix it.
+    """
+
+    severity: str
+    layer: int
+    file: str
+    element: str
+    problem: str
+    fix: str
+
+    def __str__(self) -> str:
+        problem, fix = self.problem.rstrip(". "), self.fix.rstrip(". ")
+        head = f"{self.severity.upper()} [{self.layer}] {self.file}: {self.element}"
+        return f"{head}: {problem}. Fix: {fix}"
+
+
+@dataclass(frozen=True)
+class ValidationReport:
+    """Everything :func:`mjx_arm.urdf.validate.validate` found in one URDF for one engine choice."""
+
+    path: str
+    engine: str
+    findings: tuple[Finding, ...] = ()
+
+    @property
+    def errors(self) -> tuple[Finding, ...]:
+        """Findings that make the file unusable."""
+        return tuple(f for f in self.findings if f.severity == "error")
+
+    @property
+    def warnings(self) -> tuple[Finding, ...]:
+        """Findings that leave the file usable."""
+        return tuple(f for f in self.findings if f.severity == "warning")
+
+    @property
+    def ok(self) -> bool:
+        """True when there is no error (warnings allowed)."""
+        return not self.errors
+
+    def format(self) -> str:
+        """A header line, the errors, the warnings, and a verdict line."""
+        lines = [f"Validating {self.path} (engine: {self.engine})"]
+        lines += [str(f) for f in (*self.errors, *self.warnings)]
+        n_err, n_warn = len(self.errors), len(self.warnings)
+        if n_err:
+            lines.append(f"INVALID: {n_err} errors, {n_warn} warnings")
+        else:
+            lines.append("valid" + (f" ({n_warn} warnings)" if n_warn else ""))
+        return "\n".join(lines)
+
+
+class _Findings:
+    """Collects findings for one file."""
+
+    def __init__(self, file: str) -> None:
+        self.file = file
+        self.items: list[Finding] = []
+
+    def error(self, layer: int, element: str, problem: str, fix: str) -> None:
+        self._add("error", layer, element, problem, fix)
+
+    def warning(self, layer: int, element: str, problem: str, fix: str) -> None:
+        self._add("warning", layer, element, problem, fix)
+
+    def _add(self, severity: str, layer: int, element: str, problem: str, fix: str) -> None:
+        finding = Finding(severity, layer, self.file, element, problem, fix)
+        if finding not in self.items:
+            self.items.append(finding)
+
+    @property
+    def has_errors(self) -> bool:
+        return any(f.severity == "error" for f in self.items)
+
+
+# --------------------------------------------------------------------------- lenient tree
+
+
+@dataclass
+class _Joint:
+    name: str
+    type: str
+    parent: str
+    child: str
+    elem: ET.Element
+
+
+@dataclass
+class _Tree:
+    """What layers 2 and 3 need from layer 1: elements by name and the joint graph."""
+
+    path: Path
+    root: ET.Element
+    links: dict[str, ET.Element] = field(default_factory=dict)
+    joints: dict[str, _Joint] = field(default_factory=dict)
+
+    def child_joints(self, link: str) -> list[_Joint]:
+        return [j for j in self.joints.values() if j.parent == link]
+
+    def moving_links(self) -> dict[str, bool]:
+        """Links below a non-fixed joint: name -> True when such a joint is its parent joint."""
+        out: dict[str, bool] = {}
+        for joint in self.joints.values():
+            if joint.type != "fixed" and joint.child in self.links:
+                out[joint.child] = True
+        stack = list(out)
+        while stack:
+            for joint in self.child_joints(stack.pop()):
+                if joint.child in self.links and joint.child not in out:
+                    out[joint.child] = False
+                    stack.append(joint.child)
+        return out
+
+
+def _link(name: str) -> str:
+    return f"link {name!r}"
+
+
+def _joint(name: str) -> str:
+    return f"joint {name!r}"
+
+
+def _numbers(text: str | None, n: int) -> tuple[float, ...] | None:
+    """``n`` finite floats from a space-separated attribute, or None when malformed."""
+    if text is None:
+        return None
+    try:
+        values = tuple(float(v) for v in text.split())
+    except ValueError:
+        return None
+    if len(values) != n or not all(np.isfinite(values)):
+        return None
+    return values
+
+
+def _fmt_values(values: list[float]) -> str:
+    return "(" + ", ".join(f"{v:.6g}" for v in values) + ")"
+
+
+def _number(elem: ET.Element | None, attr: str) -> float | str | None:
+    """A float attribute: the value, None when absent, or the raw text when it is no number."""
+    if elem is None or elem.get(attr) is None:
+        return None
+    raw = elem.get(attr, "")
+    values = _numbers(raw, 1)
+    return raw if values is None else values[0]

@@ -1,0 +1,196 @@
+"""A checked URDF into an edited ``MjSpec``, a compiled model and MJCF text (no validation:
+:mod:`mjx_arm.urdf.convert` validates first).
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from mjx_arm.urdf.convert_config import ConvertConfig
+from mjx_arm.urdf.errors import ConversionError, one_line
+from mjx_arm.urdf.inertia import inertia_problem, inertia_tensor, repair_inertia
+from mjx_arm.urdf.meshes import resolve_mesh_filename
+from mjx_arm.urdf.model import RobotModel, parse_urdf
+from mjx_arm.urdf.safe_xml import read_xml
+from mjx_arm.urdf.scene import add_scene
+from mjx_arm.urdf.scene_shapes import SCENES
+from mjx_arm.urdf.spec_edits import (
+    _add_actuators,
+    _add_sites_and_sensors,
+    _edit_joints,
+    _exclude_neighbours,
+    _set_contact_bits,
+    _set_options,
+    _tool_bodies,
+)
+
+
+def build_checked_spec(path: Path, config: ConvertConfig) -> mujoco.MjSpec:
+    """``mjx_arm.urdf.convert.build_spec`` for a URDF that already passed the static checks
+    (the validator's native layer calls it). Raises ``ConversionError`` as that does."""
+    if config.scene not in SCENES:
+        raise ConversionError(f"unknown scene {config.scene!r}; choose one of {sorted(SCENES)}")
+    model = parse_urdf(path)
+    xml_text = _prepare_urdf_text(path, config)
+    try:
+        spec = mujoco.MjSpec.from_string(xml_text)
+    except Exception as exc:  # MuJoCo raises ValueError with its own text
+        raise ConversionError(f"{path}: MuJoCo's URDF importer failed: {exc}") from exc
+    try:
+        _edit_spec(spec, model, config, path)
+    except ConversionError:
+        raise
+    except (ValueError, mujoco.FatalError) as exc:
+        # The edits compile copies of the spec (joint inertias, tool centre of mass, contacts at
+        # rest); MuJoCo's compiler reports a zero joint axis or an unreadable mesh there. Its
+        # message comes first, as the validator quotes it after "MuJoCo cannot load the model:".
+        raise ConversionError(f"{str(exc).rstrip()}\n(MuJoCo compiling {path})") from exc
+    return spec
+
+
+def _edit_spec(spec: mujoco.MjSpec, model: RobotModel, config: ConvertConfig, path: Path) -> None:
+    """Apply every converter edit to the imported ``spec``, in order."""
+    _set_options(spec, config)
+    actuated = _edit_joints(spec, model, config, path)
+    _add_actuators(spec, actuated, model, config)
+    ee_body, ft_body = _tool_bodies(spec, model, config, path)
+    _add_sites_and_sensors(spec, model, ee_body, ft_body, config)
+    _set_contact_bits(spec, config.self_collision)
+    if config.gravity_compensation:
+        for body in spec.bodies[1:]:
+            body.gravcomp = 1.0
+    add_scene(spec, config.scene)
+    _exclude_neighbours(spec, model)
+
+
+def compile_spec(spec: mujoco.MjSpec, urdf: str | Path) -> mujoco.MjModel:
+    """Compile a converted spec and check that the model's numbers are finite.
+
+    Raises:
+        ConversionError: the model does not compile or holds NaN or infinite values.
+    """
+    try:
+        model = spec.compile()
+    except Exception as exc:
+        raise ConversionError(f"{urdf}: the converted model does not compile: {exc}") from exc
+    _check_finite(model, urdf)
+    return model
+
+
+def mjcf_text(spec: mujoco.MjSpec, urdf: str | Path) -> str:
+    """The MJCF text of a converted spec, checked to compile again as written.
+
+    MuJoCo writes about 6 significant digits per vector, so extreme values that compile from
+    the spec can fail from the text; that is a :class:`ConversionError` here, not a broken file.
+    """
+    compile_spec(spec, urdf)
+    text = spec.to_xml()
+    try:
+        mujoco.MjModel.from_xml_string(text)
+    except Exception as exc:
+        raise ConversionError(
+            f"{urdf}: the written MJCF does not compile again (MuJoCo keeps about 6 significant "
+            f"digits per vector; check the URDF for extreme values): {one_line(exc)}"
+        ) from exc
+    return text
+
+
+# Model arrays that must be finite, with the object each row belongs to.
+_FINITE_FIELDS = {
+    "body_pos": mujoco.mjtObj.mjOBJ_BODY,
+    "body_quat": mujoco.mjtObj.mjOBJ_BODY,
+    "body_ipos": mujoco.mjtObj.mjOBJ_BODY,
+    "body_mass": mujoco.mjtObj.mjOBJ_BODY,
+    "body_inertia": mujoco.mjtObj.mjOBJ_BODY,
+    "geom_size": mujoco.mjtObj.mjOBJ_GEOM,
+    "geom_pos": mujoco.mjtObj.mjOBJ_GEOM,
+    "jnt_range": mujoco.mjtObj.mjOBJ_JOINT,
+    "jnt_axis": mujoco.mjtObj.mjOBJ_JOINT,
+    "dof_damping": mujoco.mjtObj.mjOBJ_DOF,
+    "dof_armature": mujoco.mjtObj.mjOBJ_DOF,
+    "dof_frictionloss": mujoco.mjtObj.mjOBJ_DOF,
+    "actuator_gainprm": mujoco.mjtObj.mjOBJ_ACTUATOR,
+    "actuator_biasprm": mujoco.mjtObj.mjOBJ_ACTUATOR,
+    "actuator_ctrlrange": mujoco.mjtObj.mjOBJ_ACTUATOR,
+    "actuator_forcerange": mujoco.mjtObj.mjOBJ_ACTUATOR,
+}
+
+
+def _check_finite(model: mujoco.MjModel, urdf: str | Path) -> None:
+    """Raise a ConversionError naming the first model row that holds NaN or inf."""
+    for name, objtype in _FINITE_FIELDS.items():
+        values = np.asarray(getattr(model, name))
+        if values.size == 0:
+            continue
+        bad = np.flatnonzero(~np.isfinite(values.reshape(len(values), -1)).all(axis=1))
+        if bad.size:
+            owner = mujoco.mj_id2name(model, objtype, int(bad[0])) or f"#{int(bad[0])}"
+            raise ConversionError(
+                f"{urdf}: the converted model has non-finite {name} for {owner!r} (the URDF's "
+                "values are too large or too small to compute with)"
+            )
+
+
+# --------------------------------------------------------------------------- URDF text
+
+
+def _prepare_urdf_text(path: Path, config: ConvertConfig) -> str:
+    """Resolve mesh paths, check inertias and tell the importer to keep every link apart."""
+    root = read_xml(path)
+    for mesh in root.iter("mesh"):
+        link = _enclosing_link_name(root, mesh)
+        mesh.set(
+            "filename",
+            str(resolve_mesh_filename(mesh.get("filename", ""), path, link, config.package_dirs)),
+        )
+    for link in root.findall("link"):
+        _check_or_repair_inertia(link, path, config.repair_inertia)
+    for old in root.findall("mujoco"):
+        root.remove(old)
+    extension = ET.Element("mujoco")
+    ET.SubElement(
+        extension,
+        "compiler",
+        {
+            "fusestatic": "false",
+            "discardvisual": "false",
+            "strippath": "false",
+            "angle": "radian",
+            "autolimits": "true",
+        },
+    )
+    root.insert(0, extension)
+    return ET.tostring(root, encoding="unicode")
+
+
+def _enclosing_link_name(root: ET.Element, node: ET.Element) -> str:
+    for link in root.findall("link"):
+        if any(n is node for n in link.iter()):
+            return link.get("name", "?")
+    return "?"
+
+
+def _check_or_repair_inertia(link: ET.Element, path: Path, repair: bool) -> None:
+    inertia = link.find("inertial/inertia")
+    if inertia is None:
+        return
+    keys = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
+    v = {k: float(inertia.get(k, "0")) for k in keys}
+    tensor = inertia_tensor(v)
+    problem = inertia_problem(tensor)
+    if problem is None:
+        return
+    name = link.get("name", "?")
+    if not repair:
+        raise ConversionError(
+            f"{path}: link {name!r}: inertia {problem}. Fix the <inertia> values, or convert "
+            "with repair_inertia=True (CLI: --repair-inertia) to raise the smaller principal "
+            "moments to the nearest valid tensor."
+        )
+    fixed = repair_inertia(tensor)
+    for key, (i, j) in zip(keys, [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)], strict=True):
+        inertia.set(key, repr(float(fixed[i, j])))

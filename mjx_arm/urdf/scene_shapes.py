@@ -1,0 +1,46 @@
+"""The scene's names and shapes, without MuJoCo: table and box sizes, the target's names, the
+camera and the collision bits of scene geoms.
+
+Table and box sizes come from ``assets/table.urdf`` and ``assets/target_box.urdf``, which the
+PyBullet reference env loads directly, so both engines see the same scene. Engine-neutral code
+(the task rules) reads the box height here without importing MuJoCo.
+"""
+
+from __future__ import annotations
+
+import functools
+
+from mjx_arm.paths import asset
+from mjx_arm.urdf.model import Geometry, parse_urdf
+
+# Collision bit masks of scene geoms (table, target box): they never collide with each other,
+# only with the arm (mjx_arm.urdf.convert_config has the arm's bits).
+SCENE_CONTYPE, SCENE_CONAFFINITY = 2, 1
+
+SCENES = frozenset({"none", "reach", "touch"})
+TARGET_BODY = "target"
+TARGET_SITE = "target"
+TARGET_GEOM = "target_box"
+FLOOR_Z = -0.75
+
+# One camera for every engine: eye, look-at point (m, world frame) and vertical field of view.
+CAMERA_EYE = (1.45, -1.05, 0.85)
+CAMERA_TARGET = (0.35, 0.0, 0.1)
+CAMERA_FOVY = 45.0
+
+
+@functools.cache
+def scene_geometry() -> dict[str, tuple[Geometry, ...]]:
+    """Collision shapes of the table and the target box, from the shipped URDFs."""
+    table = parse_urdf(asset("table.urdf"))
+    box = parse_urdf(asset("target_box.urdf"))
+    return {
+        "table": table.links["table_top"].collisions,
+        "box": box.links["box"].collisions,
+    }
+
+
+def box_top_offset() -> float:
+    """Height (m) of the target box's top face above the box frame (its bottom face centre)."""
+    (geom,) = scene_geometry()["box"]
+    return geom.origin.xyz[2] + geom.size[2] / 2
