@@ -1,11 +1,11 @@
 """Hostile and broken URDFs: what the validator and the converter do with seeded mutations.
 
 Valid URDFs (the shipped arm, pybullet_data's Franka Panda and KUKA iiwa) are mutated
-(:mod:`mjx_arm.urdf.mutate`: deleted and duplicated elements, NaN, negative, zero and huge
+(:mod:`urdf_fuzz.mutate`: deleted and duplicated elements, NaN, negative, zero and huge
 numbers, broken and outside references, cycles, wrong types, deep nesting, truncation, bad
 encodings, very large files, entity expansion and external entities). Every mutant goes through
 ``validate`` (all engines, native loads included), ``to_mjcf``, ``mjx-arm validate`` and
-``mjx-arm convert`` in a worker process (:mod:`mjx_arm.urdf.fuzz`), which survives native
+``mjx-arm convert`` in a worker process (:mod:`urdf_fuzz.harness`), which survives native
 crashes and hangs. A mutant counts as a crash when any of the four crashed, a hang when any took
 more than 5 s, a named error when one reported named errors, else a pass; outside reads count
 files opened outside the URDF's folder.
@@ -83,7 +83,7 @@ def main() -> None:
     parser.add_argument("--results-dir", type=Path, default=None)
     args = parser.parse_args()
 
-    from mjx_arm.urdf.fuzz import HANG_SECONDS, OPS, default_bases, run_fuzz, tally
+    from urdf_fuzz.harness import HANG_SECONDS, OPS, default_bases, run_fuzz, tally
 
     def progress(outcome) -> None:
         if outcome.status in ("crash", "hang") or outcome.outside:

@@ -2,7 +2,7 @@
 
 The 500-mutation run (:func:`test_seeded_mutations_get_named_errors_or_pass`) runs every mutant
 through ``validate``, ``to_mjcf``, ``mjx-arm validate`` and ``mjx-arm convert`` in a worker
-process (:mod:`mjx_arm.urdf.fuzz`); about 80 s on a 2-core CPU.
+process (:mod:`urdf_fuzz.harness`); about 80 s on a 2-core CPU.
 """
 
 from __future__ import annotations
@@ -15,9 +15,7 @@ import pytest
 from mjx_arm.cli import main
 from mjx_arm.paths import default_arm_urdf
 from mjx_arm.urdf import ConversionError, to_mjcf
-from mjx_arm.urdf.fuzz import HANG_SECONDS, OPS, STATUSES, _OpenAudit, run_fuzz, tally
 from mjx_arm.urdf.meshes import AssetPathError, find_package_dir, resolve_asset
-from mjx_arm.urdf.mutate import KINDS, mutant, mutants
 from mjx_arm.urdf.safe_xml import (
     MAX_ATTRIBUTE_CHARS,
     MAX_BYTES,
@@ -27,6 +25,8 @@ from mjx_arm.urdf.safe_xml import (
     read_xml,
 )
 from mjx_arm.urdf.validate import validate
+from urdf_fuzz.harness import HANG_SECONDS, OPS, STATUSES, _OpenAudit, run_fuzz, tally
+from urdf_fuzz.mutate import KINDS, mutant, mutants
 
 ARM = default_arm_urdf().read_text()
 FUZZ_MUTATIONS = 500

@@ -1,6 +1,6 @@
 """Run the URDF tools on mutated files in a worker process and classify what happens.
 
-Each mutant (:mod:`mjx_arm.urdf.mutate`) goes through four operations: ``validate`` (the API,
+Each mutant (:mod:`urdf_fuzz.mutate`) goes through four operations: ``validate`` (the API,
 all engines, native loads included), ``to_mjcf``, ``mjx-arm validate`` and ``mjx-arm convert``.
 They run in a long-lived worker process, so a crash of a native loader (a segfault) or a hang
 cannot take the caller down: the worker is replaced and the operation counted.
@@ -36,7 +36,7 @@ from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from mjx_arm.urdf.mutate import KINDS, Mutant, mutants
+from urdf_fuzz.mutate import KINDS, Mutant, mutants
 
 HANG_SECONDS = 5.0
 OPS = ("validate", "to_mjcf", "cli_validate", "cli_convert")
