@@ -15,7 +15,7 @@ from mjx_arm.evaluate import (
     EpisodeStats,
     eval_task,
     evaluate,
-    make_env,
+    make_eval_env,
     run_batched,
     run_episodes,
     summarize,
@@ -92,7 +92,7 @@ def test_engines_see_the_same_episodes(policy_path: Path):
     task, _ = eval_task(policy)
     starts = []
     for engine in ("mujoco", "pybullet"):
-        env = make_env(task, engine)
+        env = make_eval_env(task, engine)
         starts.append(run_episodes(policy, env, 2, seed=7).trajectories[1]["obs"][0])
         env.close()
     # same seed: same start pose and target (joint angles and target_rel exactly)
@@ -115,7 +115,7 @@ def test_runner_films_the_first_episodes(policy_path: Path, tmp_path: Path):
 
     policy = load(policy_path)
     task, _ = eval_task(policy)
-    env = make_env(task, "mujoco", render=True, width=160, height=120)
+    env = make_eval_env(task, "mujoco", render=True, width=160, height=120)
     run = run_episodes(policy, env, 3, seed=0, video=tmp_path / "v.mp4", video_episodes=2)
     env.close()
     expected = sum(e.steps + 1 for e in run.episodes[:2])  # the reset frame, then one per step
@@ -126,7 +126,7 @@ def test_runner_films_the_first_episodes(policy_path: Path, tmp_path: Path):
 
 def test_runner_notes_an_env_without_render_mode(policy_path: Path, tmp_path: Path):
     policy = load(policy_path)
-    env = make_env(eval_task(policy)[0], "mujoco")
+    env = make_eval_env(eval_task(policy)[0], "mujoco")
     run = run_episodes(policy, env, 1, video=tmp_path / "v.mp4")
     env.close()
     assert run.frames == 0 and "render_mode" in run.notes[0]

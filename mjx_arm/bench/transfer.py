@@ -20,7 +20,7 @@ from typing import Any
 from mjx_arm.bench.results import fmt, markdown_table, save_results, verdict
 from mjx_arm.bench.settings import setting
 from mjx_arm.envs.physics_config import IMPLS
-from mjx_arm.evaluate import TASK_IDS
+from mjx_arm.names import TASK_IDS
 from mjx_arm.task.config import TaskConfig
 
 

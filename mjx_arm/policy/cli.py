@@ -1,13 +1,10 @@
-"""``mjx-arm export``, ``eval`` and ``replay``: a trained policy's commands."""
+"""``mjx-arm export``: a trained run's policy into a file that runs without the trainer."""
 
 from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
-from mjx_arm import names
-from mjx_arm.jax_cache import enable_compilation_cache
 from mjx_arm.names import EXIT_INVALID, EXIT_OK
 
 
@@ -25,87 +22,6 @@ def cmd_export(args: argparse.Namespace) -> int:
             print(f"error: {exc}", file=sys.stderr)
             return EXIT_INVALID
         print(f"wrote {path} ({path.stat().st_size / 1024:.0f} KiB)")
-    return EXIT_OK
-
-
-def cmd_eval(args: argparse.Namespace) -> int:
-    """Evaluate a policy file or a run directory (newest checkpoint) on one engine.
-
-    Prints the success rate with its 95% Wilson interval, the mean return, the mean steps to
-    success and the mean peak contact force, and saves them as JSON with -o. CPU engines reset
-    episode i with seed + i, so mujoco and pybullet see the same episodes.
-    """
-    import json
-
-    from mjx_arm.evaluate import eval_task, evaluate, format_summary, resolve_policy
-    from mjx_arm.replay import save_trajectory
-
-    if args.engine == "mjx":
-        enable_compilation_cache()
-        _warn_mjx_on_cpu()
-    policy, source = resolve_policy(args.policy, args.step)
-    task, notes = eval_task(policy, args.task)
-    result, run = evaluate(
-        policy,
-        args.engine,
-        task,
-        args.episodes,
-        args.seed,
-        args.video,
-        args.width,
-        args.height,
-        impl=args.impl,
-    )
-    result = {"policy": str(source), **result, "notes": notes + result["notes"]}
-    print(format_summary(result))
-    if args.trajectory:
-        print(f"trajectory: {save_trajectory(args.trajectory, run.trajectory, task)}")
-    if result["video"]:
-        print(f"video: {result['video']}")
-    if args.output:
-        Path(args.output).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.output).write_text(json.dumps(result, indent=2))
-        print(f"results: {args.output}")
-    print(json.dumps({k: v for k, v in result.items() if k != "per_episode"}))
-    return EXIT_OK
-
-
-def _warn_mjx_on_cpu() -> None:
-    import jax
-
-    if jax.default_backend() == "cpu":
-        print(
-            "note: --engine mjx runs MJX (JAX) on the CPU here: compiling takes minutes and "
-            "stepping is about 100x slower than C MuJoCo",
-            file=sys.stderr,
-        )
-
-
-def cmd_replay(args: argparse.Namespace) -> int:
-    """Plot a trajectory (reward, ee x/y/z, contact force; the largest reward drop marked).
-
-    Reads transitions.npz from a checkpoint or a file written by mjx-arm eval --trajectory;
-    with --video, renders each step's joint angles and target through MuJoCo.
-    """
-    from mjx_arm.replay import replay
-
-    try:
-        summary = replay(
-            args.trajectory, args.output, args.video, args.width, args.height, args.task
-        )
-    except (OSError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return EXIT_INVALID
-    drop = summary["largest_reward_drop_step"]
-    print(
-        f"{summary['steps']} steps, return {summary['return']:.2f}, task {summary['task']} "
-        f"(from {summary['task_from']}), largest reward drop at step {drop}"
-    )
-    print(f"plot: {summary['plot']}")
-    if summary["video"]:
-        print(f"video: {summary['video']} ({summary['frames']} frames)")
-    if "video_note" in summary:
-        print(summary["video_note"])
     return EXIT_OK
 
 
@@ -127,64 +43,6 @@ def _add_export(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=cmd_export)
 
 
-def _add_eval(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "eval",
-        help="evaluate a policy: success rate (95%% CI), return, force",
-        description=cmd_eval.__doc__,
-    )
-    p.add_argument("policy", help="policy file (.npz/.onnx) or run directory (newest checkpoint)")
-    p.add_argument(
-        "--engine",
-        choices=names.EVAL_ENGINES,
-        default="mujoco",
-        help="mujoco or pybullet (Gymnasium env, CPU) or mjx (the batched MJX env; "
-        "on a CPU it still runs MJX, only slowly: minutes to compile, about "
-        "100x slower than C MuJoCo) (default: mujoco)",
-    )
-    p.add_argument(
-        "--impl",
-        choices=names.IMPLS,
-        default="auto",
-        help="MJX implementation for --engine mjx (default: auto: Warp on a GPU where installed)",
-    )
-    p.add_argument("--step", type=int, help="checkpoint step of a run directory (default: newest)")
-    p.add_argument("--episodes", type=int, default=50, help="episodes (default: 50)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the first episode (default: 0)")
-    p.add_argument(
-        "--task",
-        type=str.lower,
-        choices=names.TASKS,
-        help="task (default: the one the policy was trained on)",
-    )
-    p.add_argument("--video", help="video of the first episode (.mp4 or .gif)")
-    p.add_argument("--width", type=int, default=640, help="video width (default: 640)")
-    p.add_argument("--height", type=int, default=480, help="video height (default: 480)")
-    p.add_argument("--trajectory", help="save the first episode as a trajectory .npz (replay)")
-    p.add_argument("-o", "--output", help="JSON file for the results")
-    p.set_defaults(func=cmd_eval)
-
-
-def _add_replay(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "replay", help="plot (and film) a recorded trajectory", description=cmd_replay.__doc__
-    )
-    p.add_argument("trajectory", help="trajectory .npz (transitions.npz or from eval)")
-    p.add_argument("-o", "--output", required=True, help="PNG plot to write")
-    p.add_argument("--video", help="also render a video (.mp4 or .gif) through MuJoCo")
-    p.add_argument("--width", type=int, default=800, help="plot and video width (default: 800)")
-    p.add_argument("--height", type=int, default=600, help="plot and video height (default: 600)")
-    p.add_argument(
-        "--task",
-        type=str.lower,
-        choices=names.TASKS,
-        help="scene to render (default: from the file or its run directory)",
-    )
-    p.set_defaults(func=cmd_replay)
-
-
 def register(sub: argparse._SubParsersAction) -> None:
-    """Add ``export``, ``eval`` and ``replay`` to ``sub``."""
+    """Add ``export`` to ``sub``."""
     _add_export(sub)
-    _add_eval(sub)
-    _add_replay(sub)

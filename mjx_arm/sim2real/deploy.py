@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from mjx_arm.evaluate import EvalRun, Policy, eval_task, make_env, run_episodes, summarize
+from mjx_arm.evaluate import EvalRun, Policy, eval_task, make_eval_env, run_episodes, summarize
 from mjx_arm.sim2real.commands import ServojConfig, joint_trajectory_msg, urscript_program
 from mjx_arm.sim2real.position_env import EpisodeCommands, make_position_env
 from mjx_arm.sim2real.settings import DeployConfig
@@ -79,7 +79,7 @@ def deploy_sim(
     """
     config = config or DeployConfig()
     task = task or eval_task(policy)[0]
-    velocity_env = make_env(task, engine)
+    velocity_env = make_eval_env(task, engine)
     try:
         velocity_run = run_episodes(policy, velocity_env, episodes, seed)
     finally:

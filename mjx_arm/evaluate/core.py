@@ -1,0 +1,175 @@
+"""What ``mjx-arm eval`` runs: the policy and task to evaluate, the env, the numbers and the
+summary line.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+from dataclasses import asdict
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from mjx_arm.evaluate.runners import Policy, run_batched, run_episodes
+from mjx_arm.evaluate.stats import EvalRun, summarize
+from mjx_arm.names import EVAL_ENGINES as ENGINES
+from mjx_arm.names import env_id
+from mjx_arm.task.config import TaskConfig, task_config
+
+# Fields of a task that change what an action does; kept from the policy's training config when
+# it is evaluated on the other task.
+DYNAMICS_FIELDS = ("ctrl_dt", "sim_dt", "action_scale")
+
+if TYPE_CHECKING:
+    import gymnasium as gym
+
+
+# --------------------------------------------------------------------------- evaluate
+
+
+def resolve_policy(source: str | Path, step: int | None = None) -> tuple[Any, str]:
+    """A policy from a file (``.npz`` / ``.onnx``) or a run directory.
+
+    A run directory is exported on the fly (newest checkpoint, or ``step``) to a temporary
+    ``.npz`` that is loaded into memory and deleted.
+
+    Returns:
+        ``(policy, description of where it came from)``.
+    """
+    from mjx_arm.policy import export_policy, load
+
+    source = Path(source)
+    if not source.is_dir():
+        return load(source), str(source)
+    with tempfile.TemporaryDirectory(prefix="mjx_arm_eval_") as folder:
+        policy = load(export_policy(source, Path(folder) / "policy.npz", step))
+    return policy, f"{source} (checkpoint step {policy.metadata['step']})"
+
+
+def eval_task(policy: Any, name: str | None = None) -> tuple[TaskConfig, list[str]]:
+    """The task to evaluate in: the policy's training task, or preset ``name``.
+
+    When ``name`` is another task than the training one, its preset is used with the
+    policy's ``ctrl_dt``, ``sim_dt`` and ``action_scale`` (so an action means the same).
+
+    Returns:
+        The task config and notes.
+    """
+    trained_dict = getattr(policy, "config", {}).get("task")
+    if trained_dict is None:
+        return task_config(name or "touch"), ["the policy names no training task"]
+    trained = TaskConfig.from_dict(trained_dict)
+    if name is None or name == trained.task:
+        return trained, []
+    dynamics = {k: getattr(trained, k) for k in DYNAMICS_FIELDS}
+    note = f"policy trained on {trained.task}, evaluated on {name} (its preset; {dynamics})"
+    return task_config(name, **dynamics), [note]
+
+
+def make_eval_env(
+    task: TaskConfig, engine: str, render: bool = False, width: int = 640, height: int = 480
+) -> gym.Env:
+    """A Gymnasium env of ``task`` on a CPU engine ("mujoco" or "pybullet"), made through its
+    registered id (:func:`mjx_arm.envs.registration.make_env` behind Gymnasium's wrappers: the
+    time limit and the checks), with an ``rgb_array`` renderer when ``render``."""
+    import gymnasium as gym
+
+    from mjx_arm.envs.registration import register_envs
+
+    register_envs()  # idempotent; also registers tasks added since import
+    kwargs = {"render_mode": "rgb_array", "width": width, "height": height} if render else {}
+    return gym.make(env_id(task.task), engine=engine, task=task, **kwargs)
+
+
+def evaluate(
+    policy: Policy,
+    engine: str,
+    task: TaskConfig,
+    episodes: int = 50,
+    seed: int = 0,
+    video: str | Path | None = None,
+    width: int = 640,
+    height: int = 480,
+    backend: str | None = None,
+    video_episodes: int = 1,
+    impl: str = "auto",
+) -> tuple[dict[str, Any], EvalRun]:
+    """Evaluate ``policy`` on ``engine`` and summarise.
+
+    Args:
+        policy: observation -> action (single or batched).
+        engine: "mujoco", "pybullet" (Gymnasium envs) or "mjx" (the batched env).
+        task: the task configuration.
+        episodes: number of episodes.
+        seed: first episode's seed (CPU engines) or the batch key's seed (mjx).
+        video: a video (.mp4 or .gif) of the first ``video_episodes`` episodes, or None
+            (mjx: env 0's episode, re-rendered in CPU MuJoCo).
+        width, height: video frame size (pixels).
+        backend: for ``engine="mjx"``: "mjx" (default) or "mujoco" (C MuJoCo, fast on a CPU).
+        impl: for the MJX backend: "auto" (Warp on a GPU where installed), "jax" or "warp".
+
+    Returns:
+        The JSON-ready summary and the raw :class:`EvalRun`.
+    """
+    if engine not in ENGINES:
+        raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
+    start = time.monotonic()
+    if engine == "mjx":
+        run = run_batched(policy, task, episodes, seed, backend or "mjx", impl)
+        if video is not None:
+            run.frames, note = _replay_video(run.trajectory, task, video, width, height)
+            run.notes += [note] if note else []
+    else:
+        env = make_eval_env(task, engine, render=video is not None, width=width, height=height)
+        try:
+            run = run_episodes(policy, env, episodes, seed, video, video_episodes)
+        finally:
+            env.close()
+    result = {"engine": engine, "task": task.task, "seed": seed, **summarize(run.episodes)}
+    if engine == "mjx":
+        from mjx_arm.envs.physics_config import resolve_impl
+
+        result["backend"] = backend or "mjx"
+        if result["backend"] == "mjx":
+            result["impl"] = resolve_impl(impl)
+    result["wall_seconds"] = time.monotonic() - start
+    result["video"] = str(video) if video is not None and run.frames else None
+    result["notes"] = run.notes
+    result["per_episode"] = [asdict(e) for e in run.episodes]
+    return result, run
+
+
+def _replay_video(
+    traj: dict[str, np.ndarray], task: TaskConfig, video: str | Path, width: int, height: int
+) -> tuple[int, str]:
+    """Film a batched env's trajectory through the CPU MuJoCo renderer."""
+    from mjx_arm.replay import render_frames, rendering_available, write_video
+
+    ok, reason = rendering_available()
+    if not ok:
+        return 0, f"video skipped: {reason}"
+    frames = write_video(video, render_frames(traj, task, width, height), 1.0 / task.ctrl_dt)
+    return frames, "video: env 0's episode re-rendered in CPU MuJoCo from its joint angles"
+
+
+def format_summary(result: dict[str, Any]) -> str:
+    """A few human-readable lines of an :func:`evaluate` result."""
+    low, high = result["success_ci95"]
+
+    def num(key: str, fmt: str) -> str:
+        value = result.get(key)
+        return "n/a" if value is None else format(value, fmt)
+
+    lines = [
+        f"{result['engine']} ({result['task']}): {result['episodes']} episodes "
+        f"in {result['wall_seconds']:.1f} s",
+        f"  success rate      {result['success_rate']:.3f}  (95% CI {low:.3f} - {high:.3f})",
+        f"  mean return       {num('mean_return', '.2f')}",
+        f"  steps to success  {num('mean_steps_to_success', '.1f')}",
+        f"  peak contact (N)  {num('mean_peak_contact_force', '.2f')}",
+        f"  final distance    {num('mean_final_distance', '.4f')} m",
+    ]
+    lines += [f"  note: {n}" for n in result.get("notes", [])]
+    return "\n".join(lines)

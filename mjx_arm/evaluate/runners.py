@@ -1,0 +1,272 @@
+"""Run a policy for episodes: one Gymnasium env at a time (with an optional video), or the
+whole batch at once on the JAX vector env.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from mjx_arm.evaluate.stats import EpisodeStats, EvalRun
+from mjx_arm.task.config import TaskConfig
+from mjx_arm.task.observation import OBS_KEYS, flatten_obs
+
+if TYPE_CHECKING:
+    import gymnasium as gym
+
+Policy = Callable[[Any], np.ndarray]
+
+
+class _Recorder:
+    """Per-step rows of one episode (the trajectory format of :mod:`mjx_arm.replay`)."""
+
+    KEYS = ("obs", "action", "reward", "done", "ee_pos", "contact_force", "distance", "success")
+
+    def __init__(self) -> None:
+        self.rows: dict[str, list] = {k: [] for k in self.KEYS}
+
+    def add(
+        self,
+        flat_obs: np.ndarray,
+        action: np.ndarray,
+        reward: float,
+        done: bool,
+        next_obs: dict[str, np.ndarray],
+        info: dict[str, Any],
+    ) -> None:
+        """Record one step: the observation acted on, then what the step produced."""
+        values = (
+            flat_obs,
+            action,
+            reward,
+            done,
+            np.asarray(next_obs["ee_pose"])[:3],
+            info["contact_force_norm"],
+            info["distance"],
+            info["is_success"],
+        )
+        for key, value in zip(self.KEYS, values, strict=True):
+            self.rows[key].append(np.asarray(value))
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """``obs (T, 22)``, ``action (T, 6)``, ``ee_pos (T, 3)``, the rest ``(T,)``."""
+        dtypes = {"done": bool, "success": bool}
+        return {k: np.asarray(v, dtype=dtypes.get(k, np.float32)) for k, v in self.rows.items()}
+
+
+# --------------------------------------------------------------------------- Gymnasium runner
+
+
+def _flat(obs: Any) -> np.ndarray:
+    return flatten_obs(np, {k: np.asarray(obs[k], np.float32) for k in OBS_KEYS})
+
+
+def run_episode(
+    policy: Policy, env: gym.Env, seed: int | None, capture: Callable[[], None] | None = None
+) -> tuple[EpisodeStats, dict]:
+    """One episode of ``policy`` in a Gymnasium env of the contract.
+
+    Args:
+        policy: observation -> action ``(6,)``.
+        env: a Gymnasium env with the contract's spaces and ``info`` keys.
+        seed: reset seed.
+        capture: called after the reset and after every step (e.g. to film ``render()``).
+
+    Returns:
+        The episode's numbers and its trajectory arrays.
+    """
+    obs, _ = env.reset(seed=seed)
+    if capture is not None:
+        capture()
+    rec, ret, first_success, peak = _Recorder(), 0.0, None, 0.0
+    steps, done, info = 0, False, {"distance": math.nan}
+    while not done:
+        action = policy(obs)
+        next_obs, reward, terminated, truncated, info = env.step(action)
+        steps += 1
+        rec.add(_flat(obs), action, reward, terminated, next_obs, info)
+        ret += float(reward)
+        peak = max(peak, float(info["contact_force_norm"]))
+        if info["is_success"] and first_success is None:
+            first_success = steps
+        done, obs = bool(terminated or truncated), next_obs
+        if capture is not None:
+            capture()
+    stats = EpisodeStats(
+        ret, steps, first_success is not None, first_success, peak, float(info["distance"])
+    )
+    return stats, rec.arrays()
+
+
+def run_episodes(
+    policy: Policy,
+    env: gym.Env,
+    episodes: int,
+    seed: int = 0,
+    video: str | Path | None = None,
+    video_episodes: int = 1,
+) -> EvalRun:
+    """Run ``episodes`` episodes (episode ``i`` reset with ``seed + i``), optionally filmed.
+
+    Args:
+        policy: observation -> action ``(6,)`` (e.g. :func:`mjx_arm.policy.load`'s result).
+        env: a Gymnasium env of the contract; for a video, made with ``render_mode="rgb_array"``.
+        episodes: number of episodes.
+        seed: seed of the first episode.
+        video: ``.mp4`` or ``.gif`` path for the first ``video_episodes`` episodes, or None.
+        video_episodes: episodes to film.
+
+    Returns:
+        Per-episode numbers and trajectories, the frame count and notes.
+    """
+    writer, notes = _open_video(env, video)
+    results, trajectories = [], []
+    for i in range(episodes):
+        capture = functools.partial(writer.capture, env) if writer and i < video_episodes else None
+        try:
+            stats, traj = run_episode(policy, env, seed + i, capture)
+        except _RenderError as exc:  # the renderer failed: redo the episode without it
+            notes.append(f"video stopped: {exc}")
+            writer.close()
+            writer = None
+            stats, traj = run_episode(policy, env, seed + i)
+        results.append(stats)
+        trajectories.append(traj)
+    frames = writer.close() if writer is not None else 0
+    return EvalRun(results, trajectories, frames, notes)
+
+
+class _RenderError(RuntimeError):
+    """``render()`` failed."""
+
+
+class _SafeVideo:
+    """A VideoWriter fed by ``env.render()``; any render failure becomes a _RenderError."""
+
+    def __init__(self, writer) -> None:
+        self.writer = writer
+
+    def capture(self, env: gym.Env) -> None:
+        """Render one frame of ``env`` into the video."""
+        try:
+            frame = env.render()
+        except Exception as exc:  # GL context or driver errors surface as many types
+            raise _RenderError(f"{type(exc).__name__}: {exc}") from exc
+        if frame is None:
+            raise _RenderError("render() returned None: make the env with render_mode='rgb_array'")
+        self.writer.append(frame)
+
+    def close(self) -> int:
+        """Finish the file; returns the frame count."""
+        return self.writer.close()
+
+
+def _open_video(env: gym.Env, video: str | Path | None) -> tuple[_SafeVideo | None, list[str]]:
+    from mjx_arm.replay import VideoWriter, fit_framebuffer, rendering_available
+
+    if video is None:
+        return None, []
+    if getattr(env, "render_mode", None) != "rgb_array":
+        return None, ["video skipped: the env was not made with render_mode='rgb_array'"]
+    ok, reason = rendering_available()
+    if not ok and getattr(env.unwrapped, "engine", "") == "mujoco":
+        return None, [f"video skipped: {reason}"]
+    model = getattr(env.unwrapped, "model", None)
+    if model is not None and hasattr(model, "vis"):  # MuJoCo: room for frames over 640 x 480
+        fit_framebuffer(model, env.unwrapped.width, env.unwrapped.height)
+    fps = env.metadata.get("render_fps", 30)
+    return _SafeVideo(VideoWriter(video, fps)), []
+
+
+# --------------------------------------------------------------------------- batched runner
+
+
+def run_batched(
+    policy: Policy,
+    task: TaskConfig,
+    episodes: int,
+    seed: int = 0,
+    backend: str = "mjx",
+    impl: str = "auto",
+) -> EvalRun:
+    """Run ``episodes`` episodes at once, one per env of an :class:`ArmVectorEnv`.
+
+    Each env's first episode counts; envs that finish early are reset by the vector env and
+    ignored until the slowest one ends (at most ``task.episode_steps`` steps).
+
+    Args:
+        policy: batched observation Dict -> actions ``(episodes, 6)``.
+        task: the task configuration.
+        episodes: number of envs (= episodes).
+        seed: seed of the batch's PRNG key.
+        backend: "mjx" (MJX: slow on a CPU), "mujoco" (C MuJoCo) or "auto".
+        impl: MJX implementation: "auto", "jax" or "warp".
+    """
+    from mjx_arm.envs.physics_config import PhysicsConfig
+    from mjx_arm.envs.vector import ArmVectorEnv
+
+    env = ArmVectorEnv(task, episodes, backend, PhysicsConfig(impl=impl))
+    obs, _ = env.reset(seed=seed)
+    acc = _BatchAccumulator(episodes)
+    rec = _Recorder()
+    while acc.active.any():
+        actions = np.asarray(policy(obs), dtype=np.float32).reshape(episodes, 6)
+        next_obs, rewards, terminated, truncated, info = env.step(actions)
+        final = info.get("final_obs", next_obs)
+        if acc.active[0]:
+            row = {k: v[0] for k, v in info.items() if k in ("contact_force_norm", "distance")}
+            row["is_success"] = info["is_success"][0]
+            rec.add(
+                _flat({k: v[0] for k, v in obs.items()}),
+                actions[0],
+                rewards[0],
+                terminated[0],
+                {"ee_pose": final["ee_pose"][0]},
+                row,
+            )
+        acc.add(rewards, terminated | truncated, info)
+        obs = next_obs
+    env.close()
+    return EvalRun(acc.episodes(), [rec.arrays()])
+
+
+class _BatchAccumulator:
+    """Running per-env sums of a batch of first episodes."""
+
+    def __init__(self, n: int) -> None:
+        self.active = np.ones(n, bool)
+        self.ret = np.zeros(n)
+        self.steps = np.zeros(n, int)
+        self.first_success = np.zeros(n, int)
+        self.peak = np.zeros(n)
+        self.distance = np.full(n, np.nan)
+
+    def add(self, rewards: np.ndarray, done: np.ndarray, info: dict[str, Any]) -> None:
+        """Add one step's numbers to the envs still in their first episode."""
+        a = self.active
+        self.ret[a] += np.asarray(rewards)[a]
+        self.steps[a] += 1
+        new = a & np.asarray(info["is_success"]) & (self.first_success == 0)
+        self.first_success[new] = self.steps[new]
+        self.peak[a] = np.maximum(self.peak[a], np.asarray(info["contact_force_norm"])[a])
+        self.distance[a] = np.asarray(info["distance"])[a]
+        self.active = a & ~np.asarray(done)
+
+    def episodes(self) -> list[EpisodeStats]:
+        """One :class:`EpisodeStats` per env."""
+        return [
+            EpisodeStats(
+                float(self.ret[i]),
+                int(self.steps[i]),
+                bool(self.first_success[i] > 0),
+                int(self.first_success[i]) if self.first_success[i] > 0 else None,
+                float(self.peak[i]),
+                float(self.distance[i]),
+            )
+            for i in range(len(self.ret))
+        ]
