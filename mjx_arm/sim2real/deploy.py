@@ -49,6 +49,14 @@ def ee_deviation(velocity_run: EvalRun, position_run: EvalRun) -> dict[str, floa
     return _stats(gaps)
 
 
+def _run_closed(policy: Policy, env: Any, episodes: int, seed: int) -> tuple[EvalRun, Any]:
+    """Run ``episodes`` episodes from ``seed`` on ``env``, close it; (the run, the bare env)."""
+    try:
+        return run_episodes(policy, env, episodes, seed), env.unwrapped
+    finally:
+        env.close()
+
+
 def deploy_sim(
     policy: Policy,
     engine: str = "mujoco",
@@ -79,17 +87,9 @@ def deploy_sim(
     """
     config = config or DeployConfig()
     task = task or eval_task(policy)[0]
-    velocity_env = make_eval_env(task, engine)
-    try:
-        velocity_run = run_episodes(policy, velocity_env, episodes, seed)
-    finally:
-        velocity_env.close()
+    velocity_run, _ = _run_closed(policy, make_eval_env(task, engine), episodes, seed)
     position_env = make_position_env(task, engine, config.chain())
-    try:
-        position_run = run_episodes(policy, position_env, episodes, seed)
-    finally:
-        position_env.close()
-    base = position_env.unwrapped
+    position_run, base = _run_closed(policy, position_env, episodes, seed)
     longest = max(range(episodes), key=lambda i: len(base.episodes[i].commands))
     return {
         "engine": engine,

@@ -55,6 +55,20 @@ def strong(tree: Any) -> Any:
     return jax.tree.map(lambda x: jnp.asarray(x).astype(jnp.asarray(x).dtype), tree)
 
 
+def _run_keys(seed: int) -> tuple[jax.Array, ...]:
+    """The run's keys from its seed: (policy init, value init, env reset, evaluation, epochs)."""
+    global_key, local_key = jax.random.split(jax.random.PRNGKey(seed))
+    local_key, key_env, key_eval = jax.random.split(local_key, 3)
+    key_policy, key_value = jax.random.split(global_key)
+    return key_policy, key_value, key_env, key_eval, local_key
+
+
+def _training_metrics(metrics: dict[str, Any], sps: float, walltime: float) -> dict[str, Any]:
+    """An epoch's metrics as Brax names them: ``training/sps``, ``training/walltime``, ..."""
+    named = {f"training/{name}": value for name, value in metrics.items()}
+    return {"training/sps": sps, "training/walltime": walltime, **named}
+
+
 def run_ppo(
     config: TrainConfig,
     env: Any,
@@ -82,10 +96,7 @@ def run_ppo(
     config.check_devices(len(devices))
     mesh = make_mesh(devices)
     partition = resolve_partition(config, env.physics.impl)
-    key = jax.random.PRNGKey(config.seed + step_offset)
-    global_key, local_key = jax.random.split(key)
-    local_key, key_env, key_eval = jax.random.split(local_key, 3)
-    key_policy, key_value = jax.random.split(global_key)
+    key_policy, key_value, key_env, key_eval, local_key = _run_keys(config.seed + step_offset)
 
     split_mesh = mesh if partition == "per_device" else None
     train_env = wrap_for_training(env, episode_length, mesh=split_mesh, axis=ENV_AXIS)
@@ -114,11 +125,7 @@ def run_ppo(
         step += sizes.env_steps_per_epoch
         params = learner.params(state)
         callbacks.policy_params(step, learner.make_policy, params)
-        training = {
-            "training/sps": sizes.env_steps_per_epoch / seconds,
-            "training/walltime": walltime,
-            **{f"training/{name}": value for name, value in metrics.items()},
-        }
+        training = _training_metrics(metrics, sizes.env_steps_per_epoch / seconds, walltime)
         callbacks.progress(step, evaluate.run_evaluation(params, training))
     return {"devices": [str(d) for d in devices], "partition": partition}
 
