@@ -218,13 +218,7 @@ class PybulletPositionArmEnv(_ChainActuation, PybulletArmEnv):
     The torque law at every substep is the velocity servo's with the velocity target
     ``K * (q_target - q)``: ``clip(kv * (K * (q_target - q) - qdot), +-effort) - d * qdot
     + g(q)``, the same law as MuJoCo's position actuator with its joint damping and gravity
-    compensation.
-
-    Args:
-        task: the task configuration (default: Touch).
-        urdf: the arm URDF (default: the shipped arm).
-        config: the chain and the servo (default: :class:`ChainConfig()`).
-        render_mode, width, height: as for :class:`PybulletArmEnv`.
+    compensation. Arguments as for :class:`MujocoPositionArmEnv`.
     """
 
     def __init__(
