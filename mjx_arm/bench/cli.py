@@ -14,6 +14,7 @@ from pathlib import Path
 
 from mjx_arm.bench.settings import add_arguments, from_arguments
 from mjx_arm.names import EXIT_INVALID, EXIT_OK
+from mjx_arm.settings import add_set_argument
 
 PARITY_OUT = Path("benchmarks/results/parity")
 TRANSFER_OUT = Path("benchmarks/results/transfer")
@@ -162,11 +163,8 @@ def register(sub) -> None:
     p.add_argument("--out", type=Path, default=TRANSFER_OUT, help=f"output folder ({TRANSFER_OUT})")
 
     p = _command(commands, cmd_seeds, "a preset over seeds: fraction solved, times", SeedsConfig)
-    p.add_argument(
-        "--set",
-        nargs="+",
-        metavar="KEY=VALUE",
-        help="change the preset (exploration; the report then says so, never 'as shipped')",
+    add_set_argument(
+        p, "change the preset (exploration; the report then says so, never 'as shipped')"
     )
     p.add_argument("--name", help="file stem (default: seeds_TASK_PRESET)")
     p.add_argument("--runs", type=Path, help="where the runs go (default: runs/seeds-...)")

@@ -30,7 +30,8 @@ import numpy as np
 
 from mjx_arm.bench.results import fmt, markdown_table, save_results
 from mjx_arm.bench.settings import setting
-from mjx_arm.names import BACKENDS, PRESET_NAMES, TASKS
+from mjx_arm.names import BACKENDS, PRESET_NAMES
+from mjx_arm.task.registry import task_names
 
 SUCCESS_KEY = "eval/episode_success"
 
@@ -62,7 +63,7 @@ def parse_seeds(text: str) -> tuple[int, ...]:
 class SeedsConfig:
     """Settings of ``mjx-arm bench seeds`` (each field is a flag)."""
 
-    task: str = setting("touch", "task to train", TASKS)
+    task: str = setting("touch", "task to train", task_names())
     preset: str = setting("fast", "training preset, as shipped", PRESET_NAMES)
     seeds: str = setting("0-9", "seeds: a range 0-9, a list 0,3,7 or both")
     backend: str = setting("auto", "physics backend", BACKENDS)

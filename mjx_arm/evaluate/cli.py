@@ -9,6 +9,7 @@ from pathlib import Path
 from mjx_arm import names
 from mjx_arm.jax_cache import enable_compilation_cache
 from mjx_arm.names import EXIT_INVALID, EXIT_OK
+from mjx_arm.task.registry import task_names
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
@@ -119,7 +120,7 @@ def _add_eval(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--task",
         type=str.lower,
-        choices=names.TASKS,
+        choices=task_names(),
         help="task (default: the one the policy was trained on)",
     )
     p.add_argument("--video", help="video of the first episode (.mp4 or .gif)")
@@ -142,7 +143,7 @@ def _add_replay(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--task",
         type=str.lower,
-        choices=names.TASKS,
+        choices=task_names(),
         help="scene to render (default: from the file or its run directory)",
     )
     p.set_defaults(func=cmd_replay)

@@ -3,55 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import sys
 from pathlib import Path
 from typing import Any
 
 from mjx_arm.names import CPU_ENGINES, EXIT_INVALID, EXIT_OK
-
-
-def apply_overrides(config: Any, items: list[str]) -> Any:
-    """A copy of a (nested) frozen dataclass with ``key=value`` or ``outer.inner=value`` set.
-
-    Values take the type of the field they replace.
-
-    Raises:
-        ValueError: an unknown key, a missing ``=``, or a value of the wrong type.
-    """
-    for item in items:
-        key, sep, text = item.partition("=")
-        if not sep:
-            raise ValueError(f"--set expects KEY=VALUE, got {item!r}")
-        config = _set_path(config, key.strip().split("."), text.strip())
-    return config
-
-
-def _set_path(config: Any, path: list[str], text: str) -> Any:
-    names = {f.name for f in dataclasses.fields(config)}
-    if path[0] not in names:
-        raise ValueError(f"unknown setting {path[0]!r}; choose one of {sorted(names)}")
-    current = getattr(config, path[0])
-    if dataclasses.is_dataclass(current):
-        if len(path) == 1:
-            raise ValueError(f"{path[0]!r} is a group; set one of its fields ({path[0]}.NAME)")
-        return dataclasses.replace(config, **{path[0]: _set_path(current, path[1:], text)})
-    if len(path) > 1:
-        raise ValueError(f"{path[0]!r} has no fields")
-    return dataclasses.replace(config, **{path[0]: type(current)(text)})
-
-
-def _settings(config: Any, prefix: str = "") -> list[str]:
-    """``name=value`` of every field (nested ones dotted), for the help text."""
-    out = []
-    for f in dataclasses.fields(config):
-        value = getattr(config, f.name)
-        if dataclasses.is_dataclass(value):
-            out += _settings(value, f"{prefix}{f.name}.")
-        else:
-            out.append(f"{prefix}{f.name}={value:g}")
-    return out
+from mjx_arm.settings import add_set_argument, apply_settings, describe
 
 
 def cmd_deploy_sim(args: argparse.Namespace) -> int:
@@ -68,7 +26,7 @@ def cmd_deploy_sim(args: argparse.Namespace) -> int:
     from mjx_arm.sim2real.deploy import DeployConfig, deploy_sim, write_commands
 
     try:
-        config = apply_overrides(DeployConfig(), args.set or [])
+        config = apply_settings(DeployConfig(), args.set or [])
         policy, source = resolve_policy(args.policy)
     except (ValueError, FileNotFoundError) as exc:
         print(f"error: {exc}", file=sys.stderr)
@@ -155,13 +113,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--episodes", type=int, default=20, help="episodes per run (default: 20)")
     p.add_argument("--seed", type=int, default=0, help="seed of the first episode (default: 0)")
-    p.add_argument(
-        "--set",
-        action="extend",
-        nargs="+",
-        metavar="KEY=VALUE",
-        help="chain settings (defaults: " + ", ".join(_settings(DeployConfig())) + ")",
-    )
+    add_set_argument(p, "chain settings (defaults: " + ", ".join(describe(DeployConfig())) + ")")
     p.add_argument(
         "--script",
         default="deploy_sim.script",

@@ -9,6 +9,8 @@ from pathlib import Path
 from mjx_arm import names
 from mjx_arm.jax_cache import enable_compilation_cache
 from mjx_arm.names import EXIT_INVALID, EXIT_OK
+from mjx_arm.settings import add_set_argument
+from mjx_arm.task.registry import task_names
 
 
 def cmd_train(args: argparse.Namespace) -> int:
@@ -63,7 +65,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--task",
         type=str.lower,
-        choices=names.TASKS,
+        choices=task_names(),
         help="task to train (default: the preset's)",
     )
     p.add_argument(
@@ -84,15 +86,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "(default: all; also on --resume, which may change it)",
     )
     p.add_argument("--config", help="JSON file with training config fields")
-    p.add_argument(
-        "--set",
-        action="extend",
-        nargs="+",
-        metavar="KEY=VALUE",
-        help=(
-            "override config fields (KEY=VALUE ...; repeatable); task.FIELD=... and "
-            "task.reward.TERM=... for the task, physics.FIELD=..., randomization.FIELD=..."
-        ),
+    add_set_argument(
+        p,
+        "override config fields (KEY=VALUE ...; repeatable); task.FIELD=... and "
+        "task.reward.TERM=... for the task, physics.FIELD=..., randomization.FIELD=...",
     )
     p.add_argument("--run-dir", help="run directory (default: runs/TASK-TIMESTAMP)")
     p.add_argument("--resume", metavar="RUN_DIR", help="continue the run in RUN_DIR")

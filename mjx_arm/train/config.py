@@ -12,14 +12,15 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from mjx_arm.envs.physics_config import PhysicsConfig, RandomizationConfig
-from mjx_arm.names import BACKENDS, PRESET_NAMES, TASKS
+from mjx_arm.names import BACKENDS, PRESET_NAMES
+from mjx_arm.settings import set_path, split_setting
 from mjx_arm.task.config import RewardConfig, TaskConfig
+from mjx_arm.task.registry import is_task, task_names
 
 PARTITIONS = ("auto", "xla", "per_device")
 
@@ -130,8 +131,8 @@ class TrainConfig:
 
     def validate(self) -> None:
         """Check names and the batch arithmetic PPO requires."""
-        if self.task not in TASKS:
-            raise ValueError(f"task must be one of {TASKS}, got {self.task!r}")
+        if not is_task(self.task):
+            raise ValueError(f"task must be one of {list(task_names())}, got {self.task!r}")
         if self.backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {self.backend!r}")
         if self.partition not in PARTITIONS:
@@ -230,26 +231,6 @@ def preset_config(name: str, task: str | None = None) -> TrainConfig:
     return config.replace(task=task, **TASK_PRESETS.get((name, task), {}))
 
 
-def _coerce(text: str, kind: Any) -> Any:
-    """Parse a ``--set`` value for a field of type ``kind``."""
-    if isinstance(kind, str):  # an alias such as Range, unresolved
-        kind = tuple
-    origin = typing.get_origin(kind)
-    if kind is bool:
-        if text.lower() in ("1", "true", "yes", "on"):
-            return True
-        if text.lower() in ("0", "false", "no", "off"):
-            return False
-        raise ValueError(f"not a boolean: {text!r}")
-    if kind in (int, float, str):
-        return kind(float(text)) if kind is int else kind(text)
-    if origin is tuple or kind is tuple:
-        args = typing.get_args(kind)
-        number = float if args and args[0] is float else int
-        return tuple(number(v) for v in text.strip("()[] ").split(",") if v.strip())
-    return json.loads(text)
-
-
 def _set_task_field(task_changes: dict[str, Any], name: str, text: str) -> None:
     """Put ``task.NAME=text`` into ``task_changes`` (``reward.TERM`` into its ``reward`` dict).
 
@@ -274,36 +255,16 @@ def _set_task_field(task_changes: dict[str, Any], name: str, text: str) -> None:
 
 
 def apply_overrides(config: TrainConfig, items: list[str]) -> TrainConfig:
-    """Apply ``key=value`` overrides; ``task.KEY=value`` goes to ``task_overrides`` and
-    ``task.reward.TERM=value`` to its reward weights."""
-    hints = typing.get_type_hints(TrainConfig)
-    changes: dict[str, Any] = {}
-    sections = {name: {} for name in SECTIONS}
+    """Apply ``key=value`` overrides (:mod:`mjx_arm.settings`); ``task.KEY=value`` goes to
+    ``task_overrides`` and ``task.reward.TERM=value`` to its reward weights."""
     task_changes = dict(config.task_overrides)
     for item in items:
-        key, sep, value = item.partition("=")
-        if not sep:
-            raise ValueError(f"--set expects key=value, got {item!r}")
-        section, dot, field_name = key.partition(".")
-        if dot and section == "task":
-            _set_task_field(task_changes, field_name, value)
-            continue
-        if dot and section in SECTIONS:
-            section_hints = typing.get_type_hints(SECTIONS[section])
-            if field_name not in section_hints:
-                raise ValueError(
-                    f"unknown config key {key!r}; known: "
-                    f"{sorted(f'{section}.{k}' for k in section_hints)}"
-                )
-            sections[section][field_name] = _coerce(value, section_hints[field_name])
-            continue
-        if key not in hints:
-            raise ValueError(f"unknown config key {key!r}; known: {sorted(hints)}")
-        changes[key] = _coerce(value, hints[key])
-    for name, values in sections.items():
-        if values:
-            changes[name] = dataclasses.replace(changes.get(name, getattr(config, name)), **values)
-    return config.replace(task_overrides=task_changes, **changes)
+        path, text = split_setting(item)
+        if path[0] == "task" and len(path) > 1:
+            _set_task_field(task_changes, ".".join(path[1:]), text)
+        else:
+            config = set_path(config, path, text, "config key")
+    return config.replace(task_overrides=task_changes)
 
 
 def _task_named(data: dict[str, Any], overrides: list[str]) -> str | None:
