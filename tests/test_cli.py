@@ -96,3 +96,23 @@ def test_console_script_is_on_the_venv_path(tmp_path: Path):
     )
     assert result.returncode == 0, result.stderr
     assert "usage: mjx-arm" in result.stdout
+
+
+def test_short_run_says_why_it_has_no_speed() -> None:
+    """Too few evaluations for the compile/steady split: a sentence, not NaN."""
+    from types import SimpleNamespace
+
+    from mjx_arm.train.cli import done_line
+
+    nan = float("nan")
+    short = SimpleNamespace(
+        steps=2048,
+        train_seconds=12.0,
+        compile_seconds=nan,
+        steps_per_second=nan,
+        metrics={"eval/episode_success": 0.25},
+    )
+    line = done_line(short)
+    assert "nan" not in line.lower() and "3 or more evaluations" in line and "0.250" in line
+    full = SimpleNamespace(**{**vars(short), "compile_seconds": 4.0, "steps_per_second": 1500.0})
+    assert "compile 4.0 s, 1,500 steps/s" in done_line(full)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
@@ -46,13 +47,21 @@ def cmd_train(args: argparse.Namespace) -> int:
     except RunDirError as err:
         print(f"error: {err}", file=sys.stderr)
         return EXIT_INVALID
+    print(done_line(result))
+    return EXIT_OK
+
+
+def done_line(result) -> str:
+    """The closing line of a run. Compile time and steady speed need two trained epochs after
+    the first evaluation; a shorter run says so instead of printing NaN."""
     success = result.metrics.get("eval/episode_success", float("nan"))
-    print(
-        f"done: {result.steps} steps in {result.train_seconds:.1f} s "
-        f"(compile {result.compile_seconds:.1f} s, {result.steps_per_second:,.0f} steps/s), "
+    if math.isfinite(result.compile_seconds) and math.isfinite(result.steps_per_second):
+        speed = f"compile {result.compile_seconds:.1f} s, {result.steps_per_second:,.0f} steps/s"
+    else:
+        speed = "compile time and steps/s need 3 or more evaluations"
+    return f"done: {result.steps} steps in {result.train_seconds:.1f} s ({speed}), " + (
         f"eval success {success:.3f}"
     )
-    return EXIT_OK
 
 
 def register(sub: argparse._SubParsersAction) -> None:
