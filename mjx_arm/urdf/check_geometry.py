@@ -201,6 +201,15 @@ def _check_mesh_format(
     suffix = Path(filename).suffix.lower()
     readable = {"mujoco": MUJOCO_MESH_FORMATS, "pybullet": PYBULLET_MESH_FORMATS}
     blind = [e for e in engines if suffix not in readable[e]]
+    if role == "visual" and "mujoco" in blind:
+        out.warning(
+            2,
+            _link(link),
+            f"has <visual> mesh {filename!r} in format {suffix or '(none)'}, which MuJoCo "
+            "cannot read: the converter leaves this visual out (it only draws)",
+            "convert the mesh to .stl or .obj to see it in MuJoCo's renderer",
+        )
+        blind.remove("mujoco")
     if blind:
         who = " and ".join({"mujoco": "MuJoCo", "pybullet": "PyBullet"}[e] for e in blind)
         out.error(

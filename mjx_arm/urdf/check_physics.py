@@ -17,7 +17,7 @@ from pathlib import Path
 
 from mjx_arm.urdf.errors import one_line
 from mjx_arm.urdf.findings import _Findings, _joint, _link, _number, _Tree
-from mjx_arm.urdf.inertia import inertia_problem, inertia_tensor
+from mjx_arm.urdf.inertia import inertia_problem, inertia_tensor, is_frame
 from mjx_arm.urdf.meshes import (
     AssetPathError,
     resolve_asset,
@@ -39,19 +39,37 @@ def _check_inertials(tree: _Tree, engines: tuple[str, ...], repair: bool, out: _
             out.error(3, _link(name), f"has negative mass {mass:g}", "give the mass in kg, > 0")
             continue
         if name in moving:
-            _check_moving_mass(name, elem, mass or 0.0, moving[name], out)
+            _check_moving_mass(name, elem, mass or 0.0, moving[name], engines, out)
         if inertial is None:
             continue
+        if not moving.get(name) and is_frame(elem):
+            continue  # a massless frame on a fixed joint: nothing to check, see is_frame
         # The converter checks every <inertia>; PyBullet uses those of massive or moving links.
         if (mass or 0.0) > 0 or name in moving or "mujoco" in engines:
             _check_tensor(name, inertial, engines, repair, needed=(mass or 0.0) > 0, out=out)
 
 
 def _check_moving_mass(
-    name: str, elem: ET.Element, mass: float, direct: bool, out: _Findings
+    name: str,
+    elem: ET.Element,
+    mass: float,
+    direct: bool,
+    engines: tuple[str, ...],
+    out: _Findings,
 ) -> None:
-    """A moving link needs mass; a massless frame without collision geometry is allowed."""
+    """A moving link needs mass; a massless frame without collision geometry is allowed, and
+    for MuJoCo alone also one with collision geometry on a fixed joint (welded to its parent,
+    its shapes collide and add no mass; PyBullet would give it 1 kg without <inertial>)."""
     if mass > 0 or not (direct or elem.find("collision") is not None):
+        return
+    if not direct and engines == ("mujoco",):
+        out.warning(
+            3,
+            _link(name),
+            "is a massless frame on a fixed joint with collision geometry: MuJoCo keeps it "
+            "welded to its parent, its shapes collide and add no mass",
+            "add <inertial> with the link's mass if its shapes stand for a real part",
+        )
         return
     how = "is moved by a non-fixed joint" if direct else "moves and has collision geometry"
     if elem.find("inertial") is None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import xml.etree.ElementTree as ET
 from collections.abc import Mapping
 
 import numpy as np
@@ -83,3 +84,23 @@ def repair_inertia(inertia: np.ndarray) -> np.ndarray:
 
 def _fmt(values: np.ndarray) -> str:
     return "[" + ", ".join(f"{v:.6g}" for v in values) + "]"
+
+
+def is_frame(link: ET.Element) -> bool:
+    """A link without mass: no ``<inertial>``, or mass 0 with an all-zero (or no) inertia.
+
+    Description packages mark frames this way (UR's ``base``, ``tool0``, ``ee_link``; Panda's
+    ``panda_link8``). On a fixed joint such a link is welded to its parent and needs no inertia.
+    """
+    inertial = link.find("inertial")
+    if inertial is None:
+        return True
+    mass = inertial.find("mass")
+    try:
+        if mass is not None and float(mass.get("value", "0")) != 0.0:
+            return False
+        inertia = inertial.find("inertia")
+        keys = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
+        return inertia is None or all(float(inertia.get(k, "0")) == 0.0 for k in keys)
+    except ValueError:
+        return False

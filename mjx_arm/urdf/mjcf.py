@@ -12,8 +12,8 @@ import numpy as np
 
 from mjx_arm.urdf.convert_config import ConvertConfig
 from mjx_arm.urdf.errors import ConversionError, one_line
-from mjx_arm.urdf.inertia import inertia_problem, inertia_tensor, repair_inertia
-from mjx_arm.urdf.meshes import resolve_mesh_filename
+from mjx_arm.urdf.inertia import inertia_problem, inertia_tensor, is_frame, repair_inertia
+from mjx_arm.urdf.meshes import MUJOCO_MESH_FORMATS, resolve_mesh_filename
 from mjx_arm.urdf.model import RobotModel, parse_urdf
 from mjx_arm.urdf.safe_xml import read_xml
 from mjx_arm.urdf.scene import add_scene
@@ -141,13 +141,17 @@ def _check_finite(model: mujoco.MjModel, urdf: str | Path) -> None:
 def _prepare_urdf_text(path: Path, config: ConvertConfig) -> str:
     """Resolve mesh paths, check inertias and tell the importer to keep every link apart."""
     root = read_xml(path)
+    _drop_unreadable_visuals(root)
     for mesh in root.iter("mesh"):
         link = _enclosing_link_name(root, mesh)
         mesh.set(
             "filename",
             str(resolve_mesh_filename(mesh.get("filename", ""), path, link, config.package_dirs)),
         )
+    moved = {c.get("link") for j in root.findall("joint") if _moves(j) for c in j.findall("child")}
     for link in root.findall("link"):
+        if link.get("name") not in moved and is_frame(link):
+            continue  # a massless frame welded to its parent (the validator warns)
         _check_or_repair_inertia(link, path, config.repair_inertia)
     for old in root.findall("mujoco"):
         root.remove(old)
@@ -165,6 +169,21 @@ def _prepare_urdf_text(path: Path, config: ConvertConfig) -> str:
     )
     root.insert(0, extension)
     return ET.tostring(root, encoding="unicode")
+
+
+def _moves(joint: ET.Element) -> bool:
+    return joint.get("type", "") not in ("fixed", "")
+
+
+def _drop_unreadable_visuals(root: ET.Element) -> None:
+    """Remove ``<visual>`` elements whose mesh MuJoCo cannot read (Collada, ...): they only
+    draw, and the validator reports each as a warning. Collision meshes stay (an error)."""
+    for link in root.findall("link"):
+        for visual in link.findall("visual"):
+            mesh = visual.find("geometry/mesh")
+            suffix = Path(mesh.get("filename", "")).suffix.lower() if mesh is not None else ""
+            if mesh is not None and suffix not in MUJOCO_MESH_FORMATS:
+                link.remove(visual)
 
 
 def _enclosing_link_name(root: ET.Element, node: ET.Element) -> str:

@@ -1,0 +1,80 @@
+"""Arm URDFs as their description packages publish them convert with no edit by hand.
+
+The robots come from the ``example-robot-data`` package (a pinned test dependency): UR3, UR5 and
+UR10 (Collada visuals, ``package://`` paths, massless frame links ``base``, ``tool0`` and
+``ee_link``, the last with a collision box) and Panda (Collada visuals, frames ``panda_link8``
+and ``panda_hand_tcp``, a mimic finger joint). Warnings are allowed; errors are not.
+"""
+
+from __future__ import annotations
+
+import sysconfig
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+
+from mjx_arm.urdf import ConversionError, to_mjcf
+from mjx_arm.urdf.validate import validate
+
+ROBOTS = Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix/share/example-robot-data/robots"
+ARMS = {  # URDF -> (joints, actuated joints)
+    "ur_description/urdf/ur3_robot.urdf": (6, 6),
+    "ur_description/urdf/ur5_robot.urdf": (6, 6),
+    "ur_description/urdf/ur10_robot.urdf": (6, 6),
+    "panda_description/urdf/panda.urdf": (9, 8),  # 7 arm joints, 2 fingers (one mimics)
+}
+
+pytestmark = pytest.mark.skipif(
+    not ROBOTS.is_dir(), reason="example-robot-data is not installed (pip install -e '.[test]')"
+)
+
+
+@pytest.mark.parametrize("name", sorted(ARMS))
+def test_published_arm_converts_and_compiles(name: str, tmp_path: Path) -> None:
+    path = ROBOTS / name
+    report = validate(path, engine="mujoco", native=False)
+    assert report.ok, report.format()
+    text = to_mjcf(path)
+    model = mujoco.MjModel.from_xml_string(text)
+    joints, actuated = ARMS[name]
+    assert (model.njnt, model.nu) == (joints, actuated)
+    data = mujoco.MjData(model)
+    mujoco.mj_step(model, data)
+    assert np.isfinite(data.qacc).all() and np.isfinite(data.qpos).all()
+
+
+def test_collada_visuals_are_warnings_and_left_out() -> None:
+    path = ROBOTS / "ur_description/urdf/ur5_robot.urdf"
+    report = validate(path, engine="mujoco", native=False)
+    dae = [w for w in report.warnings if ".dae" in w.problem]
+    assert len(dae) == 7 and all("leaves this visual out" in w.problem for w in dae)
+    assert ".dae" not in to_mjcf(path)
+
+
+def test_massless_frame_with_collision_is_a_warning_for_mujoco_only() -> None:
+    path = ROBOTS / "ur_description/urdf/ur5_robot.urdf"
+    mujoco_report = validate(path, engine="mujoco", native=False)
+    frames = [w for w in mujoco_report.warnings if "massless frame" in w.problem]
+    assert [w.element for w in frames] == ["link 'ee_link'"]
+    # PyBullet would give a link without <inertial> 1 kg: still an error there
+    pybullet_report = validate(path, engine="pybullet", native=False)
+    assert any("ee_link" in e.element for e in pybullet_report.errors)
+
+
+def test_mimic_joint_becomes_an_equality() -> None:
+    model = mujoco.MjModel.from_xml_string(to_mjcf(ROBOTS / "panda_description/urdf/panda.urdf"))
+    assert model.neq == 1 and model.eq_type[0] == mujoco.mjtEq.mjEQ_JOINT
+
+
+def test_a_moving_massless_link_stays_a_named_error(tmp_path: Path) -> None:
+    root = ET.parse(ROBOTS / "ur_description/urdf/ur5_robot.urdf").getroot()
+    wrist = next(link for link in root.findall("link") if link.get("name") == "wrist_3_link")
+    wrist.remove(wrist.find("inertial"))
+    path = tmp_path / "ur5_massless_wrist.urdf"
+    ET.ElementTree(root).write(path, encoding="unicode")
+    packages = {"example-robot-data": str(ROBOTS.parent)}  # the copy lies outside the package
+    with pytest.raises(ConversionError, match=r"wrist_3_link.*inertial"):
+        to_mjcf(path, package_dirs=packages)
