@@ -78,3 +78,13 @@ def test_a_moving_massless_link_stays_a_named_error(tmp_path: Path) -> None:
     packages = {"example-robot-data": str(ROBOTS.parent)}  # the copy lies outside the package
     with pytest.raises(ConversionError, match=r"wrist_3_link.*inertial"):
         to_mjcf(path, package_dirs=packages)
+
+
+def test_package_paths_resolve_from_ros_package_path(tmp_path: Path, monkeypatch) -> None:
+    """A copy of the URDF outside its package finds the meshes through ROS_PACKAGE_PATH."""
+    copy = tmp_path / "ur5.urdf"
+    copy.write_text((ROBOTS / "ur_description/urdf/ur5_robot.urdf").read_text())
+    with pytest.raises(ConversionError, match="example-robot-data"):
+        to_mjcf(copy)  # no package folder above tmp_path
+    monkeypatch.setenv("ROS_PACKAGE_PATH", str(ROBOTS.parent))
+    assert mujoco.MjModel.from_xml_string(to_mjcf(copy)).nu == 6

@@ -8,6 +8,7 @@ refused with a :class:`AssetPathError` before anything opens it.
 
 from __future__ import annotations
 
+import os
 import re
 from collections.abc import Mapping
 from pathlib import Path
@@ -40,16 +41,24 @@ class AssetPathError(ConversionError):
 
 
 def find_package_dir(package: str, urdf_path: Path, package_dirs: Mapping[str, str]) -> Path | None:
-    """Directory of ROS package ``package``: from ``package_dirs``, else searched upwards.
+    """Directory of ROS package ``package``: from ``package_dirs``, then the ``ROS_PACKAGE_PATH``
+    variable (folders, ``:``-separated, holding packages or being one), else searched upwards.
 
-    The search looks, from the URDF's folder up :data:`PACKAGE_SEARCH_LEVELS` folders (never at
-    the file system root), for a folder named like the package, either the folder itself or a
-    child of it. A name that is not a plain folder name (``..``, ``a/b``) is never searched for.
+    The upward search looks, from the URDF's folder up :data:`PACKAGE_SEARCH_LEVELS` folders
+    (never at the file system root), for a folder named like the package, either the folder
+    itself or a child of it. A name that is not a plain folder name (``..``, ``a/b``) is never
+    searched for.
     """
     if package in package_dirs:
         return Path(package_dirs[package]).expanduser().resolve()
     if not _PACKAGE_NAME.match(package) or set(package) == {"."}:
         return None
+    for entry in filter(None, os.environ.get("ROS_PACKAGE_PATH", "").split(os.pathsep)):
+        root = Path(entry).expanduser().resolve()
+        if root.name == package and _is_dir(root):
+            return root
+        if _is_dir(root / package):
+            return root / package
     folders = [urdf_path.parent, *urdf_path.parent.parents][: PACKAGE_SEARCH_LEVELS + 1]
     for folder in folders:
         if folder.parent == folder:  # the file system root
