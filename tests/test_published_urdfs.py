@@ -88,3 +88,27 @@ def test_package_paths_resolve_from_ros_package_path(tmp_path: Path, monkeypatch
         to_mjcf(copy)  # no package folder above tmp_path
     monkeypatch.setenv("ROS_PACKAGE_PATH", str(ROBOTS.parent))
     assert mujoco.MjModel.from_xml_string(to_mjcf(copy)).nu == 6
+
+
+def test_missing_joint_limits_name_the_setting_that_supplies_them(tmp_path: Path) -> None:
+    root = ET.parse(ROBOTS / "ur_description/urdf/ur5_robot.urdf").getroot()
+    elbow = next(j for j in root.findall("joint") if j.get("name") == "elbow_joint")
+    for attr in ("effort", "velocity"):
+        del elbow.find("limit").attrib[attr]
+    path = tmp_path / "ur5_no_limits.urdf"
+    ET.ElementTree(root).write(path, encoding="unicode")
+    packages = {"example-robot-data": str(ROBOTS.parent)}
+    with pytest.raises(ConversionError, match=r"--default-effort VALUE"):
+        to_mjcf(path, package_dirs=packages)
+    text = to_mjcf(path, package_dirs=packages, default_effort=28.0, default_velocity=3.15)
+    model = mujoco.MjModel.from_xml_string(text)
+    elbow_id = model.joint("elbow_joint").id
+    assert model.jnt_actfrcrange[elbow_id].tolist() == [-28.0, 28.0]
+    report = validate(
+        path,
+        "mujoco",
+        {"example-robot-data": str(ROBOTS.parent)},
+        False,
+        default_limits={"effort": 28.0, "velocity": 3.15},
+    )
+    assert report.ok and sum("--default-" in w.problem for w in report.warnings) == 2

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -22,8 +23,15 @@ from mjx_arm.urdf.findings import (
 
 
 def _check_joints(
-    tree: _Tree, engines: tuple[str, ...], min_damping: float, out: _Findings
+    tree: _Tree,
+    engines: tuple[str, ...],
+    min_damping: float,
+    out: _Findings,
+    default_limits: Mapping[str, float] | None = None,
 ) -> None:
+    """Joint checks; ``default_limits`` (``effort``/``velocity`` -> value) are what the converter
+    puts where a joint gives none (MuJoCo only)."""
+    defaults = dict(default_limits or {}) if engines == ("mujoco",) else {}
     for j in tree.joints.values():
         if j.type in ("floating", "planar"):
             _check_free_joint(j, engines, out)
@@ -31,9 +39,9 @@ def _check_joints(
             continue
         _check_axis(j, out)
         if j.type in LIMITED_TYPES:
-            _check_limit(j, out)
+            _check_limit(j, out, defaults)
         elif "mujoco" in engines:
-            _check_effort_velocity(j, j.elem.find("limit"), out, for_converter=True)
+            _check_effort_velocity(j, j.elem.find("limit"), out, True, defaults)
         _check_damping(j, engines, min_damping, out)
 
 
@@ -72,7 +80,7 @@ def _check_axis(j: _Joint, out: _Findings) -> None:
         )
 
 
-def _check_limit(j: _Joint, out: _Findings) -> None:
+def _check_limit(j: _Joint, out: _Findings, defaults: Mapping[str, float]) -> None:
     """Revolute and prismatic joints: <limit> with lower < upper, effort > 0, velocity > 0."""
     limit = j.elem.find("limit")
     if limit is None:
@@ -106,31 +114,39 @@ def _check_limit(j: _Joint, out: _Findings) -> None:
             f"has limit lower={lower:g} >= upper={upper:g}",
             "set lower < upper (swap them if they are reversed)",
         )
-    _check_effort_velocity(j, limit, out, for_converter=False)
+    _check_effort_velocity(j, limit, out, False, defaults)
 
 
 def _check_effort_velocity(
-    j: _Joint, limit: ET.Element | None, out: _Findings, for_converter: bool
+    j: _Joint,
+    limit: ET.Element | None,
+    out: _Findings,
+    for_converter: bool,
+    defaults: Mapping[str, float],
 ) -> None:
     why = " (the converter sizes the joint's velocity actuator from them)" if for_converter else ""
-    if limit is None:
+    for attr, unit in (("effort", "N m or N"), ("velocity", "rad/s or m/s")):
+        value = None if limit is None else _number(limit, attr)
+        if not (value is None or isinstance(value, str) or value <= 0):
+            continue
+        shown = "missing" if value is None else f"{value}"
+        if defaults.get(attr, 0.0) > 0:
+            out.warning(
+                2,
+                _joint(j.name),
+                f"has <limit {attr}> {shown}: the converter uses {defaults[attr]:g} "
+                f"(--default-{attr})",
+                f"set {attr} to the joint's positive maximum ({unit})",
+            )
+            continue
         out.error(
             2,
             _joint(j.name),
-            f"has no <limit effort velocity>{why}",
-            "add <limit effort=... velocity=.../> with positive values",
+            f"has <limit {attr}> {shown}, not > 0{why}",
+            f"set {attr} to the joint's positive maximum ({unit}), or convert with "
+            f"--default-{attr} VALUE (ConvertConfig.default_{attr}) to use one value for "
+            "every joint without it",
         )
-        return
-    for attr, unit in (("effort", "N m or N"), ("velocity", "rad/s or m/s")):
-        value = _number(limit, attr)
-        if value is None or isinstance(value, str) or value <= 0:
-            shown = "missing" if value is None else f"{value}"
-            out.error(
-                2,
-                _joint(j.name),
-                f"has <limit {attr}> {shown}, not > 0{why}",
-                f"set {attr} to the joint's positive maximum ({unit})",
-            )
 
 
 def _check_damping(j: _Joint, engines: tuple[str, ...], min_damping: float, out: _Findings) -> None:

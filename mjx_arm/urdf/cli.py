@@ -34,19 +34,24 @@ def cmd_convert(args: argparse.Namespace) -> int:
     from mjx_arm.urdf.validate import validate
 
     package_dirs = _package_dirs(args.package)
+    config = ConvertConfig(
+        scene=args.scene,
+        package_dirs=package_dirs,
+        repair_inertia=args.repair_inertia,
+        default_effort=args.default_effort,
+        default_velocity=args.default_velocity,
+    )
     report = validate(
         args.urdf,
         engine="mujoco",
         package_dirs=package_dirs,
         native=False,
         repair_inertia=args.repair_inertia,
+        default_limits=config.default_limits(),
     )
     if not report.ok:
         print(report.format(), file=sys.stderr)
         return EXIT_INVALID
-    config = ConvertConfig(
-        scene=args.scene, package_dirs=package_dirs, repair_inertia=args.repair_inertia
-    )
     try:
         xml = to_mjcf(args.urdf, config)
     except ConversionError as exc:
@@ -115,4 +120,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="replace inertia tensors that break the triangle inequality",
     )
+    for attr, unit in (("effort", "N m or N"), ("velocity", "rad/s or m/s")):
+        p.add_argument(
+            f"--default-{attr}",
+            type=float,
+            default=0.0,
+            metavar="VALUE",
+            help=f"{attr} limit ({unit}) of every moving joint whose URDF gives none "
+            "(default: none, such a joint is an error)",
+        )
     p.set_defaults(func=cmd_convert)

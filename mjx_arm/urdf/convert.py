@@ -71,6 +71,7 @@ def build_spec(urdf: str | Path, config: ConvertConfig | None = None) -> mujoco.
         package_dirs=config.package_dirs,
         native=False,
         repair_inertia=config.repair_inertia,
+        default_limits=config.default_limits(),
     )
     if not report.ok:
         raise ConversionError(report.format())

@@ -61,6 +61,9 @@ class ConvertConfig:
             from the URDF's folder.
         repair_inertia: replace inertia tensors that break the triangle inequality (or are not
             positive definite) by the nearest valid one instead of failing.
+        default_effort, default_velocity: the effort (N m or N) and velocity (rad/s or m/s)
+            limit of every moving joint whose URDF gives none (or 0); 0 leaves such a joint an
+            error. The validator reports each use as a warning.
         self_collision: let non-neighbouring arm links collide with each other. The task
             models turn it off: the tasks keep the arm near its home pose, and dropping the
             self pairs cuts MJX's contact rows from 374 to about a quarter.
@@ -78,7 +81,13 @@ class ConvertConfig:
     scene: str = "none"
     package_dirs: Mapping[str, str] = field(default_factory=dict)
     repair_inertia: bool = False
+    default_effort: float = 0.0
+    default_velocity: float = 0.0
     self_collision: bool = True
+
+    def default_limits(self) -> dict[str, float]:
+        """``effort``/``velocity`` -> the value the converter supplies where a joint has none."""
+        return {"effort": self.default_effort, "velocity": self.default_velocity}
 
     def replace(self, **changes) -> ConvertConfig:
         """Return a copy with some fields changed."""

@@ -142,6 +142,7 @@ def _prepare_urdf_text(path: Path, config: ConvertConfig) -> str:
     """Resolve mesh paths, check inertias and tell the importer to keep every link apart."""
     root = read_xml(path)
     _drop_unreadable_visuals(root)
+    _fill_limits(root, config.default_limits())
     for mesh in root.iter("mesh"):
         link = _enclosing_link_name(root, mesh)
         mesh.set(
@@ -169,6 +170,25 @@ def _prepare_urdf_text(path: Path, config: ConvertConfig) -> str:
     )
     root.insert(0, extension)
     return ET.tostring(root, encoding="unicode")
+
+
+def _fill_limits(root: ET.Element, defaults: dict[str, float]) -> None:
+    """Give moving joints without an effort or velocity limit the configured default (> 0)."""
+    for joint in root.findall("joint"):
+        if not _moves(joint):
+            continue
+        limit = joint.find("limit")
+        for attr, value in defaults.items():
+            if value <= 0:
+                continue
+            if limit is None:
+                limit = ET.SubElement(joint, "limit")
+            try:
+                missing = float(limit.get(attr, "0")) <= 0
+            except ValueError:
+                missing = False  # not a number: the validator has already said so
+            if missing:
+                limit.set(attr, repr(float(value)))
 
 
 def _moves(joint: ET.Element) -> bool:

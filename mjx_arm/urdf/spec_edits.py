@@ -53,14 +53,15 @@ def _edit_joints(spec: mujoco.MjSpec, model: RobotModel, config: ConvertConfig, 
             if lim is not None and lim.effort > 0:
                 joint.armature = config.armature_per_effort * lim.effort
             continue
-        if lim is None or lim.effort <= 0 or lim.velocity <= 0:
+        effort, velocity = effort_velocity(urdf_joint, config)
+        if effort <= 0 or velocity <= 0:
             raise ConversionError(
                 f"{path}: joint {urdf_joint.name!r} needs <limit effort=... velocity=...> with "
                 "positive values: the velocity actuator's torque cap and speed come from them"
             )
         if not (urdf_joint.damping and urdf_joint.damping > 0):
             joint.damping[0] = config.default_damping
-        joint.armature = config.armature_per_effort * lim.effort
+        joint.armature = config.armature_per_effort * effort
         if config.gravity_compensation:
             joint.actgravcomp = True
         actuated.append(joint)
@@ -69,11 +70,18 @@ def _edit_joints(spec: mujoco.MjSpec, model: RobotModel, config: ConvertConfig, 
     return actuated
 
 
+def effort_velocity(urdf_joint, config: ConvertConfig) -> tuple[float, float]:
+    """A joint's effort and velocity limits, the configured defaults where it gives none."""
+    lim = urdf_joint.limit
+    effort = lim.effort if lim is not None and lim.effort > 0 else config.default_effort
+    velocity = lim.velocity if lim is not None and lim.velocity > 0 else config.default_velocity
+    return effort, velocity
+
+
 def _add_actuators(spec: mujoco.MjSpec, joints, model: RobotModel, config: ConvertConfig) -> None:
     inertia = _min_joint_inertia(spec, [j.name for j in joints])
     for joint in joints:
-        lim = model.joints[joint.name].limit
-        assert lim is not None  # checked in _edit_joints
+        effort, velocity = effort_velocity(model.joints[joint.name], config)
         act = spec.add_actuator()
         act.name = joint.name
         act.target = joint.name
@@ -83,9 +91,9 @@ def _add_actuators(spec: mujoco.MjSpec, joints, model: RobotModel, config: Conve
             kv=float(np.format_float_positional(kv, precision=4, unique=False, fractional=False))
         )
         act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
-        act.ctrlrange = [-lim.velocity, lim.velocity]
+        act.ctrlrange = [-velocity, velocity]
         act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
-        act.forcerange = [-lim.effort, lim.effort]
+        act.forcerange = [-effort, effort]
 
 
 def _min_joint_inertia(spec: mujoco.MjSpec, names: list[str], samples: int = 256) -> dict:

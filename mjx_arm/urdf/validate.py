@@ -40,6 +40,7 @@ def validate(
     native: bool = True,
     repair_inertia: bool = False,
     min_damping_pybullet: float = 0.01,
+    default_limits: Mapping[str, float] | None = None,
 ) -> ValidationReport:
     """Validate a URDF in three layers and return every finding; never raises on bad input.
 
@@ -51,6 +52,9 @@ def validate(
         repair_inertia: report invalid inertia tensors as warnings, since the converter repairs
             them (MuJoCo only; PyBullet loads the file as written).
         min_damping_pybullet: joint damping below which PyBullet is expected to jitter.
+        default_limits: ``effort``/``velocity`` values the converter supplies to joints that
+            give none (``ConvertConfig.default_limits``); with ``engine="mujoco"`` a missing
+            limit with a default is a warning.
 
     Raises:
         ValueError: ``engine`` is not one of the three names.
@@ -61,7 +65,9 @@ def validate(
     out = _Findings(str(path))
     tree = _guarded(out, 1, lambda: _layer1(Path(path), out))
     if tree is not None:
-        _guarded(out, 2, lambda: _check_joints(tree, engines, min_damping_pybullet, out))
+        _guarded(
+            out, 2, lambda: _check_joints(tree, engines, min_damping_pybullet, out, default_limits)
+        )
         _guarded(out, 2, lambda: _check_geometry(tree, engines, dirs, out))
         _guarded(out, 3, lambda: _check_inertials(tree, engines, repair_inertia, out))
         if native and not out.has_errors:
