@@ -146,7 +146,7 @@ def test_final_checkpoint_keeps_the_best_evaluation(tmp_path: Path, keep_best: b
     """A run that ends on its budget saves its best evaluation's params as the last checkpoint
     (keep_best), or the last params (keep_best=False). Checkpoints are captured, not written."""
     from mjx_arm.task.config import task_config
-    from mjx_arm.train.ppo import _Progress
+    from mjx_arm.train.progress import _Progress
 
     config = load_config("cpu", None, _tiny(30, checkpoint_every="10"))
     config = config.replace(keep_best=keep_best)

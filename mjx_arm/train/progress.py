@@ -1,0 +1,159 @@
+"""What a training run does at each evaluation: log the metrics, show the progress bar, write
+checkpoints and transitions, keep the best evaluation, and stop once the run is solved.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import jax
+import numpy as np
+
+from mjx_arm.envs.mjx_physics import PhysicsOverflowError, overflow_message
+from mjx_arm.task.config import TaskConfig
+from mjx_arm.train.config import TrainConfig
+from mjx_arm.train.rundir import RunDir
+
+TRANSITIONS_KEPT = 100
+LOGGED_PREFIXES = ("eval/", "training/")
+
+
+class Solved(Exception):
+    """An evaluation reached ``stop_at_success``: training stops early."""
+
+
+class _Progress:
+    """Run callbacks: metrics to the run dir, a progress bar, checkpoints at an interval.
+
+    Steps are the run's global env steps. Each evaluation's metrics row is written before the
+    checkpoint of the same step, so a run killed between the two loses no row: it resumes from
+    the checkpoint before and drops the rows after it (:meth:`RunDir.truncate_metrics`).
+    """
+
+    def __init__(
+        self, run: RunDir, config: TrainConfig, task: TaskConfig, step_offset: int, quiet: bool
+    ) -> None:
+        from tqdm import tqdm
+
+        self.run, self.config, self.task = run, config, task
+        self.physics: dict[str, Any] = {}
+        self.total = config.num_timesteps
+        self.bar = tqdm(
+            total=self.total,
+            initial=step_offset,
+            unit="step",
+            unit_scale=True,
+            disable=quiet,
+            desc=f"train {config.task}",
+            dynamic_ncols=True,
+        )
+        self.evals = 0
+        self.latest: tuple | None = None
+        # (success, step, params on the host) of the best evaluation after training started
+        self.best: tuple[float, int, Any] | None = None
+        self.times: list[tuple[float, int]] = []
+        self.last_metrics: dict[str, float] = {}
+
+    def policy_params(self, step: int, make_policy, params) -> None:
+        """Keep the newest params (saved by :meth:`progress` when a checkpoint is due)."""
+        self.latest = (make_policy, params)
+
+    def progress(self, step: int, metrics: dict[str, Any]) -> None:
+        """Log one evaluation; save a checkpoint every ``checkpoint_every`` and at the end."""
+        self.times.append((time.monotonic(), int(step)))
+        row = {
+            k: float(np.asarray(v).mean())
+            for k, v in metrics.items()
+            if k.startswith(LOGGED_PREFIXES)
+        }
+        self.last_metrics = row
+        self.run.log_metrics(step, row)
+        self._show(step, row)
+        overflow = row.get("eval/episode_physics_overflow", 0.0)
+        if overflow > 0:
+            raise PhysicsOverflowError(overflow_message(overflow, self.physics))
+        goal = self.config.stop_at_success
+        solved = goal > 0 and row.get("eval/episode_success", 0.0) >= goal
+        if not any("training/" in k for k in row):  # the evaluation before training
+            return
+        self.evals += 1
+        success = row.get("eval/episode_success", 0.0)
+        self._remember_best(step, success)
+        due = self.evals % self.config.checkpoint_every == 0
+        if (due or solved or step >= self.total) and self.latest is not None:
+            make_policy, params = self.latest
+            meta: dict[str, Any] = {}
+            if step >= self.total and not solved and self._best_is_better(success):
+                best_success, best_step, params = self.best
+                meta = {"params_step": best_step, "params_success": best_success}
+                self.bar.write(
+                    f"the final checkpoint keeps the params of step {best_step} "
+                    f"(evaluation success {best_success:.3f}, last {success:.3f})"
+                )
+            self._save(step, make_policy, params, meta)
+        if solved:
+            raise Solved(step)
+
+    def _remember_best(self, step: int, success: float) -> None:
+        """Keep a host copy of the params of the best evaluation so far (ties: the later)."""
+        if not self.config.keep_best or self.latest is None:
+            return
+        if self.best is None or success >= self.best[0]:
+            self.best = (success, step, jax.tree.map(np.asarray, self.latest[1]))
+
+    def _best_is_better(self, success: float) -> bool:
+        return self.config.keep_best and self.best is not None and self.best[0] > success
+
+    def _show(self, step: int, row: dict[str, float]) -> None:
+        self.bar.n = step
+        self.bar.set_postfix(
+            reward=f"{row.get('eval/episode_reward', float('nan')):.1f}",
+            success=f"{row.get('eval/episode_success', float('nan')):.2f}",
+        )
+        self.bar.refresh()
+
+    def _save(self, step: int, make_policy, params, meta: dict[str, Any] | None = None) -> None:
+        params = jax.tree.map(np.asarray, params)
+        transitions = rollout_transitions(make_policy, params, self.task, seed=step)
+        meta = {"task": self.config.task, **(meta or {})}
+        self.run.save_checkpoint(step, params, meta, transitions)
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+def rollout_transitions(make_policy, params, task: TaskConfig, seed: int) -> dict[str, np.ndarray]:
+    """One evaluation episode in the CPU MuJoCo env; the last 100 transitions as arrays.
+
+    Returns:
+        obs ``(T, 22)``, action ``(T, 6)``, reward ``(T,)``, done ``(T,)``, ee_pos ``(T, 3)``,
+        contact_force ``(T,)`` with T <= 100.
+    """
+    from mjx_arm.envs.mujoco_env import MujocoArmEnv
+    from mjx_arm.task.observation import flatten_obs
+
+    policy = jax.jit(make_policy(params, deterministic=True))
+    env = MujocoArmEnv(task)
+    obs, _ = env.reset(seed=int(seed) % (2**31))
+    key = jax.random.PRNGKey(0)
+    rows: dict[str, list] = {
+        k: [] for k in ("obs", "action", "reward", "done", "ee_pos", "contact_force")
+    }
+    for _ in range(task.episode_steps):
+        flat = flatten_obs(np, obs)
+        action = np.asarray(policy(flat, key)[0], dtype=np.float32)
+        obs, reward, terminated, _, info = env.step(action)
+        for name, value in (
+            ("obs", flat),
+            ("action", action),
+            ("reward", reward),
+            ("done", terminated),
+            ("ee_pos", obs["ee_pose"][:3]),
+            ("contact_force", info["contact_force_norm"]),
+        ):
+            rows[name].append(value)
+        if terminated:
+            break
+    env.close()
+    return {k: np.asarray(v[-TRANSITIONS_KEPT:]) for k, v in rows.items()}
