@@ -76,3 +76,20 @@ def test_c_batch_matches_the_cpu_env_on_the_toy_task(at_rest) -> None:
     cpu_rewards, cpu_dones = _cpu_rewards(at_rest)
     assert dones == cpu_dones
     np.testing.assert_allclose(rewards, cpu_rewards, atol=REWARD_ATOL)
+
+
+def test_installed_packages_add_tasks_through_entry_points(monkeypatch) -> None:
+    """A package's ``mjx_arm.tasks`` entry point is found by name and loaded on first use."""
+    from importlib.metadata import EntryPoint
+
+    from mjx_arm.task import registry
+
+    point = EntryPoint(name="hover_pkg", value="toy_task:HOVER", group=registry.ENTRY_POINT_GROUP)
+    monkeypatch.setattr(registry, "entry_points", lambda group: [point])
+    monkeypatch.setattr(registry, "_TASKS", dict(registry._TASKS))
+    registry._load_entry_points.cache_clear()
+    try:
+        assert "hover_pkg" in task_names()
+        assert get_task("hover_pkg") is HOVER
+    finally:
+        registry._load_entry_points.cache_clear()
