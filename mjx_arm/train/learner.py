@@ -2,8 +2,9 @@
 
 Brax's ``ppo.train`` replicates its training step with ``jax.pmap``, and XLA crashes compiling
 MJX's graph under pmap on several GPUs (jax 0.11). This module keeps Brax's PPO (its networks,
-``compute_ppo_loss``, running-statistics normaliser, ``generate_unroll`` and the same optax
-optimiser) and compiles the epoch with ``jax.jit`` over a :class:`jax.sharding.Mesh` instead:
+its loss, :mod:`mjx_arm.train.losses`, running-statistics normaliser, ``generate_unroll`` and
+the same optax optimiser) and compiles the epoch with ``jax.jit`` over a
+:class:`jax.sharding.Mesh` instead:
 
 - the env batch is sharded over the mesh axis ``envs`` (each device steps ``num_envs / D`` envs);
 - params, optimiser and normaliser state are replicated on every device;
@@ -27,16 +28,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optax
-from brax.training import acting, gradients
+from brax.training import acting
 from brax.training import types as brax_types
 from brax.training.acme import running_statistics, specs
-from brax.training.agents.ppo import losses as ppo_losses
 from brax.training.agents.ppo import networks as ppo_networks
 from brax.training.agents.ppo.train import TrainingState
 from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
 from mjx_arm.train.config import TrainConfig
+from mjx_arm.train.losses import init_params, loss_and_grad
 from mjx_arm.train.networks import make_networks
 
 ENV_AXIS = "envs"
@@ -128,30 +129,14 @@ class Learner:
         self.optimizer = optax.chain(
             optax.clip_by_global_norm(config.max_grad_norm), optax.adam(config.learning_rate)
         )
-        loss = functools.partial(
-            ppo_losses.compute_ppo_loss,
-            ppo_network=self.network,
-            entropy_cost=config.entropy_cost,
-            discounting=config.discounting,
-            reward_scaling=config.reward_scaling,
-            gae_lambda=config.gae_lambda,
-            clipping_epsilon=config.clipping_epsilon,
-            normalize_advantage=True,
-            vf_coefficient=config.vf_loss_coefficient,
-        )
-        # pmap_axis_name=None: the loss is a mean over the global minibatch; under jit over the
-        # mesh XLA reduces the gradient across devices itself.
-        self._loss_and_grad = gradients.loss_and_pgrad(loss, pmap_axis_name=None, has_aux=True)
+        self._loss_and_grad = loss_and_grad(config, self.network)
         self.replicated = NamedSharding(mesh, P())
 
     # ------------------------------------------------------------------ state
 
     def init(self, key_policy: jax.Array, key_value: jax.Array) -> TrainingState:
         """Fresh network params, optimiser and normaliser state, replicated on the mesh."""
-        params = ppo_losses.PPONetworkParams(
-            policy=self.network.policy_network.init(key_policy),
-            value=self.network.value_network.init(key_value),
-        )
+        params = init_params(self.network, key_policy, key_value)
         obs_spec = specs.Array((self.observation_size,), jnp.dtype("float32"))
         state = TrainingState(
             optimizer_state=self.optimizer.init(params),
