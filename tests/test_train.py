@@ -166,3 +166,29 @@ def test_final_checkpoint_keeps_the_best_evaluation(tmp_path: Path, keep_best: b
     else:
         np.testing.assert_array_equal(params["w"], [30.0, 30.0])
         assert meta == {}
+
+
+def test_a_checkpoint_restores_the_params_it_saved(tmp_path: Path) -> None:
+    """Fresh params saved as a checkpoint and read back (as a resumed run does) are the same
+    arrays, the normaliser's sample count included, and go back into the training state."""
+    import jax
+
+    from mjx_arm.task.observation import OBS_SIZE
+    from mjx_arm.train.checkpoints import restore_brax_params
+    from mjx_arm.train.learner import Learner, local_devices, make_mesh
+    from mjx_arm.train.loop import ACTION_SIZE
+
+    config = load_config("cpu", None, _tiny(4000))
+    learner = Learner(config, OBS_SIZE, ACTION_SIZE, make_mesh(local_devices(1)))
+    state = learner.init(jax.random.PRNGKey(0), jax.random.PRNGKey(1))
+    saved = learner.params(state)
+    run = RunDir(tmp_path / "run")
+    run.save_checkpoint(640, saved, {"task": "reach"})
+    restored = restore_brax_params(RunDir.load_params(run.latest_checkpoint()))
+    assert int(restored[0].count.lo) == int(saved[0].count.lo)
+    for a, b in zip(jax.tree.leaves(saved), jax.tree.leaves(restored), strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    state = learner.restore(state, restored)
+    for a, b in zip(jax.tree.leaves(saved), jax.tree.leaves(learner.params(state)), strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    assert int(RunDir.load_meta(run.latest_checkpoint())["step"]) == 640

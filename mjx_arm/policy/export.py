@@ -53,7 +53,7 @@ def find_checkpoint(run_dir: str | Path, step: int | None = None) -> Path:
 
 def available_steps(run_dir: str | Path) -> list[int]:
     """Steps of every checkpoint in ``run_dir``, ascending."""
-    from mjx_arm.train.rundir import CHECKPOINT_PREFIX
+    from mjx_arm.train.checkpoints import CHECKPOINT_PREFIX
 
     folder = Path(run_dir) / "checkpoints"
     if not folder.exists():

@@ -10,7 +10,6 @@ again (google/brax#655), and a run resumes on any number of devices.
 
 from __future__ import annotations
 
-import functools
 import itertools
 import time
 from dataclasses import dataclass
@@ -18,11 +17,11 @@ from pathlib import Path
 from typing import Any
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from mjx_arm.envs.backend import make_batched_env, resolve_backend
 from mjx_arm.task.config import TaskConfig, task_config
+from mjx_arm.train.checkpoints import restore_brax_params
 from mjx_arm.train.config import TrainConfig
 from mjx_arm.train.learner import local_devices
 from mjx_arm.train.loop import Callbacks, resolve_partition, run_ppo
@@ -131,30 +130,6 @@ def make_envs(config: TrainConfig, task: TaskConfig) -> tuple[Any, Any]:
         return train_env, train_env
     eval_env = make_batched_env(task, config.backend, config.physics, config.num_eval_envs)
     return train_env, eval_env
-
-
-def restore_brax_params(raw: Any) -> tuple:
-    """Brax's (normalizer, policy, value) from a checkpoint read back without a target.
-
-    orbax returns plain dicts; Brax needs its running-statistics dataclass (with the UInt64
-    sample count) for the normaliser. Policy and value params are plain dicts already.
-    """
-    from brax.training import types as brax_types
-    from brax.training.acme import running_statistics
-
-    norm, policy, value = raw
-    count = norm["count"]
-    if isinstance(count, dict):
-        count = brax_types.UInt64(hi=jnp.asarray(count["hi"]), lo=jnp.asarray(count["lo"]))
-    state = running_statistics.RunningStatisticsState(
-        mean=jnp.asarray(norm["mean"]),
-        std=jnp.asarray(norm["std"]),
-        count=count,
-        summed_variance=jnp.asarray(norm["summed_variance"]),
-        std_eps=float(np.asarray(norm.get("std_eps", 0.0))),
-    )
-    to_jax = functools.partial(jax.tree.map, jnp.asarray)
-    return state, to_jax(policy), to_jax(value)
 
 
 def _timings(times: list[tuple[float, int]], config: TrainConfig) -> tuple[float, float]:

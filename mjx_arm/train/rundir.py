@@ -6,6 +6,8 @@ Layout::
     RUN_DIR/metrics.csv                      one row per evaluation
     RUN_DIR/tb/                              TensorBoard event files
     RUN_DIR/checkpoints/step_000001234/      params (orbax) + meta.json + transitions.npz
+
+The checkpoints themselves are written and read by :mod:`mjx_arm.train.checkpoints`.
 """
 
 from __future__ import annotations
@@ -21,7 +23,11 @@ from typing import Any
 
 import numpy as np
 
-CHECKPOINT_PREFIX = "step_"
+from mjx_arm.train import checkpoints as ckpt
+from mjx_arm.train.checkpoints import CHECKPOINT_PREFIX
+
+__all__ = ["CHECKPOINT_PREFIX", "MIN_FREE_BYTES", "RunDir", "RunDirError"]
+
 MIN_FREE_BYTES = 64 * 2**20  # a checkpoint of the default networks takes about 3 MiB
 
 
@@ -149,7 +155,7 @@ class RunDir:
 
     def checkpoint_dir(self, step: int) -> Path:
         """Folder of the checkpoint at ``step``."""
-        return self.checkpoints / f"{CHECKPOINT_PREFIX}{step:012d}"
+        return ckpt.checkpoint_dir(self.checkpoints, step)
 
     def save_checkpoint(
         self,
@@ -158,57 +164,17 @@ class RunDir:
         meta: dict[str, Any],
         transitions: dict[str, np.ndarray] | None = None,
     ) -> Path:
-        """Save params (normaliser, policy, value) with orbax, ``meta.json`` and transitions.
-
-        Atomic: everything is written into a hidden folder that is then renamed to
-        ``step_N``, so a run killed mid-save never leaves a half-written checkpoint behind
-        under a name :meth:`latest_checkpoint` would take.
-        """
-        import orbax.checkpoint as ocp
-
+        """Save the checkpoint of ``step``, atomically (see :mod:`mjx_arm.train.checkpoints`)."""
         folder = self.checkpoint_dir(step)
-        partial = folder.with_name(f".partial-{folder.name}")
-        shutil.rmtree(partial, ignore_errors=True)
-        partial.mkdir(parents=True)
-        ocp.PyTreeCheckpointer().save((partial / "params").resolve(), params, force=True)
-        if transitions is not None:
-            self.save_transitions(partial, transitions)
-        (partial / "meta.json").write_text(json.dumps({"step": step, **meta}, indent=2))
-        _fsync_tree(partial)
-        if folder.exists():  # the same step saved again (a resumed run's last checkpoint)
-            shutil.rmtree(folder)
-        os.replace(partial, folder)
-        return folder
+        return ckpt.save_checkpoint(folder, step, params, meta, transitions)
 
     def latest_checkpoint(self) -> Path | None:
         """The newest checkpoint folder, or None."""
-        if not self.checkpoints.exists():
-            return None
-        found = sorted(
-            p
-            for p in self.checkpoints.iterdir()
-            if p.name.startswith(CHECKPOINT_PREFIX) and (p / "meta.json").exists()
-        )
-        return found[-1] if found else None
+        return ckpt.latest_checkpoint(self.checkpoints)
 
-    @staticmethod
-    def load_meta(folder: Path) -> dict[str, Any]:
-        """The ``meta.json`` of a checkpoint folder."""
-        return json.loads((folder / "meta.json").read_text())
-
-    @staticmethod
-    def load_params(folder: Path) -> Any:
-        """The params saved in a checkpoint folder."""
-        import orbax.checkpoint as ocp
-
-        return ocp.PyTreeCheckpointer().restore((folder / "params").resolve())
-
-    @staticmethod
-    def save_transitions(folder: Path, transitions: dict[str, np.ndarray]) -> Path:
-        """Write ``transitions.npz`` (obs, action, reward, done, ...) into a checkpoint folder."""
-        path = folder / "transitions.npz"
-        np.savez_compressed(path, **transitions)
-        return path
+    load_meta = staticmethod(ckpt.load_meta)
+    load_params = staticmethod(ckpt.load_params)
+    save_transitions = staticmethod(ckpt.save_transitions)
 
     def close(self) -> None:
         """Flush and close TensorBoard."""
@@ -233,14 +199,6 @@ def _complete(row: dict[str, Any], fields: list[str]) -> bool:
     except (TypeError, ValueError):
         return False
     return True
-
-
-def _fsync_tree(folder: Path) -> None:
-    """Flush every file under ``folder`` to disk before it is renamed into place."""
-    for path in folder.rglob("*"):
-        if path.is_file():
-            with path.open("rb") as f:
-                os.fsync(f.fileno())
 
 
 def _existing_fields(path: Path) -> list[str] | None:
