@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from mjx_arm.task.config import TaskConfig, task_config
-from mjx_arm.task.observation import obs_slices
+from mjx_arm.task.observation import n_joints_of, obs_slices
 
 REQUIRED_KEYS = ("obs", "reward", "ee_pos", "contact_force")
 DEFAULT_WIDTH, DEFAULT_HEIGHT = 800, 600
@@ -156,7 +156,7 @@ def _plot_reward(ax, steps: np.ndarray, reward: np.ndarray) -> None:
 
 
 def _plot_position(ax, steps: np.ndarray, traj: dict[str, Any]) -> None:
-    target = traj["obs"][:, obs_slices()["target_rel"]]
+    target = traj["obs"][:, obs_slices(n_joints_of(traj["obs"].shape[-1]))["target_rel"]]
     colors = ("tab:red", "tab:green", "tab:blue")
     for i, (axis, color) in enumerate(zip("xyz", colors, strict=True)):
         ax.plot(steps, traj["ee_pos"][:, i], color=color, label=f"ee {axis}")
@@ -193,22 +193,27 @@ def fit_framebuffer(model: Any, width: int, height: int) -> None:
 
 
 def render_frames(
-    traj: dict[str, Any], task: TaskConfig, width: int = DEFAULT_WIDTH, height: int = DEFAULT_HEIGHT
+    traj: dict[str, Any],
+    task: TaskConfig,
+    width: int = DEFAULT_WIDTH,
+    height: int = DEFAULT_HEIGHT,
+    arm: Any = None,
 ) -> Iterator[np.ndarray]:
-    """MuJoCo frames ``(height, width, 3)`` uint8 of each step's joint angles and target."""
+    """MuJoCo frames ``(height, width, 3)`` uint8 of each step's joint angles and target, on
+    ``arm`` (default: the shipped arm)."""
     import mujoco
 
     from mjx_arm.envs.mujoco_env import MujocoArmEnv
     from mjx_arm.task import sampling
     from mjx_arm.urdf.scene import TARGET_BODY
 
-    env = MujocoArmEnv(task, render_mode="rgb_array", width=width, height=height)
+    env = MujocoArmEnv(task, arm, render_mode="rgb_array", width=width, height=height)
     fit_framebuffer(env.model, width, height)
     env.reset(seed=0)
     model, data = env.model, env.data
     mocap = int(model.body_mocapid[model.body(TARGET_BODY).id])
     offset = sampling.target_point(np, np.zeros(3), task)
-    s = obs_slices()
+    s = obs_slices(env.arm.n_joints)
     try:
         for obs in np.asarray(traj["obs"], dtype=np.float64):
             data.qpos[env.ids.qpos_adr] = obs[s["joint_angles"]]

@@ -37,6 +37,7 @@ rest so the F/T sensor has a reading, and puts the joints back at the sampled an
 from __future__ import annotations
 
 import functools
+import operator
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from itertools import combinations
@@ -51,13 +52,14 @@ with native_output_silenced((STDOUT, STDERR)):  # "pybullet build time: ..."
     import pybullet
     from pybullet_utils.bullet_client import BulletClient
 
-from mjx_arm.envs.arm import ArmInfo
+from mjx_arm.envs.arm import ArmInfo, arm_info
 from mjx_arm.envs.base import DEFAULT_HEIGHT, DEFAULT_WIDTH, BaseRobotEnv, PhysicsReading
 from mjx_arm.paths import asset
 from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.wrench import external_wrench
-from mjx_arm.urdf.convert import ConvertConfig, load_model
+from mjx_arm.urdf.arm_config import ArmConfig
+from mjx_arm.urdf.convert import load_model
 from mjx_arm.urdf.scene import CAMERA_EYE, CAMERA_FOVY, CAMERA_TARGET
 
 GRAVITY = (0.0, 0.0, -9.81)
@@ -77,10 +79,10 @@ class JointServo:
     """The joint drive of the converted MuJoCo model, per actuated joint in contract order.
 
     Attributes:
-        kv: velocity gain of the actuator (N m s/rad), ``(6,)``.
-        damping: joint damping (N m s/rad), ``(6,)``.
-        effort: torque cap of the actuator (N m), ``(6,)``.
-        armature: reflected rotor inertia (kg m^2), ``(6,)``.
+        kv: velocity gain of the actuator (N m s/rad), ``(n,)``.
+        damping: joint damping (N m s/rad), ``(n,)``.
+        effort: torque cap of the actuator (N m), ``(n,)``.
+        armature: reflected rotor inertia (kg m^2), ``(n,)``.
     """
 
     kv: tuple[float, ...]
@@ -111,9 +113,11 @@ class JointServo:
 
 
 @functools.cache
-def _servo_cached(urdf: Path, mtime: float, sim_dt: float, names: tuple[str, ...]) -> JointServo:
+def _servo_cached(config: ArmConfig, mtime: float, sim_dt: float) -> JointServo:
     del mtime  # part of the cache key only
-    model = load_model(urdf, ConvertConfig(sim_dt=sim_dt))
+    arm = arm_info(config)
+    model = load_model(arm.urdf, arm.convert_config(sim_dt=sim_dt))
+    names = arm.joint_names
     actuators = [model.actuator(name) for name in names]
     joints = [model.joint(name) for name in names]
     return JointServo(
@@ -126,7 +130,7 @@ def _servo_cached(urdf: Path, mtime: float, sim_dt: float, names: tuple[str, ...
 
 def joint_servo(arm: ArmInfo, sim_dt: float) -> JointServo:
     """The servo of the MuJoCo model converted from ``arm.urdf`` (cached per file version)."""
-    return _servo_cached(arm.urdf, arm.urdf.stat().st_mtime, sim_dt, arm.joint_names)
+    return _servo_cached(arm.config, arm.urdf.stat().st_mtime, sim_dt)
 
 
 @dataclass(frozen=True)
@@ -134,10 +138,13 @@ class ArmIds:
     """PyBullet indices of the arm, looked up by name (link index = joint index).
 
     Attributes:
-        joints: the six actuated joints, contract order.
-        ft: the fixed joint of the wrist F/T reading; its child link is the tool link.
+        joints: the n actuated joints, contract order.
+        ft: the joint of the wrist F/T reading (the fixed F/T joint, or the last arm joint);
+            its child link is the tool link.
         ee: the end-effector link.
         read: what one ``getJointStates`` call reads: ``joints`` then ``ft``.
+        dofs: every moving joint (the arm's and a gripper's): inverse dynamics needs them all.
+        arm_in_dofs: where each of ``joints`` sits in ``dofs``.
         tool_com: the tool link's centre of mass in the tool link frame (m), ``(3,)``; PyBullet
             reports the F/T torque about this point.
         inertia: principal inertia (kg m^2) of each actuated joint's child link with the
@@ -149,6 +156,8 @@ class ArmIds:
     ft: int
     ee: int
     read: tuple[int, ...]
+    dofs: tuple[int, ...]
+    arm_in_dofs: tuple[int, ...]
     tool_com: np.ndarray
     inertia: tuple[tuple[float, float, float], ...]
     self_collision_off: tuple[tuple[int, int], ...]
@@ -186,7 +195,7 @@ class PybulletArmEnv(BaseRobotEnv):
 
     Args:
         task: the task configuration (default: Touch).
-        urdf: the arm URDF (default: the shipped arm).
+        arm: the arm (a URDF, an arm file or an ArmConfig; default: the shipped arm).
         render_mode: None, "rgb_array" or "human".
         width, height: frame size (pixels).
     """
@@ -196,12 +205,12 @@ class PybulletArmEnv(BaseRobotEnv):
     def __init__(
         self,
         task: TaskConfig | None = None,
-        urdf: str | Path | None = None,
+        arm: str | Path | ArmConfig | None = None,
         render_mode: str | None = None,
         width: int = DEFAULT_WIDTH,
         height: int = DEFAULT_HEIGHT,
     ) -> None:
-        super().__init__(task, urdf, render_mode, width, height)
+        super().__init__(task, arm, render_mode, width, height)
         self.servo = joint_servo(self.arm, self.task.sim_dt)
         with native_output_silenced():  # "argv[0]="
             self.client = BulletClient(connection_mode=pybullet.DIRECT)
@@ -210,6 +219,8 @@ class PybulletArmEnv(BaseRobotEnv):
         self._load_flags = 0 if render_mode else pybullet.URDF_IGNORE_VISUAL_SHAPES
         self.ids = self._lookup_ids()
         self._zeros = [0.0] * len(self.ids.joints)
+        self._dof_zeros = [0.0] * len(self.ids.dofs)
+        self._pick = operator.itemgetter(*self.ids.arm_in_dofs)
         self._u = list(self._zeros)
         self._target_body = sampling.target_body_pos(np, np.full(3, 0.5), self.task)
         self._tool_before = (np.zeros(3), np.zeros(3))
@@ -233,12 +244,15 @@ class PybulletArmEnv(BaseRobotEnv):
         joint = {info[1].decode(): info[0] for info in infos}
         link = {info[12].decode(): info[0] for info in infos}
         joints = tuple(joint[name] for name in self.arm.joint_names)
-        ft = joint[self.arm.ft_joint]
+        ft = link[self.arm.ft_link]  # the joint above the tool link (link index = joint index)
+        dofs = tuple(info[0] for info in infos if info[2] != pybullet.JOINT_FIXED)
         return ArmIds(
             joints=joints,
             ft=ft,
             ee=link[self.arm.ee_link],
             read=(*joints, ft),
+            dofs=dofs,
+            arm_in_dofs=tuple(dofs.index(j) for j in joints),
             tool_com=np.array(c.getDynamicsInfo(arm, ft)[3]),
             inertia=tuple(
                 inertia_with_armature(c, arm, j, a)
@@ -311,11 +325,13 @@ class PybulletArmEnv(BaseRobotEnv):
         self._u = [float(v) for v in qdot_target]
 
     def _physics_step(self, n_substeps: int) -> None:
-        calls, body, joints, zeros = self._calls, self.body, self.ids.joints, self._zeros
+        calls, body, joints, zeros = self._calls, self.body, self.ids.joints, self._dof_zeros
+        dofs, pick = self.ids.dofs, self._pick
         for i in range(n_substeps):
-            states = calls.get_joint_states(body, joints)
+            states = calls.get_joint_states(body, dofs)
             gravity = calls.inverse_dynamics(body, [s[0] for s in states], zeros, zeros)
-            torque = self.servo.torque(self._u, [s[1] for s in states], gravity)
+            qdot = [s[1] for s in pick(states)]  # the arm's joints (5 or more: a tuple)
+            torque = self.servo.torque(self._u, qdot, pick(gravity))
             calls.set_motors(body, joints, pybullet.TORQUE_CONTROL, forces=torque)
             if i == n_substeps - 1:
                 self._tool_before = self._tool_velocity()

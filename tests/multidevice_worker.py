@@ -20,7 +20,6 @@ from jax.sharding import PartitionSpec as P
 from mjx_arm.task import OBS_SIZE
 from mjx_arm.train.config import load_config
 from mjx_arm.train.learner import ENV_AXIS, Learner, make_mesh
-from mjx_arm.train.loop import ACTION_SIZE
 from mjx_arm.train.ppo import train
 from mjx_arm.train.rundir import RunDir
 
@@ -99,7 +98,7 @@ def gradient_errors() -> dict[str, float]:
     grads = {}
     for count in (1, 2):
         mesh = make_mesh(jax.local_devices()[:count])
-        learner = Learner(config, OBS_SIZE, ACTION_SIZE, mesh)
+        learner = Learner(config, OBS_SIZE, 6, mesh)
         state = learner.init(jax.random.PRNGKey(0), jax.random.PRNGKey(1))
         data = _transitions(learner, state, ENVS, STEPS, jax.random.PRNGKey(2))
         inputs = (state.params, state.normalizer_params, data)

@@ -110,8 +110,8 @@ def test_config_rejects_bad_settings():
 def test_flags_come_from_the_config():
     parser = argparse.ArgumentParser()
     add_arguments(parser, ParityConfig)
-    args = parser.parse_args(["--jitter-command", "1"])
-    with pytest.raises(ValueError, match="jitter_command"):
+    args = parser.parse_args(["--press-boxes", "99"])
+    with pytest.raises(ValueError, match="press_boxes"):
         from_arguments(ParityConfig(), args)
     args = parser.parse_args(["--sequences", "7", "--engines", "mujoco", "mjx", "--seconds", "1.5"])
     config = from_arguments(ParityConfig.quick(), args)

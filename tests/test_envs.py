@@ -326,7 +326,7 @@ def test_invalid_urdf_stops_construction(
     broken.write_text(breakage(text))
     assert broken.read_text() != text
     with pytest.raises(UrdfError, match=message) as err:
-        gym.make(env_id, engine=engine, urdf=broken)
+        gym.make(env_id, engine=engine, arm=broken)
     assert str(broken) in str(err.value)
     assert "Fix:" in str(err.value)
 

@@ -54,13 +54,26 @@ def test_collada_visuals_are_warnings_and_left_out() -> None:
     assert ".dae" not in to_mjcf(path)
 
 
-def test_massless_frame_with_collision_is_a_warning_for_mujoco_only() -> None:
+@pytest.mark.parametrize("engine", ["mujoco", "pybullet"])
+def test_massless_frame_with_collision_is_a_warning(engine: str) -> None:
+    # UR's ee_link writes out mass 0 (PyBullet keeps 0), and carries a collision box
     path = ROBOTS / "ur_description/urdf/ur5_robot.urdf"
-    mujoco_report = validate(path, engine="mujoco", native=False)
-    frames = [w for w in mujoco_report.warnings if "massless frame" in w.problem]
+    report = validate(path, engine=engine, native=False)
+    frames = [w for w in report.warnings if "massless frame" in w.problem]
     assert [w.element for w in frames] == ["link 'ee_link'"]
-    # PyBullet would give a link without <inertial> 1 kg: still an error there
-    pybullet_report = validate(path, engine="pybullet", native=False)
+    assert not report.errors
+
+
+def test_frame_without_inertial_is_an_error_for_pybullet_only(tmp_path: Path) -> None:
+    root = ET.parse(ROBOTS / "ur_description/urdf/ur5_robot.urdf").getroot()
+    ee = next(link for link in root.findall("link") if link.get("name") == "ee_link")
+    ee.remove(ee.find("inertial"))  # PyBullet would invent 1 kg for it
+    path = tmp_path / "ur5_no_inertial.urdf"
+    ET.ElementTree(root).write(path, encoding="unicode")
+    packages = {"example-robot-data": str(ROBOTS.parent)}
+    mujoco_report = validate(path, engine="mujoco", native=False, package_dirs=packages)
+    assert not mujoco_report.errors
+    pybullet_report = validate(path, engine="pybullet", native=False, package_dirs=packages)
     assert any("ee_link" in e.element for e in pybullet_report.errors)
 
 

@@ -18,7 +18,7 @@ from mjx_arm.task import observation as obs_lib
 from mjx_arm.task import reach_config, sampling, touch_config
 from mjx_arm.task import reward as reward_lib
 from mjx_arm.task import touch as touch_lib
-from mjx_arm.task.config import REWARD_TERMS, RewardConfig, TaskConfig
+from mjx_arm.task.config import HOME_QPOS, REWARD_TERMS, RewardConfig, TaskConfig
 from mjx_arm.task.wrench import ToolInertia, external_wrench, tool_inertia
 from mjx_arm.urdf.scene import box_top_offset
 
@@ -404,9 +404,9 @@ def test_random_obs_always_inside_space() -> None:
 
 @pytest.mark.parametrize("preset", [reach_config, touch_config])
 def test_sampling_inside_bounds(preset) -> None:
-    cfg = preset()
+    cfg = preset().for_arm(HOME_QPOS, 1.0)
     rng = np.random.default_rng(1)
-    u = rng.uniform(size=(500, sampling.N_UNIFORMS))
+    u = rng.uniform(size=(500, sampling.n_uniforms(6)))
     u[0], u[1] = 0.0, np.nextafter(1.0, 0.0)  # the edges of [0, 1)
     qpos = sampling.initial_qpos(np, u[:, :6], cfg)
     assert qpos.shape == (500, 6)
@@ -516,11 +516,10 @@ def test_wrench_batched() -> None:
 
 
 def test_tool_inertia_of_shipped_arm() -> None:
-    from mjx_arm.envs.arm import EE_LINK, FT_JOINT
     from mjx_arm.paths import default_arm_urdf
     from mjx_arm.urdf.model import parse_urdf
 
-    tool = tool_inertia(parse_urdf(default_arm_urdf()), FT_JOINT, EE_LINK)
+    tool = tool_inertia(parse_urdf(default_arm_urdf()), "tool_link", "ee_link")
     assert tool.mass == pytest.approx(0.201)  # tool_link 0.2 kg + ee_link 1 g
     np.testing.assert_allclose(tool.com, [0, 0, (0.2 * 0.05 + 0.001 * 0.115) / 0.201])
     np.testing.assert_allclose(tool.ee_pos, [0, 0, 0.115])

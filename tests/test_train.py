@@ -176,10 +176,9 @@ def test_a_checkpoint_restores_the_params_it_saved(tmp_path: Path) -> None:
     from mjx_arm.task.observation import OBS_SIZE
     from mjx_arm.train.checkpoints import restore_brax_params
     from mjx_arm.train.learner import Learner, local_devices, make_mesh
-    from mjx_arm.train.loop import ACTION_SIZE
 
     config = load_config("cpu", None, _tiny(4000))
-    learner = Learner(config, OBS_SIZE, ACTION_SIZE, make_mesh(local_devices(1)))
+    learner = Learner(config, OBS_SIZE, 6, make_mesh(local_devices(1)))
     state = learner.init(jax.random.PRNGKey(0), jax.random.PRNGKey(1))
     saved = learner.params(state)
     run = RunDir(tmp_path / "run")

@@ -230,9 +230,9 @@ class MjxEngine:
         from mjx_arm.envs.mjx_physics import MjxPhysics
         from mjx_arm.envs.physics_config import PhysicsConfig
 
-        arm = arm or arm_info()
+        arm = self.arm = arm or arm_info()
         one_step = task.replace(ctrl_dt=task.sim_dt)  # a control step of one physics step
-        model = arm_model(arm.urdf, task)
+        model = arm_model(arm, task)
         self.physics = MjxPhysics(model, arm, one_step, PhysicsConfig(impl=impl), batch_size)
         self.name = f"mjx-{self.physics.impl}"
         self.scale = np.asarray(task.action_scale * arm.v_max, np.float32)
@@ -252,7 +252,8 @@ class MjxEngine:
 
         from mjx_arm.envs.mjx_physics import Dynamics
 
-        dynamics = Dynamics.nominal().replace(damping=jnp.full(6, damping))
+        n = self.arm.n_joints
+        dynamics = Dynamics.nominal(n).replace(damping=jnp.full(n, damping))
 
         def body(data, action):
             data = self.physics.step(data, jnp.clip(action, -1.0, 1.0) * self.scale, dynamics)
@@ -283,7 +284,13 @@ class MjxEngine:
         """Nothing to free."""
 
 
-def make_engine(name: str, task: TaskConfig, impl: str = "auto", batch_size: int = 1) -> Engine:
+def make_engine(
+    name: str,
+    task: TaskConfig,
+    impl: str = "auto",
+    batch_size: int = 1,
+    arm: ArmInfo | None = None,
+) -> Engine:
     """The engine ``name`` (see :data:`ENGINES`) on ``task``'s scene.
 
     Args:
@@ -291,15 +298,17 @@ def make_engine(name: str, task: TaskConfig, impl: str = "auto", batch_size: int
         task: the task (scene and time step).
         impl: MJX implementation ("auto", "jax", "warp"); ignored by the CPU engines.
         batch_size: the largest batch (MJX on Warp sizes its contact pool with it).
+        arm: the arm (default: the shipped one).
     """
+    config = arm.config if arm is not None else None
     if name == "mujoco":
         from mjx_arm.envs.mujoco_env import MujocoArmEnv
 
-        return MujocoEngine(MujocoArmEnv(task))
+        return MujocoEngine(MujocoArmEnv(task, config))
     if name == "pybullet":
         from pybullet_ref import PybulletArmEnv
 
-        return BulletEngine(PybulletArmEnv(task))
+        return BulletEngine(PybulletArmEnv(task, config))
     if name == "mjx":
-        return MjxEngine(task, impl, batch_size)
+        return MjxEngine(task, impl, batch_size, arm)
     raise ValueError(f"engine must be one of {ENGINES}, got {name!r}")

@@ -38,9 +38,10 @@ from mjx_arm.bench.parity_config import (
     ParityConfig,
 )
 from mjx_arm.envs.arm import ArmInfo, arm_info
+from mjx_arm.envs.base import task_for_arm
 from mjx_arm.envs.physics_config import resolve_impl
 from mjx_arm.task import reach_config, sampling, touch_config
-from mjx_arm.task.config import HOME_QPOS, TaskConfig
+from mjx_arm.task.config import TaskConfig
 
 # --------------------------------------------------------------------------- inputs
 
@@ -64,9 +65,11 @@ def open_loop_inputs(task: TaskConfig, config: ParityConfig, steps: int) -> Inpu
     ``+-config.amplitude``; ``steps`` control steps. Damping as converted.
     """
     n, rng = config.sequences, np.random.default_rng(config.seed)
-    qpos0 = sampling.initial_qpos(np, rng.uniform(size=(n, 6)), task)
+    joints = len(task.home_qpos)
+    qpos0 = sampling.initial_qpos(np, rng.uniform(size=(n, joints)), task)
     targets = sampling.target_body_pos(np, rng.uniform(size=(n, 3)), task)
-    levels = config.amplitude * rng.uniform(-1.0, 1.0, (n, -(-steps // config.hold_steps), 6))
+    shape = (n, -(-steps // config.hold_steps), joints)
+    levels = config.amplitude * rng.uniform(-1.0, 1.0, shape)
     actions = np.repeat(levels, config.hold_steps, axis=1)[:, :steps]
     return Inputs(qpos0, targets, per_physics_step(actions, task.n_substeps), np.ones(n))
 
@@ -74,13 +77,15 @@ def open_loop_inputs(task: TaskConfig, config: ParityConfig, steps: int) -> Inpu
 def jitter_inputs(task: TaskConfig, config: ParityConfig, steps: int) -> Inputs:
     """From the home pose: zero action and the constant command, each with the damping as
     converted and zeroed (:data:`FREE_SCENARIOS` x :data:`DAMPING`, in that order)."""
-    commands = {"hold": np.zeros(6), "constant": np.asarray(config.jitter_command)}
+    home = np.asarray(task.home_qpos)
+    constant = np.resize(np.asarray(config.jitter_command), len(home))
+    commands = {"hold": np.zeros(len(home)), "constant": constant}
     runs = list(itertools.product(FREE_SCENARIOS, DAMPING))
     actions = np.array([np.tile(commands[s], (steps * task.n_substeps, 1)) for s, _ in runs])
     n = len(runs)
     target = sampling.target_body_pos(np, np.full(3, 0.5), task)
     return Inputs(
-        np.tile(np.asarray(HOME_QPOS), (n, 1)),
+        np.tile(home, (n, 1)),
         np.tile(target, (n, 1)),
         actions,
         np.array([DAMPING[d] for _, d in runs]),
@@ -98,7 +103,7 @@ def press_inputs(engine: MujocoEngine, boxes: np.ndarray, steps: int, depth: flo
         Inputs with one action per physics step, ``(len(boxes), steps * substeps, 6)``.
     """
     env, task = engine.env, engine.env.task
-    qpos0 = np.tile(np.asarray(HOME_QPOS), (len(boxes), 1))
+    qpos0 = np.tile(np.asarray(task.home_qpos), (len(boxes), 1))
     recorded = []
     for q, box in zip(qpos0, boxes, strict=True):
         env._physics_reset(q, box)
@@ -253,15 +258,16 @@ class EngineResult:
 
 @dataclass
 class ParityInputs:
-    """Everything the engines play: FK poses ``(P, 6)``, the Reach batch (open loop, then
+    """Everything the engines play: FK poses ``(P, n)``, the Reach batch (open loop, then
     free-space jitter) and the press batch (damping as converted, then zeroed), with the two
-    tasks."""
+    tasks and the arm."""
 
     reach_task: TaskConfig
     touch_task: TaskConfig
     fk_qpos: np.ndarray
     reach: Inputs
     press: Inputs
+    arm: ArmInfo
 
 
 def engine_specs(config: ParityConfig) -> list[tuple[str, str]]:
@@ -282,22 +288,23 @@ def parity_inputs(config: ParityConfig, arm: ArmInfo) -> ParityInputs:
     the averaging and jitter windows. The gentle variant's slower joints change neither the
     controller's steady force nor the contact model.
     """
-    reach = reach_config(terminate_on_success=False)
-    touch = touch_config("seed", terminate_on_success=False)
+    reach = task_for_arm(reach_config(terminate_on_success=False), arm)
+    touch = task_for_arm(touch_config("seed", terminate_on_success=False), arm)
     steps = round(config.seconds / reach.ctrl_dt)
     reach_inputs = Inputs.concat(
         [open_loop_inputs(reach, config, steps), jitter_inputs(reach, config, steps)]
     )
-    recorder = make_engine("mujoco", touch)
+    recorder = make_engine("mujoco", touch, arm=arm)
     try:
-        boxes = np.asarray(BOX_POSITIONS[: config.press_boxes])
+        # the boxes move out with the arm's reach, as the tasks' targets do
+        boxes = np.asarray(BOX_POSITIONS[: config.press_boxes]) * touch.workspace_scale
         press_steps = round(config.press_seconds / touch.ctrl_dt)
         press = press_inputs(recorder, boxes, press_steps, config.press_depth)
     finally:
         recorder.close()
     fk_qpos = random_joint_angles(arm, config.fk_poses, config.seed)
     zeroed = dataclasses.replace(press, damping=np.full(len(press), DAMPING["zeroed"]))
-    return ParityInputs(reach, touch, fk_qpos, reach_inputs, Inputs.concat([press, zeroed]))
+    return ParityInputs(reach, touch, fk_qpos, reach_inputs, Inputs.concat([press, zeroed]), arm)
 
 
 def jitter_runs(result: EngineResult, n_open: int, n_boxes: int) -> dict[str, dict[str, Trace]]:
@@ -323,7 +330,7 @@ def run_engine(name: str, impl: str, inputs: ParityInputs) -> tuple[str, EngineR
         clock = now
 
     batch = max(len(inputs.reach), len(inputs.fk_qpos))
-    engine: Engine = make_engine(name, inputs.reach_task, impl, batch)
+    engine: Engine = make_engine(name, inputs.reach_task, impl, batch, inputs.arm)
     lap("build")
     ee = engine.fk(inputs.fk_qpos)
     lap("fk")
@@ -332,7 +339,7 @@ def run_engine(name: str, impl: str, inputs: ParityInputs) -> tuple[str, EngineR
     compile_s = getattr(engine, "compile_seconds", 0.0)
     label = engine.name
     engine.close()
-    engine = make_engine(name, inputs.touch_task, impl, len(inputs.press))
+    engine = make_engine(name, inputs.touch_task, impl, len(inputs.press), inputs.arm)
     lap("build")
     press = engine.rollout(inputs.press)
     lap("press")
@@ -383,7 +390,7 @@ def run_parity(config: ParityConfig, log=print) -> dict[str, Any]:
         (per engine and phase), ``figures`` (see :func:`parity_figures`) and ``goals``
         (see :func:`check_goals`).
     """
-    inputs = parity_inputs(config, arm_info())
+    inputs = parity_inputs(config, arm_info(config.arm or None))
     results = {}
     for name, impl in engine_specs(config):
         log(f"parity: running {name} ({len(inputs.reach)} Reach runs, {len(inputs.press)} presses)")

@@ -1,86 +1,217 @@
-"""What every engine needs to know about the arm, read once from the URDF."""
+"""What every engine needs to know about the arm, read once from its config and URDF."""
 
 from __future__ import annotations
 
 import functools
+import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from mjx_arm.paths import default_arm_urdf
 from mjx_arm.task.wrench import ToolInertia, tool_inertia
-from mjx_arm.urdf.model import parse_urdf
+from mjx_arm.urdf.arm_config import ArmConfig, ResolvedArm, load_arm, resolve_arm
+from mjx_arm.urdf.convert_config import ConvertConfig
 
-EE_LINK = "ee_link"
-FT_JOINT = "ft_sensor_joint"
-N_JOINTS = 6
+# Poses drawn to measure an arm's reach (seeded: the same arm always gets the same scale).
+REACH_SAMPLES = 4096
+REACH_QUANTILE = 0.99
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class ArmInfo:
-    """Joint names and limits, tool frames and tool mass properties of a 6-joint arm.
+    """Joint names and limits, tool frames, home pose and reach of an arm of n joints.
 
     Attributes:
+        config: the arm config as given (saved with runs and policy files).
         urdf: path of the URDF.
-        joint_names: the six actuated joints, base to wrist.
-        lower, upper: position limits (rad), shape ``(6,)``.
-        v_max: velocity limits (rad/s), shape ``(6,)``.
-        effort: torque limits (N m), shape ``(6,)``.
-        ee_link: the end-effector link; ft_joint: the fixed joint of the F/T reading.
-        tool: mass properties of the tool below the F/T joint.
+        joint_names: the n actuated joints, base to wrist (n from 5 to 7).
+        lower, upper: position limits (rad), shape ``(n,)``.
+        v_max: velocity limits (rad/s), shape ``(n,)``.
+        effort: torque limits (N m), shape ``(n,)``.
+        home_qpos: home joint angles (rad), shape ``(n,)``.
+        ee_link: the end-effector link.
+        ft_joint: the fixed joint of the F/T reading, or "" when it is taken at the last arm
+            joint; ft_link: the root link of the tool the reading weighs.
+        tool: mass properties of the tool below the F/T point.
+        reach_scale: the arm's horizontal reach over the shipped arm's (1.0 for the shipped
+            arm): task targets are drawn in a box scaled by it.
+        urdf_hash: SHA-256 of the URDF file (policy files record it).
     """
 
+    config: ArmConfig
     urdf: Path
     joint_names: tuple[str, ...]
     lower: np.ndarray
     upper: np.ndarray
     v_max: np.ndarray
     effort: np.ndarray
+    home_qpos: np.ndarray
     ee_link: str
     ft_joint: str
+    ft_link: str
     tool: ToolInertia
+    reach_scale: float
+    urdf_hash: str
+
+    @property
+    def n_joints(self) -> int:
+        """Number of actuated joints."""
+        return len(self.joint_names)
+
+    def convert_config(self, **fields) -> ConvertConfig:
+        """Conversion settings that put the ee site and F/T sensors where this arm says."""
+        return ConvertConfig(ee_link=self.ee_link, ft_joint=self.ft_joint or None, **fields)
 
 
-@functools.cache
-def _arm_info_cached(path: Path, mtime: float) -> ArmInfo:
-    model = parse_urdf(path)
-    joints = model.actuated_joints
-    if len(joints) != N_JOINTS:
-        raise ValueError(f"{path}: the task needs {N_JOINTS} actuated joints, found {len(joints)}")
-    for name in (EE_LINK,):
-        if name not in model.links:
-            raise ValueError(f"{path}: the task needs a link named {name!r} (the ee point)")
-    if FT_JOINT not in model.joints:
-        raise ValueError(f"{path}: the task needs a fixed joint named {FT_JOINT!r} (wrist F/T)")
-    limits = [j.limit for j in joints]
+def _info(resolved: ResolvedArm, reach: float, reference: float) -> ArmInfo:
+    limits = [j.limit for j in resolved.joints]
+    path = resolved.config.urdf_path
     return ArmInfo(
+        config=resolved.config,
         urdf=path,
-        joint_names=tuple(j.name for j in joints),
+        joint_names=resolved.joint_names,
         lower=np.array([lim.lower for lim in limits]),
         upper=np.array([lim.upper for lim in limits]),
         v_max=np.array([lim.velocity for lim in limits]),
         effort=np.array([lim.effort for lim in limits]),
-        ee_link=EE_LINK,
-        ft_joint=FT_JOINT,
-        tool=tool_inertia(model, FT_JOINT, EE_LINK),
+        home_qpos=np.array(resolved.home_qpos),
+        ee_link=resolved.ee_link,
+        ft_joint=resolved.ft_joint,
+        ft_link=resolved.ft_link,
+        tool=tool_inertia(resolved.model, resolved.ft_link, resolved.ee_link),
+        reach_scale=reach / reference,
+        urdf_hash=hashlib.sha256(path.read_bytes()).hexdigest(),
     )
 
 
-def arm_info(urdf: str | Path | None = None) -> ArmInfo:
-    """Arm facts of ``urdf`` (default: the shipped arm), cached per file version."""
-    path = Path(urdf or default_arm_urdf()).resolve()
-    return _arm_info_cached(path, path.stat().st_mtime)
+@functools.cache
+def _arm_info_cached(arm: ArmConfig, mtime: float) -> ArmInfo:
+    resolved = resolve_arm(arm)
+    reference = _reference_reach()
+    shipped = arm.urdf_path == ArmConfig().urdf_path and not (arm.ee_link or arm.joints)
+    reach = reference if shipped else horizontal_reach(resolved)
+    return _info(resolved, reach, reference)
 
 
-def validated_arm_info(urdf: str | Path | None, engine: str) -> ArmInfo:
-    """Validate ``urdf`` (default: the shipped arm) for ``engine``, then read its arm facts.
+@functools.cache
+def _reference_reach() -> float:
+    """The shipped arm's horizontal reach (m), the unit of ``reach_scale``."""
+    return horizontal_reach(resolve_arm(ArmConfig()))
+
+
+def arm_info(arm: str | Path | ArmConfig | None = None) -> ArmInfo:
+    """Arm facts of ``arm`` (a URDF, an arm file or config; default: the shipped arm), cached
+    per config and file version."""
+    config = load_arm(arm)
+    return _arm_info_cached(config, config.urdf_path.stat().st_mtime)
+
+
+def validated_arm_info(arm: str | Path | ArmConfig | None, engine: str) -> ArmInfo:
+    """Validate the arm's URDF for ``engine``, then read its arm facts.
 
     Validation comes first, so a broken file fails with the validator's report instead of a
     parse error.
     """
     from mjx_arm.urdf.validate import validated
 
-    path = Path(urdf).expanduser().resolve() if urdf is not None else default_arm_urdf()
-    validated(path, engine)
-    return arm_info(path)
+    config = load_arm(arm)
+    validated(config.urdf_path, engine)
+    return arm_info(config)
+
+
+def horizontal_reach(resolved: ResolvedArm) -> float:
+    """How far (m) the ee point gets from the base's vertical axis: the 99th percentile over
+    seeded random poses inside the joint limits (full-turn joints within +-pi)."""
+    import mujoco
+
+    from mjx_arm.urdf.convert import EE_SITE, load_model
+
+    config = ConvertConfig(ee_link=resolved.ee_link, ft_joint=resolved.ft_joint or None)
+    model = load_model(resolved.config.urdf_path, config)
+    data = mujoco.MjData(model)
+    adr = np.array([model.joint(n).qposadr[0] for n in resolved.joint_names])
+    low = np.maximum([j.limit.lower for j in resolved.joints], -np.pi)
+    high = np.minimum([j.limit.upper for j in resolved.joints], np.pi)
+    poses = np.random.default_rng(0).uniform(low, high, (REACH_SAMPLES, len(adr)))
+    site = model.site(EE_SITE).id
+    radii = np.empty(REACH_SAMPLES)
+    for i, q in enumerate(poses):
+        data.qpos[adr] = q
+        mujoco.mj_kinematics(model, data)
+        radii[i] = np.hypot(*data.site_xpos[site][:2])
+    return float(np.quantile(radii, REACH_QUANTILE))
+
+
+class ArmMismatchError(ValueError):
+    """A policy trained on one arm run on another."""
+
+
+# What the model hash covers: the kinematics, masses, joints and actuators of the converted arm.
+_HASHED_FIELDS = (
+    "body_pos",
+    "body_quat",
+    "body_mass",
+    "body_inertia",
+    "jnt_type",
+    "jnt_axis",
+    "jnt_range",
+    "dof_damping",
+    "dof_armature",
+    "actuator_gainprm",
+    "actuator_forcerange",
+)
+
+
+def model_hash(arm: ArmInfo) -> str:
+    """SHA-256 of the arm's converted MuJoCo model (no scene): joint names, then kinematics,
+    masses, joints and actuators rounded to 6 significant digits, so the same arm hashes the
+    same wherever its files live."""
+    return _model_hash_cached(arm.config, arm.urdf.stat().st_mtime)
+
+
+@functools.cache
+def _model_hash_cached(config: ArmConfig, mtime: float) -> str:
+    from mjx_arm.urdf.convert import load_model
+
+    arm = arm_info(config)
+    model = load_model(arm.urdf, arm.convert_config())
+    digest = hashlib.sha256(",".join(arm.joint_names).encode())
+    for name in _HASHED_FIELDS:
+        values = np.asarray(getattr(model, name), np.float64)
+        digest.update(np.char.mod("%.6g", values.ravel()).tobytes())
+    return digest.hexdigest()
+
+
+def arm_record(arm: ArmInfo) -> dict:
+    """What a run's config and a policy file record of the arm, JSON-ready."""
+    return {
+        "config": arm.config.to_dict(),
+        "joint_names": list(arm.joint_names),
+        "ee_link": arm.ee_link,
+        "v_max": arm.v_max.tolist(),
+        "reach_scale": arm.reach_scale,
+        "model_hash": model_hash(arm),
+    }
+
+
+def check_same_arm(recorded: dict | None, arm: ArmInfo, what: str = "the policy") -> None:
+    """Raise :class:`ArmMismatchError` unless ``arm`` is the arm of ``recorded``
+    (:func:`arm_record`); a record without a model hash (older files) checks joint names only.
+    """
+    if not recorded:
+        recorded = {"joint_names": list(arm_info().joint_names)}  # older files: shipped arm
+    names = list(recorded.get("joint_names", []))
+    where = recorded.get("config", {}).get("urdf") or "the shipped arm"
+    if names != list(arm.joint_names):
+        raise ArmMismatchError(
+            f"{what} was trained on {where} with joints {names}; this env's arm ({arm.urdf}) "
+            f"has {list(arm.joint_names)}. Pass the arm it was trained on (--arm)."
+        )
+    expected = recorded.get("model_hash")
+    if expected and expected != model_hash(arm):
+        raise ArmMismatchError(
+            f"{what} was trained on {where}; this env's arm ({arm.urdf}) has the same joint "
+            "names but a different converted model (kinematics, masses or actuators). Pass "
+            "the arm it was trained on (--arm)."
+        )

@@ -24,6 +24,7 @@ def make_batched_env(
     physics: PhysicsConfig | None = None,
     batch_size: int = 1,
     randomization=None,
+    arm=None,
 ):
     """The single-env JAX env (``MjxArmEnv``) with the physics of ``backend``.
 
@@ -34,11 +35,14 @@ def make_batched_env(
         batch_size: the largest batch stepped at once (sizes Warp's shared contact pool).
         randomization: domain randomisation
             (:class:`mjx_arm.envs.randomization.RandomizationConfig`; default off).
+        arm: the arm (a URDF, an arm file or an ArmConfig; default: the shipped arm).
     """
     from mjx_arm.envs.mjx_env import MjxArmEnv
 
     if resolve_backend(backend) == "mujoco":
         from mjx_arm.envs.mujoco_batch import MujocoCallbackPhysics
 
-        return MjxArmEnv(task, physics_factory=MujocoCallbackPhysics, randomization=randomization)
-    return MjxArmEnv(task, physics=physics, batch_size=batch_size, randomization=randomization)
+        return MjxArmEnv(
+            task, arm, physics_factory=MujocoCallbackPhysics, randomization=randomization
+        )
+    return MjxArmEnv(task, arm, physics=physics, batch_size=batch_size, randomization=randomization)

@@ -28,6 +28,7 @@ from mjx_arm.task import reward as reward_lib
 from mjx_arm.task import rules, sampling
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.touch import touch_config
+from mjx_arm.urdf.arm_config import ArmConfig
 
 DEFAULT_WIDTH, DEFAULT_HEIGHT = 640, 480
 
@@ -39,7 +40,7 @@ class PhysicsReading(NamedTuple):
 
     Attributes:
         ee_pos: ee point (m), ``(3,)``; ee_quat: ee orientation (w, x, y, z), ``(4,)``.
-        qpos, qvel: joint angles (rad) and velocities (rad/s), ``(6,)`` each.
+        qpos, qvel: joint angles (rad) and velocities (rad/s), ``(n,)`` each.
         target_pos: the target point (m), ``(3,)``.
         wrench: tared external wrench on the tool in the ee frame, ``(6,)``, unclipped.
     """
@@ -62,12 +63,15 @@ _Evaluation = tuple[dict[str, np.ndarray], float, bool, dict[str, Any]]
 
 
 class BaseRobotEnv(gym.Env):
-    """A 6-DoF arm task with the contract's spaces, reward and success rule.
+    """An arm task with the contract's spaces, reward and success rule.
 
     Args:
-        task: the task configuration (default: Touch).
-        urdf: the arm URDF (default: the shipped UR5e-class arm). It is validated for the
-            engine before anything is loaded; an invalid URDF raises ``UrdfError``.
+        task: the task configuration (default: Touch). Its empty ``home_qpos`` and
+            ``workspace_scale`` are filled in from the arm (:meth:`TaskConfig.for_arm`).
+        arm: the arm: a URDF path, an arm file (.toml/.json) or an
+            :class:`~mjx_arm.urdf.arm_config.ArmConfig` (default: the shipped UR5e-class arm).
+            Its URDF is validated for the engine before anything is loaded; an invalid URDF
+            raises ``UrdfError``.
         render_mode: None, "rgb_array" or "human".
         width, height: frame size (pixels) of ``render()``.
     """
@@ -78,19 +82,20 @@ class BaseRobotEnv(gym.Env):
     def __init__(
         self,
         task: TaskConfig | None = None,
-        urdf: str | Path | None = None,
+        arm: str | Path | ArmConfig | None = None,
         render_mode: str | None = None,
         width: int = DEFAULT_WIDTH,
         height: int = DEFAULT_HEIGHT,
     ) -> None:
-        self.task = task or touch_config()
+        self.arm: ArmInfo = validated_arm_info(arm, self.engine)
+        self.task = task_for_arm(task or touch_config(), self.arm)
         self.metadata = {**self.metadata, "render_fps": round(1.0 / self.task.ctrl_dt)}
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}")
         self.render_mode, self.width, self.height = render_mode, width, height
-        self.arm: ArmInfo = validated_arm_info(urdf, self.engine)
-        self.action_space = gym.spaces.Box(-1.0, 1.0, (6,), np.float32)
-        self.observation_space = obs_lib.observation_space(self.task.force_clip)
+        n = self.arm.n_joints
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (n,), np.float32)
+        self.observation_space = obs_lib.observation_space(self.task.force_clip, n)
         # constants of the per-step evaluation, computed once
         self._n_substeps = self.task.n_substeps
         # a * (action_scale * v_max): bit-identical to (a * action_scale) * v_max for the
@@ -98,12 +103,13 @@ class BaseRobotEnv(gym.Env):
         self._qdot_scale = self.task.action_scale * self.arm.v_max
         self._band = reward_lib.joint_band((self.arm.lower, self.arm.upper), self.task)
         self._speed_limits = reward_lib.speed_limits(self.arm.v_max, self.task)
-        self._bounds = obs_lib.state_bounds(self.task.force_clip)
+        self._bounds = obs_lib.state_bounds(self.task.force_clip, n)
         self._reading: PhysicsReading | None = None
         self._last_obs: dict[str, np.ndarray] | None = None
         # what the success rule and the motion terms remember within an episode
         self._progress = reward_lib.start_progress(np)
-        self._action = np.zeros(6, np.float32)
+        self._action = np.zeros(n, np.float32)
+        self._action_bounds = (np.full(n, -1.0, np.float32), np.full(n, 1.0, np.float32))
         self._distance = 0.0
 
     # ------------------------------------------------------------------ engine hooks
@@ -134,9 +140,10 @@ class BaseRobotEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Start an episode: home pose plus noise, a new target, both from the seeded generator."""
         super().reset(seed=seed)
-        u = self.np_random.uniform(size=sampling.N_UNIFORMS)
-        qpos = sampling.initial_qpos(np, u[:6], self.task)
-        body = sampling.target_body_pos(np, u[6:], self.task)
+        n = self.arm.n_joints
+        u = self.np_random.uniform(size=sampling.n_uniforms(n))
+        qpos = sampling.initial_qpos(np, u[:n], self.task)
+        body = sampling.target_body_pos(np, u[n:], self.task)
         if options and "target" in options:
             body = np.asarray(options["target"], dtype=np.float64)
         self._physics_reset(qpos, body)
@@ -144,7 +151,7 @@ class BaseRobotEnv(gym.Env):
         _, state, d, force = self._measure(reading)
         self._last_obs = obs = obs_lib.unflatten_obs(state.astype(np.float32))
         self._progress = reward_lib.start_progress(np)
-        self._action = np.zeros(6, np.float32)
+        self._action = np.zeros(self.arm.n_joints, np.float32)
         self._distance = d
         info = {"is_success": False, "distance": d, "contact_force_norm": force, "reward_terms": {}}
         return obs, info
@@ -153,7 +160,7 @@ class BaseRobotEnv(gym.Env):
         """Apply one action for ``ctrl_dt``: (obs, reward, terminated, truncated, info)."""
         if self._reading is None:
             raise RuntimeError("call reset() before step()")
-        clipped = check_action(action)
+        clipped = check_action(action, self._action_bounds)
         self._physics_set_velocity_targets(clipped * self._qdot_scale)
         self._physics_step(self._n_substeps)
         reading = self._physics_read()
@@ -186,7 +193,7 @@ class BaseRobotEnv(gym.Env):
 
     def apply_action(self, action) -> np.ndarray:
         """Check and clip an action, command joint velocity targets; return them (rad/s)."""
-        qdot = check_action(action) * self._qdot_scale
+        qdot = check_action(action, self._action_bounds) * self._qdot_scale
         self._physics_set_velocity_targets(qdot)
         return qdot
 
@@ -203,7 +210,7 @@ class BaseRobotEnv(gym.Env):
     # ------------------------------------------------------------------ helpers
 
     def _measure(self, reading: PhysicsReading) -> tuple[np.ndarray, np.ndarray, float, float]:
-        """The flat state before and after clipping (float64, ``(22,)``), distance d (m) and
+        """The flat state before and after clipping (float64, ``(16 + n,)``), distance d (m) and
         contact force norm (N) of a reading, each computed once."""
         ee_pos, ee_quat, qpos, _, target_pos, wrench = reading
         raw = obs_lib.raw_state(np, ee_pos, ee_quat, qpos, target_pos, wrench)
@@ -281,11 +288,20 @@ class BaseRobotEnv(gym.Env):
 
 
 _FLOAT32 = np.dtype(np.float32)
-_ACTION_LOW, _ACTION_HIGH = np.full(6, -1.0, np.float32), np.full(6, 1.0, np.float32)
+_SHIPPED_BOUNDS = (np.full(6, -1.0, np.float32), np.full(6, 1.0, np.float32))
 
 
-def check_action(action) -> np.ndarray:
-    """Validate an action: shape ``(6,)``, finite; clip into [-1, 1]; return float32.
+def task_for_arm(task: TaskConfig, arm: ArmInfo) -> TaskConfig:
+    """``task`` with the arm's home pose and reach scale filled in where it leaves them empty."""
+    return task.for_arm(tuple(arm.home_qpos), arm.reach_scale)
+
+
+def check_action(action, bounds: tuple[np.ndarray, np.ndarray] = _SHIPPED_BOUNDS) -> np.ndarray:
+    """Validate an action: shape ``(n,)``, finite; clip into [-1, 1]; return float32.
+
+    Args:
+        action: the action, ``(n,)``.
+        bounds: ``(-1, 1)`` arrays of float32, ``(n,)`` each (default: 6 joints).
 
     Raises:
         ValueError: wrong shape, or NaN / inf entries.
@@ -293,9 +309,10 @@ def check_action(action) -> np.ndarray:
     arr = np.asarray(action)
     if arr.dtype is not _FLOAT32:  # float32 clips exactly as its float64 widening would
         arr = arr.astype(np.float64)
-    if arr.shape != (6,):
-        raise ValueError(f"action must have shape (6,), got {arr.shape}")
+    low, high = bounds
+    if arr.shape != low.shape:
+        raise ValueError(f"action must have shape {low.shape}, got {arr.shape}")
     # finite sum of squares <=> finite entries, barring overflow, which the exact test rules out
     if not (math.isfinite(arr.dot(arr)) or np.isfinite(arr).all()):
         raise ValueError(f"action contains NaN or inf: {arr.tolist()}")
-    return np.minimum(np.maximum(arr, _ACTION_LOW), _ACTION_HIGH).astype(np.float32, copy=False)
+    return np.minimum(np.maximum(arr, low), high).astype(np.float32, copy=False)

@@ -30,6 +30,7 @@ from brax.envs.base import Env, State
 from flax import struct
 
 from mjx_arm.envs.arm import validated_arm_info
+from mjx_arm.envs.base import task_for_arm
 from mjx_arm.envs.mjx_physics import MjxPhysics, Reading
 from mjx_arm.envs.model_io import arm_model
 from mjx_arm.envs.physics_config import PhysicsConfig
@@ -44,6 +45,7 @@ from mjx_arm.task import reward as reward_lib
 from mjx_arm.task import rules, sampling
 from mjx_arm.task.config import REWARD_TERMS, TaskConfig
 from mjx_arm.task.touch import touch_config
+from mjx_arm.urdf.arm_config import ArmConfig
 
 __all__ = ["MjxArmEnv", "Reading", "TaskMemory"]
 
@@ -54,7 +56,7 @@ class TaskMemory:
 
     Attributes:
         progress: the success rule's progress (consecutive holds, strike seen).
-        prev_action: the previous action, ``(6,)`` (also the delayed action under latency).
+        prev_action: the previous action, ``(n,)`` (also the delayed action under latency).
         prev_distance: d at the previous step (m), ``()``.
     """
 
@@ -63,17 +65,19 @@ class TaskMemory:
     prev_distance: jax.Array
 
     @staticmethod
-    def start(distance: jax.Array) -> TaskMemory:
-        """The memory at the start of an episode at distance ``d``."""
-        return TaskMemory(reward_lib.start_progress(jnp), jnp.zeros(6), distance)
+    def start(distance: jax.Array, n_joints: int) -> TaskMemory:
+        """The memory at the start of an episode at distance ``d`` (``n_joints`` actions)."""
+        return TaskMemory(reward_lib.start_progress(jnp), jnp.zeros(n_joints), distance)
 
 
 class MjxArmEnv(Env):
     """A batched-ready arm task on MJX (one env; ``jax.vmap`` it or use Brax's wrappers).
 
     Args:
-        task: the task configuration (default: Touch).
-        urdf: the arm URDF (default: the shipped arm); validated before use.
+        task: the task configuration (default: Touch); its empty home pose and workspace scale
+            come from the arm.
+        arm: the arm (a URDF, an arm file or an ArmConfig; default: the shipped arm); its URDF
+            is validated before use.
         physics_factory: builds the physics from (mj_model, arm, task); default: MJX with
             ``physics`` and ``batch_size``.
         mj_model: a task model converted with other settings (benchmark sweeps); default: the
@@ -86,16 +90,16 @@ class MjxArmEnv(Env):
     def __init__(
         self,
         task: TaskConfig | None = None,
-        urdf: str | Path | None = None,
+        arm: str | Path | ArmConfig | None = None,
         physics_factory=None,
         mj_model: mujoco.MjModel | None = None,
         physics: PhysicsConfig | None = None,
         batch_size: int = 1,
         randomization: RandomizationConfig | None = None,
     ) -> None:
-        self.task = task or touch_config()
-        self.arm = validated_arm_info(urdf, "mujoco")
-        self.mj_model = mj_model if mj_model is not None else arm_model(self.arm.urdf, self.task)
+        self.arm = validated_arm_info(arm, "mujoco")
+        self.task = task_for_arm(task or touch_config(), self.arm)
+        self.mj_model = mj_model if mj_model is not None else arm_model(self.arm, self.task)
         if physics_factory is None:
             self.physics = MjxPhysics(self.mj_model, self.arm, self.task, physics, batch_size)
         else:
@@ -108,13 +112,13 @@ class MjxArmEnv(Env):
 
     @property
     def observation_size(self) -> int:
-        """Size of the flat observation ``state``: 22."""
-        return obs_lib.OBS_SIZE
+        """Size of the flat observation ``state``: 16 + n (22 for a 6-joint arm)."""
+        return obs_lib.obs_size(self.arm.n_joints)
 
     @property
     def action_size(self) -> int:
-        """Six joint velocity commands in [-1, 1]."""
-        return 6
+        """One joint velocity command in [-1, 1] per arm joint."""
+        return self.arm.n_joints
 
     @property
     def backend(self) -> str:
@@ -122,18 +126,19 @@ class MjxArmEnv(Env):
         return "mjx"
 
     def sample_episode(self, rng: jax.Array) -> tuple[jax.Array, jax.Array]:
-        """Start joint angles ``(6,)`` and target body position ``(3,)`` from ``rng``."""
-        u = jax.random.uniform(rng, (sampling.N_UNIFORMS,))
+        """Start joint angles ``(n,)`` and target body position ``(3,)`` from ``rng``."""
+        n = self.arm.n_joints
+        u = jax.random.uniform(rng, (sampling.n_uniforms(n),))
         return (
-            sampling.initial_qpos(jnp, u[:6], self.task),
-            sampling.target_body_pos(jnp, u[6:], self.task),
+            sampling.initial_qpos(jnp, u[:n], self.task),
+            sampling.target_body_pos(jnp, u[n:], self.task),
         )
 
     def reset(self, rng: jax.Array) -> State:
         """A new episode from ``rng`` (a single PRNG key)."""
         rng, key, key_rand = jax.random.split(rng, 3)
         qpos, target_body = self.sample_episode(key)
-        episode = sample_episode(key_rand, self.randomization)
+        episode = sample_episode(key_rand, self.randomization, self.arm.n_joints)
         data = self.physics.init(qpos, target_body + episode.box_offset)
         reading = self.physics.read(data)
         d, force = self._distance_and_force(reading)
@@ -148,11 +153,11 @@ class MjxArmEnv(Env):
             reward=zero,
             done=zero,
             metrics=metrics,
-            info={"rng": rng, "task": TaskMemory.start(d), "episode": episode},
+            info={"rng": rng, "task": TaskMemory.start(d, self.arm.n_joints), "episode": episode},
         )
 
     def step(self, state: State, action: jax.Array) -> State:
-        """Apply ``action (6,)`` for one control step."""
+        """Apply ``action (n,)`` for one control step."""
         memory: TaskMemory = state.info["task"]
         episode: Episode = state.info["episode"]
         action = jnp.clip(action, -1.0, 1.0)
@@ -203,21 +208,22 @@ class MjxArmEnv(Env):
         still trains on many targets.
 
         Returns:
-            (data, obs ``(22,)``, the ``info`` entries of a new episode: task, episode).
+            (data, obs ``(16 + n,)``, the ``info`` entries of a new episode: task, episode).
         """
         key, key_rand = jax.random.split(rng)
         _, target_body = self.sample_episode(key)
-        episode = sample_episode(key_rand, self.randomization)
+        episode = sample_episode(key_rand, self.randomization, self.arm.n_joints)
         data = self.physics.set_target(data, target_body + episode.box_offset)
         reading = self.physics.read(data)
         d, _ = self._distance_and_force(reading)
         obs = self.observe(reading, episode)
-        return data, obs, {"task": TaskMemory.start(d), "episode": episode}
+        memory = TaskMemory.start(d, self.arm.n_joints)
+        return data, obs, {"task": memory, "episode": episode}
 
     def observe(
         self, reading: Reading, episode: Episode | None = None, noise: jax.Array | None = None
     ) -> jax.Array:
-        """The flat observation ``state (22,)`` of a reading.
+        """The flat observation ``state (16 + n,)`` of a reading.
 
         Args:
             reading: the physics read-out.

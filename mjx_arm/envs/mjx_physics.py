@@ -54,7 +54,7 @@ class Reading:
     """What the contract reads from the physics, one env (add a leading batch axis under vmap).
 
     Attributes:
-        ee_pos ``(3,)``, ee_quat ``(4,)`` (w, x, y, z), qpos ``(6,)``, qvel ``(6,)``,
+        ee_pos ``(3,)``, ee_quat ``(4,)`` (w, x, y, z), qpos ``(n,)``, qvel ``(n,)``,
         target_pos ``(3,)``, wrench ``(6,)`` (tared, ee frame, unclipped).
     """
 
@@ -72,9 +72,9 @@ class Dynamics:
 
     Attributes:
         friction: of every geom's friction coefficients, ``()``.
-        damping: of the six joints' damping, ``(6,)``.
-        armature: of the six joints' rotor inertia, ``(6,)``.
-        gain: of the six velocity servos' gain, ``(6,)``.
+        damping: of the n arm joints' damping, ``(n,)``.
+        armature: of the n joints' rotor inertia, ``(n,)``.
+        gain: of the n velocity servos' gain, ``(n,)``.
     """
 
     friction: jax.Array
@@ -83,9 +83,10 @@ class Dynamics:
     gain: jax.Array
 
     @staticmethod
-    def nominal() -> Dynamics:
-        """All multipliers 1."""
-        return Dynamics(jnp.ones(()), jnp.ones(6), jnp.ones(6), jnp.ones(6))
+    def nominal(n_joints: int = 6) -> Dynamics:
+        """All multipliers 1, for an arm of ``n_joints``."""
+        n = n_joints
+        return Dynamics(jnp.ones(()), jnp.ones(n), jnp.ones(n), jnp.ones(n))
 
 
 def warp_compatible(mj_model: mujoco.MjModel) -> mujoco.MjModel:
@@ -174,7 +175,7 @@ class MjxPhysics:
     # ------------------------------------------------------------------ state
 
     def init(self, qpos: jax.Array, target_body: jax.Array) -> Any:
-        """Data at rest at joint angles ``qpos (6,)`` with the target body at ``(3,)``."""
+        """Data at rest at joint angles ``qpos (n,)`` with the target body at ``(3,)``."""
         data = self._template
         data = data.replace(
             qpos=data.qpos.at[self.ids.qpos_adr].set(qpos),
@@ -187,11 +188,11 @@ class MjxPhysics:
         return data.replace(mocap_pos=data.mocap_pos.at[self.mocap].set(target_body))
 
     def step(self, data: Any, ctrl: jax.Array, dynamics: Dynamics | None = None) -> Any:
-        """One control step: hold ``ctrl (6,)`` for ``n_substeps`` physics steps.
+        """One control step: hold ``ctrl (n,)`` for ``n_substeps`` physics steps.
 
         Args:
             data: one env's state (vmap for a batch).
-            ctrl: joint velocity targets (rad/s), ``(6,)``.
+            ctrl: joint velocity targets (rad/s), ``(n,)``.
             dynamics: per-env multipliers of friction, damping, armature and servo gain;
                 None steps the model as built.
         """

@@ -5,27 +5,28 @@ Shared by the CPU MuJoCo env and the MJX env, so both read the same sites and se
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
 import mujoco
 import numpy as np
 
-from mjx_arm.envs.arm import ArmInfo
+from mjx_arm.envs.arm import ArmInfo, arm_info
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.wrench import SENSOR_BLOCK, SENSOR_BLOCK_SIZE, sensor_wrench
 from mjx_arm.urdf.convert import EE_SITE, SENSORS, ConvertConfig, load_model
 from mjx_arm.urdf.scene import TARGET_SITE
 
 
-def task_convert_config(task: TaskConfig) -> ConvertConfig:
-    """Conversion settings of a task model: its scene and time step, no self-collision."""
-    return ConvertConfig(scene=task.spec.scene, sim_dt=task.sim_dt, self_collision=False)
+def task_convert_config(task: TaskConfig, arm: ArmInfo | None = None) -> ConvertConfig:
+    """Conversion settings of a task model: the arm's ee and F/T point (default: the shipped
+    arm's), the task's scene and time step, no self-collision."""
+    arm = arm or arm_info()
+    return arm.convert_config(scene=task.spec.scene, sim_dt=task.sim_dt, self_collision=False)
 
 
-def arm_model(urdf: Path, task: TaskConfig) -> mujoco.MjModel:
-    """The task's MuJoCo model: the arm converted from ``urdf`` with the task scene."""
-    return load_model(Path(urdf).resolve(), task_convert_config(task))
+def arm_model(arm: ArmInfo, task: TaskConfig) -> mujoco.MjModel:
+    """The task's MuJoCo model: ``arm`` converted from its URDF with the task scene."""
+    return load_model(arm.urdf, task_convert_config(task, arm))
 
 
 # The model's sensor of each entry of the wrench sensor block (``SENSOR_BLOCK`` order).
@@ -48,8 +49,8 @@ class SensorReader:
     """Ids and addresses, looked up by name once, and the contract read-outs built on them.
 
     Attributes:
-        qpos_adr, dof_adr: qpos and dof addresses of the six joints, ``(6,)`` each.
-        actuators: actuator ids of the six joints, ``(6,)``.
+        qpos_adr, dof_adr: qpos and dof addresses of the arm's n joints, ``(n,)`` each.
+        actuators: actuator ids of the n joints, ``(n,)``.
         ee_site, ee_body, target_site: ids of the ee site, its body and the target site.
         sensor_slices: where each named sensor sits in ``sensordata``.
         block_index: ``sensordata`` positions of the wrench block

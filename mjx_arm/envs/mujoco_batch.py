@@ -53,7 +53,7 @@ class CState:
 
 
 def dynamics_row(dyn: Dynamics) -> jax.Array:
-    """The multipliers as one row ``(19,)``: friction, damping (6), armature (6), gain (6)."""
+    """The multipliers as one row ``(1 + 3n,)``: friction, damping (n), armature (n), gain (n)."""
     return jnp.concatenate([jnp.reshape(dyn.friction, (1,)), dyn.damping, dyn.armature, dyn.gain])
 
 
@@ -63,13 +63,14 @@ class _ModelCopies:
     def __init__(self, model: mujoco.MjModel, dofs: np.ndarray, actuators: np.ndarray) -> None:
         self.base, self.dofs, self.act = model, dofs, actuators
         self.models: list[mujoco.MjModel] = []
-        self.applied = np.zeros((0, 19))
+        self.width = 1 + 3 * len(dofs)
+        self.applied = np.zeros((0, self.width))
 
     def __call__(self, rows: np.ndarray) -> list[mujoco.MjModel]:
-        """The models of ``rows (n, 19)``, each updated where its row changed."""
+        """The models of ``rows (B, 1 + 3n)``, each updated where its row changed."""
         while len(self.models) < len(rows):
             self.models.append(copy.copy(self.base))
-            self.applied = np.concatenate([self.applied, np.full((1, 19), np.nan)])
+            self.applied = np.concatenate([self.applied, np.full((1, self.width), np.nan)])
         changed = np.flatnonzero((self.applied[: len(rows)] != rows).any(axis=1))
         for i in changed:
             self._apply(self.models[i], rows[i])
@@ -78,11 +79,13 @@ class _ModelCopies:
 
     def _apply(self, m: mujoco.MjModel, row: np.ndarray) -> None:
         base, dofs, act = self.base, self.dofs, self.act
+        n = len(dofs)
+        damping, armature, gain = row[1 : 1 + n], row[1 + n : 1 + 2 * n], row[1 + 2 * n :]
         m.geom_friction[:] = base.geom_friction * row[0]
-        m.dof_damping[dofs] = base.dof_damping[dofs] * row[1:7]
-        m.dof_armature[dofs] = base.dof_armature[dofs] * row[7:13]
-        m.actuator_gainprm[act, 0] = base.actuator_gainprm[act, 0] * row[13:19]
-        m.actuator_biasprm[act, 2] = base.actuator_biasprm[act, 2] * row[13:19]
+        m.dof_damping[dofs] = base.dof_damping[dofs] * damping
+        m.dof_armature[dofs] = base.dof_armature[dofs] * armature
+        m.actuator_gainprm[act, 0] = base.actuator_gainprm[act, 0] * gain
+        m.actuator_biasprm[act, 2] = base.actuator_biasprm[act, 2] * gain
 
 
 class _Stepper:
@@ -109,7 +112,7 @@ class _Stepper:
         Args:
             state: ``(..., nstate)``; ctrl: ``(..., nu)``; mocap: ``(..., 3)``.
             nstep: physics steps to take; the sensors returned are those at the final state.
-            dynamics: per-row multipliers ``(..., 19)`` (:func:`dynamics_row`), or None for
+            dynamics: per-row multipliers ``(..., 1 + 3n)`` (:func:`dynamics_row`), or None for
                 the nominal model.
         """
         lead = state.shape[:-1]
@@ -122,7 +125,7 @@ class _Stepper:
         with self.lock:
             model = self.model
             if dynamics is not None:
-                model = self.copies(np.asarray(dynamics, np.float64).reshape(-1, 19))
+                model = self.copies(np.asarray(dynamics, np.float64).reshape(-1, self.copies.width))
             states, sensors = self.rollout.rollout(
                 model,
                 self.datas,
@@ -181,7 +184,7 @@ class MujocoCallbackPhysics:
         return jax.pure_callback(host, shapes, *args, vmap_method="broadcast_all")
 
     def init(self, qpos: jax.Array, target_body: jax.Array) -> CState:
-        """State at rest at ``qpos (6,)`` with the target body at ``(3,)``; sensors filled."""
+        """State at rest at ``qpos (n,)`` with the target body at ``(3,)``; sensors filled."""
         state = jnp.asarray(self._template, jnp.float32)
         state = state.at[self._qpos_slice.start + self.ids.qpos_adr].set(qpos)
         ctrl = jnp.zeros(self.mj_model.nu, jnp.float32)
@@ -193,7 +196,7 @@ class MujocoCallbackPhysics:
         return data.replace(mocap_pos=target_body.astype(jnp.float32))
 
     def step(self, data: CState, ctrl: jax.Array, dynamics: Dynamics | None = None) -> CState:
-        """One control step of ``n_substeps`` physics steps with ``ctrl (6,)``.
+        """One control step of ``n_substeps`` physics steps with ``ctrl (n,)``.
 
         ``dynamics``: per-env multipliers (domain randomisation), or None for the model.
         """

@@ -15,6 +15,7 @@ from mjx_arm.envs.model_io import SensorReader, arm_model, as_slice
 from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.wrench import sensor_wrench
+from mjx_arm.urdf.arm_config import ArmConfig
 from mjx_arm.urdf.scene import TARGET_BODY
 
 
@@ -23,7 +24,7 @@ class MujocoArmEnv(BaseRobotEnv):
 
     Args:
         task: the task configuration (default: Touch).
-        urdf: the arm URDF (default: the shipped arm).
+        arm: the arm (a URDF, an arm file or an ArmConfig; default: the shipped arm).
         render_mode: None, "rgb_array" or "human".
         width, height: frame size (pixels).
     """
@@ -33,13 +34,13 @@ class MujocoArmEnv(BaseRobotEnv):
     def __init__(
         self,
         task: TaskConfig | None = None,
-        urdf: str | Path | None = None,
+        arm: str | Path | ArmConfig | None = None,
         render_mode: str | None = None,
         width: int = DEFAULT_WIDTH,
         height: int = DEFAULT_HEIGHT,
     ) -> None:
-        super().__init__(task, urdf, render_mode, width, height)
-        self.model = arm_model(self.arm.urdf, self.task)
+        super().__init__(task, arm, render_mode, width, height)
+        self.model = arm_model(self.arm, self.task)
         self.data = mujoco.MjData(self.model)
         self.ids = SensorReader(self.model, self.arm)
         self._mocap = self.model.body_mocapid[self.model.body(TARGET_BODY).id]

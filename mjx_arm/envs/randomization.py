@@ -42,15 +42,16 @@ class Episode:
     latency: jax.Array
 
 
-def nominal_episode() -> Episode:
-    """No randomisation: nominal dynamics, no offset, no delay."""
-    return Episode(Dynamics.nominal(), jnp.zeros(3), jnp.zeros(()))
+def nominal_episode(n_joints: int = 6) -> Episode:
+    """No randomisation: nominal dynamics of ``n_joints``, no offset, no delay."""
+    return Episode(Dynamics.nominal(n_joints), jnp.zeros(3), jnp.zeros(()))
 
 
-def sample_episode(rng: jax.Array, cfg: RandomizationConfig) -> Episode:
-    """Draw one env's episode randomisation from ``rng`` (nominal when disabled)."""
+def sample_episode(rng: jax.Array, cfg: RandomizationConfig, n_joints: int = 6) -> Episode:
+    """Draw one env's episode randomisation from ``rng`` (nominal when disabled); the joint
+    multipliers are ``(n_joints,)``."""
     if not cfg.enabled:
-        return nominal_episode()
+        return nominal_episode(n_joints)
     keys = jax.random.split(rng, 7)
 
     def uniform(key: jax.Array, bounds: Range, shape: tuple[int, ...]) -> jax.Array:
@@ -58,9 +59,9 @@ def sample_episode(rng: jax.Array, cfg: RandomizationConfig) -> Episode:
 
     dynamics = Dynamics(
         friction=uniform(keys[0], cfg.friction, ()),
-        damping=uniform(keys[1], cfg.damping, (6,)),
-        armature=uniform(keys[2], cfg.armature, (6,)),
-        gain=uniform(keys[3], cfg.gain, (6,)),
+        damping=uniform(keys[1], cfg.damping, (n_joints,)),
+        armature=uniform(keys[2], cfg.armature, (n_joints,)),
+        gain=uniform(keys[3], cfg.gain, (n_joints,)),
     )
     offset = cfg.box_offset * jax.random.uniform(keys[4], (2,), minval=-1.0, maxval=1.0)
     latency = (jax.random.uniform(keys[5], ()) < cfg.latency_prob).astype(jnp.float32)

@@ -42,7 +42,8 @@ def make_env(
         task_name: a registered task name.
         engine: the CPU engine.
         task: the task config, or overrides of the task's preset (None: the preset).
-        kwargs: passed to the env class (``urdf``, ``render_mode``, ...).
+        kwargs: passed to the env class (``arm``: a URDF, an arm file or an ArmConfig;
+            ``render_mode``, ...).
     """
     if engine not in ENGINE_ENTRY_POINTS:
         raise ValueError(f"unknown engine {engine!r}; choose one of {ENGINES}")

@@ -37,6 +37,7 @@ class ArmVectorEnv(VectorEnv):
         backend: "auto" (MJX on an accelerator, C MuJoCo on a CPU), "mjx" or "mujoco".
         physics: the MJX implementation (``mjx`` only; default ``impl="auto"``: Warp on a GPU
             where it is installed).
+        arm: the arm (a URDF, an arm file or an ArmConfig; default: the shipped arm).
     """
 
     metadata: ClassVar[dict[str, Any]] = {
@@ -50,12 +51,14 @@ class ArmVectorEnv(VectorEnv):
         num_envs: int,
         backend: str = "auto",
         physics: PhysicsConfig | None = None,
+        arm=None,
     ) -> None:
-        self.task, self.num_envs = task, num_envs
-        self.env = make_batched_env(task, backend, physics, batch_size=num_envs)
-        self.single_observation_space = obs_lib.observation_space(task.force_clip)
+        self.num_envs = num_envs
+        self.env = make_batched_env(task, backend, physics, batch_size=num_envs, arm=arm)
+        self.task, n = self.env.task, self.env.action_size
+        self.single_observation_space = obs_lib.observation_space(task.force_clip, n)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
-        self.single_action_space = gym.spaces.Box(-1.0, 1.0, (6,), np.float32)
+        self.single_action_space = gym.spaces.Box(-1.0, 1.0, (n,), np.float32)
         self.action_space = batch_space(self.single_action_space, num_envs)
         self._reset = jax.jit(jax.vmap(self.env.reset))
         self._step = jax.jit(jax.vmap(self.env.step))
@@ -74,13 +77,15 @@ class ArmVectorEnv(VectorEnv):
         return self._obs(self._state.obs), {}
 
     def step(self, actions):
-        """Step every env with ``actions (num_envs, 6)``; finished envs reset in the same step."""
+        """Step every env with ``actions (num_envs, n)``; finished envs reset in the same step."""
         if self._state is None:
             raise RuntimeError("call reset() before step()")
         actions = np.asarray(actions, dtype=np.float64)
-        if actions.shape != (self.num_envs, 6):
-            raise ValueError(f"actions must have shape ({self.num_envs}, 6), got {actions.shape}")
-        actions = np.stack([check_action(a) for a in actions])
+        shape = (self.num_envs, self.env.action_size)
+        if actions.shape != shape:
+            raise ValueError(f"actions must have shape {shape}, got {actions.shape}")
+        bounds = (self.single_action_space.low, self.single_action_space.high)
+        actions = np.stack([check_action(a, bounds) for a in actions])
         state = self._step(self._state, jnp.asarray(actions))
         self.env.physics.check_overflow(state.metrics["physics_overflow"])
         self._steps += 1
@@ -134,6 +139,7 @@ def make_vector_env(
     backend: str = "auto",
     max_episode_steps: int | None = None,
     physics: PhysicsConfig | dict | None = None,
+    arm=None,
     **kwargs: Any,
 ) -> ArmVectorEnv:
     """Vector entry point of the registered ids (``max_episode_steps`` sets the episode length)."""
@@ -144,4 +150,4 @@ def make_vector_env(
         cfg = cfg.replace(episode_steps=int(max_episode_steps))
     if isinstance(physics, dict):
         physics = PhysicsConfig.from_dict(physics)
-    return ArmVectorEnv(cfg, num_envs, backend, physics)
+    return ArmVectorEnv(cfg, num_envs, backend, physics, arm)

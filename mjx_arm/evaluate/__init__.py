@@ -14,6 +14,7 @@ start poses and targets. The batched env draws its episodes from JAX's generator
 
 from mjx_arm.evaluate.core import (
     DYNAMICS_FIELDS,
+    eval_arm,
     eval_task,
     evaluate,
     format_summary,
@@ -28,6 +29,7 @@ __all__ = [
     "EpisodeStats",
     "EvalRun",
     "Policy",
+    "eval_arm",
     "eval_task",
     "evaluate",
     "format_summary",

@@ -21,7 +21,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     """
     import json
 
-    from mjx_arm.evaluate import eval_task, evaluate, format_summary, resolve_policy
+    from mjx_arm.evaluate import eval_arm, eval_task, evaluate, format_summary, resolve_policy
     from mjx_arm.replay import save_trajectory
 
     if args.engine == "mjx":
@@ -29,6 +29,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
         _warn_mjx_on_cpu()
     policy, source = resolve_policy(args.policy, args.step)
     task, notes = eval_task(policy, args.task)
+    arm = eval_arm(policy, args.arm)
     result, run = evaluate(
         policy,
         args.engine,
@@ -39,6 +40,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
         args.width,
         args.height,
         impl=args.impl,
+        arm=arm,
     )
     result = {"policy": str(source), **result, "notes": notes + result["notes"]}
     print(format_summary(result))
@@ -122,6 +124,11 @@ def _add_eval(sub: argparse._SubParsersAction) -> None:
         type=str.lower,
         choices=task_names(),
         help="task (default: the one the policy was trained on)",
+    )
+    p.add_argument(
+        "--arm",
+        help="the arm: a URDF or an arm file (.toml/.json) (default: the arm the policy was "
+        "trained on; a policy run on another arm is an error)",
     )
     p.add_argument("--video", help="video of the first episode (.mp4 or .gif)")
     p.add_argument("--width", type=int, default=640, help="video width (default: 640)")

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from mjx_arm.evaluate.runners import Policy, run_batched, run_episodes
+from mjx_arm.evaluate.runners import Policy, check_policy_arm, run_batched, run_episodes
 from mjx_arm.evaluate.stats import EvalRun, summarize
 from mjx_arm.names import EVAL_ENGINES as ENGINES
 from mjx_arm.names import env_id
@@ -69,18 +69,45 @@ def eval_task(policy: Any, name: str | None = None) -> tuple[TaskConfig, list[st
 
 
 def make_eval_env(
-    task: TaskConfig, engine: str, render: bool = False, width: int = 640, height: int = 480
+    task: TaskConfig,
+    engine: str,
+    render: bool = False,
+    width: int = 640,
+    height: int = 480,
+    arm: Any = None,
 ) -> gym.Env:
     """A Gymnasium env of ``task`` on a CPU engine ("mujoco" or "pybullet"), made through its
     registered id (:func:`mjx_arm.envs.registration.make_env` behind Gymnasium's wrappers: the
-    time limit and the checks), with an ``rgb_array`` renderer when ``render``."""
+    time limit and the checks), with an ``rgb_array`` renderer when ``render``, for ``arm`` (a
+    URDF, an arm file or an ArmConfig; default: the shipped arm)."""
     import gymnasium as gym
 
     from mjx_arm.envs.registration import register_envs
 
     register_envs()  # idempotent; also registers tasks added since import
     kwargs = {"render_mode": "rgb_array", "width": width, "height": height} if render else {}
-    return gym.make(env_id(task.task), engine=engine, task=task, **kwargs)
+    return gym.make(env_id(task.task), engine=engine, task=task, arm=arm, **kwargs)
+
+
+def eval_arm(policy: Any, source: str | Path | None = None) -> Any:
+    """The arm to evaluate on: ``source`` (a URDF or an arm file), else the arm the policy
+    records (files from before arm records: the shipped arm).
+
+    Raises:
+        FileNotFoundError: the recorded arm's URDF is not on this machine (pass ``source``).
+    """
+    from mjx_arm.urdf.arm_config import ArmConfig, load_arm
+
+    if source is not None:
+        return load_arm(source)
+    record = getattr(policy, "metadata", {}).get("arm") or {}
+    arm = ArmConfig.from_dict(record.get("config", {}))
+    if not arm.urdf_path.is_file():
+        raise FileNotFoundError(
+            f"the policy was trained on {arm.urdf}, which is not on this machine; pass the "
+            "same arm's URDF or arm file with --arm"
+        )
+    return arm
 
 
 def evaluate(
@@ -95,6 +122,7 @@ def evaluate(
     backend: str | None = None,
     video_episodes: int = 1,
     impl: str = "auto",
+    arm: Any = None,
 ) -> tuple[dict[str, Any], EvalRun]:
     """Evaluate ``policy`` on ``engine`` and summarise.
 
@@ -109,6 +137,8 @@ def evaluate(
         width, height: video frame size (pixels).
         backend: for ``engine="mjx"``: "mjx" (default) or "mujoco" (C MuJoCo, fast on a CPU).
         impl: for the MJX backend: "auto" (Warp on a GPU where installed), "jax" or "warp".
+        arm: the arm (a URDF, an arm file or an ArmConfig; default: the shipped arm). A policy
+            that records another arm raises :class:`~mjx_arm.envs.arm.ArmMismatchError`.
 
     Returns:
         The JSON-ready summary and the raw :class:`EvalRun`.
@@ -117,13 +147,14 @@ def evaluate(
         raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
     start = time.monotonic()
     if engine == "mjx":
-        run = run_batched(policy, task, episodes, seed, backend or "mjx", impl)
+        run = run_batched(policy, task, episodes, seed, backend or "mjx", impl, arm)
         if video is not None:
-            run.frames, note = _replay_video(run.trajectory, task, video, width, height)
+            run.frames, note = _replay_video(run.trajectory, task, video, width, height, arm)
             run.notes += [note] if note else []
     else:
-        env = make_eval_env(task, engine, render=video is not None, width=width, height=height)
+        env = make_eval_env(task, engine, video is not None, width, height, arm)
         try:
+            check_policy_arm(policy, env.unwrapped.arm)
             run = run_episodes(policy, env, episodes, seed, video, video_episodes)
         finally:
             env.close()
@@ -142,7 +173,12 @@ def evaluate(
 
 
 def _replay_video(
-    traj: dict[str, np.ndarray], task: TaskConfig, video: str | Path, width: int, height: int
+    traj: dict[str, np.ndarray],
+    task: TaskConfig,
+    video: str | Path,
+    width: int,
+    height: int,
+    arm: Any = None,
 ) -> tuple[int, str]:
     """Film a batched env's trajectory through the CPU MuJoCo renderer."""
     from mjx_arm.replay import render_frames, rendering_available, write_video
@@ -150,7 +186,7 @@ def _replay_video(
     ok, reason = rendering_available()
     if not ok:
         return 0, f"video skipped: {reason}"
-    frames = write_video(video, render_frames(traj, task, width, height), 1.0 / task.ctrl_dt)
+    frames = write_video(video, render_frames(traj, task, width, height, arm), 1.0 / task.ctrl_dt)
     return frames, "video: env 0's episode re-rendered in CPU MuJoCo from its joint angles"
 
 

@@ -72,7 +72,7 @@ def run_episode(
     """One episode of ``policy`` in a Gymnasium env of the contract.
 
     Args:
-        policy: observation -> action ``(6,)``.
+        policy: observation -> action ``(n,)``.
         env: a Gymnasium env with the contract's spaces and ``info`` keys.
         seed: reset seed.
         capture: called after the reset and after every step (e.g. to film ``render()``).
@@ -114,7 +114,7 @@ def run_episodes(
     """Run ``episodes`` episodes (episode ``i`` reset with ``seed + i``), optionally filmed.
 
     Args:
-        policy: observation -> action ``(6,)`` (e.g. :func:`mjx_arm.policy.load`'s result).
+        policy: observation -> action ``(n,)`` (e.g. :func:`mjx_arm.policy.load`'s result).
         env: a Gymnasium env of the contract; for a video, made with ``render_mode="rgb_array"``.
         episodes: number of episodes.
         seed: seed of the first episode.
@@ -183,6 +183,16 @@ def _open_video(env: gym.Env, video: str | Path | None) -> tuple[_SafeVideo | No
     return _SafeVideo(VideoWriter(video, fps)), []
 
 
+def check_policy_arm(policy: Any, arm: Any) -> None:
+    """Raise :class:`~mjx_arm.envs.arm.ArmMismatchError` when ``policy`` (with ``metadata``)
+    was trained on another arm than ``arm`` (an :class:`~mjx_arm.envs.arm.ArmInfo`)."""
+    from mjx_arm.envs.arm import check_same_arm
+
+    metadata = getattr(policy, "metadata", None)
+    if metadata is not None:
+        check_same_arm(metadata.get("arm"), arm)
+
+
 # --------------------------------------------------------------------------- batched runner
 
 
@@ -193,6 +203,7 @@ def run_batched(
     seed: int = 0,
     backend: str = "mjx",
     impl: str = "auto",
+    arm=None,
 ) -> EvalRun:
     """Run ``episodes`` episodes at once, one per env of an :class:`ArmVectorEnv`.
 
@@ -200,22 +211,24 @@ def run_batched(
     ignored until the slowest one ends (at most ``task.episode_steps`` steps).
 
     Args:
-        policy: batched observation Dict -> actions ``(episodes, 6)``.
+        policy: batched observation Dict -> actions ``(episodes, n)``.
         task: the task configuration.
         episodes: number of envs (= episodes).
         seed: seed of the batch's PRNG key.
         backend: "mjx" (MJX: slow on a CPU), "mujoco" (C MuJoCo) or "auto".
         impl: MJX implementation: "auto", "jax" or "warp".
+        arm: the arm (a URDF, an arm file or an ArmConfig; default: the shipped arm).
     """
     from mjx_arm.envs.physics_config import PhysicsConfig
     from mjx_arm.envs.vector import ArmVectorEnv
 
-    env = ArmVectorEnv(task, episodes, backend, PhysicsConfig(impl=impl))
+    env = ArmVectorEnv(task, episodes, backend, PhysicsConfig(impl=impl), arm)
+    check_policy_arm(policy, env.env.arm)
     obs, _ = env.reset(seed=seed)
     acc = _BatchAccumulator(episodes)
     rec = _Recorder()
     while acc.active.any():
-        actions = np.asarray(policy(obs), dtype=np.float32).reshape(episodes, 6)
+        actions = np.asarray(policy(obs), dtype=np.float32).reshape(env.action_space.shape)
         next_obs, rewards, terminated, truncated, info = env.step(actions)
         final = info.get("final_obs", next_obs)
         if acc.active[0]:

@@ -108,12 +108,13 @@ def brax_activation() -> str:
 def policy_metadata(config: Mapping[str, Any], checkpoint: Path, run_dir: Path) -> dict:
     """Everything but the weights a runtime needs, as a JSON-ready dict."""
     from mjx_arm import __version__
-    from mjx_arm.envs.arm import arm_info
+    from mjx_arm.envs.arm import arm_info, arm_record
     from mjx_arm.task.config import TaskConfig
-    from mjx_arm.task.observation import OBS_LAYOUT
+    from mjx_arm.task.observation import obs_layout
 
     task = TaskConfig.from_dict(config["task"])
-    arm = arm_info()
+    record = config.get("arm") or arm_record(arm_info())  # runs before the arm record: shipped
+    n = len(record["joint_names"])
     meta = json.loads((checkpoint / "meta.json").read_text())
     return {
         "format": FORMAT,
@@ -123,13 +124,14 @@ def policy_metadata(config: Mapping[str, Any], checkpoint: Path, run_dir: Path) 
         "step": int(meta["step"]),
         "run_dir": str(run_dir.resolve()),
         "exported_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-        "obs_layout": [[key, size] for key, size in OBS_LAYOUT],
-        "action_size": 6,
+        "obs_layout": [[key, size] for key, size in obs_layout(n)],
+        "action_size": n,
         "activation": brax_activation(),
         "distribution": "tanh_normal",
         "action_scale": task.action_scale,
-        "v_max": arm.v_max.tolist(),
-        "joint_names": list(arm.joint_names),
+        "v_max": list(record["v_max"]),
+        "joint_names": list(record["joint_names"]),
+        "arm": record,
         "ctrl_dt": task.ctrl_dt,
         "config": dict(config),
     }

@@ -31,7 +31,7 @@ class ObservationBuilder:
     def __init__(self, task: TaskConfig, urdf: str | Path | None = None) -> None:
         self.task = task
         self.arm = arm_info(urdf)
-        self.model = arm_model(self.arm.urdf, task)
+        self.model = arm_model(self.arm, task)
         self.data = mujoco.MjData(self.model)
         self._qpos_adr = np.array([self.model.joint(n).qposadr[0] for n in self.arm.joint_names])
         self._site = self.model.site(EE_SITE).id

@@ -8,14 +8,11 @@ the contract. Each task's preset lives in its own file (:mod:`mjx_arm.task.reach
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass, field
 from typing import Any
 
 from mjx_arm.task.registry import get_task, is_task, task_names
-
-# The arm's home pose: tool pointing down, about 0.37 m above the table, in front of the base.
-HOME_QPOS = (0.0, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0)
+from mjx_arm.urdf.arm_config import SHIPPED_HOME_QPOS as HOME_QPOS  # noqa: F401  (re-export)
 
 
 @dataclass(frozen=True)
@@ -89,10 +86,14 @@ class TaskConfig:
         action_scale: joint velocity target = action * action_scale * v_max (URDF velocity).
         episode_steps: control steps before truncation (150 = 5 s).
         terminate_on_success: end the episode on the first success step.
-        home_qpos: joint angles (rad) episodes start around.
+        home_qpos: joint angles (rad) episodes start around; () takes the arm's home pose
+            (:class:`mjx_arm.urdf.arm_config.ArmConfig`). An env fills it in from its arm.
         init_noise: half-width (rad) of the uniform noise added to ``home_qpos`` at reset.
-        target_low, target_high: box (m, base frame) the target is drawn from uniformly. For
-            touch only x and y are used: the box stands on the table at z = 0.
+        target_low, target_high: box (m, base frame) the target is drawn from uniformly, for
+            the shipped arm. For touch only x and y are used: the box stands on the table at
+            z = 0.
+        workspace_scale: the target box is scaled by this factor about the base; 0 takes the
+            arm's reach over the shipped arm's (1.0 for the shipped arm). An env fills it in.
         success_distance: d (m) below which the ee point counts as at the target.
         force_band: (min, max) contact force norm (N) of a successful touch.
         success_hold_steps: consecutive control steps the success condition must hold (near the
@@ -121,10 +122,11 @@ class TaskConfig:
     action_scale: float = 0.5
     episode_steps: int = 150
     terminate_on_success: bool = True
-    home_qpos: tuple[float, ...] = HOME_QPOS
+    home_qpos: tuple[float, ...] = ()
     init_noise: float = 0.05
     target_low: tuple[float, float, float] = (0.35, -0.25, 0.05)
     target_high: tuple[float, float, float] = (0.65, 0.25, 0.45)
+    workspace_scale: float = 0.0
     success_distance: float = 0.05
     force_band: tuple[float, float] = (1.0, 50.0)
     success_hold_steps: int = 1
@@ -144,8 +146,8 @@ class TaskConfig:
             raise ValueError(
                 f"ctrl_dt {self.ctrl_dt} is not a whole multiple of sim_dt {self.sim_dt}"
             )
-        if len(self.home_qpos) != 6:
-            raise ValueError("home_qpos needs 6 joint angles")
+        if self.workspace_scale < 0:
+            raise ValueError("workspace_scale must be >= 0 (0: from the arm)")
         if self.success_hold_steps < 1:
             raise ValueError("success_hold_steps must be >= 1")
         if not self.divergence_speed_factor > 1:
@@ -155,6 +157,25 @@ class TaskConfig:
     def n_substeps(self) -> int:
         """Physics steps per control step."""
         return round(self.ctrl_dt / self.sim_dt)
+
+    def target_box(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """``(low, high)`` of the target box (m, base frame), scaled by ``workspace_scale``."""
+        scale = self.workspace_scale or 1.0
+        low = tuple(scale * v for v in self.target_low)
+        return low, tuple(scale * v for v in self.target_high)
+
+    def for_arm(self, home_qpos: tuple[float, ...], reach_scale: float) -> TaskConfig:
+        """This config with the arm's home pose and reach scale where it leaves them empty.
+
+        Raises:
+            ValueError: a ``home_qpos`` given here that does not fit the arm's joint count.
+        """
+        home = self.home_qpos or tuple(float(q) for q in home_qpos)
+        if len(home) != len(home_qpos):
+            raise ValueError(
+                f"home_qpos has {len(home)} angles; the arm has {len(home_qpos)} joints"
+            )
+        return self.replace(home_qpos=home, workspace_scale=self.workspace_scale or reach_scale)
 
     @property
     def spec(self) -> Any:

@@ -1,4 +1,5 @@
-"""The observation contract: an ordered Dict of four keys and its flat 22-vector.
+"""The observation contract: an ordered Dict of four keys and its flat vector (22 entries for
+a 6-joint arm: ``16 + n``).
 
 Functions take an array namespace ``xp`` (``numpy`` or ``jax.numpy``) so every engine, batched or
 not, assembles observations with the same code.
@@ -13,60 +14,80 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-# (key, size) in contract order. Brax and exported policies see the concatenation: state (22,).
-OBS_LAYOUT: tuple[tuple[str, int], ...] = (
-    ("ee_pose", 7),
-    ("joint_angles", 6),
-    ("target_rel", 3),
-    ("contact_force", 6),
-)
-OBS_KEYS = tuple(key for key, _ in OBS_LAYOUT)
-OBS_SIZE = sum(size for _, size in OBS_LAYOUT)
-# Positions (m) are bounded well outside the arm's reach (about 1.1 m from the base).
+SHIPPED_JOINTS = 6
+# Sizes of the keys that do not depend on the arm; ``joint_angles`` has one entry per joint.
+FIXED_SIZES = {"ee_pose": 7, "target_rel": 3, "contact_force": 6}
+OBS_KEYS = ("ee_pose", "joint_angles", "target_rel", "contact_force")
+# Positions (m) are bounded well outside the reach of the arms the tasks drive (up to 1.3 m).
 POSITION_BOUND = 2.0
 
 
-def _layout_slices() -> tuple[tuple[str, slice], ...]:
+def obs_layout(n_joints: int = SHIPPED_JOINTS) -> tuple[tuple[str, int], ...]:
+    """(key, size) in contract order for an arm of ``n_joints``; Brax and exported policies
+    see the concatenation, ``state (16 + n_joints,)``."""
+    return tuple((key, FIXED_SIZES.get(key, n_joints)) for key in OBS_KEYS)
+
+
+def obs_size(n_joints: int = SHIPPED_JOINTS) -> int:
+    """Length of the flat ``state``: 22 for a 6-joint arm."""
+    return sum(size for _, size in obs_layout(n_joints))
+
+
+# The shipped arm's layout and size.
+OBS_LAYOUT = obs_layout()
+OBS_SIZE = obs_size()
+# The force part (fx, fy, fz) of ``contact_force``, the last key: the same for every arm.
+FORCE_SLICE = slice(-6, -3)
+
+
+def n_joints_of(state_size: int) -> int:
+    """The joint count of a flat ``state`` of ``state_size`` entries."""
+    n = state_size - obs_size(0)
+    if n < 1:
+        raise ValueError(f"a flat state of {state_size} entries holds no joint angles")
+    return n
+
+
+@functools.lru_cache(maxsize=16)
+def _slices(n_joints: int) -> tuple[tuple[str, slice], ...]:
     """(key, slice of the flat vector) in contract order."""
     out, start = [], 0
-    for key, size in OBS_LAYOUT:
+    for key, size in obs_layout(n_joints):
         out.append((key, slice(start, start + size)))
         start += size
     return tuple(out)
 
 
-_SLICES = _layout_slices()
-_CONTACT = dict(_SLICES)["contact_force"]
-# The force part (fx, fy, fz) of ``contact_force`` in the flat vector.
-FORCE_SLICE = slice(_CONTACT.start, _CONTACT.start + 3)
-
-
-def obs_slices() -> dict[str, slice]:
+def obs_slices(n_joints: int = SHIPPED_JOINTS) -> dict[str, slice]:
     """Where each key sits in the flat vector."""
-    return dict(_SLICES)
+    return dict(_slices(n_joints))
 
 
-def _bounds(force_clip: float, dtype: Any = np.float32) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+def _bounds(
+    force_clip: float, n_joints: int, dtype: Any = np.float32
+) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """(low, high) of each key, arrays of ``dtype``."""
     pose_high = np.array([POSITION_BOUND] * 3 + [1.0] * 4, dtype)
     pose_low = -pose_high.copy()
     pose_low[3] = 0.0  # quaternion w >= 0
     return {
         "ee_pose": (pose_low, pose_high),
-        "joint_angles": (np.full(6, -math.pi, dtype), np.full(6, math.pi, dtype)),
+        "joint_angles": (np.full(n_joints, -math.pi, dtype), np.full(n_joints, math.pi, dtype)),
         "target_rel": (np.full(3, -POSITION_BOUND, dtype), np.full(3, POSITION_BOUND, dtype)),
         "contact_force": (np.full(6, -force_clip, dtype), np.full(6, force_clip, dtype)),
     }
 
 
 @functools.lru_cache(maxsize=16)
-def state_bounds(force_clip: float) -> tuple[np.ndarray, np.ndarray]:
-    """Bounds of the flat ``state`` (float64, read-only), low and high, each ``(22,)``.
+def state_bounds(
+    force_clip: float, n_joints: int = SHIPPED_JOINTS
+) -> tuple[np.ndarray, np.ndarray]:
+    """Bounds of the flat ``state`` (float64, read-only), low and high, each ``(16 + n,)``.
 
     The float64 twins of :func:`flat_observation_space`'s bounds: clipping with them leaves
     wrapped joint angles (already inside [-pi, pi]) and canonical quaternions unchanged.
     """
-    bounds = _bounds(force_clip, np.float64)
+    bounds = _bounds(force_clip, n_joints, np.float64)
     low = np.concatenate([bounds[k][0] for k in OBS_KEYS])
     high = np.concatenate([bounds[k][1] for k in OBS_KEYS])
     low.setflags(write=False)
@@ -74,20 +95,20 @@ def state_bounds(force_clip: float) -> tuple[np.ndarray, np.ndarray]:
     return low, high
 
 
-def observation_space(force_clip: float = 100.0) -> spaces.Dict:
+def observation_space(force_clip: float = 100.0, n_joints: int = SHIPPED_JOINTS) -> spaces.Dict:
     """The Dict observation space, keys in contract order (built from a list: no sorting)."""
-    bounds = _bounds(force_clip)
+    bounds = _bounds(force_clip, n_joints)
     return spaces.Dict(
         [
             (key, spaces.Box(*bounds[key], shape=(size,), dtype=np.float32))
-            for key, size in OBS_LAYOUT
+            for key, size in obs_layout(n_joints)
         ]
     )
 
 
-def flat_observation_space(force_clip: float = 100.0) -> spaces.Box:
-    """The flat ``state (22,)`` space: the Dict bounds concatenated in contract order."""
-    bounds = _bounds(force_clip)
+def flat_observation_space(force_clip: float = 100.0, n_joints: int = SHIPPED_JOINTS) -> spaces.Box:
+    """The flat ``state (16 + n,)`` space: the Dict bounds concatenated in contract order."""
+    bounds = _bounds(force_clip, n_joints)
     low = np.concatenate([bounds[k][0] for k in OBS_KEYS])
     high = np.concatenate([bounds[k][1] for k in OBS_KEYS])
     return spaces.Box(low, high, dtype=np.float32)
@@ -109,7 +130,7 @@ def canonical_quat(xp: Any, quat):
 
 
 def raw_state(xp: Any, ee_pos, ee_quat, qpos, target_pos, wrench):
-    """The flat ``state`` before clipping, shape ``(..., 22)``, the dtype of the inputs.
+    """The flat ``state`` before clipping, shape ``(..., 16 + n)``, the dtype of the inputs.
 
     Quaternion made canonical, joint angles wrapped, nothing clipped: a non-finite input shows
     as a non-finite entry here (clipping would turn an infinity into a bound).
@@ -118,7 +139,7 @@ def raw_state(xp: Any, ee_pos, ee_quat, qpos, target_pos, wrench):
         xp: ``numpy`` or ``jax.numpy``.
         ee_pos: end-effector point (m), shape ``(..., 3)``.
         ee_quat: end-effector orientation (w, x, y, z), shape ``(..., 4)``.
-        qpos: the six joint angles (rad), shape ``(..., 6)``.
+        qpos: the n joint angles (rad), shape ``(..., n)``.
         target_pos: target point (m), shape ``(..., 3)``.
         wrench: tared external wrench on the tool in the ee frame, shape ``(..., 6)``.
     """
@@ -127,15 +148,16 @@ def raw_state(xp: Any, ee_pos, ee_quat, qpos, target_pos, wrench):
 
 
 def clip_state(xp: Any, state, bounds: tuple[Any, Any]):
-    """Clip a flat ``state (..., 22)`` into ``bounds`` (:func:`state_bounds`); same dtype."""
+    """Clip a flat ``state (..., 16 + n)`` into ``bounds`` (:func:`state_bounds`); same dtype."""
     low, high = bounds
     return xp.minimum(xp.maximum(state, low), high)
 
 
 def flat_obs(xp: Any, ee_pos, ee_quat, qpos, target_pos, wrench, force_clip: float):
-    """The observation as the flat float32 ``state (..., 22)`` (see :func:`assemble_obs`)."""
+    """The observation as the flat float32 ``state (..., 16 + n)`` (see :func:`assemble_obs`)."""
     raw = raw_state(xp, ee_pos, ee_quat, qpos, target_pos, wrench)
-    return xp.asarray(clip_state(xp, raw, state_bounds(force_clip)), dtype=xp.float32)
+    bounds = state_bounds(force_clip, qpos.shape[-1])
+    return xp.asarray(clip_state(xp, raw, bounds), dtype=xp.float32)
 
 
 def assemble_obs(xp: Any, ee_pos, ee_quat, qpos, target_pos, wrench, force_clip: float) -> dict:
@@ -145,23 +167,23 @@ def assemble_obs(xp: Any, ee_pos, ee_quat, qpos, target_pos, wrench, force_clip:
         xp: ``numpy`` or ``jax.numpy``.
         ee_pos: end-effector point (m), shape ``(..., 3)``.
         ee_quat: end-effector orientation (w, x, y, z), shape ``(..., 4)``.
-        qpos: the six joint angles (rad), shape ``(..., 6)``.
+        qpos: the n joint angles (rad), shape ``(..., n)``.
         target_pos: target point (m), shape ``(..., 3)``.
         wrench: tared external wrench on the tool in the ee frame, shape ``(..., 6)``.
         force_clip: bound of each wrench component.
 
     Returns:
         Dict of float32 arrays in contract key order, each inside :func:`observation_space`:
-        views into one flat ``state (..., 22)`` (:func:`flat_obs`).
+        views into one flat ``state (..., 16 + n)`` (:func:`flat_obs`).
     """
     return unflatten_obs(flat_obs(xp, ee_pos, ee_quat, qpos, target_pos, wrench, force_clip))
 
 
 def flatten_obs(xp: Any, obs: dict):
-    """Concatenate an observation dict into ``state``, shape ``(..., 22)``."""
+    """Concatenate an observation dict into ``state``, shape ``(..., 16 + n)``."""
     return xp.concatenate([obs[key] for key in OBS_KEYS], axis=-1)
 
 
 def unflatten_obs(state) -> dict:
-    """Split ``state (..., 22)`` back into the observation dict (views, no copy)."""
-    return {key: state[..., s] for key, s in _SLICES}
+    """Split ``state (..., 16 + n)`` back into the observation dict (views, no copy)."""
+    return {key: state[..., s] for key, s in _slices(n_joints_of(state.shape[-1]))}

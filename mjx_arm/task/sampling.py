@@ -11,13 +11,23 @@ from typing import Any
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.registry import get_task
 
-N_UNIFORMS = 9  # 6 for the start pose, 3 for the target
+N_TARGET_UNIFORMS = 3
 
 
-def initial_qpos(xp: Any, u6, cfg: TaskConfig):
-    """Start joint angles (rad): home pose plus uniform noise; ``u6`` shape ``(..., 6)``."""
+def n_uniforms(n_joints: int) -> int:
+    """Uniform draws per episode: one per joint for the start pose, 3 for the target."""
+    return n_joints + N_TARGET_UNIFORMS
+
+
+def initial_qpos(xp: Any, u_n, cfg: TaskConfig):
+    """Start joint angles (rad): home pose plus uniform noise; ``u_n`` shape ``(..., n)``.
+
+    ``cfg.home_qpos`` must be filled in (:meth:`TaskConfig.for_arm`).
+    """
+    if not cfg.home_qpos:
+        raise ValueError("the task config has no home_qpos: fill it in with TaskConfig.for_arm")
     home = xp.asarray(cfg.home_qpos)
-    return home + cfg.init_noise * (2.0 * u6 - 1.0)
+    return home + cfg.init_noise * (2.0 * u_n - 1.0)
 
 
 def target_body_pos(xp: Any, u3, cfg: TaskConfig):

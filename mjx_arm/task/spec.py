@@ -46,8 +46,9 @@ class Task:
         raise NotImplementedError
 
     def target_body_pos(self, xp: Any, u3, cfg: TaskConfig):
-        """Where the target body goes (m, base frame), from uniform draws ``u3 (..., 3)``."""
-        low, high = xp.asarray(cfg.target_low), xp.asarray(cfg.target_high)
+        """Where the target body goes (m, base frame), from uniform draws ``u3 (..., 3)``: the
+        config's target box, scaled to the arm's reach."""
+        low, high = (xp.asarray(v) for v in cfg.target_box())
         return low + u3 * (high - low)
 
     def target_point(self, xp: Any, body_pos, cfg: TaskConfig):

@@ -164,9 +164,9 @@ def _frozen(a: np.ndarray) -> np.ndarray:
     return out
 
 
-def tool_inertia(model: RobotModel, ft_joint: str, ee_link: str) -> ToolInertia:
-    """Mass properties of everything below ``ft_joint``, from the URDF, in the sensor frame."""
-    root = model.joints[ft_joint].child
+def tool_inertia(model: RobotModel, root: str, ee_link: str) -> ToolInertia:
+    """Mass properties of link ``root`` and everything below it (the tool the F/T reading
+    weighs), from the URDF, in ``root``'s frame (the sensor frame)."""
     frames = {root: np.eye(4)}
     for joint in model.joints_in_tree_order():
         if joint.parent in frames:

@@ -21,11 +21,12 @@ from mjx_arm.names import BACKENDS, PRESET_NAMES
 from mjx_arm.settings import set_path, split_setting
 from mjx_arm.task.config import RewardConfig, TaskConfig
 from mjx_arm.task.registry import is_task, task_names
+from mjx_arm.urdf.arm_config import ArmConfig
 
 PARTITIONS = ("auto", "xla", "per_device")
 
 # Nested sections of the config: name -> type (``--set physics.impl=warp``).
-SECTIONS = {"physics": PhysicsConfig, "randomization": RandomizationConfig}
+SECTIONS = {"physics": PhysicsConfig, "randomization": RandomizationConfig, "arm": ArmConfig}
 
 
 @dataclass(frozen=True)
@@ -34,6 +35,7 @@ class TrainConfig:
 
     Attributes:
         task: "reach" or "touch".
+        arm: the arm trained (URDF, end effector, joints, home pose; default: the shipped arm).
         task_overrides: fields of the task config to change (e.g. {"action_scale": 0.4};
             {"variant": "seed"} picks the seed document's Touch).
         backend: "auto", "mjx" or "mujoco" (C MuJoCo through a host callback, CPU).
@@ -69,6 +71,7 @@ class TrainConfig:
 
     task: str = "reach"
     task_overrides: dict[str, Any] = field(default_factory=dict)
+    arm: ArmConfig = field(default_factory=ArmConfig)
     backend: str = "auto"
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
     randomization: RandomizationConfig = field(default_factory=RandomizationConfig)

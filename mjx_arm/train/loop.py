@@ -19,7 +19,6 @@ from jax.sharding import NamedSharding
 from jax.sharding import PartitionSpec as P
 
 from mjx_arm.envs.wrappers import wrap_for_training
-from mjx_arm.task.observation import OBS_SIZE
 from mjx_arm.train.config import TrainConfig
 from mjx_arm.train.learner import (
     ENV_AXIS,
@@ -31,8 +30,6 @@ from mjx_arm.train.learner import (
     local_devices,
     make_mesh,
 )
-
-ACTION_SIZE = 6
 
 
 @dataclass
@@ -100,7 +97,7 @@ def run_ppo(
 
     split_mesh = mesh if partition == "per_device" else None
     train_env = wrap_for_training(env, episode_length, mesh=split_mesh, axis=ENV_AXIS)
-    learner = Learner(config, OBS_SIZE, ACTION_SIZE, mesh)
+    learner = Learner(config, env.observation_size, env.action_size, mesh)
     state = learner.init(key_policy, key_value)
     if restore is not None:
         state = learner.restore(state, restore)

@@ -42,20 +42,28 @@ class TrainResult:
 
 
 def full_config(
-    config: TrainConfig, task: TaskConfig, physics: dict[str, Any] | None = None
+    config: TrainConfig, task: TaskConfig, physics: dict[str, Any] | None = None, arm=None
 ) -> dict[str, Any]:
     """Every resolved setting of a run, as saved in ``config.json``.
 
-    ``physics``: what the env's physics reports of itself (implementation, buffer sizes).
+    Args:
+        config: the training config.
+        task: the task config as the env resolved it (the arm's home pose and reach scale
+            filled in).
+        physics: what the env's physics reports of itself (implementation, buffer sizes).
+        arm: the env's :class:`~mjx_arm.envs.arm.ArmInfo` (default: the config's arm).
     """
     from mjx_arm import __version__
+    from mjx_arm.envs.arm import arm_info, arm_record
     from mjx_arm.envs.model_io import task_convert_config
 
-    conversion = task_convert_config(task)
+    arm = arm or arm_info(config.arm)
+    conversion = task_convert_config(task, arm)
     return {
         "mjx_arm_version": __version__,
         "train": config.to_dict(),
         "task": task.to_dict(),
+        "arm": arm_record(arm),
         "convert": {k: v for k, v in vars(conversion).items() if k != "package_dirs"},
         "backend": resolve_backend(config.backend),
         "physics_resolved": physics or {},
@@ -92,10 +100,11 @@ def train(
     run.truncate_metrics(step_offset)  # rows a killed run wrote after its last checkpoint
 
     env, eval_env = make_envs(config, task)
+    task = env.task  # with the arm's home pose and reach scale
     progress = _Progress(run, config, task, step_offset, quiet)
     progress.physics = env.physics.describe()
     if not resume:
-        run.save_config(full_config(config, task, env.physics.describe()))
+        run.save_config(full_config(config, task, env.physics.describe(), env.arm))
     start = time.monotonic()
     progress.times.append((start, step_offset))
     try:
@@ -125,10 +134,14 @@ def make_envs(config: TrainConfig, task: TaskConfig) -> tuple[Any, Any]:
     Warp's contact pool is sized for the larger of the training and evaluation batches.
     """
     batch = max(config.num_envs, config.num_eval_envs)
-    train_env = make_batched_env(task, config.backend, config.physics, batch, config.randomization)
+    train_env = make_batched_env(
+        task, config.backend, config.physics, batch, config.randomization, config.arm
+    )
     if not config.randomization.enabled:
         return train_env, train_env
-    eval_env = make_batched_env(task, config.backend, config.physics, config.num_eval_envs)
+    eval_env = make_batched_env(
+        task, config.backend, config.physics, config.num_eval_envs, arm=config.arm
+    )
     return train_env, eval_env
 
 

@@ -58,16 +58,18 @@ def _check_moving_mass(
     out: _Findings,
 ) -> None:
     """A moving link needs mass; a massless frame without collision geometry is allowed, and
-    for MuJoCo alone also one with collision geometry on a fixed joint (welded to its parent,
-    its shapes collide and add no mass; PyBullet would give it 1 kg without <inertial>)."""
+    so is one with collision geometry on a fixed joint: both engines keep it welded to its
+    parent, its shapes collide and add no mass. PyBullet needs the mass 0 written out: for a
+    link without ``<inertial>`` it invents 1 kg (MuJoCo alone does not mind)."""
     if mass > 0 or not (direct or elem.find("collision") is not None):
         return
-    if not direct and engines == ("mujoco",):
+    written = elem.find("inertial") is not None
+    if not direct and (written or engines == ("mujoco",)):
         out.warning(
             3,
             _link(name),
-            "is a massless frame on a fixed joint with collision geometry: MuJoCo keeps it "
-            "welded to its parent, its shapes collide and add no mass",
+            "is a massless frame on a fixed joint with collision geometry: it stays welded "
+            "to its parent, its shapes collide and add no mass",
             "add <inertial> with the link's mass if its shapes stand for a real part",
         )
         return

@@ -1,0 +1,261 @@
+"""An arm is a config: its URDF, end effector, actuated joints, home pose and F/T point.
+
+Every field may be left empty; :func:`resolve_arm` fills it from the URDF:
+
+- ``ee_link``: a link named ``ee_link`` if there is one, else the tip of the longest chain of
+  arm joints (revolute or continuous); a leaf reached through a prismatic joint is a finger,
+  not a tip.
+- ``joints``: the revolute and continuous joints from the base down to ``ee_link``. Gripper
+  joints (prismatic fingers, and anything off the chain) are left out.
+- ``home_qpos``: the middle of each joint's limits (a full-turn joint: 0). The shipped arm's
+  home is its tool-down pose.
+- ``ft_joint``: a fixed joint named ``ft_sensor_joint`` if there is one; else the wrist
+  force/torque reading is taken where the last arm joint meets its child link.
+
+An arm file is TOML or JSON with the same fields; a relative ``urdf`` path is read from the
+file's folder.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from mjx_arm.paths import default_arm_urdf
+from mjx_arm.urdf.model import Joint, RobotModel, parse_urdf
+
+ARM_JOINT_TYPES = ("revolute", "continuous")
+MIN_JOINTS, MAX_JOINTS = 5, 7
+NAMED_EE_LINK = "ee_link"
+NAMED_FT_JOINT = "ft_sensor_joint"
+ARM_FILE_SUFFIXES = (".toml", ".json")
+# The shipped arm's home pose: tool pointing down, about 0.37 m above the table, in front of the
+# base (UR joint conventions).
+SHIPPED_HOME_QPOS = (0.0, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0)
+
+
+class ArmConfigError(ValueError):
+    """An arm config that does not fit its URDF (unknown link, wrong joint count, ...)."""
+
+
+@dataclass(frozen=True)
+class ArmConfig:
+    """Which arm the tasks drive. Saved with every run and recorded in every policy file.
+
+    Attributes:
+        urdf: path of the arm URDF; "" is the shipped UR5e-class arm.
+        ee_link: the link whose origin is the end-effector point; "" picks the default.
+        joints: the actuated joints, base to wrist; () picks the chain to ``ee_link``.
+        home_qpos: joint angles (rad) episodes start around; () picks the default.
+        ft_joint: the fixed joint of the wrist force/torque reading; "" picks the default.
+    """
+
+    urdf: str = ""
+    ee_link: str = ""
+    joints: tuple[str, ...] = ()
+    home_qpos: tuple[float, ...] = ()
+    ft_joint: str = ""
+
+    @property
+    def urdf_path(self) -> Path:
+        """The URDF's absolute path (the shipped arm's when ``urdf`` is empty)."""
+        return Path(self.urdf).expanduser().resolve() if self.urdf else default_arm_urdf()
+
+    def replace(self, **changes: Any) -> ArmConfig:
+        """A copy with some fields changed."""
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-ready dict of every field."""
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> ArmConfig:
+        """Inverse of :meth:`to_dict`; unknown keys are an error."""
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ArmConfigError(f"unknown arm config keys {unknown}; known: {sorted(known)}")
+        data = dict(data)
+        for key in ("joints", "home_qpos"):
+            if key in data:
+                data[key] = tuple(data[key])
+        return cls(**data)
+
+
+@dataclass(frozen=True)
+class ResolvedArm:
+    """An arm config with every default filled in from its URDF.
+
+    Attributes:
+        config: the config as given (empty fields stay empty: it is what a run saves).
+        model: the parsed URDF.
+        ee_link: the end-effector link.
+        joints: the actuated joints, base to wrist, ``n`` of them (5 to 7).
+        home_qpos: home joint angles (rad), ``(n,)``.
+        ft_joint: the fixed F/T joint, or "" when the reading is taken at the last arm joint.
+        ft_link: the link whose subtree is the tool the F/T reading weighs.
+    """
+
+    config: ArmConfig
+    model: RobotModel
+    ee_link: str
+    joints: tuple[Joint, ...]
+    home_qpos: tuple[float, ...]
+    ft_joint: str
+    ft_link: str
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        """Names of the actuated joints, base to wrist."""
+        return tuple(j.name for j in self.joints)
+
+
+def load_arm(source: str | Path | ArmConfig | None) -> ArmConfig:
+    """An :class:`ArmConfig` from a URDF path, an arm file (.toml/.json), a config or None.
+
+    Raises:
+        ArmConfigError: an arm file that cannot be read or has unknown keys.
+        FileNotFoundError: a path that does not exist.
+    """
+    if source is None:
+        return ArmConfig()
+    if isinstance(source, ArmConfig):
+        return source
+    path = Path(source).expanduser()
+    if not path.exists():
+        raise FileNotFoundError(f"arm {str(source)!r}: no such URDF or arm file")
+    if path.suffix.lower() not in ARM_FILE_SUFFIXES:
+        return ArmConfig(urdf=str(path.resolve()))
+    try:
+        text = path.read_text()
+        data = tomllib.loads(text) if path.suffix.lower() == ".toml" else json.loads(text)
+    except (tomllib.TOMLDecodeError, json.JSONDecodeError) as err:
+        raise ArmConfigError(f"{path}: not a valid arm file: {err}") from err
+    arm = ArmConfig.from_dict(data)
+    if arm.urdf and not Path(arm.urdf).expanduser().is_absolute():
+        arm = arm.replace(urdf=str((path.parent / arm.urdf).resolve()))
+    return arm
+
+
+def resolve_arm(arm: ArmConfig) -> ResolvedArm:
+    """Fill every default of ``arm`` from its URDF and check what was given.
+
+    Raises:
+        ArmConfigError: an unknown link or joint, a joint that is not a revolute joint of the
+            chain to the end effector, fewer than 5 or more than 7 joints, or a home pose of
+            the wrong length or outside the limits.
+    """
+    path = arm.urdf_path
+    model = parse_urdf(path)
+    ee_link = arm.ee_link or default_ee_link(model)
+    if ee_link not in model.links:
+        raise ArmConfigError(
+            f"{path}: ee_link {ee_link!r} is not a link; links: {list(model.links)}"
+        )
+    joints = _joints(model, ee_link, arm.joints, path)
+    home = tuple(float(q) for q in arm.home_qpos) or default_home(path, joints)
+    _check_home(home, joints, path)
+    ft_joint, ft_link = _ft_point(model, joints, arm.ft_joint, ee_link, path)
+    return ResolvedArm(arm, model, ee_link, joints, home, ft_joint, ft_link)
+
+
+def arm_chain(model: RobotModel, link: str) -> list[Joint]:
+    """The arm joints (revolute or continuous) from the root down to ``link``."""
+    return [j for j in model.chain_to(link) if j.type in ARM_JOINT_TYPES]
+
+
+def default_ee_link(model: RobotModel) -> str:
+    """``ee_link`` if the URDF names one, else the tip of the longest chain of arm joints.
+
+    A leaf below a prismatic joint (a finger) is no tip. Among tips with equally many arm
+    joints, the one with the fewest joints in all wins (the first in file order on a tie).
+    """
+    if NAMED_EE_LINK in model.links:
+        return NAMED_EE_LINK
+    parents = {j.parent for j in model.joints.values()}
+    leaves = [name for name in model.links if name not in parents]
+    tips = [leaf for leaf in leaves if not _below_prismatic(model, leaf)] or leaves
+    order = {name: i for i, name in enumerate(model.links)}
+    return max(
+        tips,
+        key=lambda n: (len(arm_chain(model, n)), -len(model.chain_to(n)), -order[n]),
+    )
+
+
+def default_home(path: Path, joints: tuple[Joint, ...]) -> tuple[float, ...]:
+    """The shipped arm's tool-down pose, else the middle of each joint's limits."""
+    if path == default_arm_urdf() and len(joints) == len(SHIPPED_HOME_QPOS):
+        return SHIPPED_HOME_QPOS
+    return tuple(_mid(j) for j in joints)
+
+
+def _mid(joint: Joint) -> float:
+    """Middle of a joint's range (rad); 0 for a continuous or unlimited joint."""
+    if joint.type == "continuous" or joint.limit is None:
+        return 0.0
+    return 0.5 * (joint.limit.lower + joint.limit.upper)
+
+
+def _below_prismatic(model: RobotModel, link: str) -> bool:
+    return any(j.type == "prismatic" for j in model.chain_to(link))
+
+
+def _joints(
+    model: RobotModel, ee_link: str, names: tuple[str, ...], path: Path
+) -> tuple[Joint, ...]:
+    """The actuated joints: ``names`` checked against the chain, or the whole chain."""
+    chain = arm_chain(model, ee_link)
+    if names:
+        on_chain = {j.name: j for j in chain}
+        off = [n for n in names if n not in on_chain]
+        if off:
+            raise ArmConfigError(
+                f"{path}: joints {off} are not revolute joints on the chain to {ee_link!r} "
+                f"({[j.name for j in chain]})"
+            )
+        chain = [on_chain[n] for n in names]
+    if not MIN_JOINTS <= len(chain) <= MAX_JOINTS:
+        raise ArmConfigError(
+            f"{path}: the tasks drive {MIN_JOINTS} to {MAX_JOINTS} arm joints; the chain to "
+            f"{ee_link!r} has {len(chain)} ({[j.name for j in chain]}). Pick another ee_link "
+            "or name the joints in an arm file."
+        )
+    return tuple(chain)
+
+
+def _check_home(home: tuple[float, ...], joints: tuple[Joint, ...], path: Path) -> None:
+    if len(home) != len(joints):
+        raise ArmConfigError(f"{path}: home_qpos has {len(home)} angles for {len(joints)} joints")
+    for q, j in zip(home, joints, strict=True):
+        if (
+            j.limit is not None
+            and j.type == "revolute"
+            and not (j.limit.lower - 1e-9 <= q <= j.limit.upper + 1e-9)
+        ):
+            raise ArmConfigError(
+                f"{path}: home angle {q} of {j.name!r} is outside [{j.limit.lower}, "
+                f"{j.limit.upper}]"
+            )
+
+
+def _ft_point(
+    model: RobotModel, joints: tuple[Joint, ...], ft_joint: str, ee_link: str, path: Path
+) -> tuple[str, str]:
+    """(F/T joint or "", the root link of the tool the reading weighs)."""
+    name = ft_joint or (NAMED_FT_JOINT if NAMED_FT_JOINT in model.joints else "")
+    if not name:
+        return "", joints[-1].child
+    if name not in model.joints:
+        raise ArmConfigError(f"{path}: ft_joint {name!r} is not a joint of this URDF")
+    joint = model.joints[name]
+    if joint.type != "fixed":
+        raise ArmConfigError(f"{path}: ft_joint {name!r} must be a fixed joint, not {joint.type}")
+    if name not in {j.name for j in model.chain_to(ee_link)}:
+        raise ArmConfigError(f"{path}: ft_joint {name!r} is not above ee_link {ee_link!r}")
+    return name, joint.child
