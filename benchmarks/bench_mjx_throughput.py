@@ -37,14 +37,17 @@ def _peak_bytes() -> int | None:
     return stats.get("peak_bytes_in_use")
 
 
-def _env(task_name: str, backend: str, convert: list[str], physics, batch: int):
-    """The batched env, its model converted with ``key=value`` overrides of ConvertConfig."""
+def _env(task_name: str, backend: str, convert: list[str], physics, batch: int, arm: str = ""):
+    """The batched env of ``arm`` (a URDF or arm file; "" the shipped arm), its model converted
+    with ``key=value`` overrides of ConvertConfig."""
     from mjx_arm.envs.backend import make_batched_env
     from mjx_arm.task import task_config
 
     task = task_config(task_name)
     if not convert:
-        return make_batched_env(task, backend, physics, batch)
+        return make_batched_env(task, backend, physics, batch, arm=arm or None)
+    if arm:
+        raise SystemExit("--convert is for the shipped arm only")
     import dataclasses
 
     from mjx_arm.envs.mjx_env import MjxArmEnv
@@ -71,14 +74,16 @@ def measure(
     backend: str,
     convert: list[str] | None = None,
     physics=None,
+    arm: str = "",
 ) -> dict:
     """Time env and raw stepping for one batch size (in this process)."""
     import jax
     import jax.numpy as jnp
 
-    env = _env(task_name, backend, convert or [], physics, batch)
+    env = _env(task_name, backend, convert or [], physics, batch, arm)
     keys = jax.random.split(jax.random.PRNGKey(0), batch)
-    actions = jax.random.uniform(jax.random.PRNGKey(1), (batch, 6), minval=-1, maxval=1)
+    shape = (batch, env.action_size)
+    actions = jax.random.uniform(jax.random.PRNGKey(1), shape, minval=-1, maxval=1)
 
     def env_rollout(state):
         def body(s, _):
@@ -139,8 +144,11 @@ def _child(args: argparse.Namespace) -> None:
     physics = PhysicsConfig(
         impl=args.child_impl, naconmax_per_env=args.naconmax_per_env, njmax=args.njmax
     )
-    row = measure(args.task, args.child_batch, args.steps, args.backend, args.convert, physics)
+    row = measure(
+        args.task, args.child_batch, args.steps, args.backend, args.convert, physics, args.arm
+    )
     row["convert"] = args.convert
+    row["arm"] = args.arm or "shipped"
     row["impl"] = row["physics"].get("impl", args.backend)
     print(json.dumps(row))
 
@@ -164,6 +172,9 @@ def main() -> None:
     )
     parser.add_argument("--naconmax-per-env", type=int, default=0, help="Warp contacts per env")
     parser.add_argument("--njmax", type=int, default=0, help="Warp constraint rows per env")
+    parser.add_argument(
+        "--arm", default="", help="the arm: a URDF or an arm file (default: shipped)"
+    )
     parser.add_argument("--child-batch", type=int, help=argparse.SUPPRESS)
     parser.add_argument("--child-impl", default="auto", help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -189,6 +200,8 @@ def main() -> None:
             str(args.naconmax_per_env),
             "--njmax",
             str(args.njmax),
+            "--arm",
+            args.arm,
         ]
         if args.convert:
             cmd += ["--convert", *args.convert]
@@ -209,6 +222,7 @@ def main() -> None:
         {
             "meta": meta,
             "task": args.task,
+            "arm": args.arm or "shipped",
             "backend": args.backend,
             "rows": rows,
             "warp_over_jax": _ratios(rows),

@@ -69,6 +69,7 @@ class SeedsConfig:
     backend: str = setting("auto", "physics backend", BACKENDS)
     threshold: float = setting(0.95, "evaluation success that counts as solved")
     devices: int = setting(0, "local devices to train on (0: all)")
+    arm: str = setting("", "the arm: a URDF or an arm file (.toml/.json); '' is the shipped arm")
 
 
 @dataclass
@@ -131,12 +132,16 @@ def train_seed(
     from mjx_arm.train.config import load_config
     from mjx_arm.train.ppo import train
     from mjx_arm.train.rundir import RunDir
+    from mjx_arm.urdf.arm_config import load_arm
 
     items = [f"task={config.task}", f"backend={config.backend}", *overrides, f"seed={seed}"]
     if config.devices:
         items.append(f"devices={config.devices}")
     train_config = load_config(config.preset, None, items)
-    run_dir = out / f"{config.task}-{config.preset}-seed{seed}"
+    if config.arm:
+        train_config = train_config.replace(arm=load_arm(config.arm))
+    arm_tag = f"{Path(config.arm).stem}-" if config.arm else ""
+    run_dir = out / f"{arm_tag}{config.task}-{config.preset}-seed{seed}"
     start = time.time() if start is None else start
     result = train(train_config, run_dir, quiet=True)
     wall = time.time() - start

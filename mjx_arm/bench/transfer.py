@@ -54,6 +54,7 @@ class TransferConfig:
     seed: int = setting(1000, "first episode's seed (CPU engines) or the batch's seed")
     impl: str = setting("auto", "MJX implementation", IMPLS)
     mjx_on_cpu: bool = setting(False, "run MJX even without a GPU (minutes to compile)")
+    arm: str = setting("", "the arm: a URDF or an arm file (default: the policy's own)")
     goal_success: float = setting(0.95, "goal: success rate in every engine")
     goal_peak_force: float = setting(50.0, "goal (Touch): mean peak contact force (N)")
 
@@ -118,8 +119,9 @@ def transfer_matrix(
         ``config``, ``task``, ``rows`` (one :func:`~mjx_arm.evaluate.evaluate` summary per
         engine, with ``key``, ``label`` and the goals met) and ``notes``.
     """
-    from mjx_arm.evaluate import evaluate
+    from mjx_arm.evaluate import eval_arm, evaluate
 
+    arm = eval_arm(policy, config.arm or None)
     keys, notes = plan_engines(config, jax_backend)
     rows = []
     for key in keys:
@@ -133,6 +135,7 @@ def transfer_matrix(
             config.seed,
             backend=spec.backend,
             impl=config.impl,
+            arm=arm,
         )
         result.pop("per_episode", None)
         rows.append({"key": key, "label": spec.label, **result, **row_goals(result, config, task)})

@@ -21,6 +21,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     """
     import json
 
+    from mjx_arm.envs.arm import ArmMismatchError
     from mjx_arm.evaluate import eval_arm, eval_task, evaluate, format_summary, resolve_policy
     from mjx_arm.replay import save_trajectory
 
@@ -29,19 +30,23 @@ def cmd_eval(args: argparse.Namespace) -> int:
         _warn_mjx_on_cpu()
     policy, source = resolve_policy(args.policy, args.step)
     task, notes = eval_task(policy, args.task)
-    arm = eval_arm(policy, args.arm)
-    result, run = evaluate(
-        policy,
-        args.engine,
-        task,
-        args.episodes,
-        args.seed,
-        args.video,
-        args.width,
-        args.height,
-        impl=args.impl,
-        arm=arm,
-    )
+    try:
+        arm = eval_arm(policy, args.arm)
+        result, run = evaluate(
+            policy,
+            args.engine,
+            task,
+            args.episodes,
+            args.seed,
+            args.video,
+            args.width,
+            args.height,
+            impl=args.impl,
+            arm=arm,
+        )
+    except (ArmMismatchError, FileNotFoundError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return EXIT_INVALID
     result = {"policy": str(source), **result, "notes": notes + result["notes"]}
     print(format_summary(result))
     if args.trajectory:

@@ -143,8 +143,11 @@ def evaluate(
     Returns:
         The JSON-ready summary and the raw :class:`EvalRun`.
     """
+    from mjx_arm.envs.arm import arm_info
+
     if engine not in ENGINES:
         raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
+    check_policy_arm(policy, arm_info(arm))  # before the task meets the arm
     start = time.monotonic()
     if engine == "mjx":
         run = run_batched(policy, task, episodes, seed, backend or "mjx", impl, arm)
@@ -154,7 +157,6 @@ def evaluate(
     else:
         env = make_eval_env(task, engine, video is not None, width, height, arm)
         try:
-            check_policy_arm(policy, env.unwrapped.arm)
             run = run_episodes(policy, env, episodes, seed, video, video_episodes)
         finally:
             env.close()

@@ -39,6 +39,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         if args.backend:
             overrides.insert(0, f"backend={args.backend}")
         config = load_config(args.preset, args.config, overrides)
+        config = _with_arm(config, args.arm, args.ee_link)
         stamp = time.strftime("%Y%m%d-%H%M%S")
         run_dir = Path(args.run_dir or Path("runs") / f"{config.task}-{stamp}")
     print(f"run directory: {run_dir}")
@@ -49,6 +50,16 @@ def cmd_train(args: argparse.Namespace) -> int:
         return EXIT_INVALID
     print(done_line(result))
     return EXIT_OK
+
+
+def _with_arm(config, source: str | None, ee_link: str | None):
+    """``config`` with the arm of ``--arm`` and ``--ee-link`` (each None: unchanged)."""
+    from mjx_arm.urdf.arm_config import load_arm
+
+    arm = load_arm(source) if source else config.arm
+    if ee_link:
+        arm = arm.replace(ee_link=ee_link, joints=())  # the chain follows the new ee link
+    return config.replace(arm=arm)
 
 
 def done_line(result) -> str:
@@ -93,6 +104,17 @@ def register(sub: argparse._SubParsersAction) -> None:
         type=int,
         help="local devices to train on, the env batch split evenly over them "
         "(default: all; also on --resume, which may change it)",
+    )
+    p.add_argument(
+        "--arm",
+        metavar="URDF_OR_FILE",
+        help="the arm: a URDF, or an arm file (.toml/.json: urdf, ee_link, joints, home_qpos, "
+        "ft_joint) (default: the shipped UR5e-class arm)",
+    )
+    p.add_argument(
+        "--ee-link",
+        help="end-effector link of the arm (default: ee_link, else the tip of the longest "
+        "chain of revolute joints)",
     )
     p.add_argument("--config", help="JSON file with training config fields")
     add_set_argument(

@@ -115,7 +115,9 @@ class _Progress:
 
     def _save(self, step: int, make_policy, params, meta: dict[str, Any] | None = None) -> None:
         params = jax.tree.map(np.asarray, params)
-        transitions = rollout_transitions(make_policy, params, self.task, seed=step)
+        transitions = rollout_transitions(
+            make_policy, params, self.task, seed=step, arm=self.config.arm
+        )
         meta = {"task": self.config.task, **(meta or {})}
         self.run.save_checkpoint(step, params, meta, transitions)
 
@@ -123,18 +125,21 @@ class _Progress:
         self.bar.close()
 
 
-def rollout_transitions(make_policy, params, task: TaskConfig, seed: int) -> dict[str, np.ndarray]:
-    """One evaluation episode in the CPU MuJoCo env; the last 100 transitions as arrays.
+def rollout_transitions(
+    make_policy, params, task: TaskConfig, seed: int, arm: Any = None
+) -> dict[str, np.ndarray]:
+    """One evaluation episode in the CPU MuJoCo env of ``arm`` (default: the shipped arm); the
+    last 100 transitions as arrays.
 
     Returns:
-        obs ``(T, 22)``, action ``(T, 6)``, reward ``(T,)``, done ``(T,)``, ee_pos ``(T, 3)``,
+        obs ``(T, 16 + n)``, action ``(T, n)``, reward ``(T,)``, done ``(T,)``, ee_pos ``(T, 3)``,
         contact_force ``(T,)`` with T <= 100.
     """
     from mjx_arm.envs.mujoco_env import MujocoArmEnv
     from mjx_arm.task.observation import flatten_obs
 
     policy = jax.jit(make_policy(params, deterministic=True))
-    env = MujocoArmEnv(task)
+    env = MujocoArmEnv(task, arm)
     obs, _ = env.reset(seed=int(seed) % (2**31))
     key = jax.random.PRNGKey(0)
     rows: dict[str, list] = {

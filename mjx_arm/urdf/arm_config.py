@@ -13,7 +13,8 @@ Every field may be left empty; :func:`resolve_arm` fills it from the URDF:
   force/torque reading is taken where the last arm joint meets its child link.
 
 An arm file is TOML or JSON with the same fields; a relative ``urdf`` path is read from the
-file's folder.
+file's folder, and ``package://NAME/...`` from the ROS package NAME (found through the
+``ROS_PACKAGE_PATH`` variable or above the arm file, as mesh paths are).
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from mjx_arm.paths import default_arm_urdf
+from mjx_arm.urdf.meshes import PACKAGE_PREFIX, find_package_dir
 from mjx_arm.urdf.model import Joint, RobotModel, parse_urdf
 
 ARM_JOINT_TYPES = ("revolute", "continuous")
@@ -138,9 +140,23 @@ def load_arm(source: str | Path | ArmConfig | None) -> ArmConfig:
     except (tomllib.TOMLDecodeError, json.JSONDecodeError) as err:
         raise ArmConfigError(f"{path}: not a valid arm file: {err}") from err
     arm = ArmConfig.from_dict(data)
-    if arm.urdf and not Path(arm.urdf).expanduser().is_absolute():
-        arm = arm.replace(urdf=str((path.parent / arm.urdf).resolve()))
-    return arm
+    return arm.replace(urdf=_arm_file_urdf(arm.urdf, path)) if arm.urdf else arm
+
+
+def _arm_file_urdf(urdf: str, arm_file: Path) -> str:
+    """The absolute path of an arm file's ``urdf`` entry."""
+    if urdf.startswith(PACKAGE_PREFIX):
+        package, _, rest = urdf[len(PACKAGE_PREFIX) :].partition("/")
+        root = find_package_dir(package, arm_file.resolve(), {})
+        if root is None:
+            raise ArmConfigError(
+                f"{arm_file}: package {package!r} of {urdf!r} not found; add the folder that "
+                "holds it to the ROS_PACKAGE_PATH variable"
+            )
+        return str((root / rest).resolve())
+    if Path(urdf).expanduser().is_absolute():
+        return urdf
+    return str((arm_file.parent / urdf).resolve())
 
 
 def resolve_arm(arm: ArmConfig) -> ResolvedArm:
