@@ -24,6 +24,14 @@ from mjx_arm.urdf.findings import (
     _numbers,
     _Tree,
 )
+from mjx_arm.urdf.mesh_convert import (
+    CONVERTIBLE_FORMATS,
+    INSTALL_HINT,
+    MeshConvertError,
+    default_cache_dir,
+    mesh_bounds,
+    missing_packages,
+)
 from mjx_arm.urdf.meshes import (
     MUJOCO_MESH_FORMATS,
     PYBULLET_MESH_FORMATS,
@@ -167,7 +175,7 @@ def _check_mesh(
             "set filename to the mesh file (relative to the URDF, or package://...)",
         )
         return None
-    _check_mesh_format(link, role, filename, engines, out)
+    convert = _check_mesh_format(link, role, filename, engines, out)
     resolved = _resolve_mesh(path, link, role, filename, package_dirs, out)
     scale = _numbers(shape.get("scale", "1 1 1"), 3)
     if scale is None:
@@ -180,6 +188,18 @@ def _check_mesh(
         return None
     if resolved is None:
         return None
+    if convert:
+        box = _converted_box(link, filename, resolved, out)
+    else:
+        box = _file_box(link, role, filename, resolved, out)
+    return None if box is None else np.sort(box * np.array(scale), axis=0)
+
+
+def _file_box(
+    link: str, role: str, filename: str, resolved: Path, out: _Findings
+) -> np.ndarray | None:
+    """Bounding box ``(2, 3)`` of an STL or OBJ mesh file, None for other files; an ASCII STL
+    is an error."""
     if resolved.suffix.lower() == ".stl" and _is_ascii_stl(str(resolved), *_stamp(resolved)):
         out.error(
             2,
@@ -191,13 +211,43 @@ def _check_mesh(
         return None
     if resolved.suffix.lower() not in _READ_FORMATS:  # only mesh files are ever opened
         return None
-    box = _mesh_box(str(resolved), *_stamp(resolved))
-    return None if box is None else np.sort(box * np.array(scale), axis=0)
+    return _mesh_box(str(resolved), *_stamp(resolved))
+
+
+def _converted_box(link: str, filename: str, resolved: Path, out: _Findings) -> np.ndarray | None:
+    """Read a collision mesh the converter turns into STL with trimesh.
+
+    Reports a warning that says where the STL goes, or an error when trimesh cannot read the
+    file. Returns the mesh's bounding box ``(2, 3)`` (m, before ``<mesh scale>``) or None.
+    """
+    cannot = f"has <collision> mesh {filename!r} in format {Path(filename).suffix.lower()}, "
+    cannot += "which MuJoCo cannot read"
+    try:
+        box = mesh_bounds(resolved)
+    except MeshConvertError as exc:
+        problem = f"{cannot}, and trimesh cannot convert it: {exc.problem}"
+        out.error(2, _link(link), problem, exc.fix)
+        return None
+    out.warning(
+        2,
+        _link(link),
+        f"{cannot}: converted to STL with trimesh, cached in {default_cache_dir()} "
+        "(ConvertConfig.mesh_cache_dir sets another folder)",
+        "nothing needed; to skip the conversion, save the mesh as binary .stl or .obj and "
+        "point filename at it",
+    )
+    return box
 
 
 def _check_mesh_format(
     link: str, role: str, filename: str, engines: tuple[str, ...], out: _Findings
-) -> None:
+) -> bool:
+    """Report a mesh format an engine cannot read.
+
+    Returns:
+        True for a collision mesh the converter turns into STL for MuJoCo (trimesh and the
+        packages it needs are installed): :func:`_converted_box` reports it once it is read.
+    """
     suffix = Path(filename).suffix.lower()
     readable = {"mujoco": MUJOCO_MESH_FORMATS, "pybullet": PYBULLET_MESH_FORMATS}
     blind = [e for e in engines if suffix not in readable[e]]
@@ -210,6 +260,10 @@ def _check_mesh_format(
             "convert the mesh to .stl or .obj to see it in MuJoCo's renderer",
         )
         blind.remove("mujoco")
+    convert = False
+    if "mujoco" in blind and suffix in CONVERTIBLE_FORMATS:
+        blind.remove("mujoco")
+        convert = _converter_installed(link, filename, suffix, out)
     if blind:
         who = " and ".join({"mujoco": "MuJoCo", "pybullet": "PyBullet"}[e] for e in blind)
         out.error(
@@ -220,6 +274,22 @@ def _check_mesh_format(
             "convert the mesh to .stl or .obj (for example with trimesh or meshlab) and "
             "point filename at it",
         )
+    return convert
+
+
+def _converter_installed(link: str, filename: str, suffix: str, out: _Findings) -> bool:
+    """True when trimesh (and pycollada for Collada) can be imported, else an error."""
+    missing = missing_packages(suffix)
+    if missing:
+        out.error(
+            2,
+            _link(link),
+            f"has <collision> mesh {filename!r} in format {suffix}, which MuJoCo cannot read, "
+            f"and {' and '.join(missing)}, which the converter needs to convert it to STL, "
+            f"{'is' if len(missing) == 1 else 'are'} not installed",
+            f"{INSTALL_HINT}, or convert the mesh to .stl or .obj and point filename at it",
+        )
+    return not missing
 
 
 def _resolve_mesh(

@@ -67,6 +67,10 @@ class ConvertConfig:
         self_collision: let non-neighbouring arm links collide with each other. The task
             models turn it off: the tasks keep the arm near its home pose, and dropping the
             self pairs cuts MJX's contact rows from 374 to about a quarter.
+        convert_meshes: convert collision meshes MuJoCo cannot read (Collada ``.dae``, PLY,
+            glTF, ...) to binary STL with trimesh; off, such a mesh is an error.
+        mesh_cache_dir: folder of the converted meshes (named by a hash of the source file,
+            reused on the next conversion); None uses ``~/.cache/mjx_arm/meshes``.
     """
 
     default_damping: float = 1.0
@@ -84,6 +88,8 @@ class ConvertConfig:
     default_effort: float = 0.0
     default_velocity: float = 0.0
     self_collision: bool = True
+    convert_meshes: bool = True
+    mesh_cache_dir: str | None = None
 
     def default_limits(self) -> dict[str, float]:
         """``effort``/``velocity`` -> the value the converter supplies where a joint has none."""

@@ -13,7 +13,14 @@ import numpy as np
 from mjx_arm.urdf.convert_config import ConvertConfig
 from mjx_arm.urdf.errors import ConversionError, one_line
 from mjx_arm.urdf.inertia import inertia_problem, inertia_tensor, is_frame, repair_inertia
-from mjx_arm.urdf.meshes import MUJOCO_MESH_FORMATS, resolve_mesh_filename
+from mjx_arm.urdf.mesh_convert import CONVERTIBLE_FORMATS, MeshConvertError, convert_mesh
+from mjx_arm.urdf.meshes import (
+    MUJOCO_MESH_FORMATS,
+    AssetPathError,
+    is_file,
+    resolve_asset,
+    resolve_mesh_filename,
+)
 from mjx_arm.urdf.model import RobotModel, parse_urdf
 from mjx_arm.urdf.safe_xml import read_xml
 from mjx_arm.urdf.scene import add_scene
@@ -139,16 +146,14 @@ def _check_finite(model: mujoco.MjModel, urdf: str | Path) -> None:
 
 
 def _prepare_urdf_text(path: Path, config: ConvertConfig) -> str:
-    """Resolve mesh paths, check inertias and tell the importer to keep every link apart."""
+    """Resolve mesh paths (converting collision meshes MuJoCo cannot read), check inertias and
+    tell the importer to keep every link apart."""
     root = read_xml(path)
     _drop_unreadable_visuals(root)
     _fill_limits(root, config.default_limits())
     for mesh in root.iter("mesh"):
         link = _enclosing_link_name(root, mesh)
-        mesh.set(
-            "filename",
-            str(resolve_mesh_filename(mesh.get("filename", ""), path, link, config.package_dirs)),
-        )
+        mesh.set("filename", str(_mesh_path(mesh.get("filename", ""), path, link, config)))
     moved = {c.get("link") for j in root.findall("joint") if _moves(j) for c in j.findall("child")}
     for link in root.findall("link"):
         if link.get("name") not in moved and is_frame(link):
@@ -197,13 +202,41 @@ def _moves(joint: ET.Element) -> bool:
 
 def _drop_unreadable_visuals(root: ET.Element) -> None:
     """Remove ``<visual>`` elements whose mesh MuJoCo cannot read (Collada, ...): they only
-    draw, and the validator reports each as a warning. Collision meshes stay (an error)."""
+    draw, and the validator reports each as a warning. Collision meshes in such a format are
+    converted to STL instead (:func:`_mesh_path`)."""
     for link in root.findall("link"):
         for visual in link.findall("visual"):
             mesh = visual.find("geometry/mesh")
             suffix = Path(mesh.get("filename", "")).suffix.lower() if mesh is not None else ""
             if mesh is not None and suffix not in MUJOCO_MESH_FORMATS:
                 link.remove(visual)
+
+
+def _mesh_path(filename: str, path: Path, link: str, config: ConvertConfig) -> Path:
+    """The mesh file MuJoCo reads for ``filename``: the file itself, or, for a format MuJoCo
+    cannot read and trimesh can, its STL conversion in the mesh cache.
+
+    Raises:
+        ConversionError: the mesh is missing, outside its folders, unreadable for MuJoCo
+            (with ``convert_meshes`` off or a format trimesh does not read), or cannot be
+            converted.
+    """
+    suffix = Path(filename).suffix.lower()
+    convert = suffix not in MUJOCO_MESH_FORMATS and suffix in CONVERTIBLE_FORMATS
+    if not (config.convert_meshes and convert):
+        return resolve_mesh_filename(filename, path, link, config.package_dirs)
+    try:
+        source = resolve_asset(filename, path, config.package_dirs)
+    except AssetPathError as exc:
+        raise ConversionError(
+            f"{path}: link {link!r}: mesh {filename!r} {exc.problem}; {exc.fix}"
+        ) from exc
+    if not is_file(source):
+        raise ConversionError(f"{path}: link {link!r}: mesh file {source} does not exist")
+    try:
+        return convert_mesh(source, config.mesh_cache_dir)
+    except MeshConvertError as exc:
+        raise ConversionError(f"{path}: link {link!r}: mesh {exc}") from exc
 
 
 def _enclosing_link_name(root: ET.Element, node: ET.Element) -> str:

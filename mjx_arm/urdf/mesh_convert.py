@@ -1,0 +1,254 @@
+"""Meshes in formats MuJoCo cannot read (Collada ``.dae``, PLY, glTF, ...) converted to binary
+STL with trimesh (pycollada reads Collada for it).
+
+A converted mesh is written once to a cache folder and named by a hash of the source file's
+bytes, so converting the same file again returns the same path without rewriting it. A scene of
+several geometries becomes one mesh with each geometry's transform applied, and a Collada file's
+``<unit meter>`` is applied, so the STL is in metres like the rest of the URDF. Collada's
+``<up_axis>`` is ignored, as ROS tools (RViz, Gazebo) ignore it.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import importlib
+import logging
+import os
+import re
+import tempfile
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mjx_arm.urdf.errors import ConversionError, one_line
+
+# Mesh formats trimesh reads, with the modules each needs (import name -> pip name).
+CONVERTIBLE_FORMATS = frozenset({".dae", ".zae", ".ply", ".off", ".glb", ".gltf"})
+_TRIMESH = {"trimesh": "trimesh"}
+_COLLADA = {**_TRIMESH, "collada": "pycollada"}
+_NEEDED = {".dae": _COLLADA, ".zae": _COLLADA}
+INSTALL_HINT = "pip install trimesh pycollada"
+# Folder of converted meshes beside a written MJCF file (see :func:`cache_dir_for`).
+CACHE_FOLDER = "meshes_converted"
+# Part of every hash: a change in how meshes are converted gives new file names.
+_HASH_SALT = b"mjx_arm.mesh_convert 1\0"
+_FIX = (
+    "re-export the mesh as binary .stl or .obj (e.g. with Blender or MeshLab) and point the "
+    "URDF's filename at it"
+)
+
+
+class MeshConvertError(ConversionError):
+    """A mesh that cannot be converted, with what is wrong and how to fix it.
+
+    Attributes:
+        problem: what is wrong, without the file name.
+        fix: how to fix it.
+    """
+
+    def __init__(self, path: Path, problem: str, fix: str) -> None:
+        super().__init__(f"{path}: {problem}; {fix}")
+        self.problem, self.fix = problem, fix
+
+
+def missing_packages(suffix: str) -> list[str]:
+    """Pip names of the packages that converting a ``suffix`` mesh needs and that are missing.
+
+    Args:
+        suffix: the file suffix with its dot, any case (``.DAE``).
+
+    Returns:
+        e.g. ``["pycollada"]``; empty when everything is installed.
+    """
+    needed = _NEEDED.get(suffix.lower(), _TRIMESH)
+    return [pip for module, pip in needed.items() if not _importable(module)]
+
+
+def _importable(module: str) -> bool:
+    try:
+        importlib.import_module(module)
+    except ImportError:
+        return False
+    return True
+
+
+def default_cache_dir() -> Path:
+    """The per-user cache of converted meshes: ``$XDG_CACHE_HOME/mjx_arm/meshes`` (by default
+    ``~/.cache/mjx_arm/meshes``)."""
+    base = os.environ.get("XDG_CACHE_HOME") or "~/.cache"
+    return Path(base).expanduser() / "mjx_arm" / "meshes"
+
+
+def cache_dir_for(output: str | Path | None) -> Path:
+    """Where meshes converted for ``output`` go: ``meshes_converted/`` beside that MJCF file, or
+    :func:`default_cache_dir` when there is no output file."""
+    if output is None:
+        return default_cache_dir()
+    return Path(output).expanduser().resolve().parent / CACHE_FOLDER
+
+
+def convert_mesh(path: str | Path, cache_dir: str | Path | None = None) -> Path:
+    """Convert one mesh file to binary STL in ``cache_dir``, or return the earlier conversion.
+
+    Args:
+        path: the source mesh (``.dae``, ``.ply``, ... any of :data:`CONVERTIBLE_FORMATS`).
+        cache_dir: folder of converted meshes, created when missing; None uses
+            :func:`default_cache_dir`.
+
+    Returns:
+        The path of ``<stem>_<hash>.stl`` in ``cache_dir``; the hash is of the source's bytes.
+
+    Raises:
+        MeshConvertError: a package is missing, the file cannot be read or holds no triangles,
+            or the cache folder cannot be written.
+    """
+    source = Path(path)
+    folder = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    folder = folder.expanduser().resolve()  # the MJCF names the STL by its absolute path
+    target = folder / f"{_safe_stem(source)}_{_content_hash(source)}.stl"
+    if target.is_file():
+        return target
+    mesh = load_mesh(source)
+    _write_atomic(mesh, target)
+    return target
+
+
+def mesh_bounds(path: str | Path) -> np.ndarray:
+    """Bounding box ``(2, 3)`` (min, max; m) of a mesh file as :func:`convert_mesh` converts it.
+
+    Cached per file version (path, modification time, size).
+
+    Raises:
+        MeshConvertError: as :func:`load_mesh`.
+    """
+    source = Path(path)
+    stat = _stat(source)
+    return _bounds_cached(str(source.resolve()), stat.st_mtime_ns, stat.st_size).copy()
+
+
+@functools.lru_cache(maxsize=256)
+def _bounds_cached(path: str, mtime_ns: int, size: int) -> np.ndarray:
+    del mtime_ns, size  # part of the cache key only
+    return np.asarray(load_mesh(Path(path)).bounds, dtype=float)
+
+
+def load_mesh(path: str | Path) -> Any:
+    """Read a mesh file into one ``trimesh.Trimesh`` in metres.
+
+    Args:
+        path: the mesh file.
+
+    Returns:
+        A ``trimesh.Trimesh`` with ``(n, 3)`` vertices and ``(m, 3)`` faces, ``m > 0``.
+
+    Raises:
+        MeshConvertError: a package is missing, or the file cannot be read or holds no
+            finite triangles.
+    """
+    source = Path(path)
+    missing = missing_packages(source.suffix)
+    if missing:
+        raise MeshConvertError(
+            source,
+            f"converting a {source.suffix} mesh needs {' and '.join(missing)}, not installed",
+            f"{INSTALL_HINT}, or convert the mesh to .stl or .obj yourself",
+        )
+    loaded = _read(source)
+    mesh = _concatenate(loaded, source)
+    scale = _unit_scale(getattr(loaded, "units", None), source)
+    if scale != 1.0:
+        mesh.apply_scale(scale)
+    if len(mesh.faces) == 0:
+        raise MeshConvertError(source, "the mesh holds no triangles", _FIX)
+    if not np.all(np.isfinite(mesh.vertices)):
+        raise MeshConvertError(source, "the mesh has non-finite vertex coordinates", _FIX)
+    return mesh
+
+
+def _read(source: Path) -> Any:
+    """``trimesh.load`` quietly: trimesh's log records and pycollada's warnings are not shown."""
+    import trimesh
+
+    logger = logging.getLogger("trimesh")
+    if not logger.handlers:  # a library's logger: no output unless the application asks for it
+        logger.addHandler(logging.NullHandler())
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return trimesh.load(str(source))
+    except Exception as exc:  # trimesh and pycollada raise many kinds on broken files
+        problem = f"trimesh cannot read it ({type(exc).__name__}: {one_line(exc)})"
+        raise MeshConvertError(source, problem, _FIX) from exc
+
+
+def _concatenate(loaded: Any, source: Path) -> Any:
+    """One ``trimesh.Trimesh`` from a mesh or a scene (each geometry moved by its transform)."""
+    import trimesh
+
+    if isinstance(loaded, trimesh.Scene):
+        meshes = [g for g in loaded.dump() if isinstance(g, trimesh.Trimesh)]
+        if not meshes:
+            raise MeshConvertError(source, "the file holds no triangle mesh", _FIX)
+        return trimesh.util.concatenate(meshes)
+    if isinstance(loaded, trimesh.Trimesh):
+        return loaded
+    kind = type(loaded).__name__
+    raise MeshConvertError(source, f"the file holds a {kind}, not a triangle mesh", _FIX)
+
+
+def _unit_scale(units: str | None, source: Path) -> float:
+    """Factor from the file's units (Collada's ``<unit meter>``) to metres; 1 when unstated."""
+    if not units or units in ("meters", "meter", "m"):
+        return 1.0
+    import trimesh
+
+    try:
+        return float(trimesh.units.unit_conversion(units, "meters"))
+    except (ValueError, KeyError, TypeError) as exc:
+        problem = f"its unit {units!r} cannot be converted to metres ({one_line(exc)})"
+        raise MeshConvertError(source, problem, "give the file's <unit> in metres") from exc
+
+
+def _write_atomic(mesh: Any, target: Path) -> None:
+    """Write ``mesh`` as binary STL to ``target`` through a temporary file in the same folder,
+    so a reader (or a second process converting the same file) never sees half a file."""
+    temporary = None
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        handle, temporary = tempfile.mkstemp(suffix=".tmp", dir=target.parent)
+        with os.fdopen(handle, "wb") as f:
+            f.write(mesh.export(file_type="stl"))
+        os.chmod(temporary, 0o644)
+        os.replace(temporary, target)
+    except OSError as exc:
+        raise MeshConvertError(
+            target,
+            f"the converted mesh cannot be written ({one_line(exc)})",
+            "set ConvertConfig.mesh_cache_dir to a writable folder",
+        ) from exc
+    finally:
+        if temporary is not None and os.path.exists(temporary):
+            os.unlink(temporary)
+
+
+def _content_hash(source: Path) -> str:
+    try:
+        data = source.read_bytes()
+    except OSError as exc:
+        raise MeshConvertError(source, f"the file cannot be read ({one_line(exc)})", _FIX) from exc
+    return hashlib.sha256(_HASH_SALT + data).hexdigest()[:20]
+
+
+def _stat(source: Path) -> os.stat_result:
+    try:
+        return source.stat()
+    except OSError as exc:
+        raise MeshConvertError(source, f"the file cannot be read ({one_line(exc)})", _FIX) from exc
+
+
+def _safe_stem(source: Path) -> str:
+    """The file's stem in characters safe for a file and a MuJoCo mesh name."""
+    return re.sub(r"[^A-Za-z0-9_.-]", "_", source.stem)[:64] or "mesh"
