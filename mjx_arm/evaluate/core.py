@@ -162,16 +162,22 @@ def evaluate(
             env.close()
     result = {"engine": engine, "task": task.task, "seed": seed, **summarize(run.episodes)}
     if engine == "mjx":
-        from mjx_arm.envs.physics_config import resolve_impl
-
-        result["backend"] = backend or "mjx"
-        if result["backend"] == "mjx":
-            result["impl"] = resolve_impl(impl)
+        result.update(_batch_physics(backend, impl))
     result["wall_seconds"] = time.monotonic() - start
     result["video"] = str(video) if video is not None and run.frames else None
     result["notes"] = run.notes
     result["per_episode"] = [asdict(e) for e in run.episodes]
     return result, run
+
+
+def _batch_physics(backend: str | None, impl: str) -> dict[str, str]:
+    """The ``backend`` (and MJX ``impl``) an ``mjx`` evaluation ran on, for its summary."""
+    from mjx_arm.envs.physics_config import resolve_impl
+
+    out = {"backend": backend or "mjx"}
+    if out["backend"] == "mjx":
+        out["impl"] = resolve_impl(impl)
+    return out
 
 
 def _replay_video(

@@ -31,6 +31,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
 def cmd_convert(args: argparse.Namespace) -> int:
     """Validate a URDF for MuJoCo, convert it to MJCF and write the XML."""
     from mjx_arm.urdf import ConversionError, ConvertConfig, to_mjcf
+    from mjx_arm.urdf.mesh_convert import cache_dir_for
     from mjx_arm.urdf.validate import validate
 
     package_dirs = _package_dirs(args.package)
@@ -40,6 +41,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
         repair_inertia=args.repair_inertia,
         default_effort=args.default_effort,
         default_velocity=args.default_velocity,
+        mesh_cache_dir=str(cache_dir_for(args.output)),  # meshes_converted/ beside the MJCF
     )
     report = validate(
         args.urdf,
