@@ -1,0 +1,167 @@
+"""Arms other than the shipped one: the arm config's defaults and checks, envs whose spaces
+follow the joint count, targets scaled to the arm's reach, and policies that record their arm.
+
+The published arms come from the example-robot-data package (a test dependency).
+"""
+
+from __future__ import annotations
+
+import sysconfig
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import mjx_arm  # noqa: F401  (registers the ids)
+from mjx_arm.envs.arm import ArmMismatchError, arm_info, arm_record, check_same_arm
+from mjx_arm.task import reach_config, sampling
+from mjx_arm.urdf.arm_config import (
+    SHIPPED_HOME_QPOS,
+    ArmConfig,
+    ArmConfigError,
+    load_arm,
+    resolve_arm,
+)
+
+ROBOTS = Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix/share/example-robot-data/robots"
+UR10 = ROBOTS / "ur_description/urdf/ur10_robot.urdf"
+PANDA = ROBOTS / "panda_description/urdf/panda.urdf"
+ARM_FILES = Path(__file__).resolve().parents[1] / "benchmarks/arms"
+
+pytestmark = pytest.mark.skipif(not PANDA.is_file(), reason="example-robot-data not installed")
+
+
+# --------------------------------------------------------------------------- the arm config
+
+
+def test_defaults_of_the_shipped_arm() -> None:
+    arm = resolve_arm(ArmConfig())
+    assert arm.ee_link == "ee_link" and arm.ft_joint == "ft_sensor_joint"
+    assert arm.home_qpos == SHIPPED_HOME_QPOS and len(arm.joints) == 6
+    assert arm_info().reach_scale == 1.0  # exactly: the unit of every other arm's scale
+
+
+def test_panda_defaults_leave_the_fingers_out() -> None:
+    arm = resolve_arm(ArmConfig(urdf=str(PANDA)))
+    assert arm.ee_link == "panda_hand_tcp"  # the fingers hang on prismatic joints
+    assert arm.joint_names == tuple(f"panda_joint{i}" for i in range(1, 8))
+    assert arm.ft_joint == "" and arm.ft_link == "panda_link7"
+    limits = [(j.limit.lower, j.limit.upper) for j in arm.joints]
+    np.testing.assert_allclose(arm.home_qpos, [(lo + hi) / 2 for lo, hi in limits])
+
+
+def test_ur10_defaults() -> None:
+    arm = resolve_arm(ArmConfig(urdf=str(UR10)))
+    assert arm.ee_link == "ee_link" and len(arm.joints) == 6
+    assert arm.ft_link == "wrist_3_link"
+    assert arm.home_qpos == (0.0,) * 6  # the middle of UR's +-2 pi limits
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"ee_link": "nope"}, "is not a link"),
+        ({"ee_link": "forearm_link"}, "5 to 7 arm joints"),
+        ({"joints": ("shoulder_pan_joint", "finger")}, "not revolute joints on the chain"),
+        ({"home_qpos": (0.0, 0.0)}, "2 angles for 6 joints"),
+        ({"home_qpos": (0.0, 0.0, 4.0, 0.0, 0.0, 0.0)}, "outside"),
+        ({"ft_joint": "shoulder_pan_joint"}, "must be a fixed joint"),
+    ],
+)
+def test_a_config_that_does_not_fit_the_urdf_is_a_named_error(change, message) -> None:
+    with pytest.raises(ArmConfigError, match=message):
+        resolve_arm(ArmConfig(urdf=str(UR10), **change))
+
+
+def test_arm_files(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    (tmp_path / "relative.toml").write_text(f'urdf = "{PANDA.name}"\nee_link = "panda_link8"\n')
+    (tmp_path / PANDA.name).write_text(PANDA.read_text())
+    arm = load_arm(tmp_path / "relative.toml")
+    assert Path(arm.urdf) == (tmp_path / PANDA.name).resolve() and arm.ee_link == "panda_link8"
+    (tmp_path / "arm.json").write_text('{"urdf": "x.urdf", "wrist": 1}')
+    with pytest.raises(ArmConfigError, match="unknown arm config keys"):
+        load_arm(tmp_path / "arm.json")
+    monkeypatch.setenv("ROS_PACKAGE_PATH", str(ROBOTS))
+    assert Path(load_arm(ARM_FILES / "ur10.toml").urdf) == UR10.resolve()
+    assert load_arm(PANDA) == ArmConfig(urdf=str(PANDA.resolve()))
+    with pytest.raises(FileNotFoundError, match="no such URDF or arm file"):
+        load_arm(tmp_path / "missing.urdf")
+
+
+# --------------------------------------------------------------------------- envs
+
+
+@pytest.mark.parametrize("engine", ["mujoco", "pybullet"])
+def test_panda_env_spaces_follow_the_joint_count(engine: str) -> None:
+    env = gym.make("mjx_arm/Reach-v0", engine=engine, arm=PANDA)
+    assert env.action_space.shape == (7,)
+    assert env.observation_space["joint_angles"].shape == (7,)
+    check_env(env.unwrapped, skip_render_check=True)
+    obs, _ = env.reset(seed=3)
+    for _ in range(20):
+        obs, *_ = env.step(env.action_space.sample())
+    assert env.observation_space.contains(obs)
+    with pytest.raises(ValueError, match=r"shape \(7,\)"):
+        env.step(np.zeros(6))
+    env.close()
+
+
+def test_targets_scale_with_the_reach() -> None:
+    ur10 = arm_info(UR10)
+    assert ur10.reach_scale == pytest.approx(1.30, abs=0.02)  # UR10 1.3 m, shipped arm 1.0 m
+    task = reach_config().for_arm(tuple(ur10.home_qpos), ur10.reach_scale)
+    low, high = (np.asarray(v) for v in task.target_box())
+    np.testing.assert_allclose(low, np.asarray(reach_config().target_low) * ur10.reach_scale)
+    u = np.random.default_rng(0).uniform(size=(200, 3))
+    body = sampling.target_body_pos(np, u, task)
+    assert np.all((body >= low) & (body <= high))
+    env = gym.make("mjx_arm/Reach-v0", arm=UR10).unwrapped
+    assert env.task.workspace_scale == ur10.reach_scale
+
+
+def test_a_home_pose_of_another_length_is_refused() -> None:
+    with pytest.raises(ValueError, match="7 joints"):
+        gym.make("mjx_arm/Reach-v0", arm=PANDA, task=reach_config(home_qpos=SHIPPED_HOME_QPOS))
+
+
+def test_vector_env_on_panda() -> None:
+    envs = gym.make_vec("mjx_arm/Reach-v0", num_envs=3, vectorization_mode="vector_entry_point",
+                        backend="mujoco", arm=PANDA)  # fmt: skip
+    obs, _ = envs.reset(seed=0)
+    assert obs["joint_angles"].shape == (3, 7) and envs.action_space.shape == (3, 7)
+    obs, reward, *_ = envs.step(np.zeros((3, 7), np.float32))
+    assert np.isfinite(reward).all()
+    envs.close()
+
+
+# --------------------------------------------------------------------------- policy records
+
+
+def test_a_policy_runs_only_on_its_own_arm(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("ROS_PACKAGE_PATH", str(ROBOTS.parent))  # the copy's package:// meshes
+    panda, shipped = arm_info(PANDA), arm_info()
+    check_same_arm(arm_record(panda), panda)  # the same arm: no error
+    with pytest.raises(ArmMismatchError, match="panda_joint1"):
+        check_same_arm(arm_record(panda), shipped)
+    # same joint names, another arm (heavier link 3): the model hash tells them apart
+    root = ET.parse(PANDA).getroot()
+    link3 = next(link for link in root.findall("link") if link.get("name") == "panda_link3")
+    link3.find("inertial/mass").set("value", "5.0")
+    heavier = tmp_path / "panda_heavier.urdf"
+    ET.ElementTree(root).write(heavier, encoding="unicode")
+    other = arm_info(ArmConfig(urdf=str(heavier)))
+    assert other.joint_names == panda.joint_names
+    with pytest.raises(ArmMismatchError, match="different converted model"):
+        check_same_arm(arm_record(panda), other)
+
+
+def test_parity_forward_kinematics_on_panda(tmp_path: Path) -> None:
+    from mjx_arm.bench.parity import ParityConfig, run_parity
+
+    config = ParityConfig.quick(engines=("mujoco", "pybullet"), arm=str(PANDA), press_boxes=1)
+    result = run_parity(config, log=lambda _: None)
+    fk = result["figures"]["fk_m"]["mujoco vs pybullet"]
+    assert fk < 1e-6, fk  # m, over random poses inside the limits
