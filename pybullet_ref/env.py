@@ -29,6 +29,13 @@ about the tool link's centre of mass, not the joint; it is moved to the joint he
 last substep. In fast free motion the tared reading stays below 0.6 N and 0.04 N m: Bullet's
 joint reaction carries a small velocity-product term when several joints turn at once.
 
+An arm without a fixed F/T joint takes its reading at the last arm joint. PyBullet's reaction
+at a motorised joint carries the motor torque, the joint's rotor inertia (given to the link,
+above) and Bullet's own constraint terms: tared, it still read up to 50 N m on a Panda in free
+motion. There the reading is instead the sum of the contact forces on the links of the tool
+subtree (normal and friction, about the ee point): zero in free motion, as MuJoCo's tared
+sensor reads.
+
 Reset: PyBullet reproduces a seeded episode exactly only after a full rebuild, so every reset
 rebuilds the world (about 5 ms without rendering, 8 ms with visual shapes), takes one substep at
 rest so the F/T sensor has a reading, and puts the joints back at the sampled angles.
@@ -145,6 +152,8 @@ class ArmIds:
         read: what one ``getJointStates`` call reads: ``joints`` then ``ft``.
         dofs: every moving joint (the arm's and a gripper's): inverse dynamics needs them all.
         arm_in_dofs: where each of ``joints`` sits in ``dofs``.
+        tool_links: where the F/T point is an arm joint (no fixed F/T joint), the links of the
+            tool subtree, whose contacts make the reading; else empty (the F/T sensor reads).
         tool_com: the tool link's centre of mass in the tool link frame (m), ``(3,)``; PyBullet
             reports the F/T torque about this point.
         inertia: principal inertia (kg m^2) of each actuated joint's child link with the
@@ -158,6 +167,7 @@ class ArmIds:
     read: tuple[int, ...]
     dofs: tuple[int, ...]
     arm_in_dofs: tuple[int, ...]
+    tool_links: frozenset[int]
     tool_com: np.ndarray
     inertia: tuple[tuple[float, float, float], ...]
     self_collision_off: tuple[tuple[int, int], ...]
@@ -246,12 +256,14 @@ class PybulletArmEnv(BaseRobotEnv):
         joints = tuple(joint[name] for name in self.arm.joint_names)
         ft = link[self.arm.ft_link]  # the joint above the tool link (link index = joint index)
         dofs = tuple(info[0] for info in infos if info[2] != pybullet.JOINT_FIXED)
+        tool_links = _subtree(infos, ft) if ft in joints else frozenset()
         return ArmIds(
             joints=joints,
             ft=ft,
             ee=link[self.arm.ee_link],
             read=(*joints, ft),
             dofs=dofs,
+            tool_links=tool_links,
             arm_in_dofs=tuple(dofs.index(j) for j in joints),
             tool_com=np.array(c.getDynamicsInfo(arm, ft)[3]),
             inertia=tuple(
@@ -344,13 +356,18 @@ class PybulletArmEnv(BaseRobotEnv):
             self.body, [self.ids.ft, self.ids.ee], computeLinkVelocity=1, computeForwardKinematics=1
         )
         x, y, z, w = ee[5]
+        ee_pos = np.array(ee[4])
+        if self.ids.tool_links:  # the F/T point is an arm joint: weigh the tool's contacts
+            wrench = self._contact_wrench(ee_pos, ee[5])
+        else:
+            wrench = self._wrench(states[-1][2], tool)
         return PhysicsReading(
-            ee_pos=np.array(ee[4]),
+            ee_pos=ee_pos,
             ee_quat=np.array([w, x, y, z]),
             qpos=np.array([s[0] for s in states[:-1]]),
             qvel=np.array([s[1] for s in states[:-1]]),
             target_pos=np.asarray(sampling.target_point(np, self._target_body, self.task)),
-            wrench=self._wrench(states[-1][2], tool),
+            wrench=wrench,
         )
 
     def _render_frame(self) -> np.ndarray:
@@ -373,6 +390,20 @@ class PybulletArmEnv(BaseRobotEnv):
         super().close()
 
     # ------------------------------------------------------------------ helpers
+
+    def _contact_wrench(self, ee_pos: np.ndarray, ee_xyzw: Sequence[float]) -> np.ndarray:
+        """External wrench on the tool in the ee frame about the ee point, ``(6,)``: the sum of
+        the contact forces (normal and friction) on the links of the tool subtree."""
+        force, torque = np.zeros(3), np.zeros(3)
+        for contact in self.client.getContactPoints(bodyA=self.body):
+            if contact[2] == self.body or contact[3] not in self.ids.tool_links:
+                continue
+            f = contact[9] * np.array(contact[7])  # normal force along the normal on B (to A)
+            f += contact[10] * np.array(contact[11]) + contact[12] * np.array(contact[13])
+            force += f
+            torque += _cross(np.array(contact[5]) - ee_pos, f)
+        rot = np.array(pybullet.getMatrixFromQuaternion(ee_xyzw)).reshape(3, 3)
+        return np.concatenate([rot.T @ force, rot.T @ torque])
 
     def _tool_velocity(self) -> tuple[np.ndarray, np.ndarray]:
         """World velocity of the tool link's centre of mass and its angular velocity, ``(3,)``."""
@@ -407,6 +438,15 @@ class PybulletArmEnv(BaseRobotEnv):
             CAMERA_FOVY, self.width / self.height, NEAR, FAR
         )
         return view, projection
+
+
+def _subtree(infos: Sequence[tuple], root: int) -> frozenset[int]:
+    """Link ``root`` and every link below it, from ``getJointInfo`` rows (index 16: parent)."""
+    links = {root}
+    for info in infos:  # parents come before their children
+        if info[16] in links:
+            links.add(info[0])
+    return frozenset(links)
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
