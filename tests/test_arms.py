@@ -165,3 +165,20 @@ def test_parity_forward_kinematics_on_panda(tmp_path: Path) -> None:
     result = run_parity(config, log=lambda _: None)
     fk = result["figures"]["fk_m"]["mujoco vs pybullet"]
     assert fk < 1e-6, fk  # m, over random poses inside the limits
+
+
+def test_collision_meshes_can_be_fitted_capsules() -> None:
+    import mujoco
+
+    from mjx_arm.envs.model_io import arm_model
+
+    def collision_types(collision: str) -> set[str]:
+        arm = arm_info(ArmConfig(urdf=str(UR10), collision=collision))
+        model = arm_model(arm, reach_config())
+        arm_geoms = [i for i in range(model.ngeom) if model.geom_bodyid[i] > 0]
+        return {mujoco.mjtGeom(model.geom_type[i]).name for i in arm_geoms if model.geom_contype[i]}
+
+    assert "mjGEOM_MESH" in collision_types("mesh")
+    assert collision_types("capsule") == {"mjGEOM_CAPSULE", "mjGEOM_BOX"}  # ee_link's own box
+    with pytest.raises(ArmConfigError, match="collision must be one of"):
+        ArmConfig(collision="sphere")

@@ -61,7 +61,12 @@ class ArmInfo:
 
     def convert_config(self, **fields) -> ConvertConfig:
         """Conversion settings that put the ee site and F/T sensors where this arm says."""
-        return ConvertConfig(ee_link=self.ee_link, ft_joint=self.ft_joint or None, **fields)
+        return ConvertConfig(
+            ee_link=self.ee_link,
+            ft_joint=self.ft_joint or None,
+            collision=self.config.collision,
+            **fields,
+        )
 
 
 def _info(resolved: ResolvedArm, reach: float, reference: float) -> ArmInfo:

@@ -36,6 +36,7 @@ MIN_JOINTS, MAX_JOINTS = 5, 7
 NAMED_EE_LINK = "ee_link"
 NAMED_FT_JOINT = "ft_sensor_joint"
 ARM_FILE_SUFFIXES = (".toml", ".json")
+COLLISION_CHOICES = ("mesh", "capsule", "box")
 # The shipped arm's home pose: tool pointing down, about 0.37 m above the table, in front of the
 # base (UR joint conventions).
 SHIPPED_HOME_QPOS = (0.0, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0)
@@ -55,6 +56,9 @@ class ArmConfig:
         joints: the actuated joints, base to wrist; () picks the chain to ``ee_link``.
         home_qpos: joint angles (rad) episodes start around; () picks the default.
         ft_joint: the fixed joint of the wrist force/torque reading; "" picks the default.
+        collision: the arm's collision shapes in MuJoCo and MJX: "mesh" (as the URDF gives
+            them), or "capsule" / "box" fitted to each mesh
+            (:class:`~mjx_arm.urdf.convert_config.ConvertConfig`).
     """
 
     urdf: str = ""
@@ -62,6 +66,11 @@ class ArmConfig:
     joints: tuple[str, ...] = ()
     home_qpos: tuple[float, ...] = ()
     ft_joint: str = ""
+    collision: str = "mesh"
+
+    def __post_init__(self) -> None:
+        if self.collision not in COLLISION_CHOICES:
+            raise ArmConfigError(f"collision must be one of {COLLISION_CHOICES}")
 
     @property
     def urdf_path(self) -> Path:
