@@ -125,10 +125,11 @@ def _is_dir(path: Path) -> bool:
         return False
 
 
-def resolve_mesh_filename(
+def existing_mesh(
     filename: str, urdf_path: Path, link: str, package_dirs: Mapping[str, str]
 ) -> Path:
-    """Resolve a mesh for MuJoCo or raise a :class:`ConversionError` that says how to fix it."""
+    """The mesh file of ``filename``, resolved and present, in any format; else a
+    :class:`ConversionError` that says how to fix it."""
     try:
         path = resolve_asset(filename, urdf_path, package_dirs)
     except AssetPathError as exc:
@@ -137,6 +138,14 @@ def resolve_mesh_filename(
         ) from exc
     if not is_file(path):
         raise ConversionError(f"{urdf_path}: link {link!r}: mesh file {path} does not exist")
+    return path
+
+
+def resolve_mesh_filename(
+    filename: str, urdf_path: Path, link: str, package_dirs: Mapping[str, str]
+) -> Path:
+    """Resolve a mesh for MuJoCo or raise a :class:`ConversionError` that says how to fix it."""
+    path = existing_mesh(filename, urdf_path, link, package_dirs)
     if path.suffix.lower() not in MUJOCO_MESH_FORMATS:
         raise ConversionError(
             f"{urdf_path}: link {link!r}: mesh {path.name} is {path.suffix} which MuJoCo cannot "

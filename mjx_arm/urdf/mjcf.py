@@ -16,9 +16,7 @@ from mjx_arm.urdf.inertia import inertia_problem, inertia_tensor, is_frame, repa
 from mjx_arm.urdf.mesh_convert import CONVERTIBLE_FORMATS, MeshConvertError, convert_mesh
 from mjx_arm.urdf.meshes import (
     MUJOCO_MESH_FORMATS,
-    AssetPathError,
-    is_file,
-    resolve_asset,
+    existing_mesh,
     resolve_mesh_filename,
 )
 from mjx_arm.urdf.model import RobotModel, parse_urdf
@@ -227,14 +225,7 @@ def _mesh_path(filename: str, path: Path, link: str, config: ConvertConfig) -> P
     convert = suffix not in MUJOCO_MESH_FORMATS and suffix in CONVERTIBLE_FORMATS
     if not (config.convert_meshes and convert):
         return resolve_mesh_filename(filename, path, link, config.package_dirs)
-    try:
-        source = resolve_asset(filename, path, config.package_dirs)
-    except AssetPathError as exc:
-        raise ConversionError(
-            f"{path}: link {link!r}: mesh {filename!r} {exc.problem}; {exc.fix}"
-        ) from exc
-    if not is_file(source):
-        raise ConversionError(f"{path}: link {link!r}: mesh file {source} does not exist")
+    source = existing_mesh(filename, path, link, config.package_dirs)
     try:
         return convert_mesh(source, config.mesh_cache_dir)
     except MeshConvertError as exc:
