@@ -7,7 +7,9 @@ from typing import Any
 from mjx_arm.task import reward as reward_lib
 from mjx_arm.task.config import RewardConfig, TaskConfig
 from mjx_arm.task.spec import Task
-from mjx_arm.urdf.scene_shapes import box_top_offset
+from mjx_arm.urdf.scene_shapes import box_top_offset, table_top_extent
+
+BOX_EDGE_MARGIN = 0.05  # m: the box keeps at least its own length from the table's edges
 
 # Touch's default reward ("gentle"): gentle contact is the optimum.
 # - The seed's distance charge guides the tool from afar; ``proximity`` (length 1 cm) pays up to
@@ -69,8 +71,14 @@ class Touch(Task):
         return base.replace(**overrides)
 
     def target_body_pos(self, xp: Any, u3, cfg: TaskConfig):
-        """The box's bottom-face centre on the table (z = 0), x and y drawn from the target box."""
-        return super().target_body_pos(xp, u3, cfg) * xp.asarray([1.0, 1.0, 0.0])
+        """The box's bottom-face centre on the table (z = 0), x and y drawn from the target box.
+
+        An arm of a longer reach scales the target box past the table's edge: x and y are
+        kept on the table, a box length from its edges (no change for the shipped arm).
+        """
+        body = super().target_body_pos(xp, u3, cfg) * xp.asarray([1.0, 1.0, 0.0])
+        low, high = table_top_extent(margin=BOX_EDGE_MARGIN)
+        return xp.clip(body, xp.asarray([*low, 0.0]), xp.asarray([*high, 0.0]))
 
     def target_point(self, xp: Any, body_pos, cfg: TaskConfig):
         """The centre of the box's top face."""

@@ -44,3 +44,12 @@ def box_top_offset() -> float:
     """Height (m) of the target box's top face above the box frame (its bottom face centre)."""
     (geom,) = scene_geometry()["box"]
     return geom.origin.xyz[2] + geom.size[2] / 2
+
+
+def table_top_extent(margin: float = 0.0) -> tuple[tuple[float, float], tuple[float, float]]:
+    """``((x_min, y_min), (x_max, y_max))`` of the table's top face (m), shrunk by ``margin``."""
+    (geom,) = scene_geometry()["table"]
+    centre = geom.origin.xyz
+    half = (geom.size[0] / 2 - margin, geom.size[1] / 2 - margin)
+    low = (centre[0] - half[0], centre[1] - half[1])
+    return low, (centre[0] + half[0], centre[1] + half[1])
