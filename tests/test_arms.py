@@ -182,3 +182,24 @@ def test_collision_meshes_can_be_fitted_capsules() -> None:
     assert collision_types("capsule") == {"mjGEOM_CAPSULE", "mjGEOM_BOX"}  # ee_link's own box
     with pytest.raises(ArmConfigError, match="collision must be one of"):
         ArmConfig(collision="sphere")
+
+
+def test_an_inertia_on_the_triangle_edge_is_moved_inside_by_the_repair() -> None:
+    from mjx_arm.urdf.inertia import (
+        REPAIR_MARGIN,
+        inertia_tensor,
+        on_triangle_edge,
+        principal_moments,
+        repair_inertia,
+    )
+
+    # TIAGo's arm_1_link: a + b exceeds c by 2e-12, which 6 written digits turn into a + b < c
+    edge = inertia_tensor(
+        {"ixx": 0.003060504572445, "ixy": 0.002364723186022, "ixz": 0.001495245689439,
+         "iyy": 0.008630326004235, "iyz": 0.000522540423519, "izz": 0.009347757530069}
+    )  # fmt: skip
+    assert on_triangle_edge(edge)
+    a, b, c = principal_moments(repair_inertia(edge))
+    assert a + b >= c * (1 + REPAIR_MARGIN) * (1 - 1e-12)
+    written = np.array([float(f"{m:.6g}") for m in (a, b, c)])
+    assert written[0] + written[1] >= written[2]

@@ -66,16 +66,29 @@ def inertia_problem(inertia: np.ndarray) -> str | None:
     return None
 
 
+REPAIR_MARGIN = 1e-4  # relative: well above the 6 significant digits MuJoCo writes
+
+
+def on_triangle_edge(inertia: np.ndarray) -> bool:
+    """True for a tensor within :data:`REPAIR_MARGIN` of breaking ``a + b >= c`` (or breaking
+    it by less than the tolerance of :func:`inertia_problem`): MuJoCo may refuse it once the
+    tensor is written with 6 significant digits."""
+    a, b, c = principal_moments(inertia)
+    return a + b < c * (1.0 + REPAIR_MARGIN)
+
+
 def repair_inertia(inertia: np.ndarray) -> np.ndarray:
     """Return the nearest tensor that satisfies the triangle inequality, shape ``(3, 3)``.
 
     The principal axes are kept; the two smaller principal moments are raised together until
-    their sum equals the largest one, and every moment is kept above a small positive floor.
+    their sum exceeds the largest one by :data:`REPAIR_MARGIN` of it (so the tensor stays valid
+    once MuJoCo writes it with 6 significant digits), and every moment is kept above a small
+    positive floor.
     """
     moments, axes = _scaled_eigh(inertia)
     floor = max(1e-9, 1e-6 * float(np.abs(moments).max()))
     moments = np.maximum(moments, floor)
-    deficit = moments[2] - (moments[0] + moments[1])
+    deficit = moments[2] * (1.0 + REPAIR_MARGIN) - (moments[0] + moments[1])
     if deficit > 0:
         moments[0] += deficit / 2
         moments[1] += deficit / 2

@@ -12,7 +12,13 @@ import numpy as np
 
 from mjx_arm.urdf.convert_config import ConvertConfig
 from mjx_arm.urdf.errors import ConversionError, one_line
-from mjx_arm.urdf.inertia import inertia_problem, inertia_tensor, is_frame, repair_inertia
+from mjx_arm.urdf.inertia import (
+    inertia_problem,
+    inertia_tensor,
+    is_frame,
+    on_triangle_edge,
+    repair_inertia,
+)
 from mjx_arm.urdf.mesh_convert import CONVERTIBLE_FORMATS, MeshConvertError, convert_mesh
 from mjx_arm.urdf.meshes import (
     MUJOCO_MESH_FORMATS,
@@ -101,7 +107,8 @@ def mjcf_text(spec: mujoco.MjSpec, urdf: str | Path) -> str:
     except Exception as exc:
         raise ConversionError(
             f"{urdf}: the written MJCF does not compile again (MuJoCo keeps about 6 significant "
-            f"digits per vector; check the URDF for extreme values): {one_line(exc)}"
+            f"digits per vector; check the URDF for extreme values; an inertia on the edge of the "
+            f"triangle inequality is moved inside it by --repair-inertia): {one_line(exc)}"
         ) from exc
     return text
 
@@ -247,7 +254,7 @@ def _check_or_repair_inertia(link: ET.Element, path: Path, repair: bool) -> None
     v = {k: float(inertia.get(k, "0")) for k in keys}
     tensor = inertia_tensor(v)
     problem = inertia_problem(tensor)
-    if problem is None:
+    if problem is None and not (repair and on_triangle_edge(tensor)):
         return
     name = link.get("name", "?")
     if not repair:
