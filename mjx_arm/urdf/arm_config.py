@@ -37,7 +37,9 @@ NAMED_EE_LINK = "ee_link"
 NAMED_FT_JOINT = "ft_sensor_joint"
 ARM_FILE_SUFFIXES = (".toml", ".json")
 COLLISION_CHOICES = ("mesh", "capsule", "box")
-# The shipped arm's home pose: tool pointing down, about 0.37 m above the table, in front of the
+# The arms in assets/: the UR5e-class arm, and the same arm with a parallel-jaw gripper.
+SHIPPED_ARMS = ("ur5e.urdf", "ur5e_gripper.urdf")
+# The shipped arms' home pose: tool pointing down, about 0.37 m above the table, in front of the
 # base (UR joint conventions).
 SHIPPED_HOME_QPOS = (0.0, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0)
 
@@ -214,8 +216,9 @@ def default_ee_link(model: RobotModel) -> str:
 
 
 def default_home(path: Path, joints: tuple[Joint, ...]) -> tuple[float, ...]:
-    """The shipped arm's tool-down pose, else the middle of each joint's limits."""
-    if path == default_arm_urdf() and len(joints) == len(SHIPPED_HOME_QPOS):
+    """The shipped arms' tool-down pose, else the middle of each joint's limits."""
+    shipped = path.parent == default_arm_urdf().parent and path.name in SHIPPED_ARMS
+    if shipped and len(joints) == len(SHIPPED_HOME_QPOS):
         return SHIPPED_HOME_QPOS
     return tuple(_mid(j) for j in joints)
 
