@@ -43,6 +43,7 @@ def _add_demo(sub: argparse._SubParsersAction) -> None:
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every subcommand, in the order of the pipeline."""
     from mjx_arm.bench import cli as bench_cli
+    from mjx_arm.envs import cli as envs_cli
     from mjx_arm.evaluate import cli as evaluate_cli
     from mjx_arm.policy import cli as policy_cli
     from mjx_arm.sim2real import cli as sim2real_cli
@@ -54,7 +55,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Train and check 6-DoF arm control policies (URDF -> MJCF -> MJX + Brax PPO).",
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for package in (urdf_cli, train_cli, policy_cli, evaluate_cli):
+    for package in (urdf_cli, envs_cli, train_cli, policy_cli, evaluate_cli):
         package.register(sub)
     _add_demo(sub)
     sim2real_cli.register(sub)

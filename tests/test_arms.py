@@ -203,3 +203,19 @@ def test_an_inertia_on_the_triangle_edge_is_moved_inside_by_the_repair() -> None
     assert a + b >= c * (1 + REPAIR_MARGIN) * (1 - 1e-12)
     written = np.array([float(f"{m:.6g}") for m in (a, b, c)])
     assert written[0] + written[1] >= written[2]
+
+
+def test_arm_command_writes_an_arm_file_that_resolves_the_same(tmp_path: Path, capsys) -> None:
+    from mjx_arm.cli import main
+    from mjx_arm.names import EXIT_INVALID, EXIT_OK
+
+    out = tmp_path / "panda.toml"
+    assert main(["arm", str(PANDA), "-o", str(out)]) == EXIT_OK
+    shown = capsys.readouterr().out
+    assert "panda_hand_tcp" in shown and "observation 23, action 7" in shown
+    again = arm_info(load_arm(out))
+    panda = arm_info(PANDA)
+    assert again.joint_names == panda.joint_names and again.ee_link == panda.ee_link
+    np.testing.assert_allclose(again.home_qpos, panda.home_qpos, atol=1e-6)
+    assert main(["arm", str(PANDA), "--ee-link", "panda_link3"]) == EXIT_INVALID
+    assert "5 to 7 arm joints" in capsys.readouterr().err
