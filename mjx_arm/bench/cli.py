@@ -40,7 +40,8 @@ def cmd_parity(args: argparse.Namespace) -> int:
     while holding still, under a constant command and pressing, with the joint damping as
     converted and zeroed. Writes parity.md, parity.json and three PNG plots into --out, with
     each goal met or missed. MJX on a CPU takes several minutes (compilation); --quick is a
-    small run.
+    small run. --grasp adds the grasp check on the gripper arm (grasp.md, grasp.json): the same
+    scripted close-and-lift of a cube in each engine, and its slip in the fingers over 2 s.
     """
     from mjx_arm.bench.parity import ParityConfig, run_parity
     from mjx_arm.bench.parity_report import goals_table, write_report
@@ -57,7 +58,26 @@ def cmd_parity(args: argparse.Namespace) -> int:
     result = run_parity(config)
     print(goals_table(result))
     _print_paths(write_report(result, meta, args.out))
+    if args.grasp:
+        _print_paths(_grasp_report(config.engines, meta, args.out))
     return EXIT_OK
+
+
+def _grasp_report(engines: tuple[str, ...], meta: dict, out: Path) -> list[Path]:
+    """Run the grasp check (:mod:`mjx_arm.bench.grasp`) and write grasp.md and grasp.json."""
+    from mjx_arm.bench.grasp import grasp_check
+    from mjx_arm.bench.results import fmt, markdown_table, save_results
+
+    result = grasp_check(engines)
+    rows = [
+        [name, fmt(r["lift_m"], ".3f"), fmt(1000 * r["slip_m"], ".2f"),
+         fmt(1000 * r["opening_m"], ".1f"), "pass" if r["met"] else "MISS"]
+        for name, r in result["engines"].items()
+    ]  # fmt: skip
+    headers = ["engine", "lift (m)", "slip over 2 s (mm)", "finger opening (mm)", "held, <= 5 mm"]
+    table = markdown_table(headers, rows)
+    print(table)
+    return list(save_results("grasp", {"meta": meta, **result}, table, out))
 
 
 def cmd_transfer(args: argparse.Namespace) -> int:
@@ -153,6 +173,9 @@ def register(sub) -> None:
 
     p = _command(commands, cmd_parity, "engine parity: FK, divergence, force, jitter", ParityConfig)
     p.add_argument("--quick", action="store_true", help="a small run (tests, a first look)")
+    p.add_argument(
+        "--grasp", action="store_true", help="also the grasp check on the gripper arm (grasp.md)"
+    )
     p.add_argument("--out", type=Path, default=PARITY_OUT, help=f"output folder ({PARITY_OUT})")
 
     p = _command(commands, cmd_transfer, "one policy in every engine, with goals", TransferConfig)
