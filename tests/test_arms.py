@@ -219,3 +219,21 @@ def test_arm_command_writes_an_arm_file_that_resolves_the_same(tmp_path: Path, c
     np.testing.assert_allclose(again.home_qpos, panda.home_qpos, atol=1e-6)
     assert main(["arm", str(PANDA), "--ee-link", "panda_link3"]) == EXIT_INVALID
     assert "5 to 7 arm joints" in capsys.readouterr().err
+
+
+def test_a_hand_of_revolute_fingers_is_the_end_effector(tmp_path: Path) -> None:
+    import pybullet_data
+
+    xarm = Path(pybullet_data.getDataPath()) / "xarm/xarm6_with_gripper.urdf"
+    # the gripper's fingers are revolute: its base, where they branch, ends the arm
+    arm = resolve_arm(ArmConfig(urdf=str(xarm)))
+    assert arm.ee_link == "xarm_gripper_base_link"
+    assert arm.joint_names == tuple(f"joint{i}" for i in range(1, 7))
+    # its link inertias break the triangle inequality: the arm file's repair makes it run
+    with pytest.raises(Exception, match="triangle inequality"):
+        gym.make("mjx_arm/Reach-v0", arm=xarm)
+    (tmp_path / "xarm.toml").write_text(f'urdf = "{xarm}"\nrepair_inertia = true\n')
+    env = gym.make("mjx_arm/Reach-v0", arm=tmp_path / "xarm.toml")
+    env.reset(seed=0)
+    _, reward, *_ = env.step(np.zeros(6, np.float32))
+    assert np.isfinite(reward)

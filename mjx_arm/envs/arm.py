@@ -61,10 +61,14 @@ class ArmInfo:
 
     def convert_config(self, **fields) -> ConvertConfig:
         """Conversion settings that put the ee site and F/T sensors where this arm says."""
+        config = self.config
         return ConvertConfig(
             ee_link=self.ee_link,
             ft_joint=self.ft_joint or None,
-            collision=self.config.collision,
+            collision=config.collision,
+            repair_inertia=config.repair_inertia,
+            default_effort=config.default_effort,
+            default_velocity=config.default_velocity,
             **fields,
         )
 
@@ -78,8 +82,8 @@ def _info(resolved: ResolvedArm, reach: float, reference: float) -> ArmInfo:
         joint_names=resolved.joint_names,
         lower=np.array([lim.lower for lim in limits]),
         upper=np.array([lim.upper for lim in limits]),
-        v_max=np.array([lim.velocity for lim in limits]),
-        effort=np.array([lim.effort for lim in limits]),
+        v_max=np.array([lim.velocity or resolved.config.default_velocity for lim in limits]),
+        effort=np.array([lim.effort or resolved.config.default_effort for lim in limits]),
         home_qpos=np.array(resolved.home_qpos),
         ee_link=resolved.ee_link,
         ft_joint=resolved.ft_joint,
@@ -121,7 +125,8 @@ def validated_arm_info(arm: str | Path | ArmConfig | None, engine: str) -> ArmIn
     from mjx_arm.urdf.validate import validated
 
     config = load_arm(arm)
-    validated(config.urdf_path, engine)
+    limits = config.default_limits()
+    validated(config.urdf_path, engine, None, config.repair_inertia, limits)
     return arm_info(config)
 
 
@@ -132,8 +137,15 @@ def horizontal_reach(resolved: ResolvedArm) -> float:
 
     from mjx_arm.urdf.convert import EE_SITE, load_model
 
-    config = ConvertConfig(ee_link=resolved.ee_link, ft_joint=resolved.ft_joint or None)
-    model = load_model(resolved.config.urdf_path, config)
+    arm = resolved.config
+    config = ConvertConfig(
+        ee_link=resolved.ee_link,
+        ft_joint=resolved.ft_joint or None,
+        repair_inertia=arm.repair_inertia,
+        default_effort=arm.default_effort,
+        default_velocity=arm.default_velocity,
+    )
+    model = load_model(arm.urdf_path, config)
     data = mujoco.MjData(model)
     adr = np.array([model.joint(n).qposadr[0] for n in resolved.joint_names])
     low = np.maximum([j.limit.lower for j in resolved.joints], -np.pi)

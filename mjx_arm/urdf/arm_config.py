@@ -61,6 +61,9 @@ class ArmConfig:
         collision: the arm's collision shapes in MuJoCo and MJX: "mesh" (as the URDF gives
             them), or "capsule" / "box" fitted to each mesh
             (:class:`~mjx_arm.urdf.convert_config.ConvertConfig`).
+        repair_inertia, default_effort, default_velocity: the converter's repairs
+            (``--repair-inertia``, ``--default-effort``, ``--default-velocity``) for a URDF
+            that needs them; the joints that use a default limit take it here too.
     """
 
     urdf: str = ""
@@ -69,6 +72,13 @@ class ArmConfig:
     home_qpos: tuple[float, ...] = ()
     ft_joint: str = ""
     collision: str = "mesh"
+    repair_inertia: bool = False
+    default_effort: float = 0.0
+    default_velocity: float = 0.0
+
+    def default_limits(self) -> dict[str, float]:
+        """``effort``/``velocity`` -> the value supplied where a joint has none."""
+        return {"effort": self.default_effort, "velocity": self.default_velocity}
 
     def __post_init__(self) -> None:
         if self.collision not in COLLISION_CHOICES:
@@ -202,6 +212,9 @@ def default_ee_link(model: RobotModel) -> str:
 
     A leaf below a prismatic joint (a finger) is no tip. Among tips with equally many arm
     joints, the one with the fewest joints in all wins (the first in file order on a tie).
+    Where the chain passes a hand (a link with two or more branches that move: the fingers of
+    a gripper, revolute or prismatic), the end effector is the hand: a leaf fixed to it (a TCP
+    frame), else the hand link itself.
     """
     if NAMED_EE_LINK in model.links:
         return NAMED_EE_LINK
@@ -209,10 +222,43 @@ def default_ee_link(model: RobotModel) -> str:
     leaves = [name for name in model.links if name not in parents]
     tips = [leaf for leaf in leaves if not _below_prismatic(model, leaf)] or leaves
     order = {name: i for i, name in enumerate(model.links)}
-    return max(
+    tip = max(
         tips,
         key=lambda n: (len(arm_chain(model, n)), -len(model.chain_to(n)), -order[n]),
     )
+    hand = _hand(model, tip)
+    return tip if hand is None else _fixed_leaf(model, hand)
+
+
+def _children(model: RobotModel) -> dict[str, list[Joint]]:
+    out: dict[str, list[Joint]] = {}
+    for joint in model.joints.values():
+        out.setdefault(joint.parent, []).append(joint)
+    return out
+
+
+def _hand(model: RobotModel, tip: str) -> str | None:
+    """The first link on the way to ``tip`` with two or more child branches that move."""
+    children = _children(model)
+
+    def moves(joint: Joint) -> bool:
+        return joint.movable or any(moves(j) for j in children.get(joint.child, []))
+
+    for link in [model.root_link, *(j.child for j in model.chain_to(tip))]:
+        if sum(moves(j) for j in children.get(link, [])) >= 2:
+            return link
+    return None
+
+
+def _fixed_leaf(model: RobotModel, hand: str) -> str:
+    """The first leaf fixed to ``hand`` (through fixed joints only), else ``hand``."""
+    children = _children(model)
+    link = hand
+    while True:
+        fixed = [j for j in children.get(link, []) if j.type == "fixed"]
+        if not fixed:
+            return link
+        link = fixed[0].child
 
 
 def default_home(path: Path, joints: tuple[Joint, ...]) -> tuple[float, ...]:

@@ -113,9 +113,13 @@ def require_valid(path: str | Path, engine: str = "all", **kw) -> ValidationRepo
 
 
 def validated(
-    path: str | Path, engine: str = "all", package_dirs: Mapping[str, str] | None = None
+    path: str | Path,
+    engine: str = "all",
+    package_dirs: Mapping[str, str] | None = None,
+    repair_inertia: bool = False,
+    default_limits: Mapping[str, float] | None = None,
 ) -> ValidationReport:
-    """:func:`require_valid`, cached per (resolved path, modification time, engine).
+    """:func:`require_valid`, cached per (resolved path, modification time, engine, options).
 
     Envs call this whenever they are constructed; a file is validated again only after it
     changes.
@@ -129,12 +133,24 @@ def validated(
     except OSError:
         mtime = -1
     dirs = tuple(sorted((package_dirs or {}).items()))
-    return _validated_cached(str(resolved), mtime, engine, dirs)
+    limits = tuple(sorted((default_limits or {}).items()))
+    return _validated_cached(str(resolved), mtime, engine, dirs, repair_inertia, limits)
 
 
 @functools.lru_cache(maxsize=64)
 def _validated_cached(
-    path: str, mtime_ns: int, engine: str, package_dirs: tuple[tuple[str, str], ...]
+    path: str,
+    mtime_ns: int,
+    engine: str,
+    package_dirs: tuple[tuple[str, str], ...],
+    repair_inertia: bool,
+    default_limits: tuple[tuple[str, float], ...],
 ) -> ValidationReport:
     del mtime_ns  # part of the cache key only
-    return require_valid(path, engine, package_dirs=dict(package_dirs))
+    return require_valid(
+        path,
+        engine,
+        package_dirs=dict(package_dirs),
+        repair_inertia=repair_inertia,
+        default_limits=dict(default_limits) or None,
+    )
