@@ -237,3 +237,18 @@ def test_a_hand_of_revolute_fingers_is_the_end_effector(tmp_path: Path) -> None:
     env.reset(seed=0)
     _, reward, *_ = env.step(np.zeros(6, np.float32))
     assert np.isfinite(reward)
+
+
+@pytest.mark.parametrize("engine", ["mujoco", "pybullet"])
+def test_the_sim_to_real_chain_drives_a_seven_joint_arm(engine: str) -> None:
+    from mjx_arm.sim2real.position_env import make_position_env
+
+    env = make_position_env(reach_config(), engine, arm=PANDA)
+    obs, _ = env.reset(seed=0)
+    start = obs["joint_angles"].copy()
+    for _ in range(10):
+        obs, *_ = env.step(np.zeros(7, np.float32))  # hold still: the arm stays where it began
+    np.testing.assert_allclose(obs["joint_angles"], start, atol=2e-3)  # rad
+    commands = env.unwrapped.episodes[-1].arrays()["commands"]
+    assert commands.shape == (10, 7)
+    env.close()

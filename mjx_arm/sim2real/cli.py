@@ -28,10 +28,10 @@ def cmd_deploy_sim(args: argparse.Namespace) -> int:
     try:
         config = apply_settings(DeployConfig(), args.set or [])
         policy, source = resolve_policy(args.policy)
-    except (ValueError, FileNotFoundError) as exc:
+        report = deploy_sim(policy, args.engine, args.episodes, args.seed, config, arm=args.arm)
+    except (ValueError, FileNotFoundError) as exc:  # ArmMismatchError is a ValueError
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_INVALID
-    report = deploy_sim(policy, args.engine, args.episodes, args.seed, config)
     write_commands(report, config, args.script, args.trajectory)
     commands = report.pop("commands")
     report = {
@@ -112,6 +112,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="physics engine (default: mujoco)",
     )
     p.add_argument("--episodes", type=int, default=20, help="episodes per run (default: 20)")
+    p.add_argument(
+        "--arm", help="a URDF or an arm file (default: the arm the policy was trained on)"
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the first episode (default: 0)")
     add_set_argument(p, "chain settings (defaults: " + ", ".join(describe(DeployConfig())) + ")")
     p.add_argument(

@@ -16,7 +16,17 @@ from typing import Any
 
 import numpy as np
 
-from mjx_arm.evaluate import EvalRun, Policy, eval_task, make_eval_env, run_episodes, summarize
+from mjx_arm.envs.arm import arm_info
+from mjx_arm.evaluate import (
+    EvalRun,
+    Policy,
+    eval_arm,
+    eval_task,
+    make_eval_env,
+    run_episodes,
+    summarize,
+)
+from mjx_arm.evaluate.runners import check_policy_arm
 from mjx_arm.sim2real.commands import ServojConfig, joint_trajectory_msg, urscript_program
 from mjx_arm.sim2real.position_env import EpisodeCommands, make_position_env
 from mjx_arm.sim2real.settings import DeployConfig
@@ -64,6 +74,7 @@ def deploy_sim(
     seed: int = 0,
     config: DeployConfig | None = None,
     task: TaskConfig | None = None,
+    arm: Any = None,
 ) -> dict[str, Any]:
     """Run ``policy`` through the chain on a position-controlled arm and on the normal env.
 
@@ -76,6 +87,8 @@ def deploy_sim(
         seed: seed of the first episode.
         config: the chain's settings.
         task: the task (default: the one the policy was trained on).
+        arm: a URDF or an arm file (default: the arm the policy records; see
+            :func:`mjx_arm.evaluate.eval_arm`).
 
     Returns:
         A JSON-ready report: ``velocity_control`` and ``position_control`` summaries (success
@@ -87,8 +100,11 @@ def deploy_sim(
     """
     config = config or DeployConfig()
     task = task or eval_task(policy)[0]
-    velocity_run, _ = _run_closed(policy, make_eval_env(task, engine), episodes, seed)
-    position_env = make_position_env(task, engine, config.chain())
+    arm = eval_arm(policy, arm)
+    check_policy_arm(policy, arm_info(arm))
+    velocity_env = make_eval_env(task, engine, arm=arm)
+    velocity_run, _ = _run_closed(policy, velocity_env, episodes, seed)
+    position_env = make_position_env(task, engine, config.chain(), arm=arm)
     position_run, base = _run_closed(policy, position_env, episodes, seed)
     longest = max(range(episodes), key=lambda i: len(base.episodes[i].commands))
     return {

@@ -17,6 +17,7 @@ from mjx_arm.envs.arm import arm_info
 from mjx_arm.envs.model_io import arm_model
 from mjx_arm.task import observation as obs_lib
 from mjx_arm.task.config import TaskConfig
+from mjx_arm.urdf.arm_config import ArmConfig
 from mjx_arm.urdf.convert import EE_SITE
 
 
@@ -25,12 +26,12 @@ class ObservationBuilder:
 
     Args:
         task: the policy's task (force clip, scene of the kinematic model).
-        urdf: the arm URDF (default: the shipped arm).
+        arm: the arm (a URDF, an arm file or an ArmConfig; default: the shipped arm).
     """
 
-    def __init__(self, task: TaskConfig, urdf: str | Path | None = None) -> None:
+    def __init__(self, task: TaskConfig, arm: str | Path | ArmConfig | None = None) -> None:
         self.task = task
-        self.arm = arm_info(urdf)
+        self.arm = arm_info(arm)
         self.model = arm_model(self.arm, task)
         self.data = mujoco.MjData(self.model)
         self._qpos_adr = np.array([self.model.joint(n).qposadr[0] for n in self.arm.joint_names])
@@ -39,7 +40,7 @@ class ObservationBuilder:
 
     def ee_pose(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Forward kinematics: ee point (m, base frame) ``(3,)`` and quaternion (w, x, y, z)
-        ``(4,)`` at joint angles ``q (6,)`` (rad, contract order)."""
+        ``(4,)`` at joint angles ``q (n,)`` (rad, contract order)."""
         self.data.qpos[self._qpos_adr] = q
         mujoco.mj_kinematics(self.model, self.data)
         return self.data.site_xpos[self._site].copy(), self.data.xquat[self._body].copy()
@@ -50,7 +51,7 @@ class ObservationBuilder:
         """The observation.
 
         Args:
-            q: joint angles (rad), contract order, ``(6,)``.
+            q: joint angles (rad), contract order, ``(n,)``.
             target: target point in the base frame (m), ``(3,)``.
             wrench: tared wrist wrench in the ee frame (N, N m), ``(6,)``; zeros if None.
 
@@ -58,8 +59,9 @@ class ObservationBuilder:
             The contract's Dict observation (float32, inside the observation space).
         """
         q = np.asarray(q, dtype=np.float64)
-        if q.shape != (6,) or not np.isfinite(q).all():
-            raise ValueError(f"joint angles must be 6 finite values, got {q!r}")
+        n = self.arm.n_joints
+        if q.shape != (n,) or not np.isfinite(q).all():
+            raise ValueError(f"joint angles must be {n} finite values, got {q!r}")
         ee_pos, ee_quat = self.ee_pose(q)
         w = np.zeros(6) if wrench is None else np.asarray(wrench, dtype=np.float64)
         target = np.asarray(target, dtype=np.float64)

@@ -49,6 +49,7 @@ from mjx_arm.sim2real.adapter import VelocityToPositionAdapter
 from mjx_arm.sim2real.limiter import JointLimits, SafetyLimiter
 from mjx_arm.sim2real.settings import ChainConfig, ServoConfig
 from mjx_arm.task.config import TaskConfig
+from mjx_arm.urdf.arm_config import ArmConfig
 from pybullet_ref.env import PybulletArmEnv, pybullet  # pybullet imported quietly there
 
 
@@ -108,8 +109,8 @@ class EpisodeCommands:
     """What the chain sent in one episode and what the arm did.
 
     Attributes:
-        commands: the limiter's position commands (rad), one ``(6,)`` per step.
-        velocities: their velocities (rad/s), one ``(6,)`` per step.
+        commands: the limiter's position commands (rad), one ``(n,)`` per step.
+        velocities: their velocities (rad/s), one ``(n,)`` per step.
         measured: joint angles (rad) one control period after each command.
     """
 
@@ -118,8 +119,12 @@ class EpisodeCommands:
     measured: list[np.ndarray] = field(default_factory=list)
 
     def arrays(self) -> dict[str, np.ndarray]:
-        """The three lists as ``(T, 6)`` arrays."""
-        return {k: np.array(getattr(self, k)).reshape(-1, 6) for k in asdict(self)}
+        """The three lists as ``(T, n)`` arrays (``(0, 0)`` for an episode without steps)."""
+        out = {}
+        for key in asdict(self):
+            rows = getattr(self, key)
+            out[key] = np.array(rows, np.float64) if rows else np.zeros((0, 0))
+        return out
 
 
 class _ChainActuation:
@@ -135,7 +140,7 @@ class _ChainActuation:
 
     def _setup_chain(self, config: ChainConfig) -> None:
         self.chain_config = config
-        self.limits = JointLimits.from_urdf(self.arm.urdf, config.limiter)
+        self.limits = JointLimits.from_urdf(self.arm.config, config.limiter)
         home = np.asarray(self.task.home_qpos, dtype=np.float64)
         dt, lim = self.task.ctrl_dt, self.limits
         self.adapter = VelocityToPositionAdapter(dt, config.tau, home, lim.lower, lim.upper)
@@ -180,7 +185,7 @@ class MujocoPositionArmEnv(_ChainActuation, MujocoArmEnv):
 
     Args:
         task: the task configuration (default: Touch).
-        urdf: the arm URDF (default: the shipped arm).
+        arm: the arm (a URDF, an arm file or an ArmConfig; default: the shipped arm).
         config: the chain and the servo (default: :class:`ChainConfig()`).
         render_mode, width, height: as for :class:`MujocoArmEnv`.
     """
@@ -188,13 +193,13 @@ class MujocoPositionArmEnv(_ChainActuation, MujocoArmEnv):
     def __init__(
         self,
         task: TaskConfig | None = None,
-        urdf: str | Path | None = None,
+        arm: str | Path | ArmConfig | None = None,
         config: ChainConfig | None = None,
         render_mode: str | None = None,
         width: int = DEFAULT_WIDTH,
         height: int = DEFAULT_HEIGHT,
     ) -> None:
-        super().__init__(task, urdf, render_mode, width, height)
+        super().__init__(task, arm, render_mode, width, height)
         config = config or ChainConfig()
         self._setup_chain(config)
         self.gains = use_position_servos(self.model, self.ids.actuators, self.arm, config.servo)
@@ -224,7 +229,7 @@ class PybulletPositionArmEnv(_ChainActuation, PybulletArmEnv):
     def __init__(
         self,
         task: TaskConfig | None = None,
-        urdf: str | Path | None = None,
+        arm: str | Path | ArmConfig | None = None,
         config: ChainConfig | None = None,
         render_mode: str | None = None,
         width: int = DEFAULT_WIDTH,
@@ -235,7 +240,7 @@ class PybulletPositionArmEnv(_ChainActuation, PybulletArmEnv):
         self._gain = config.servo.position_gain
         self._q_target: list[float] = []
         self._holding = True
-        super().__init__(task, urdf, render_mode, width, height)
+        super().__init__(task, arm, render_mode, width, height)
         self._setup_chain(config)
         self._start_chain()
         self.gains = servo_gains(self.servo.kv, self.servo.effort, config.servo)
@@ -253,14 +258,15 @@ class PybulletPositionArmEnv(_ChainActuation, PybulletArmEnv):
 
     def _physics_step(self, n_substeps: int) -> None:
         # PybulletArmEnv._physics_step with the position loop in front of the velocity servo
-        calls, body, joints, zeros = self._calls, self.body, self.ids.joints, self._zeros
-        gain = self._gain
+        calls, body, joints, zeros = self._calls, self.body, self.ids.joints, self._dof_zeros
+        dofs, pick, gain = self.ids.dofs, self._pick, self._gain
         for i in range(n_substeps):
-            states = calls.get_joint_states(body, joints)
-            q = [s[0] for s in states]
-            gravity = calls.inverse_dynamics(body, q, zeros, zeros)
+            states = calls.get_joint_states(body, dofs)
+            gravity = calls.inverse_dynamics(body, [s[0] for s in states], zeros, zeros)
+            arm = pick(states)  # the arm's joints (5 or more: a tuple)
+            q = [s[0] for s in arm]
             u = [gain * (t - x) for t, x in zip(self._q_target, q, strict=True)]
-            torque = self.servo.torque(u, [s[1] for s in states], gravity)
+            torque = self.servo.torque(u, [s[1] for s in arm], pick(gravity))
             calls.set_motors(body, joints, pybullet.TORQUE_CONTROL, forces=torque)
             if i == n_substeps - 1:
                 self._tool_before = self._tool_velocity()
@@ -275,7 +281,7 @@ def make_position_env(task: TaskConfig, engine: str, config: ChainConfig | None 
         task: the task configuration.
         engine: "mujoco" or "pybullet".
         config: the chain and the servo.
-        kwargs: ``urdf``, ``render_mode``, ``width``, ``height``.
+        kwargs: ``arm``, ``render_mode``, ``width``, ``height``.
     """
     classes = {"mujoco": MujocoPositionArmEnv, "pybullet": PybulletPositionArmEnv}
     if engine not in classes:
