@@ -36,7 +36,6 @@ class ArmInfo:
         tool: mass properties of the tool below the F/T point.
         reach_scale: the arm's horizontal reach over the shipped arm's (1.0 for the shipped
             arm): task targets are drawn in a box scaled by it.
-        urdf_hash: SHA-256 of the URDF file (policy files record it).
     """
 
     config: ArmConfig
@@ -52,7 +51,6 @@ class ArmInfo:
     ft_link: str
     tool: ToolInertia
     reach_scale: float
-    urdf_hash: str
 
     @property
     def n_joints(self) -> int:
@@ -61,16 +59,7 @@ class ArmInfo:
 
     def convert_config(self, **fields) -> ConvertConfig:
         """Conversion settings that put the ee site and F/T sensors where this arm says."""
-        config = self.config
-        return ConvertConfig(
-            ee_link=self.ee_link,
-            ft_joint=self.ft_joint or None,
-            collision=config.collision,
-            repair_inertia=config.repair_inertia,
-            default_effort=config.default_effort,
-            default_velocity=config.default_velocity,
-            **fields,
-        )
+        return self.config.convert_config(self.ee_link, self.ft_joint, **fields)
 
 
 def _info(resolved: ResolvedArm, reach: float, reference: float) -> ArmInfo:
@@ -90,7 +79,6 @@ def _info(resolved: ResolvedArm, reach: float, reference: float) -> ArmInfo:
         ft_link=resolved.ft_link,
         tool=tool_inertia(resolved.model, resolved.ft_link, resolved.ee_link),
         reach_scale=reach / reference,
-        urdf_hash=hashlib.sha256(path.read_bytes()).hexdigest(),
     )
 
 
@@ -137,15 +125,8 @@ def horizontal_reach(resolved: ResolvedArm) -> float:
 
     from mjx_arm.urdf.convert import EE_SITE, load_model
 
-    arm = resolved.config
-    config = ConvertConfig(
-        ee_link=resolved.ee_link,
-        ft_joint=resolved.ft_joint or None,
-        repair_inertia=arm.repair_inertia,
-        default_effort=arm.default_effort,
-        default_velocity=arm.default_velocity,
-    )
-    model = load_model(arm.urdf_path, config)
+    config = resolved.config.convert_config(resolved.ee_link, resolved.ft_joint)
+    model = load_model(resolved.config.urdf_path, config)
     data = mujoco.MjData(model)
     adr = np.array([model.joint(n).qposadr[0] for n in resolved.joint_names])
     low = np.maximum([j.limit.lower for j in resolved.joints], -np.pi)

@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from mjx_arm.paths import default_arm_urdf
+from mjx_arm.urdf.convert_config import ConvertConfig
 from mjx_arm.urdf.meshes import PACKAGE_PREFIX, find_package_dir
 from mjx_arm.urdf.model import Joint, RobotModel, parse_urdf
 
@@ -75,6 +76,19 @@ class ArmConfig:
     repair_inertia: bool = False
     default_effort: float = 0.0
     default_velocity: float = 0.0
+
+    def convert_config(self, ee_link: str, ft_joint: str, **fields: Any) -> ConvertConfig:
+        """Conversion settings of this arm, given its resolved ``ee_link`` and ``ft_joint``
+        ("" for the last arm joint): its collision shapes and repairs, and ``fields``."""
+        return ConvertConfig(
+            ee_link=ee_link,
+            ft_joint=ft_joint or None,
+            collision=self.collision,
+            repair_inertia=self.repair_inertia,
+            default_effort=self.default_effort,
+            default_velocity=self.default_velocity,
+            **fields,
+        )
 
     def default_limits(self) -> dict[str, float]:
         """``effort``/``velocity`` -> the value supplied where a joint has none."""
