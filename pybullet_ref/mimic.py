@@ -29,6 +29,7 @@ passes): with the Panda's arm joints swinging under velocity control, up to 1.2e
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -78,8 +79,16 @@ def mimic_joints(urdf_path: str | Path) -> list[Mimic]:
         mjx_arm.urdf.safe_xml.XmlError: the file is not safe, well-formed XML.
         ValueError: a ``<mimic>`` without ``joint`` or with a non-numeric attribute.
     """
+    path = Path(urdf_path).resolve()
+    return list(_mimic_joints_cached(path, path.stat().st_mtime_ns))
+
+
+@functools.lru_cache(maxsize=32)
+def _mimic_joints_cached(path: Path, mtime_ns: int) -> tuple[Mimic, ...]:
+    """:func:`mimic_joints` read once per file version (every rebuilt world asks again)."""
+    del mtime_ns  # part of the cache key only
     out = []
-    for joint in read_xml(urdf_path).findall("joint"):
+    for joint in read_xml(path).findall("joint"):
         elem = joint.find("mimic")
         if elem is None:
             continue
@@ -93,7 +102,7 @@ def mimic_joints(urdf_path: str | Path) -> list[Mimic]:
         except ValueError as err:
             raise ValueError(f"joint {name!r}: <mimic> attribute is not a number: {err}") from err
         out.append(Mimic(name, leader, multiplier, offset))
-    return out
+    return tuple(out)
 
 
 def add_mimic_constraints(
