@@ -99,3 +99,25 @@ def describe(config: Any, prefix: str = "") -> list[str]:
 def add_set_argument(parser: argparse.ArgumentParser, help_text: str) -> None:
     """Add ``--set KEY=VALUE ...`` (repeatable; the values collect into ``args.set``)."""
     parser.add_argument("--set", action="extend", nargs="+", metavar="KEY=VALUE", help=help_text)
+
+
+def config_fields(
+    cls: type, data: dict[str, Any], what: str, error: type[Exception] = ValueError
+) -> dict[str, Any]:
+    """The keyword arguments of frozen dataclass ``cls`` from a JSON-loaded dict (the inverse of
+    ``dataclasses.asdict`` for flat configs): lists become tuples, unknown keys are an error.
+
+    Args:
+        cls: the config class.
+        data: the loaded fields (not changed).
+        what: the config's name in the error message ("physics config").
+        error: the exception class to raise.
+
+    Raises:
+        error: a key that is not a field of ``cls``, with the known ones listed.
+    """
+    known = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - known)
+    if unknown:
+        raise error(f"unknown {what} keys: {unknown}; known: {sorted(known)}")
+    return {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}

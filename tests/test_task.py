@@ -86,6 +86,14 @@ def test_task_config_dict_round_trip(preset) -> None:
     assert isinstance(back.home_qpos, tuple)
 
 
+def test_task_config_from_dict_names_unknown_keys() -> None:
+    data = reach_config().to_dict()
+    with pytest.raises(ValueError, match=r"unknown task config keys: \['speed'\]"):
+        TaskConfig.from_dict({**data, "speed": 1.0})
+    with pytest.raises(ValueError, match=r"unknown reward keys: \['bonus'\]"):
+        TaskConfig.from_dict({**data, "reward": {**data["reward"], "bonus": 1.0}})
+
+
 def test_presets_and_overrides() -> None:
     reach, touch = config_lib.task_config("Reach"), config_lib.task_config("touch")
     assert (reach.task, reach.success_distance, reach.reward.contact) == ("reach", 0.02, 0.0)

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from mjx_arm.names import IMPLS
+from mjx_arm.settings import config_fields
 
 
 @dataclass(frozen=True)
@@ -55,11 +56,7 @@ class PhysicsConfig:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> PhysicsConfig:
         """Inverse of :meth:`to_dict`; unknown keys are an error."""
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = set(data) - known
-        if unknown:
-            raise ValueError(f"unknown physics config keys: {sorted(unknown)}")
-        return cls(**data)
+        return cls(**config_fields(cls, data, "physics config"))
 
 
 Range = tuple[float, float]
@@ -98,12 +95,7 @@ class RandomizationConfig:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> RandomizationConfig:
         """Inverse of :meth:`to_dict`; unknown keys are an error."""
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = set(data) - known
-        if unknown:
-            raise ValueError(f"unknown randomization config keys: {sorted(unknown)}")
-        data = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
-        return cls(**data)
+        return cls(**config_fields(cls, data, "randomization config"))
 
 
 def warp_available() -> bool:

@@ -11,6 +11,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
+from mjx_arm.settings import config_fields
 from mjx_arm.task.registry import get_task, is_task, task_names
 from mjx_arm.urdf.arm_config import SHIPPED_HOME_QPOS as HOME_QPOS  # noqa: F401  (re-export)
 
@@ -201,11 +202,8 @@ class TaskConfig:
     def from_dict(cls, data: dict[str, Any]) -> TaskConfig:
         """Inverse of :meth:`to_dict`."""
         data = dict(data)
-        reward = RewardConfig(**data.pop("reward", {}))
-        for key in ("home_qpos", "target_low", "target_high", "force_band"):
-            if key in data:
-                data[key] = tuple(data[key])
-        return cls(reward=reward, **data)
+        reward = RewardConfig(**config_fields(RewardConfig, data.pop("reward", {}), "reward"))
+        return cls(reward=reward, **config_fields(cls, data, "task config"))
 
 
 def task_config(name: str, **overrides: Any) -> TaskConfig:

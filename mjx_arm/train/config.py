@@ -18,7 +18,7 @@ from typing import Any
 
 from mjx_arm.envs.physics_config import PhysicsConfig, RandomizationConfig
 from mjx_arm.names import BACKENDS, PRESET_NAMES
-from mjx_arm.settings import set_path, split_setting
+from mjx_arm.settings import config_fields, set_path, split_setting
 from mjx_arm.task.config import RewardConfig, TaskConfig
 from mjx_arm.task.registry import is_task, task_names
 from mjx_arm.urdf.arm_config import ArmConfig
@@ -117,16 +117,10 @@ class TrainConfig:
     def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
         """Inverse of :meth:`to_dict`; unknown keys are an error. Sections missing from older
         files take their defaults."""
-        known = {f.name for f in dataclasses.fields(cls)}
         data = dict(data)
         if "max_devices" in data:  # the name in configs written before "devices"
             data.setdefault("devices", data.pop("max_devices"))
-        unknown = set(data) - known
-        if unknown:
-            raise ValueError(f"unknown training config keys: {sorted(unknown)}")
-        for key in ("policy_hidden", "value_hidden"):
-            if key in data:
-                data[key] = tuple(data[key])
+        data = config_fields(cls, data, "training config")
         for key, kind in SECTIONS.items():
             if isinstance(data.get(key), dict):
                 data[key] = kind.from_dict(data[key])

@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from mjx_arm.paths import default_arm_urdf
+from mjx_arm.settings import config_fields
 from mjx_arm.urdf.convert_config import ConvertConfig
 from mjx_arm.urdf.meshes import PACKAGE_PREFIX, find_package_dir
 from mjx_arm.urdf.model import Joint, RobotModel, parse_urdf
@@ -114,15 +115,7 @@ class ArmConfig:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> ArmConfig:
         """Inverse of :meth:`to_dict`; unknown keys are an error."""
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(data) - known)
-        if unknown:
-            raise ArmConfigError(f"unknown arm config keys {unknown}; known: {sorted(known)}")
-        data = dict(data)
-        for key in ("joints", "home_qpos"):
-            if key in data:
-                data[key] = tuple(data[key])
-        return cls(**data)
+        return cls(**config_fields(cls, data, "arm config", ArmConfigError))
 
 
 @dataclass(frozen=True)
