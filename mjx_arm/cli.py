@@ -16,14 +16,16 @@ def cmd_demo(args: argparse.Namespace) -> int:
     """The whole product on a CPU: validate and convert the arm, train Reach, export the
     policy, evaluate it in CPU MuJoCo, PyBullet and the batched JAX env, plot and film it.
 
-    About 1-2 minutes on a 2-core CPU (--quick: under a minute).
+    About 1-2 minutes on a 2-core CPU (--quick: under a minute). --arm runs it on another arm
+    (a URDF or an arm file).
     """
     from mjx_arm.demo import DemoError, run_demo
+    from mjx_arm.urdf.arm_config import ArmConfigError
 
     enable_compilation_cache()
     try:
-        run_demo(args.out, quick=args.quick)
-    except DemoError as exc:
+        run_demo(args.out, quick=args.quick, arm=args.arm)
+    except (DemoError, ArmConfigError, FileNotFoundError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_INVALID
     return EXIT_OK
@@ -36,6 +38,10 @@ def _add_demo(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", help="output folder (default: runs/demo-TIMESTAMP)")
     p.add_argument(
         "--quick", action="store_true", help="shorter training, fewer episodes, smaller video"
+    )
+    p.add_argument(
+        "--arm",
+        help="the arm: a URDF or an arm file (.toml/.json) (default: the shipped UR5e-class arm)",
     )
     p.set_defaults(func=cmd_demo)
 

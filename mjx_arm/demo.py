@@ -1,6 +1,7 @@
 """``mjx-arm demo``: the whole product on a CPU in a few minutes.
 
-1. validate the shipped URDF (three layers, MuJoCo and PyBullet) and convert it to MJCF;
+1. validate the arm's URDF (three layers, MuJoCo and PyBullet; the shipped arm unless
+   ``--arm`` names another) and convert it to MJCF;
 2. train Reach with Brax PPO (preset ``cpu``, backend ``auto``);
 3. export the policy to ``.npz`` (and ``.onnx`` when onnxruntime is installed) and check that
    the exports agree with each other;
@@ -26,6 +27,7 @@ import numpy as np
 if TYPE_CHECKING:
     from mjx_arm.evaluate import EvalRun
     from mjx_arm.task.config import TaskConfig
+    from mjx_arm.urdf.arm_config import ArmConfig
 
 
 class DemoError(RuntimeError):
@@ -74,21 +76,31 @@ class _Log:
 # --------------------------------------------------------------------------- the steps
 
 
-def validate_and_convert(out: Path, echo: Callable[[str], None]) -> dict[str, Any]:
-    """Validate the shipped arm for both engines and write its Touch-scene MJCF."""
+def validate_and_convert(
+    out: Path, echo: Callable[[str], None], arm: ArmConfig | None = None
+) -> dict[str, Any]:
+    """Validate ``arm`` (default: the shipped arm) for both engines, with the repairs its config
+    allows, and write its Touch-scene MJCF (``<urdf stem>_touch.xml``)."""
     import mujoco
 
-    from mjx_arm.paths import default_arm_urdf
-    from mjx_arm.urdf import ConvertConfig, to_mjcf
+    from mjx_arm.envs.arm import arm_info
+    from mjx_arm.urdf import to_mjcf
+    from mjx_arm.urdf.arm_config import ArmConfig
     from mjx_arm.urdf.validate import validate
 
-    urdf = default_arm_urdf()
-    report = validate(urdf, engine="all")
+    arm = arm or ArmConfig()
+    urdf = arm.urdf_path
+    report = validate(
+        urdf,
+        engine="all",
+        repair_inertia=arm.repair_inertia,
+        default_limits=arm.default_limits(),
+    )
     echo(f"{urdf}: {len(report.errors)} errors, {len(report.warnings)} warnings")
     if not report.ok:
-        raise DemoError(f"the shipped URDF does not validate:\n{report.format()}")
-    mjcf = out / "ur5e_touch.xml"
-    mjcf.write_text(to_mjcf(urdf, ConvertConfig(scene="touch")))
+        raise DemoError(f"{urdf} does not validate:\n{report.format()}")
+    mjcf = out / f"{urdf.stem}_touch.xml"
+    mjcf.write_text(to_mjcf(urdf, arm_info(arm).convert_config(scene="touch")))
     model = mujoco.MjModel.from_xml_path(str(mjcf))
     echo(
         f"wrote {mjcf}: {model.nbody} bodies, {model.nu} velocity actuators, "
@@ -97,8 +109,14 @@ def validate_and_convert(out: Path, echo: Callable[[str], None]) -> dict[str, An
     return {"urdf": str(urdf), "warnings": len(report.warnings), "mjcf": str(mjcf)}
 
 
-def train_reach(run_dir: Path, settings: DemoSettings, echo: Callable[[str], None]):
-    """Train Reach (preset cpu, backend auto) into ``run_dir``; returns Brax's TrainResult."""
+def train_reach(
+    run_dir: Path,
+    settings: DemoSettings,
+    echo: Callable[[str], None],
+    arm: ArmConfig | None = None,
+):
+    """Train Reach (preset cpu, backend auto) on ``arm`` (default: the shipped arm) into
+    ``run_dir``; returns Brax's TrainResult."""
     from mjx_arm.envs.backend import resolve_backend
     from mjx_arm.train.config import load_config
     from mjx_arm.train.ppo import train
@@ -112,6 +130,8 @@ def train_reach(run_dir: Path, settings: DemoSettings, echo: Callable[[str], Non
             f"num_evals={settings.num_evals}",
         ],
     )
+    if arm is not None:
+        config = config.replace(arm=arm)
     echo(
         f"backend {resolve_backend(config.backend)}, {config.num_envs} envs, "
         f"{config.num_timesteps:,} steps -> {run_dir}"
@@ -165,17 +185,19 @@ def _probe_states(policy: Any, rng: np.random.Generator, n: int = 256) -> np.nda
 def evaluate_engines(
     policy_path: Path, out: Path, settings: DemoSettings, echo: Callable[[str], None]
 ) -> tuple[dict[str, dict], EvalRun]:
-    """Evaluate on CPU MuJoCo (filming the first episodes), PyBullet and the batched JAX env.
+    """Evaluate on CPU MuJoCo (filming the first episodes), PyBullet and the batched JAX env,
+    on the arm the policy records.
 
     Returns:
         Results per engine label and the MuJoCo :class:`~mjx_arm.evaluate.EvalRun`.
     """
     from mjx_arm.envs.backend import resolve_backend
-    from mjx_arm.evaluate import eval_task, evaluate, format_summary
+    from mjx_arm.evaluate import eval_arm, eval_task, evaluate, format_summary
     from mjx_arm.policy import load
 
     policy = load(policy_path)
     task, _ = eval_task(policy)
+    arm = eval_arm(policy)  # the arm the policy was trained on
     backend = resolve_backend("auto")
     runs: dict[str, dict] = {}
     mujoco_run = None
@@ -192,6 +214,7 @@ def evaluate_engines(
             height=settings.height,
             backend=backend if engine == "mjx" else None,
             video_episodes=settings.video_episodes,
+            arm=arm,
         )
         result["policy"] = str(policy_path)
         path = out / f"eval_{label}.json"
@@ -224,13 +247,26 @@ def default_out() -> Path:
 
 
 def run_demo(
-    out: str | Path | None = None, quick: bool = False, echo: Callable[[str], None] = print
+    out: str | Path | None = None,
+    quick: bool = False,
+    echo: Callable[[str], None] = print,
+    arm: str | Path | None = None,
 ) -> dict[str, Any]:
     """Run the demo into ``out``; print and return its summary (also in ``out/summary.json``).
 
+    Args:
+        out: output folder (default: :func:`default_out`).
+        quick: the smaller settings (:data:`QUICK`).
+        echo: where progress lines go.
+        arm: a URDF or an arm file (default: the shipped arm). The evaluation runs the
+            policy on the arm it recorded: this one.
+
     Raises:
-        DemoError: ``out`` already holds a training run, or the shipped URDF is invalid.
+        DemoError: ``out`` already holds a training run, or the arm's URDF is invalid.
     """
+    from mjx_arm.urdf.arm_config import load_arm
+
+    arm_config = load_arm(arm) if arm else None
     settings = QUICK if quick else FULL
     out = Path(out) if out is not None else default_out()
     run_dir = out / "run"
@@ -238,13 +274,18 @@ def run_demo(
         raise DemoError(f"{out} already holds a demo run; choose another --out")
     out.mkdir(parents=True, exist_ok=True)
     log = _Log(echo)
-    summary: dict[str, Any] = {"out": str(out), "quick": quick, "settings": vars(settings)}
+    summary: dict[str, Any] = {
+        "out": str(out),
+        "quick": quick,
+        "settings": vars(settings),
+        "arm": str(arm) if arm else "shipped",
+    }
 
     log.step("validate", "1/5 validate and convert the arm")
-    summary["urdf"] = validate_and_convert(out, echo)
+    summary["urdf"] = validate_and_convert(out, echo, arm_config)
     log.done("validate")
     log.step("train", "2/5 train Reach with Brax PPO")
-    trained = train_reach(run_dir, settings, echo)
+    trained = train_reach(run_dir, settings, echo, arm_config)
     summary["train"] = {
         "run_dir": str(run_dir),
         "steps": trained_steps(run_dir),

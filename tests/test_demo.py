@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import mujoco
 import pytest
 
 from mjx_arm.cli import EXIT_INVALID, EXIT_OK, main
@@ -39,3 +40,45 @@ def test_demo_refuses_a_folder_with_a_run(tmp_path: Path, capsys):
     (tmp_path / "run" / "checkpoints").mkdir(parents=True)
     assert main(["demo", "--quick", "--out", str(tmp_path)]) == EXIT_INVALID
     assert "already holds a demo run" in capsys.readouterr().err
+
+
+def test_demo_converts_the_arm_it_is_given(tmp_path: Path):
+    from mjx_arm.demo import validate_and_convert
+    from mjx_arm.paths import asset
+    from mjx_arm.urdf.arm_config import load_arm
+
+    lines: list[str] = []
+    result = validate_and_convert(tmp_path, lines.append, load_arm(asset("ur5e_gripper.urdf")))
+    mjcf = tmp_path / "ur5e_gripper_touch.xml"
+    assert result["mjcf"] == str(mjcf)
+    model = mujoco.MjModel.from_xml_path(str(mjcf))
+    assert model.nu == 7  # six arm joints and the driven finger
+    assert model.body("target").id > 0  # the Touch scene
+    assert "0 errors" in lines[0]
+
+
+def test_demo_names_an_arm_it_cannot_load(tmp_path: Path, capsys):
+    missing = tmp_path / "missing.toml"
+    assert main(["demo", "--quick", "--out", str(tmp_path / "o"), "--arm", str(missing)]) == (
+        EXIT_INVALID
+    )
+    assert "no such URDF or arm file" in capsys.readouterr().err
+    (tmp_path / "bad.toml").write_text('urdf = "nothere.urdf"\n')
+    arm = str(tmp_path / "bad.toml")
+    assert main(["demo", "--quick", "--out", str(tmp_path / "o2"), "--arm", arm]) == EXIT_INVALID
+    assert "does not validate" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_demo_quick_on_another_arm(tmp_path: Path):
+    from mjx_arm.paths import asset
+    from mjx_arm.policy import load as load_policy
+
+    out = tmp_path / "demo"
+    arm = str(asset("ur5e_gripper.urdf"))
+    assert main(["demo", "--quick", "--out", str(out), "--arm", arm]) == EXIT_OK
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["arm"] == arm
+    recorded = load_policy(out / "policy.npz").metadata["arm"]  # the policy records its arm
+    assert Path(recorded["config"]["urdf"]).name == "ur5e_gripper.urdf"
+    assert set(summary["eval"]) == {"mujoco", "pybullet", "batch"}
