@@ -52,9 +52,44 @@ def test_validates_and_converts_with_the_mimic_finger() -> None:
 def test_the_gripper_closes_lifts_and_holds_a_cube_in_both_engines() -> None:
     from mjx_arm.bench.grasp import SLIP_GOAL, grasp_check
 
-    result = grasp_check(("mujoco", "pybullet"), log=lambda _: None)
+    result = grasp_check(("mujoco", "pybullet"), log=lambda _: None, starts=("air",))
     assert 10.0 < result["finger_press_n"] <= 120.0  # N: the finger servo, inside the URDF effort
-    for name, row in result["engines"].items():
+    for name, row in result["starts"]["air"]["engines"].items():
         assert row["held"] and row["lift_m"] > 0.07, (name, row)  # the ee rose 0.1 m
         assert row["slip_m"] < SLIP_GOAL, (name, row)
         assert abs(row["opening_m"] - 0.045) < 0.003, (name, row)  # the cube's width
+
+
+def test_the_pick_starts_with_the_cube_resting_between_the_pads() -> None:
+    from mjx_arm.bench import grasp
+    from mjx_arm.urdf.scene import CUBE_HALF
+
+    arm = grasp.gripper_arm()
+    model = grasp.grasp_model(arm)
+    script = grasp.record_script(model, arm, "table")
+    data = grasp.start_data(model, arm, script)
+    ee = data.site_xpos[model.site("ee").id]
+    goal = script.cube_pos + np.array([0.0, 0.0, grasp.GRIP_ABOVE])
+    np.testing.assert_allclose(ee, goal, atol=1e-4)
+    assert script.cube_pos[2] == CUBE_HALF  # on the table top (z = 0)
+    np.testing.assert_allclose(data.site_xmat[model.site("ee").id].reshape(3, 3)[:, 2], [0, 0, -1],
+                               atol=1e-3)  # fmt: skip
+    touching = {
+        frozenset((model.body(model.geom_bodyid[c.geom1]).name,
+                   model.body(model.geom_bodyid[c.geom2]).name))
+        for c in data.contact[: data.ncon]
+    }  # fmt: skip
+    assert touching == {frozenset(("world", "cube"))}  # the table holds the cube; nothing else
+    for _ in range(240):  # 1 s at rest: the cube stays put
+        mujoco.mj_step(model, data)
+    np.testing.assert_allclose(data.xpos[model.body("cube").id], script.cube_pos, atol=1e-3)
+
+
+def test_pybullet_picks_the_cube_off_the_table() -> None:
+    """PyBullet lifts the cube off the table and holds it. C MuJoCo and MJX drop it at the
+    240 Hz step (README, Known gaps), so they are not asserted here."""
+    from mjx_arm.bench.grasp import SLIP_GOAL, grasp_check
+
+    result = grasp_check(("pybullet",), log=lambda _: None, starts=("table",))
+    row = result["starts"]["table"]["engines"]["pybullet"]
+    assert row["held"] and row["lift_m"] > 0.07 and row["slip_m"] < SLIP_GOAL, row

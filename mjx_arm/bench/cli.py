@@ -41,7 +41,8 @@ def cmd_parity(args: argparse.Namespace) -> int:
     converted and zeroed. Writes parity.md, parity.json and three PNG plots into --out, with
     each goal met or missed. MJX on a CPU takes several minutes (compilation); --quick is a
     small run. --grasp adds the grasp check on the gripper arm (grasp.md, grasp.json): the same
-    scripted close-and-lift of a cube in each engine, and its slip in the fingers over 2 s.
+    scripted pick of a cube in each engine, off the table and in the air, and its slip in the
+    fingers over 2 s; --grasp-video films the pick off the table in each engine.
     """
     from mjx_arm.bench.parity import ParityConfig, run_parity
     from mjx_arm.bench.parity_report import goals_table, write_report
@@ -59,22 +60,25 @@ def cmd_parity(args: argparse.Namespace) -> int:
     print(goals_table(result))
     _print_paths(write_report(result, meta, args.out))
     if args.grasp:
-        _print_paths(_grasp_report(config.engines, meta, args.out))
+        _print_paths(_grasp_report(config.engines, meta, args.out, args.grasp_video))
     return EXIT_OK
 
 
-def _grasp_report(engines: tuple[str, ...], meta: dict, out: Path) -> list[Path]:
-    """Run the grasp check (:mod:`mjx_arm.bench.grasp`) and write grasp.md and grasp.json."""
+def _grasp_report(engines: tuple[str, ...], meta: dict, out: Path, video: bool) -> list[Path]:
+    """Run the grasp check (:mod:`mjx_arm.bench.grasp`) and write grasp.md and grasp.json (and
+    with ``video`` one video of the pick from the table per engine)."""
     from mjx_arm.bench.grasp import grasp_check
     from mjx_arm.bench.results import fmt, markdown_table, save_results
 
-    result = grasp_check(engines)
+    result = grasp_check(engines, video_dir=out if video else None)
     rows = [
-        [name, fmt(r["lift_m"], ".3f"), fmt(1000 * r["slip_m"], ".2f"),
+        [start, name, fmt(r["lift_m"], ".3f"), fmt(1000 * r["slip_m"], ".2f"),
          fmt(1000 * r["opening_m"], ".1f"), "pass" if r["met"] else "MISS"]
-        for name, r in result["engines"].items()
+        for start, runs in result["starts"].items()
+        for name, r in runs["engines"].items()
     ]  # fmt: skip
-    headers = ["engine", "lift (m)", "slip over 2 s (mm)", "finger opening (mm)", "held, <= 5 mm"]
+    headers = ["start", "engine", "lift (m)", "slip over 2 s (mm)", "finger opening (mm)",
+               "held, <= 5 mm"]  # fmt: skip
     table = markdown_table(headers, rows)
     print(table)
     return list(save_results("grasp", {"meta": meta, **result}, table, out))
@@ -175,6 +179,11 @@ def register(sub) -> None:
     p.add_argument("--quick", action="store_true", help="a small run (tests, a first look)")
     p.add_argument(
         "--grasp", action="store_true", help="also the grasp check on the gripper arm (grasp.md)"
+    )
+    p.add_argument(
+        "--grasp-video",
+        action="store_true",
+        help="with --grasp: one video of the pick from the table per engine (grasp_ENGINE.mp4)",
     )
     p.add_argument("--out", type=Path, default=PARITY_OUT, help=f"output folder ({PARITY_OUT})")
 

@@ -1,8 +1,16 @@
-"""Grasp parity: the same scripted close-and-lift of a cube in every engine, and how far the cube
-slips in the fingers while it is held.
+"""Grasp parity: the same scripted pick of a cube off the table in every engine, and how far the
+cube slips in the fingers while it is held.
 
-The gripper arm (``assets/ur5e_gripper.urdf``) starts at its home pose with the fingers 1 mm
-short of a 4.5 cm, 0.1 kg cube on each side. The script, one command per control step:
+Two starts (:data:`STARTS`), each with the fingers 1 mm short of a 4.5 cm, 0.1 kg cube on each
+side (the lift scene's cube; the gripper arm ``assets/ur5e_gripper.urdf``):
+
+- ``table``: the cube rests on the table under the home ee point; the arm starts in the pose that
+  puts the ee (between the pads) :data:`GRIP_ABOVE` above the cube's centre, tool down: the
+  pick a Lift task asks for;
+- ``air``: the arm at its home pose, the cube floating between the pads (gravity on): the
+  fingers alone, away from the table.
+
+The script, one command per control step:
 
 1. close (1 s): the driven finger at its full speed, the arm still;
 2. lift (1 s): the arm joints at the velocities that raise the ee 0.1 m/s (a least-squares
@@ -19,6 +27,7 @@ force cap is the MuJoCo finger servo's press.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import mujoco
@@ -27,10 +36,11 @@ import numpy as np
 from mjx_arm.envs.arm import ArmInfo, arm_info
 from mjx_arm.paths import asset
 from mjx_arm.urdf.convert import build_spec
-from mjx_arm.urdf.scene_shapes import SCENE_CONAFFINITY, SCENE_CONTYPE
+from mjx_arm.urdf.scene_shapes import CUBE_BODY, CUBE_HALF, CUBE_MASS
 
-CUBE_HALF, CUBE_MASS = 0.0225, 0.1  # m, kg
 NEAR_CLOSED = 0.019  # finger position (m): 1 mm short of the cube on each side
+GRIP_ABOVE = 0.005  # m: the ee above the cube's centre (the finger tips 2.5 mm above the table)
+STARTS = ("table", "air")
 FINGER, MIMIC = "left_finger_joint", "right_finger_joint"
 PHASES = (("close", 1.0), ("lift", 1.0), ("hold", 2.0))  # name, seconds
 LIFT_SPEED = 0.1  # m/s of the ee during the lift
@@ -40,9 +50,18 @@ SIM_DT, N_SUBSTEPS = 1.0 / 240.0, 8
 
 @dataclass(frozen=True)
 class Script:
-    """The commands of every control step: arm joint velocities ``(T, n)`` (rad/s) and the
-    finger velocity (m/s), with the step index where the hold starts."""
+    """The start and the commands of every control step.
 
+    Attributes:
+        start_qpos: the arm's joint angles at the start (rad), ``(n,)``.
+        cube_pos: the cube's centre at the start (m), ``(3,)``.
+        qdot: arm joint velocities (rad/s), ``(T, n)``.
+        finger_speed: the driven finger's velocity command (m/s).
+        hold_start: the step index where the hold starts.
+    """
+
+    start_qpos: np.ndarray
+    cube_pos: np.ndarray
     qdot: np.ndarray
     finger_speed: float
     hold_start: int
@@ -54,34 +73,65 @@ def gripper_arm() -> ArmInfo:
 
 
 def grasp_model(arm: ArmInfo) -> mujoco.MjModel:
-    """The gripper arm (no scene, gravity on) with a free cube between the open fingers."""
-    spec = build_spec(arm.urdf, arm.convert_config(self_collision=False, sim_dt=SIM_DT))
-    probe = spec.copy().compile()
-    data = mujoco.MjData(probe)
-    data.qpos[[probe.joint(n).qposadr[0] for n in arm.joint_names]] = arm.home_qpos
-    mujoco.mj_kinematics(probe, data)
-    cube = spec.worldbody.add_body()
-    cube.name, cube.pos = "cube", data.site_xpos[probe.site("ee").id].copy()
-    cube.add_freejoint()
-    geom = cube.add_geom()
-    geom.type, geom.size, geom.mass = mujoco.mjtGeom.mjGEOM_BOX, [CUBE_HALF] * 3, CUBE_MASS
-    geom.contype, geom.conaffinity = SCENE_CONTYPE, SCENE_CONAFFINITY
-    return spec.compile()
+    """The gripper arm in the lift scene (table and free cube; gravity on)."""
+    config = arm.convert_config(scene="lift", self_collision=False, sim_dt=SIM_DT)
+    return build_spec(arm.urdf, config).compile()
 
 
-def start_data(model: mujoco.MjModel, arm: ArmInfo) -> mujoco.MjData:
-    """Home pose, fingers near closed on the cube, everything at rest."""
+def pick_pose(model: mujoco.MjModel, arm: ArmInfo, steps: int = 200) -> tuple[np.ndarray, ...]:
+    """The start: the cube on the table under the home ee point, and the arm's joint angles
+    ``(n,)`` that put the ee :data:`GRIP_ABOVE` above its centre with the home orientation
+    (damped least-squares steps on the ee Jacobian). Returns ``(qpos, cube_pos)``."""
     data = mujoco.MjData(model)
-    data.qpos[[model.joint(n).qposadr[0] for n in arm.joint_names]] = arm.home_qpos
+    adr = [model.joint(n).qposadr[0] for n in arm.joint_names]
+    dofs = [model.joint(n).dofadr[0] for n in arm.joint_names]
+    site = model.site("ee").id
+    data.qpos[adr] = arm.home_qpos
+    mujoco.mj_kinematics(model, data)
+    cube = np.array([*data.site_xpos[site][:2], CUBE_HALF])
+    goal = cube + np.array([0.0, 0.0, GRIP_ABOVE])
+    jacp, jacr = np.zeros((3, model.nv)), np.zeros((3, model.nv))
+    for _ in range(steps):
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_comPos(model, data)  # the Jacobian reads the subtree centres it sets
+        mujoco.mj_jacSite(model, data, jacp, jacr, site)
+        jac = np.vstack([jacp[:, dofs], jacr[:, dofs]])
+        error = np.concatenate([goal - data.site_xpos[site], np.zeros(3)])
+        data.qpos[adr] += jac.T @ np.linalg.solve(jac @ jac.T + 1e-6 * np.eye(6), error)
+    return data.qpos[adr].copy(), cube
+
+
+def start_data(model: mujoco.MjModel, arm: ArmInfo, script: Script) -> mujoco.MjData:
+    """The script's start pose, fingers near closed on the cube, everything at rest."""
+    data = mujoco.MjData(model)
+    data.qpos[[model.joint(n).qposadr[0] for n in arm.joint_names]] = script.start_qpos
     for name in (FINGER, MIMIC):
         data.qpos[model.joint(name).qposadr[0]] = NEAR_CLOSED
+    cube = model.joint(CUBE_BODY).qposadr[0]
+    data.qpos[cube : cube + 7] = [*script.cube_pos, 1.0, 0.0, 0.0, 0.0]
     mujoco.mj_forward(model, data)
     return data
 
 
-def record_script(model: mujoco.MjModel, arm: ArmInfo) -> Script:
-    """The joint velocities of every phase, from the ee Jacobian at the start pose."""
-    data = start_data(model, arm)
+def start_pose(model: mujoco.MjModel, arm: ArmInfo, start: str) -> tuple[np.ndarray, ...]:
+    """``(arm qpos (n,), cube centre (3,))`` of ``start`` (one of :data:`STARTS`)."""
+    if start == "table":
+        return pick_pose(model, arm)
+    if start != "air":
+        raise ValueError(f"unknown grasp start {start!r}; choose one of {STARTS}")
+    data = mujoco.MjData(model)
+    data.qpos[[model.joint(n).qposadr[0] for n in arm.joint_names]] = arm.home_qpos
+    mujoco.mj_kinematics(model, data)
+    return np.asarray(arm.home_qpos, float), data.site_xpos[model.site("ee").id].copy()
+
+
+def record_script(model: mujoco.MjModel, arm: ArmInfo, start: str = "table") -> Script:
+    """The start pose and the joint velocities of every phase, from the ee Jacobian there."""
+    qpos, cube = start_pose(model, arm, start)
+    data = mujoco.MjData(model)
+    data.qpos[[model.joint(n).qposadr[0] for n in arm.joint_names]] = qpos
+    mujoco.mj_kinematics(model, data)
+    mujoco.mj_comPos(model, data)
     jacp = np.zeros((3, model.nv))
     mujoco.mj_jacSite(model, data, jacp, None, model.site("ee").id)
     dofs = [model.joint(n).dofadr[0] for n in arm.joint_names]
@@ -95,8 +145,8 @@ def record_script(model: mujoco.MjModel, arm: ArmInfo) -> Script:
             np.zeros((steps["hold"], arm.n_joints)),
         ]
     )
-    speed = float(model.actuator(FINGER).ctrlrange[1])  # the URDF velocity limit
-    return Script(qdot, speed, steps["close"] + steps["lift"])
+    speed = finger_speed(model)
+    return Script(qpos, cube, qdot, speed, steps["close"] + steps["lift"])
 
 
 def finger_press(model: mujoco.MjModel, speed: float) -> float:
@@ -116,63 +166,81 @@ def summarize(cube: np.ndarray, ee: np.ndarray, opening: float, hold_start: int)
     }
 
 
-def run_mujoco(model: mujoco.MjModel, arm: ArmInfo, script: Script) -> dict[str, Any]:
+Frames = list | None  # RGB frames of the scene camera, one per control step, when a list
+
+
+def run_mujoco(
+    model: mujoco.MjModel, arm: ArmInfo, script: Script, frames: Frames = None
+) -> dict[str, Any]:
     """The script in C MuJoCo."""
-    data = start_data(model, arm)
+    data = start_data(model, arm, script)
     acts = [model.actuator(n).id for n in arm.joint_names]
     finger = model.actuator(FINGER).id
-    cube, ee = model.body("cube").id, model.site("ee").id
+    cube, ee = model.body(CUBE_BODY).id, model.site("ee").id
     cubes, ees = [], []
+    film = _Film(model, frames)
     for qdot in script.qdot:
         data.ctrl[acts] = qdot
         data.ctrl[finger] = script.finger_speed
         mujoco.mj_step(model, data, nstep=N_SUBSTEPS)
         cubes.append(data.xpos[cube].copy())
         ees.append(data.site_xpos[ee].copy())
+        film.add(data)
     opening = 0.085 - 2 * float(data.qpos[model.joint(FINGER).qposadr[0]])
     return summarize(np.array(cubes), np.array(ees), opening, script.hold_start)
 
 
-def run_mjx(model: mujoco.MjModel, arm: ArmInfo, script: Script) -> dict[str, Any]:
+def run_mjx(
+    model: mujoco.MjModel, arm: ArmInfo, script: Script, frames: Frames = None
+) -> dict[str, Any]:
     """The script in MJX (its JAX implementation, float32)."""
     import jax
     import jax.numpy as jnp
     from mujoco import mjx
 
     mx = mjx.put_model(model)
-    data = mjx.put_data(model, start_data(model, arm))
+    data = mjx.put_data(model, start_data(model, arm, script))
     acts = jnp.array([model.actuator(n).id for n in arm.joint_names])
     finger = model.actuator(FINGER).id
-    cube, ee = model.body("cube").id, model.site("ee").id
+    cube, ee = model.body(CUBE_BODY).id, model.site("ee").id
 
     def control_step(d, qdot):
         ctrl = d.ctrl.at[acts].set(qdot).at[finger].set(script.finger_speed)
         d = d.replace(ctrl=ctrl)
         d = jax.lax.fori_loop(0, N_SUBSTEPS, lambda _, x: mjx.step(mx, x), d)
-        return d, (d.xpos[cube], d.site_xpos[ee])
+        return d, (d.xpos[cube], d.site_xpos[ee], d.qpos)
 
-    final, (cubes, ees) = jax.jit(lambda d: jax.lax.scan(control_step, d, script.qdot))(data)
+    scan = jax.jit(lambda d: jax.lax.scan(control_step, d, script.qdot))
+    final, (cubes, ees, qposes) = scan(data)
+    film, shown = _Film(model, frames), mujoco.MjData(model)
+    for qpos in np.asarray(qposes):
+        shown.qpos[:] = qpos
+        mujoco.mj_kinematics(model, shown)
+        film.add(shown)
     opening = 0.085 - 2 * float(final.qpos[model.joint(FINGER).qposadr[0]])
     return summarize(np.asarray(cubes), np.asarray(ees), opening, script.hold_start)
 
 
-def run_pybullet(model: mujoco.MjModel, arm: ArmInfo, script: Script) -> dict[str, Any]:
-    """The script in PyBullet, through the reference env's servo and world."""
+def run_pybullet(
+    model: mujoco.MjModel, arm: ArmInfo, script: Script, frames: Frames = None
+) -> dict[str, Any]:
+    """The script in PyBullet, through the reference env's servo and world (its table)."""
     from mjx_arm.task import reach_config
     from pybullet_ref.env import PybulletArmEnv, pybullet
 
-    env = PybulletArmEnv(reach_config(sim_dt=SIM_DT), arm.config)
+    env = PybulletArmEnv(
+        reach_config(sim_dt=SIM_DT), arm.config, width=FILM_SIZE[0], height=FILM_SIZE[1]
+    )
     try:
-        env._physics_reset(arm.home_qpos, np.array([5.0, 0.0, 0.0]))  # the marker far away
+        env._physics_reset(script.start_qpos, np.array([5.0, 0.0, 0.0]))  # the marker far away
         client, body = env.client, env.body
         joint = {
             client.getJointInfo(body, j)[1].decode(): j for j in range(client.getNumJoints(body))
         }
         for name in (FINGER, MIMIC):
             client.resetJointState(body, joint[name], NEAR_CLOSED)
-        start = env._physics_read().ee_pos
         shape = client.createCollisionShape(pybullet.GEOM_BOX, halfExtents=[CUBE_HALF] * 3)
-        cube = client.createMultiBody(CUBE_MASS, shape, basePosition=list(start))
+        cube = client.createMultiBody(CUBE_MASS, shape, basePosition=list(script.cube_pos))
         client.changeDynamics(cube, -1, lateralFriction=1.0)
         press = finger_press(model, script.finger_speed)
         client.setJointMotorControl2(
@@ -185,29 +253,82 @@ def run_pybullet(model: mujoco.MjModel, arm: ArmInfo, script: Script) -> dict[st
             env._physics_step(N_SUBSTEPS)
             cubes.append(np.array(client.getBasePositionAndOrientation(cube)[0]))
             ees.append(env._physics_read().ee_pos)
+            if frames is not None:
+                frames.append(env._render_frame())
         opening = 0.085 - 2 * float(client.getJointState(body, joint[FINGER])[0])
     finally:
         env.close()
     return summarize(np.array(cubes), np.array(ees), opening, script.hold_start)
 
 
+FILM_SIZE = (480, 360)  # width, height (pixels) of the videos
+
+
+class _Film:
+    """Frames of the MuJoCo scene camera, appended to ``frames`` (nothing when it is None)."""
+
+    def __init__(self, model: mujoco.MjModel, frames: Frames) -> None:
+        self.frames, self.renderer = frames, None
+        if frames is not None:
+            width, height = FILM_SIZE
+            self.renderer = mujoco.Renderer(model, height, width)
+
+    def add(self, data: mujoco.MjData) -> None:
+        if self.renderer is not None:
+            self.renderer.update_scene(data, camera="main")
+            self.frames.append(self.renderer.render().copy())
+
+
 RUNNERS = {"mujoco": run_mujoco, "pybullet": run_pybullet, "mjx": run_mjx}
 
 
-def grasp_check(engines: tuple[str, ...] = ("mujoco", "pybullet"), log=print) -> dict[str, Any]:
-    """The scripted close-and-lift in each of ``engines``; per engine: lift (m), slip over the
-    hold (m), final finger opening (m), whether the cube was held, and the goal."""
+def grasp_check(
+    engines: tuple[str, ...] = ("mujoco", "pybullet"),
+    log=print,
+    video_dir: Path | None = None,
+    starts: tuple[str, ...] = STARTS,
+) -> dict[str, Any]:
+    """The scripted pick from each of ``starts`` in each of ``engines``.
+
+    Returns:
+        Per start: the cube's start and, per engine, the lift (m), the slip over the hold (m),
+        the final finger opening (m), whether the cube was held, the goal and (with
+        ``video_dir``, ``table`` start) the path of its video ``grasp_ENGINE.mp4`` (one frame per
+        control step, real time).
+    """
     arm = gripper_arm()
     model = grasp_model(arm)
-    script = record_script(model, arm)
-    rows = {}
-    for name in engines:
-        log(f"grasp: {name}")
-        rows[name] = {**RUNNERS[name](model, arm, script), "slip_goal_m": SLIP_GOAL}
-        rows[name]["met"] = rows[name]["held"] and rows[name]["slip_m"] <= SLIP_GOAL
-    return {
+    result: dict[str, Any] = {
         "cube": {"size_m": 2 * CUBE_HALF, "mass_kg": CUBE_MASS},
-        "finger_press_n": finger_press(model, script.finger_speed),
+        "finger_press_n": finger_press(model, finger_speed(model)),
         "phases_s": dict(PHASES),
-        "engines": rows,
+        "starts": {},
     }
+    for start in starts:
+        script = record_script(model, arm, start)
+        rows = {}
+        for name in engines:
+            log(f"grasp from the {start}: {name}")
+            films = video_dir is not None and start == "table"
+            rows[name] = _run_engine(name, model, arm, script, video_dir if films else None)
+        result["starts"][start] = {"cube_start_m": script.cube_pos.tolist(), "engines": rows}
+    return result
+
+
+def finger_speed(model: mujoco.MjModel) -> float:
+    """The driven finger's closing command (m/s): its URDF velocity limit."""
+    return float(model.actuator(FINGER).ctrlrange[1])
+
+
+def _run_engine(name, model, arm, script, video_dir: Path | None) -> dict[str, Any]:
+    """One engine's run of ``script``, its goal and, with ``video_dir``, its video."""
+    from mjx_arm.replay import write_video
+
+    frames = [] if video_dir is not None else None
+    row = {**RUNNERS[name](model, arm, script, frames), "slip_goal_m": SLIP_GOAL}
+    row["met"] = row["held"] and row["slip_m"] <= SLIP_GOAL
+    if frames:
+        path = Path(video_dir) / f"grasp_{name}.mp4"
+        write_video(path, frames, fps=1.0 / (SIM_DT * N_SUBSTEPS))
+        row["video"] = str(path)
+    return row

@@ -13,6 +13,10 @@ from mjx_arm.urdf.scene_shapes import (
     CAMERA_EYE,
     CAMERA_FOVY,
     CAMERA_TARGET,
+    CUBE_BODY,
+    CUBE_GEOM,
+    CUBE_HALF,
+    CUBE_MASS,
     FLOOR_Z,
     SCENE_CONAFFINITY,
     SCENE_CONTYPE,
@@ -28,6 +32,9 @@ __all__ = [
     "CAMERA_EYE",
     "CAMERA_FOVY",
     "CAMERA_TARGET",
+    "CUBE_BODY",
+    "CUBE_HALF",
+    "CUBE_MASS",
     "FLOOR_Z",
     "SCENES",
     "TARGET_BODY",
@@ -54,7 +61,8 @@ def camera_quat() -> np.ndarray:
 
 
 def add_scene(spec: mujoco.MjSpec, scene: str) -> None:
-    """Add floor, table, light, camera and (for reach/touch) the mocap target body."""
+    """Add floor, table, light, camera and the mocap target body; ``touch`` puts the box on
+    the target, ``lift`` adds a free cube resting on the table."""
     if scene == "none":
         return
     world = spec.worldbody
@@ -100,6 +108,27 @@ def add_scene(spec: mujoco.MjSpec, scene: str) -> None:
         marker.size = [0.02, 0, 0]
         marker.rgba = [0.1, 0.8, 0.2, 0.5]
         marker.contype = marker.conaffinity = 0
+    if scene == "lift":
+        _add_cube(world)
+
+
+def _add_cube(world) -> None:
+    """The free cube, resting on the table in front of the arm (a :data:`CUBE_HALF` half edge,
+    :data:`CUBE_MASS`); its free joint is its body's name."""
+    cube = world.add_body()
+    cube.name = CUBE_BODY
+    cube.pos = [0.5, 0.15, CUBE_HALF]
+    joint = cube.add_freejoint()
+    joint.name = CUBE_BODY
+    geom = cube.add_geom()
+    geom.name = CUBE_GEOM
+    geom.type = mujoco.mjtGeom.mjGEOM_BOX
+    geom.size = [CUBE_HALF] * 3
+    geom.mass = CUBE_MASS
+    geom.rgba = [0.2, 0.35, 0.85, 1.0]
+    # it rests on the table and is held by the fingers: it collides with both
+    geom.contype = SCENE_CONTYPE | SCENE_CONAFFINITY
+    geom.conaffinity = SCENE_CONTYPE | SCENE_CONAFFINITY
 
 
 def _set_box(geom, source: Geometry, rgba: list[float]) -> None:

@@ -17,11 +17,15 @@ from mjx_arm.urdf.model import Geometry, parse_urdf
 # only with the arm (mjx_arm.urdf.convert_config has the arm's bits).
 SCENE_CONTYPE, SCENE_CONAFFINITY = 2, 1
 
-SCENES = frozenset({"none", "reach", "touch"})
+SCENES = frozenset({"none", "reach", "touch", "lift"})
 TARGET_BODY = "target"
 TARGET_SITE = "target"
 TARGET_GEOM = "target_box"
 FLOOR_Z = -0.75
+# The lift scene's free cube (the gripper's 85 mm stroke takes 4-5 cm cubes): its body and geom,
+# half edge (m) and mass (kg) as built; a task or check moves it through its free joint.
+CUBE_BODY, CUBE_GEOM = "cube", "cube"
+CUBE_HALF, CUBE_MASS = 0.0225, 0.1
 
 # One camera for every engine: eye, look-at point (m, world frame) and vertical field of view.
 CAMERA_EYE = (1.45, -1.05, 0.85)
