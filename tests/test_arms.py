@@ -69,6 +69,7 @@ def test_ur10_defaults() -> None:
         ({"home_qpos": (0.0, 0.0)}, "2 angles for 6 joints"),
         ({"home_qpos": (0.0, 0.0, 4.0, 0.0, 0.0, 0.0)}, "outside"),
         ({"ft_joint": "shoulder_pan_joint"}, "must be a fixed joint"),
+        ({"ft_joint": "ee_fixed_joint"}, "weighs no mass"),  # ee_link: a massless frame
     ],
 )
 def test_a_config_that_does_not_fit_the_urdf_is_a_named_error(change, message) -> None:

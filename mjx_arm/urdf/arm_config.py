@@ -339,4 +339,23 @@ def _ft_point(
         raise ArmConfigError(f"{path}: ft_joint {name!r} must be a fixed joint, not {joint.type}")
     if name not in {j.name for j in model.chain_to(ee_link)}:
         raise ArmConfigError(f"{path}: ft_joint {name!r} is not above ee_link {ee_link!r}")
+    if _subtree_mass(model, joint.child) <= 0:
+        raise ArmConfigError(
+            f"{path}: ft_joint {name!r} weighs no mass (link {joint.child!r} and the links below "
+            "it are massless frames, which MuJoCo merges into their parent): name a fixed joint "
+            "whose child carries the tool's mass, or leave ft_joint empty to read the wrench at "
+            "the last arm joint"
+        )
     return name, joint.child
+
+
+def _subtree_mass(model: RobotModel, root: str) -> float:
+    """Total mass (kg) of link ``root`` and every link below it."""
+    links, total = {root}, 0.0
+    for joint in model.joints_in_tree_order():
+        if joint.parent in links:
+            links.add(joint.child)
+    for name in links:
+        inertial = model.links[name].inertial
+        total += inertial.mass if inertial is not None else 0.0
+    return total
