@@ -45,7 +45,17 @@ FINGER, MIMIC = "left_finger_joint", "right_finger_joint"
 PHASES = (("close", 1.0), ("lift", 1.0), ("hold", 2.0))  # name, seconds
 LIFT_SPEED = 0.1  # m/s of the ee during the lift
 SLIP_GOAL = 0.005  # m over the hold
-SIM_DT, N_SUBSTEPS = 1.0 / 240.0, 8
+SIM_DT, CTRL_DT = 1.0 / 240.0, 1.0 / 30.0  # the tasks' physics step and control period (s)
+
+
+@dataclass(frozen=True)
+class Cube:
+    """The cube: half edge (m), mass (kg) and sliding friction (MuJoCo's geom friction; PyBullet's
+    lateral friction)."""
+
+    half: float = CUBE_HALF
+    mass: float = CUBE_MASS
+    friction: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -72,10 +82,29 @@ def gripper_arm() -> ArmInfo:
     return arm_info(asset("ur5e_gripper.urdf"))
 
 
-def grasp_model(arm: ArmInfo) -> mujoco.MjModel:
-    """The gripper arm in the lift scene (table and free cube; gravity on)."""
+def grasp_model(arm: ArmInfo, sim_dt: float = SIM_DT, cube: Cube = Cube()) -> mujoco.MjModel:
+    """The gripper arm in the lift scene (table and free cube; gravity on), stepping ``sim_dt``
+    (a whole fraction of :data:`CTRL_DT`). The servos keep the gains converted for
+    :data:`SIM_DT`, so the finger presses the same at every step."""
     config = arm.convert_config(scene="lift", self_collision=False, sim_dt=SIM_DT)
-    return build_spec(arm.urdf, config).compile()
+    spec = build_spec(arm.urdf, config)
+    (geom,) = spec.body(CUBE_BODY).geoms
+    geom.size, geom.mass = [cube.half] * 3, cube.mass
+    geom.friction = [cube.friction, *geom.friction[1:]]
+    model = spec.compile()
+    model.opt.timestep = sim_dt
+    return model
+
+
+def substeps(model: mujoco.MjModel) -> int:
+    """Physics steps per control step."""
+    return round(CTRL_DT / model.opt.timestep)
+
+
+def cube_of(model: mujoco.MjModel) -> Cube:
+    """The model's cube."""
+    geom = model.geom(CUBE_BODY)
+    return Cube(float(geom.size[0]), float(model.body(CUBE_BODY).mass[0]), float(geom.friction[0]))
 
 
 def pick_pose(model: mujoco.MjModel, arm: ArmInfo, steps: int = 200) -> tuple[np.ndarray, ...]:
@@ -88,7 +117,7 @@ def pick_pose(model: mujoco.MjModel, arm: ArmInfo, steps: int = 200) -> tuple[np
     site = model.site("ee").id
     data.qpos[adr] = arm.home_qpos
     mujoco.mj_kinematics(model, data)
-    cube = np.array([*data.site_xpos[site][:2], CUBE_HALF])
+    cube = np.array([*data.site_xpos[site][:2], cube_of(model).half])
     goal = cube + np.array([0.0, 0.0, GRIP_ABOVE])
     jacp, jacr = np.zeros((3, model.nv)), np.zeros((3, model.nv))
     for _ in range(steps):
@@ -136,8 +165,7 @@ def record_script(model: mujoco.MjModel, arm: ArmInfo, start: str = "table") -> 
     mujoco.mj_jacSite(model, data, jacp, None, model.site("ee").id)
     dofs = [model.joint(n).dofadr[0] for n in arm.joint_names]
     lift = np.linalg.lstsq(jacp[:, dofs], [0.0, 0.0, LIFT_SPEED], rcond=None)[0]
-    ctrl_dt = SIM_DT * N_SUBSTEPS
-    steps = {name: round(seconds / ctrl_dt) for name, seconds in PHASES}
+    steps = {name: round(seconds / CTRL_DT) for name, seconds in PHASES}
     qdot = np.concatenate(
         [
             np.zeros((steps["close"], arm.n_joints)),
@@ -182,7 +210,7 @@ def run_mujoco(
     for qdot in script.qdot:
         data.ctrl[acts] = qdot
         data.ctrl[finger] = script.finger_speed
-        mujoco.mj_step(model, data, nstep=N_SUBSTEPS)
+        mujoco.mj_step(model, data, nstep=substeps(model))
         cubes.append(data.xpos[cube].copy())
         ees.append(data.site_xpos[ee].copy())
         film.add(data)
@@ -207,7 +235,7 @@ def run_mjx(
     def control_step(d, qdot):
         ctrl = d.ctrl.at[acts].set(qdot).at[finger].set(script.finger_speed)
         d = d.replace(ctrl=ctrl)
-        d = jax.lax.fori_loop(0, N_SUBSTEPS, lambda _, x: mjx.step(mx, x), d)
+        d = jax.lax.fori_loop(0, substeps(model), lambda _, x: mjx.step(mx, x), d)
         return d, (d.xpos[cube], d.site_xpos[ee], d.qpos)
 
     scan = jax.jit(lambda d: jax.lax.scan(control_step, d, script.qdot))
@@ -229,7 +257,10 @@ def run_pybullet(
     from pybullet_ref.env import PybulletArmEnv, pybullet
 
     env = PybulletArmEnv(
-        reach_config(sim_dt=SIM_DT), arm.config, width=FILM_SIZE[0], height=FILM_SIZE[1]
+        reach_config(sim_dt=float(model.opt.timestep)),
+        arm.config,
+        width=FILM_SIZE[0],
+        height=FILM_SIZE[1],
     )
     try:
         env._physics_reset(script.start_qpos, np.array([5.0, 0.0, 0.0]))  # the marker far away
@@ -239,9 +270,10 @@ def run_pybullet(
         }
         for name in (FINGER, MIMIC):
             client.resetJointState(body, joint[name], NEAR_CLOSED)
-        shape = client.createCollisionShape(pybullet.GEOM_BOX, halfExtents=[CUBE_HALF] * 3)
-        cube = client.createMultiBody(CUBE_MASS, shape, basePosition=list(script.cube_pos))
-        client.changeDynamics(cube, -1, lateralFriction=1.0)
+        spec = cube_of(model)
+        shape = client.createCollisionShape(pybullet.GEOM_BOX, halfExtents=[spec.half] * 3)
+        cube = client.createMultiBody(spec.mass, shape, basePosition=list(script.cube_pos))
+        client.changeDynamics(cube, -1, lateralFriction=spec.friction)
         press = finger_press(model, script.finger_speed)
         client.setJointMotorControl2(
             body, joint[FINGER], pybullet.VELOCITY_CONTROL,
@@ -250,7 +282,7 @@ def run_pybullet(
         cubes, ees = [], []
         for qdot in script.qdot:
             env._physics_set_velocity_targets(qdot)
-            env._physics_step(N_SUBSTEPS)
+            env._physics_step(substeps(model))
             cubes.append(np.array(client.getBasePositionAndOrientation(cube)[0]))
             ees.append(env._physics_read().ee_pos)
             if frames is not None:
@@ -329,6 +361,6 @@ def _run_engine(name, model, arm, script, video_dir: Path | None) -> dict[str, A
     row["met"] = row["held"] and row["slip_m"] <= SLIP_GOAL
     if frames:
         path = Path(video_dir) / f"grasp_{name}.mp4"
-        write_video(path, frames, fps=1.0 / (SIM_DT * N_SUBSTEPS))
+        write_video(path, frames, fps=1.0 / CTRL_DT)
         row["video"] = str(path)
     return row
