@@ -272,7 +272,10 @@ def run_pybullet(
             client.resetJointState(body, joint[name], NEAR_CLOSED)
         spec = cube_of(model)
         shape = client.createCollisionShape(pybullet.GEOM_BOX, halfExtents=[spec.half] * 3)
-        cube = client.createMultiBody(spec.mass, shape, basePosition=list(script.cube_pos))
+        look = client.createVisualShape(
+            pybullet.GEOM_BOX, halfExtents=[spec.half] * 3, rgbaColor=[0.2, 0.35, 0.85, 1.0]
+        )
+        cube = client.createMultiBody(spec.mass, shape, look, basePosition=list(script.cube_pos))
         client.changeDynamics(cube, -1, lateralFriction=spec.friction)
         press = finger_press(model, script.finger_speed)
         client.setJointMotorControl2(
