@@ -274,12 +274,8 @@ def run_demo(
         raise DemoError(f"{out} already holds a demo run; choose another --out")
     out.mkdir(parents=True, exist_ok=True)
     log = _Log(echo)
-    summary: dict[str, Any] = {
-        "out": str(out),
-        "quick": quick,
-        "settings": vars(settings),
-        "arm": str(arm) if arm else "shipped",
-    }
+    summary: dict[str, Any] = {"out": str(out), "quick": quick, "settings": vars(settings)}
+    summary["arm"] = str(arm) if arm else "shipped"
 
     log.step("validate", "1/5 validate and convert the arm")
     summary["urdf"] = validate_and_convert(out, echo, arm_config)
