@@ -93,3 +93,26 @@ def test_pybullet_picks_the_cube_off_the_table() -> None:
     result = grasp_check(("pybullet",), log=lambda _: None, starts=("table",))
     row = result["starts"]["table"]["engines"]["pybullet"]
     assert row["held"] and row["lift_m"] > 0.07 and row["slip_m"] < SLIP_GOAL, row
+
+
+def test_bench_grasp_writes_its_table_and_a_pybullet_video(tmp_path, capsys) -> None:
+    import json
+
+    from mjx_arm.cli import EXIT_OK, main
+
+    argv = ["bench", "grasp", "--engines", "mujoco", "pybullet", "--video", "--out", str(tmp_path)]
+    if not _mujoco_renders():
+        argv = ["bench", "grasp", "--engines", "pybullet", "--video", "--out", str(tmp_path)]
+    assert main(argv) == EXIT_OK
+    result = json.loads((tmp_path / "grasp.json").read_text())
+    assert set(result["starts"]) == {"table", "air"}
+    assert "pybullet" in result["starts"]["table"]["engines"]
+    assert (tmp_path / "grasp_pybullet.mp4").stat().st_size > 0  # PyBullet renders on the CPU
+    assert "| table | pybullet |" in (tmp_path / "grasp.md").read_text()
+    assert "wrote" in capsys.readouterr().out
+
+
+def _mujoco_renders() -> bool:
+    from mjx_arm.replay import rendering_available
+
+    return rendering_available()[0]

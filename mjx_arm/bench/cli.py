@@ -13,12 +13,13 @@ import time
 from pathlib import Path
 
 from mjx_arm.bench.settings import add_arguments, from_arguments
-from mjx_arm.names import EXIT_INVALID, EXIT_OK
+from mjx_arm.names import EXIT_INVALID, EXIT_OK, PARITY_ENGINES
 from mjx_arm.settings import add_set_argument
 
 PARITY_OUT = Path("benchmarks/results/parity")
 TRANSFER_OUT = Path("benchmarks/results/transfer")
 SEEDS_OUT = Path("benchmarks/results/seeds")
+GRASP_OUT = Path("benchmarks/results/grasp")
 
 
 def _enable_jax_cache() -> None:
@@ -82,6 +83,20 @@ def _grasp_report(engines: tuple[str, ...], meta: dict, out: Path, video: bool) 
     table = markdown_table(headers, rows)
     print(table)
     return list(save_results("grasp", {"meta": meta, **result}, table, out))
+
+
+def cmd_grasp(args: argparse.Namespace) -> int:
+    """Grasp check on the gripper arm alone: the same scripted pick of a cube in each engine,
+    off the table and in the air, with the cube's lift and its slip in the fingers over a 2 s
+    hold. Writes grasp.md and grasp.json into --out; --video films the pick from the table in
+    each engine (grasp_ENGINE.mp4). MJX on a CPU compiles for about a minute.
+    """
+    from mjx_arm.bench.results import environment_metadata
+
+    _enable_jax_cache()
+    meta = environment_metadata(accelerator="mjx" in args.engines)
+    _print_paths(_grasp_report(tuple(args.engines), meta, args.out, args.video))
+    return EXIT_OK
 
 
 def cmd_transfer(args: argparse.Namespace) -> int:
@@ -163,7 +178,8 @@ def _command(commands, func, help_text: str, config: type) -> argparse.ArgumentP
 
 
 def register(sub) -> None:
-    """Add ``bench`` with its ``parity`` and ``transfer`` subcommands to ``sub``."""
+    """Add ``bench`` with its ``parity``, ``grasp``, ``transfer`` and ``seeds`` subcommands to
+    ``sub``."""
     from mjx_arm.bench.parity_config import ParityConfig
     from mjx_arm.bench.seeds import SeedsConfig
     from mjx_arm.bench.transfer import TransferConfig
@@ -186,6 +202,14 @@ def register(sub) -> None:
         help="with --grasp: one video of the pick from the table per engine (grasp_ENGINE.mp4)",
     )
     p.add_argument("--out", type=Path, default=PARITY_OUT, help=f"output folder ({PARITY_OUT})")
+
+    p = commands.add_parser(
+        "grasp", help="the gripper's scripted pick in every engine", description=cmd_grasp.__doc__
+    )
+    p.set_defaults(func=cmd_grasp)
+    p.add_argument("--engines", nargs="+", choices=PARITY_ENGINES, default=list(PARITY_ENGINES))
+    p.add_argument("--video", action="store_true", help="film the pick from the table per engine")
+    p.add_argument("--out", type=Path, default=GRASP_OUT, help=f"output folder ({GRASP_OUT})")
 
     p = _command(commands, cmd_transfer, "one policy in every engine, with goals", TransferConfig)
     p.add_argument("policy", help="policy file (.npz/.onnx) or run directory (newest checkpoint)")
