@@ -107,27 +107,37 @@ def cube_of(model: mujoco.MjModel) -> Cube:
     return Cube(float(geom.size[0]), float(model.body(CUBE_BODY).mass[0]), float(geom.friction[0]))
 
 
+def _posed(model: mujoco.MjModel, arm: ArmInfo, qpos) -> mujoco.MjData:
+    """Data with the arm's joints at ``qpos`` ``(n,)`` and the kinematics the ee Jacobian
+    reads (positions and subtree centres) computed; everything else at its default."""
+    data = mujoco.MjData(model)
+    data.qpos[[model.joint(n).qposadr[0] for n in arm.joint_names]] = qpos
+    mujoco.mj_kinematics(model, data)
+    mujoco.mj_comPos(model, data)
+    return data
+
+
+def _ee_jacobian(model: mujoco.MjModel, data: mujoco.MjData, arm: ArmInfo) -> np.ndarray:
+    """The ee site's Jacobian over the arm joints, ``(6, n)``: linear rows, then angular."""
+    jacp, jacr = np.zeros((3, model.nv)), np.zeros((3, model.nv))
+    mujoco.mj_jacSite(model, data, jacp, jacr, model.site("ee").id)
+    dofs = [model.joint(n).dofadr[0] for n in arm.joint_names]
+    return np.vstack([jacp[:, dofs], jacr[:, dofs]])
+
+
 def pick_pose(model: mujoco.MjModel, arm: ArmInfo, steps: int = 200) -> tuple[np.ndarray, ...]:
     """The start: the cube on the table under the home ee point, and the arm's joint angles
     ``(n,)`` that put the ee :data:`GRIP_ABOVE` above its centre with the home orientation
     (damped least-squares steps on the ee Jacobian). Returns ``(qpos, cube_pos)``."""
-    data = mujoco.MjData(model)
-    adr = [model.joint(n).qposadr[0] for n in arm.joint_names]
-    dofs = [model.joint(n).dofadr[0] for n in arm.joint_names]
-    site = model.site("ee").id
-    data.qpos[adr] = arm.home_qpos
-    mujoco.mj_kinematics(model, data)
-    cube = np.array([*data.site_xpos[site][:2], cube_of(model).half])
+    qpos, home_ee = start_pose(model, arm, "air")
+    cube = np.array([*home_ee[:2], cube_of(model).half])
     goal = cube + np.array([0.0, 0.0, GRIP_ABOVE])
-    jacp, jacr = np.zeros((3, model.nv)), np.zeros((3, model.nv))
     for _ in range(steps):
-        mujoco.mj_kinematics(model, data)
-        mujoco.mj_comPos(model, data)  # the Jacobian reads the subtree centres it sets
-        mujoco.mj_jacSite(model, data, jacp, jacr, site)
-        jac = np.vstack([jacp[:, dofs], jacr[:, dofs]])
-        error = np.concatenate([goal - data.site_xpos[site], np.zeros(3)])
-        data.qpos[adr] += jac.T @ np.linalg.solve(jac @ jac.T + 1e-6 * np.eye(6), error)
-    return data.qpos[adr].copy(), cube
+        data = _posed(model, arm, qpos)
+        jac = _ee_jacobian(model, data, arm)
+        error = np.concatenate([goal - data.site_xpos[model.site("ee").id], np.zeros(3)])
+        qpos = qpos + jac.T @ np.linalg.solve(jac @ jac.T + 1e-6 * np.eye(6), error)
+    return qpos, cube
 
 
 def start_data(model: mujoco.MjModel, arm: ArmInfo, script: Script) -> mujoco.MjData:
@@ -148,23 +158,15 @@ def start_pose(model: mujoco.MjModel, arm: ArmInfo, start: str) -> tuple[np.ndar
         return pick_pose(model, arm)
     if start != "air":
         raise ValueError(f"unknown grasp start {start!r}; choose one of {STARTS}")
-    data = mujoco.MjData(model)
-    data.qpos[[model.joint(n).qposadr[0] for n in arm.joint_names]] = arm.home_qpos
-    mujoco.mj_kinematics(model, data)
+    data = _posed(model, arm, arm.home_qpos)
     return np.asarray(arm.home_qpos, float), data.site_xpos[model.site("ee").id].copy()
 
 
 def record_script(model: mujoco.MjModel, arm: ArmInfo, start: str = "table") -> Script:
     """The start pose and the joint velocities of every phase, from the ee Jacobian there."""
     qpos, cube = start_pose(model, arm, start)
-    data = mujoco.MjData(model)
-    data.qpos[[model.joint(n).qposadr[0] for n in arm.joint_names]] = qpos
-    mujoco.mj_kinematics(model, data)
-    mujoco.mj_comPos(model, data)
-    jacp = np.zeros((3, model.nv))
-    mujoco.mj_jacSite(model, data, jacp, None, model.site("ee").id)
-    dofs = [model.joint(n).dofadr[0] for n in arm.joint_names]
-    lift = np.linalg.lstsq(jacp[:, dofs], [0.0, 0.0, LIFT_SPEED], rcond=None)[0]
+    linear = _ee_jacobian(model, _posed(model, arm, qpos), arm)[:3]
+    lift = np.linalg.lstsq(linear, [0.0, 0.0, LIFT_SPEED], rcond=None)[0]
     steps = {name: round(seconds / CTRL_DT) for name, seconds in PHASES}
     qdot = np.concatenate(
         [
@@ -197,14 +199,18 @@ def summarize(cube: np.ndarray, ee: np.ndarray, opening: float, hold_start: int)
 Frames = list | None  # RGB frames of the scene camera, one per control step, when a list
 
 
+def _ids(model: mujoco.MjModel, arm: ArmInfo) -> tuple[list[int], int, int, int]:
+    """The arm's actuators, the driven finger's actuator, the cube body and the ee site."""
+    acts = [model.actuator(n).id for n in arm.joint_names]
+    return acts, model.actuator(FINGER).id, model.body(CUBE_BODY).id, model.site("ee").id
+
+
 def run_mujoco(
     model: mujoco.MjModel, arm: ArmInfo, script: Script, frames: Frames = None
 ) -> dict[str, Any]:
     """The script in C MuJoCo."""
     data = start_data(model, arm, script)
-    acts = [model.actuator(n).id for n in arm.joint_names]
-    finger = model.actuator(FINGER).id
-    cube, ee = model.body(CUBE_BODY).id, model.site("ee").id
+    acts, finger, cube, ee = _ids(model, arm)
     cubes, ees = [], []
     film = _Film(model, frames)
     for qdot in script.qdot:
@@ -228,9 +234,8 @@ def run_mjx(
 
     mx = mjx.put_model(model)
     data = mjx.put_data(model, start_data(model, arm, script))
-    acts = jnp.array([model.actuator(n).id for n in arm.joint_names])
-    finger = model.actuator(FINGER).id
-    cube, ee = model.body(CUBE_BODY).id, model.site("ee").id
+    acts, finger, cube, ee = _ids(model, arm)
+    acts = jnp.array(acts)
 
     def control_step(d, qdot):
         ctrl = d.ctrl.at[acts].set(qdot).at[finger].set(script.finger_speed)
@@ -240,11 +245,12 @@ def run_mjx(
 
     scan = jax.jit(lambda d: jax.lax.scan(control_step, d, script.qdot))
     final, (cubes, ees, qposes) = scan(data)
-    film, shown = _Film(model, frames), mujoco.MjData(model)
-    for qpos in np.asarray(qposes):
-        shown.qpos[:] = qpos
-        mujoco.mj_kinematics(model, shown)
-        film.add(shown)
+    if frames is not None:  # film the recorded states
+        film, shown = _Film(model, frames), mujoco.MjData(model)
+        for qpos in np.asarray(qposes):
+            shown.qpos[:] = qpos
+            mujoco.mj_kinematics(model, shown)
+            film.add(shown)
     opening = 0.085 - 2 * float(final.qpos[model.joint(FINGER).qposadr[0]])
     return summarize(np.asarray(cubes), np.asarray(ees), opening, script.hold_start)
 
