@@ -42,11 +42,10 @@ def run_all(engines: list[str], rates: tuple[int, ...]) -> list[dict]:
         script = grasp.record_script(model, arm, "table")
         for engine in engines:
             start = time.perf_counter()
-            run = grasp.RUNNERS[engine](model, arm, script)
-            met = run["held"] and run["slip_m"] <= grasp.SLIP_GOAL
+            run = grasp.run_engine(engine, model, arm, script)
+            met = run["met"]
             row = {"engine": engine, "rate_hz": rate, "cube_half_m": half, "cube_mass_kg": mass,
-                   "friction": friction, **run, "met": met,
-                   "seconds": time.perf_counter() - start}  # fmt: skip
+                   "friction": friction, **run, "seconds": time.perf_counter() - start}  # fmt: skip
             rows.append(row)
             print(
                 f"{engine:>8} {rate:>4} Hz cube {2000 * half:.0f} mm {mass} kg mu {friction}: "

@@ -351,7 +351,7 @@ def grasp_check(
         for name in engines:
             log(f"grasp from the {start}: {name}")
             films = video_dir is not None and start == "table"
-            rows[name] = _run_engine(name, model, arm, script, video_dir if films else None)
+            rows[name] = run_engine(name, model, arm, script, video_dir if films else None)
         result["starts"][start] = {"cube_start_m": script.cube_pos.tolist(), "engines": rows}
     return result
 
@@ -361,7 +361,7 @@ def finger_speed(model: mujoco.MjModel) -> float:
     return float(model.actuator(FINGER).ctrlrange[1])
 
 
-def _run_engine(name, model, arm, script, video_dir: Path | None) -> dict[str, Any]:
+def run_engine(name, model, arm, script, video_dir: Path | None = None) -> dict[str, Any]:
     """One engine's run of ``script``, its goal and, with ``video_dir``, its video."""
     from mjx_arm.replay import write_video
 
