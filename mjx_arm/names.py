@@ -12,7 +12,7 @@ presets, defined once and used by the configs, the envs and the command line's c
 from __future__ import annotations
 
 # The built-in tasks, one file each (mjx_arm/task/NAME.py); mjx_arm.task.registry adds others.
-TASKS = ("reach", "touch")
+TASKS = ("reach", "touch", "lift")
 
 
 def env_id(task: str) -> str:

@@ -33,12 +33,21 @@ class JointServo:
         damping: joint damping (N m s/rad), ``(n,)``.
         effort: torque cap of the actuator (N m), ``(n,)``.
         armature: reflected rotor inertia (kg m^2), ``(n,)``.
+        finger: the driven finger's velocity gain (N s/m) and force cap (N), for an arm with a
+            parallel gripper; else empty.
     """
 
     kv: tuple[float, ...]
     damping: tuple[float, ...]
     effort: tuple[float, ...]
     armature: tuple[float, ...]
+    finger: tuple[float, ...] = ()
+
+    def finger_force(self, speed: float) -> float:
+        """The force cap (N) of the finger's velocity motor at command ``speed`` (m/s): the
+        MuJoCo servo's press when the finger is blocked, ``kv |speed|``, at most its cap."""
+        kv, cap = self.finger
+        return min(kv * abs(speed), cap)
 
     def torque(self, u: list[float], qdot: list[float], gravity: list[float]) -> list[float]:
         """Joint torques (N m): ``clip(kv (u - qdot), +-effort) - d qdot + gravity``.
@@ -70,16 +79,22 @@ def _servo_cached(config: ArmConfig, mtime: float, sim_dt: float) -> JointServo:
     names = arm.joint_names
     actuators = [model.actuator(name) for name in names]
     joints = [model.joint(name) for name in names]
+    finger = ()
+    if arm.gripper is not None:
+        act = model.actuator(arm.gripper.joint)
+        finger = (float(act.gainprm[0]), float(act.forcerange[1]))
     return JointServo(
         kv=tuple(float(a.gainprm[0]) for a in actuators),
         damping=tuple(float(j.damping[0]) for j in joints),
         effort=tuple(float(a.forcerange[1]) for a in actuators),
         armature=tuple(float(j.armature[0]) for j in joints),
+        finger=finger,
     )
 
 
 def joint_servo(arm: ArmInfo, sim_dt: float) -> JointServo:
-    """The servo of the MuJoCo model converted from ``arm.urdf`` (cached per file version)."""
+    """The servo of the MuJoCo model converted from ``arm.urdf`` with its gains computed for
+    ``sim_dt`` (a task's servo step; cached per file version)."""
     return _servo_cached(arm.config, arm.urdf.stat().st_mtime, sim_dt)
 
 

@@ -64,6 +64,7 @@ from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.wrench import external_wrench
 from mjx_arm.urdf.arm_config import ArmConfig
 from mjx_arm.urdf.scene import CAMERA_EYE, CAMERA_FOVY, CAMERA_TARGET
+from mjx_arm.urdf.scene_shapes import CUBE_HALF, CUBE_MASS
 from pybullet_ref.arm_model import (
     BASE,
     excluded_pairs,
@@ -82,6 +83,7 @@ ARM_FLAGS = pybullet.URDF_USE_INERTIA_FROM_FILE | pybullet.URDF_USE_SELF_COLLISI
 TARGET_MARKER_RADIUS = 0.02
 TARGET_MARKER_RGBA = (0.1, 0.8, 0.2, 0.5)
 NEAR, FAR = 0.01, 10.0
+CUBE_RGBA = (0.2, 0.35, 0.85, 1.0)
 
 
 @dataclass(frozen=True)
@@ -103,6 +105,8 @@ class ArmIds:
         inertia: principal inertia (kg m^2) of each actuated joint's child link with the
             joint's armature added, 6 triples.
         self_collision_off: arm link pairs whose contacts are disabled.
+        finger: the driven finger joint of a gripper (-1 without one); finger_lower: its lower
+            limit (m); pads: the finger links, whose contacts make the pad forces.
     """
 
     joints: tuple[int, ...]
@@ -115,6 +119,9 @@ class ArmIds:
     tool_com: np.ndarray
     inertia: tuple[tuple[float, float, float], ...]
     self_collision_off: tuple[tuple[int, int], ...]
+    finger: int = -1
+    finger_lower: float = 0.0
+    pads: tuple[int, ...] = ()
 
 
 class _HotCalls(NamedTuple):
@@ -165,7 +172,7 @@ class PybulletArmEnv(BaseRobotEnv):
         height: int = DEFAULT_HEIGHT,
     ) -> None:
         super().__init__(task, arm, render_mode, width, height)
-        self.servo = joint_servo(self.arm, self.task.sim_dt)
+        self.servo = joint_servo(self.arm, self.task.spec.servo_dt or self.task.sim_dt)
         with native_output_silenced():  # "argv[0]="
             self.client = BulletClient(connection_mode=pybullet.DIRECT)
         self._calls = _HotCalls.of(self.client)
@@ -179,6 +186,8 @@ class PybulletArmEnv(BaseRobotEnv):
         self._target_body = sampling.target_body_pos(np, np.full(3, 0.5), self.task)
         self._tool_before = (np.zeros(3), np.zeros(3))
         self._camera = self._camera_matrices()
+        self._object_quat = np.array([1.0, 0.0, 0.0, 0.0])
+        self.gripper = self.arm.gripper if self.task.spec.gripper else None
         # a complete world before the first reset (render, get_ee_pose): home pose, mid target
         self._physics_reset(np.asarray(self.task.home_qpos), self._target_body)
 
@@ -200,7 +209,11 @@ class PybulletArmEnv(BaseRobotEnv):
         joints = tuple(joint[name] for name in self.arm.joint_names)
         ft = link[self.arm.ft_link]  # the joint above the tool link (link index = joint index)
         dofs = tuple(info[0] for info in infos if info[2] != pybullet.JOINT_FIXED)
-        tool_links = subtree_links(infos, ft) if ft in joints else frozenset()
+        # the tool's contacts make the reading where the F/T point is an arm joint, and with a
+        # gripper: Bullet's reaction at the F/T joint carries the finger motor's and the mimic
+        # constraint's forces (about 20 N while holding a 0.1 kg cube; MuJoCo reads its weight)
+        contacts = ft in joints or self.task.spec.gripper
+        tool_links = subtree_links(infos, ft) if contacts else frozenset()
         return ArmIds(
             joints=joints,
             ft=ft,
@@ -215,7 +228,17 @@ class PybulletArmEnv(BaseRobotEnv):
                 for j, a in zip(joints, self.servo.armature, strict=True)
             ),
             self_collision_off=excluded_pairs(c, arm),
+            **self._gripper_ids(joint, link, infos),
         )
+
+    def _gripper_ids(self, joint: dict, link: dict, infos: list) -> dict:
+        """The gripper's ``finger``, ``finger_lower`` and ``pads`` (none without a gripper)."""
+        gripper = self.arm.gripper
+        if gripper is None:
+            return {}
+        finger = joint[gripper.joint]
+        pads = tuple(link[name] for name in gripper.pad_links[:2])
+        return {"finger": finger, "finger_lower": float(infos[finger][8]), "pads": pads}
 
     def _build_world(self, qpos: np.ndarray, target_body_pos: np.ndarray) -> None:
         """Rebuild the whole world: arm at ``qpos`` (rad, at rest), table, target."""
@@ -237,8 +260,20 @@ class PybulletArmEnv(BaseRobotEnv):
                 flags=self._load_flags,
             )
             c.changeDynamics(box, BASE, lateralFriction=FRICTION)
-        elif self.render_mode:
+        elif self.render_mode and self.gripper is None:
             self._add_target_marker(position)
+        if self.gripper is not None:
+            self.cube = self._add_cube(position, self._object_quat)
+
+    def _add_cube(self, position: list[float], quat: np.ndarray) -> int:
+        """The free cube of a gripper task (the MuJoCo scene's size, mass and friction)."""
+        c, half = self.client, [CUBE_HALF] * 3
+        shape = c.createCollisionShape(pybullet.GEOM_BOX, halfExtents=half)
+        look = c.createVisualShape(pybullet.GEOM_BOX, halfExtents=half, rgbaColor=CUBE_RGBA)
+        w, x, y, z = (float(v) for v in quat)
+        cube = c.createMultiBody(CUBE_MASS, shape, look, position, [x, y, z, w])
+        c.changeDynamics(cube, BASE, lateralFriction=FRICTION)
+        return cube
 
     def _setup_arm(self, qpos: np.ndarray) -> None:
         """Dynamics, collision filter, motors, joint state and F/T sensor of a fresh arm."""
@@ -267,10 +302,16 @@ class PybulletArmEnv(BaseRobotEnv):
 
     # ------------------------------------------------------------------ engine hooks
 
-    def _physics_reset(self, qpos: np.ndarray, target_body_pos: np.ndarray) -> None:
+    def _physics_reset(
+        self, qpos: np.ndarray, target_body_pos: np.ndarray, object_quat: np.ndarray | None = None
+    ) -> None:
         self._target_body = np.asarray(target_body_pos, dtype=np.float64).copy()
+        if object_quat is not None:
+            self._object_quat = np.asarray(object_quat, dtype=np.float64)
         self._build_world(qpos, self._target_body)
         self._physics_set_velocity_targets(np.zeros(len(self.ids.joints)))
+        if self.gripper is not None:
+            self._physics_set_gripper(0.0)
         # The F/T sensor reports the joint force of the last step: take one substep at rest
         # (the arm held by gravity compensation), then put the joints back at qpos, at rest.
         self._physics_step(1)
@@ -280,6 +321,14 @@ class PybulletArmEnv(BaseRobotEnv):
 
     def _physics_set_velocity_targets(self, qdot_target: np.ndarray) -> None:
         self._u = [float(v) for v in qdot_target]
+
+    def _physics_set_gripper(self, speed: float) -> None:
+        # a velocity motor whose cap is the MuJoCo servo's press at this command (its gain is
+        # too stiff for an explicit torque law on a 60 g finger without the armature)
+        force = self.servo.finger_force(speed)
+        self.client.setJointMotorControl2(
+            self.body, self.ids.finger, pybullet.VELOCITY_CONTROL, targetVelocity=speed, force=force
+        )
 
     def _physics_step(self, n_substeps: int) -> None:
         calls, body, joints, zeros = self._calls, self.body, self.ids.joints, self._dof_zeros
@@ -306,14 +355,33 @@ class PybulletArmEnv(BaseRobotEnv):
             wrench = self._contact_wrench(ee_pos, ee[5])
         else:
             wrench = self._wrench(states[-1][2], tool)
+        target, grip = sampling.target_point(np, self._target_body, self.task), np.zeros(0)
+        if self.gripper is not None:  # the target is the cube, wherever it is now
+            grip = self._grip()
+            target = grip[1:4]
         return PhysicsReading(
             ee_pos=ee_pos,
             ee_quat=np.array([w, x, y, z]),
             qpos=np.array([s[0] for s in states[:-1]]),
             qvel=np.array([s[1] for s in states[:-1]]),
-            target_pos=np.asarray(sampling.target_point(np, self._target_body, self.task)),
+            target_pos=np.asarray(target),
             wrench=wrench,
+            grip=grip,
         )
+
+    def _grip(self) -> np.ndarray:
+        """The ``grip`` vector (:data:`mjx_arm.task.grip.GRIP_LAYOUT`): the finger's closure,
+        the cube's pose and the normal force on each pad (all its contacts, as MuJoCo's touch
+        sensor sums them)."""
+        c = self.client
+        q = c.getJointState(self.body, self.ids.finger)[0]
+        closure = (q - self.ids.finger_lower) / self.gripper.stroke
+        pos, (x, y, z, w) = c.getBasePositionAndOrientation(self.cube)
+        pads = [
+            sum(point[9] for point in c.getContactPoints(bodyA=self.body, linkIndexA=link))
+            for link in self.ids.pads
+        ]
+        return np.array([closure, *pos, w, x, y, z, *pads])
 
     def _render_frame(self) -> np.ndarray:
         view, projection = self._camera

@@ -18,6 +18,42 @@ REACH_SAMPLES = 4096
 REACH_QUANTILE = 0.99
 
 
+@dataclass(frozen=True)
+class Gripper:
+    """A parallel gripper: prismatic fingers off the arm's chain, one driven, the others its
+    ``<mimic>`` copies.
+
+    Attributes:
+        joint: the driven finger joint (its actuator takes the gripper command).
+        pad_links: every finger link (each gets a touch sensor in the task model).
+        v_max: the driven finger's speed limit (m/s).
+        stroke: the driven finger's travel (m): its upper limit minus its lower.
+    """
+
+    joint: str
+    pad_links: tuple[str, ...]
+    v_max: float
+    stroke: float
+
+
+def find_gripper(resolved: ResolvedArm) -> Gripper | None:
+    """The arm's parallel gripper: the prismatic joints off the arm chain whose child is a leaf
+    (fingers); None without two such fingers or without one that is driven (no ``<mimic>``)."""
+    model, arm = resolved.model, set(resolved.joint_names)
+    parents = {j.parent for j in model.joints.values()}
+    fingers = [
+        j
+        for j in model.actuated_joints
+        if j.type == "prismatic" and j.name not in arm and j.child not in parents
+    ]
+    driven = [j for j in fingers if j.mimic is None]
+    if len(fingers) < 2 or len(driven) != 1 or driven[0].limit is None:
+        return None
+    lim = driven[0].limit
+    speed = lim.velocity or resolved.config.default_velocity
+    return Gripper(driven[0].name, tuple(j.child for j in fingers), speed, lim.upper - lim.lower)
+
+
 @dataclass(frozen=True, eq=False)
 class ArmInfo:
     """Joint names and limits, tool frames, home pose and reach of an arm of n joints.
@@ -36,6 +72,7 @@ class ArmInfo:
         tool: mass properties of the tool below the F/T point.
         reach_scale: the arm's horizontal reach over the shipped arm's (1.0 for the shipped
             arm): task targets are drawn in a box scaled by it.
+        gripper: the parallel gripper's fingers, when the arm has one (:class:`Gripper`).
     """
 
     config: ArmConfig
@@ -51,6 +88,7 @@ class ArmInfo:
     ft_link: str
     tool: ToolInertia
     reach_scale: float
+    gripper: Gripper | None = None
 
     @property
     def n_joints(self) -> int:
@@ -79,6 +117,7 @@ def _info(resolved: ResolvedArm, reach: float, reference: float) -> ArmInfo:
         ft_link=resolved.ft_link,
         tool=tool_inertia(resolved.model, resolved.ft_link, resolved.ee_link),
         reach_scale=reach / reference,
+        gripper=find_gripper(resolved),
     )
 
 

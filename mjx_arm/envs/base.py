@@ -43,6 +43,8 @@ class PhysicsReading(NamedTuple):
         qpos, qvel: joint angles (rad) and velocities (rad/s), ``(n,)`` each.
         target_pos: the target point (m), ``(3,)``.
         wrench: tared external wrench on the tool in the ee frame, ``(6,)``, unclipped.
+        grip: a gripper task's read-out (:data:`mjx_arm.task.grip.GRIP_LAYOUT`), ``(10,)``;
+            ``(0,)`` for the other tasks.
     """
 
     ee_pos: np.ndarray
@@ -51,6 +53,7 @@ class PhysicsReading(NamedTuple):
     qvel: np.ndarray
     target_pos: np.ndarray
     wrench: np.ndarray
+    grip: np.ndarray = np.zeros(0)
 
     def finite(self) -> bool:
         """True when every quantity is finite."""
@@ -94,8 +97,12 @@ class BaseRobotEnv(gym.Env):
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}")
         self.render_mode, self.width, self.height = render_mode, width, height
         n = self.arm.n_joints
-        self.action_space = gym.spaces.Box(-1.0, 1.0, (n,), np.float32)
-        self.observation_space = obs_lib.observation_space(self.task.force_clip, n)
+        self.spec = self.task.spec
+        self._extra = self.spec.extra_obs
+        self._gripper_scale = gripper_speed(self.arm, self.task)
+        na = action_size(self.arm, self.task)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (na,), np.float32)
+        self.observation_space = obs_lib.observation_space(self.task.force_clip, n, self._extra)
         # constants of the per-step evaluation, computed once
         self._n_substeps = self.task.n_substeps
         # a * (action_scale * v_max): bit-identical to (a * action_scale) * v_max for the
@@ -103,20 +110,29 @@ class BaseRobotEnv(gym.Env):
         self._qdot_scale = self.task.action_scale * self.arm.v_max
         self._band = reward_lib.joint_band((self.arm.lower, self.arm.upper), self.task)
         self._speed_limits = reward_lib.speed_limits(self.arm.v_max, self.task)
-        self._bounds = obs_lib.state_bounds(self.task.force_clip, n)
+        self._bounds = obs_lib.state_bounds(self.task.force_clip, n, self._extra)
+        self._force_slice = obs_lib.force_slice(n)
         self._reading: PhysicsReading | None = None
         self._last_obs: dict[str, np.ndarray] | None = None
         # what the success rule and the motion terms remember within an episode
         self._progress = reward_lib.start_progress(np)
-        self._action = np.zeros(n, np.float32)
-        self._action_bounds = (np.full(n, -1.0, np.float32), np.full(n, 1.0, np.float32))
+        self._action = np.zeros(na, np.float32)
+        self._action_bounds = (np.full(na, -1.0, np.float32), np.full(na, 1.0, np.float32))
         self._distance = 0.0
 
     # ------------------------------------------------------------------ engine hooks
 
     @abstractmethod
-    def _physics_reset(self, qpos: np.ndarray, target_body_pos: np.ndarray) -> None:
-        """Put the arm at ``qpos`` (rad, at rest) and the target body at ``target_body_pos``."""
+    def _physics_reset(
+        self, qpos: np.ndarray, target_body_pos: np.ndarray, object_quat: np.ndarray | None = None
+    ) -> None:
+        """Put the arm at ``qpos`` (rad, at rest) and the target body at ``target_body_pos``;
+        a gripper task's free object goes there too, with orientation ``object_quat``
+        (w, x, y, z), the gripper open and at rest."""
+
+    def _physics_set_gripper(self, speed: float) -> None:
+        """Command the driven finger's velocity target (m/s; positive closes): gripper engines."""
+        raise NotImplementedError(f"the {self.engine} env has no gripper")
 
     @abstractmethod
     def _physics_set_velocity_targets(self, qdot_target: np.ndarray) -> None:
@@ -138,20 +154,27 @@ class BaseRobotEnv(gym.Env):
     # ------------------------------------------------------------------ the six contract methods
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        """Start an episode: home pose plus noise, a new target, both from the seeded generator."""
+        """Start an episode: home pose plus noise, a new target, both from the seeded generator.
+
+        ``options``: ``target`` (the target body's position, m) and, for a gripper task,
+        ``object_quat`` (the object's orientation, w x y z) replace the drawn ones.
+        """
         super().reset(seed=seed)
         n = self.arm.n_joints
         u = self.np_random.uniform(size=sampling.n_uniforms(n))
         qpos = sampling.initial_qpos(np, u[:n], self.task)
         body = sampling.target_body_pos(np, u[n:], self.task)
+        quat = self.spec.object_quat(np, u[n:], self.task)
         if options and "target" in options:
             body = np.asarray(options["target"], dtype=np.float64)
-        self._physics_reset(qpos, body)
+        if options and "object_quat" in options:
+            quat = np.asarray(options["object_quat"], dtype=np.float64)
+        self._physics_reset(qpos, body, quat)
         self._reading = reading = self._physics_read()
         _, state, d, force = self._measure(reading)
-        self._last_obs = obs = obs_lib.unflatten_obs(state.astype(np.float32))
+        self._last_obs = obs = obs_lib.unflatten_obs(state.astype(np.float32), self._extra)
         self._progress = reward_lib.start_progress(np)
-        self._action = np.zeros(self.arm.n_joints, np.float32)
+        self._action = np.zeros(self.action_space.shape, np.float32)
         self._distance = d
         info = {"is_success": False, "distance": d, "contact_force_norm": force, "reward_terms": {}}
         return obs, info
@@ -161,7 +184,7 @@ class BaseRobotEnv(gym.Env):
         if self._reading is None:
             raise RuntimeError("call reset() before step()")
         clipped = check_action(action, self._action_bounds)
-        self._physics_set_velocity_targets(clipped * self._qdot_scale)
+        self._command(clipped)
         self._physics_step(self._n_substeps)
         reading = self._physics_read()
         change = float(reward_lib.action_change(np, clipped, self._action))
@@ -193,8 +216,16 @@ class BaseRobotEnv(gym.Env):
 
     def apply_action(self, action) -> np.ndarray:
         """Check and clip an action, command joint velocity targets; return them (rad/s)."""
-        qdot = check_action(action, self._action_bounds) * self._qdot_scale
+        return self._command(check_action(action, self._action_bounds))
+
+    def _command(self, clipped: np.ndarray) -> np.ndarray:
+        """Send a clipped action to the physics: the arm's joint velocity targets (returned,
+        rad/s) and, for a gripper task, the last entry as the finger's speed."""
+        n = self.arm.n_joints
+        qdot = clipped[:n] * self._qdot_scale if self._gripper_scale else clipped * self._qdot_scale
         self._physics_set_velocity_targets(qdot)
+        if self._gripper_scale:
+            self._physics_set_gripper(float(clipped[n]) * self._gripper_scale)
         return qdot
 
     def is_success(self) -> bool:
@@ -210,14 +241,24 @@ class BaseRobotEnv(gym.Env):
     # ------------------------------------------------------------------ helpers
 
     def _measure(self, reading: PhysicsReading) -> tuple[np.ndarray, np.ndarray, float, float]:
-        """The flat state before and after clipping (float64, ``(16 + n,)``), distance d (m) and
-        contact force norm (N) of a reading, each computed once."""
-        ee_pos, ee_quat, qpos, _, target_pos, wrench = reading
-        raw = obs_lib.raw_state(np, ee_pos, ee_quat, qpos, target_pos, wrench)
+        """The flat state before and after clipping (float64, ``(16 + n + k,)``), distance d (m)
+        and contact force norm (N) of a reading, each computed once."""
+        ee_pos, ee_quat, qpos, _, target_pos, wrench, grip = reading
+        extra = None
+        if self._extra:
+            extra = self.spec.grip_observation(np, ee_pos, ee_quat, grip, self.task)
+        raw = obs_lib.raw_state(np, ee_pos, ee_quat, qpos, target_pos, wrench, extra)
         state = obs_lib.clip_state(np, raw, self._bounds)
         d = float(reward_lib.target_distance(np, ee_pos, target_pos))
-        force = float(reward_lib.contact_force_norm(np, state[obs_lib.FORCE_SLICE]))
+        force = float(reward_lib.contact_force_norm(np, state[self._force_slice]))
         return raw, state, d, force
+
+    def _measures(self, reading: PhysicsReading) -> dict[str, float] | None:
+        """The task's measures of a reading (gripper tasks), else None."""
+        if not self.spec.gripper:
+            return None
+        values = self.spec.measures(np, reading.ee_pos, reading.ee_quat, reading.grip, self.task)
+        return {key: float(value) for key, value in values.items()}
 
     def _evaluate(
         self, reading: PhysicsReading, diverged: bool = False, change: float = 0.0
@@ -249,9 +290,10 @@ class BaseRobotEnv(gym.Env):
         qpos, qvel = reading.qpos, reading.qvel
         if not diverged and self._runaway(qvel):
             return None
+        measures = self._measures(reading)
         score = rules.score_step(
             np, task, self._progress, self._distance, change, d, force, qpos, qvel,
-            self._band, diverged,
+            self._band, diverged, measures,
         )  # fmt: skip
         self._progress, self._distance = score.progress, d
         terms = {name: float(value) for name, value in score.terms.items()}
@@ -264,7 +306,9 @@ class BaseRobotEnv(gym.Env):
             "nonfinite": diverged,  # the older name of ``diverged``
             "overforce": bool(score.over),
         }
-        obs = obs_lib.unflatten_obs(state.astype(np.float32))
+        if measures is not None:
+            info.update(measures)
+        obs = obs_lib.unflatten_obs(state.astype(np.float32), self._extra)
         return obs, float(score.reward), bool(score.done), info
 
     def _runaway(self, qvel: np.ndarray) -> bool:
@@ -292,8 +336,28 @@ _SHIPPED_BOUNDS = (np.full(6, -1.0, np.float32), np.full(6, 1.0, np.float32))
 
 
 def task_for_arm(task: TaskConfig, arm: ArmInfo) -> TaskConfig:
-    """``task`` with the arm's home pose and reach scale filled in where it leaves them empty."""
+    """``task`` with the arm's home pose and reach scale filled in where it leaves them empty.
+
+    Raises:
+        ValueError: a gripper task on an arm without a parallel gripper.
+    """
+    if task.spec.gripper and arm.gripper is None:
+        raise ValueError(
+            f"task {task.task!r} needs an arm with a parallel gripper (two prismatic fingers, "
+            f"one driven, the other its <mimic>); {arm.urdf} has none. Try "
+            "--arm assets/ur5e_gripper.urdf"
+        )
     return task.for_arm(tuple(arm.home_qpos), arm.reach_scale)
+
+
+def action_size(arm: ArmInfo, task: TaskConfig) -> int:
+    """Entries of an action: one per arm joint, plus the gripper's for a gripper task."""
+    return arm.n_joints + int(task.spec.gripper)
+
+
+def gripper_speed(arm: ArmInfo, task: TaskConfig) -> float:
+    """The driven finger's speed (m/s) at a gripper action of 1; 0 for tasks without one."""
+    return arm.gripper.v_max if task.spec.gripper and arm.gripper else 0.0
 
 
 def check_action(action, bounds: tuple[np.ndarray, np.ndarray] = _SHIPPED_BOUNDS) -> np.ndarray:

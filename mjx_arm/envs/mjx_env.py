@@ -30,7 +30,7 @@ from brax.envs.base import Env, State
 from flax import struct
 
 from mjx_arm.envs.arm import validated_arm_info
-from mjx_arm.envs.base import task_for_arm
+from mjx_arm.envs.base import action_size, gripper_speed, task_for_arm
 from mjx_arm.envs.mjx_physics import MjxPhysics, Reading
 from mjx_arm.envs.model_io import arm_model
 from mjx_arm.envs.physics_config import PhysicsConfig
@@ -65,9 +65,9 @@ class TaskMemory:
     prev_distance: jax.Array
 
     @staticmethod
-    def start(distance: jax.Array, n_joints: int) -> TaskMemory:
-        """The memory at the start of an episode at distance ``d`` (``n_joints`` actions)."""
-        return TaskMemory(reward_lib.start_progress(jnp), jnp.zeros(n_joints), distance)
+    def start(distance: jax.Array, n_actions: int) -> TaskMemory:
+        """The memory at the start of an episode at distance ``d`` (``n_actions`` entries)."""
+        return TaskMemory(reward_lib.start_progress(jnp), jnp.zeros(n_actions), distance)
 
 
 class MjxArmEnv(Env):
@@ -105,47 +105,55 @@ class MjxArmEnv(Env):
         else:
             self.physics = physics_factory(self.mj_model, self.arm, self.task)
         self.randomization = randomization or RandomizationConfig()
-        self._v_scale = jnp.asarray(self.task.action_scale * self.arm.v_max, jnp.float32)
+        self.spec = self.task.spec
+        scale = self.task.action_scale * self.arm.v_max
+        if self.spec.gripper:  # the gripper's entry moves the finger at up to its speed limit
+            scale = [*scale, gripper_speed(self.arm, self.task)]
+        self._v_scale = jnp.asarray(scale, jnp.float32)
         limits = (jnp.asarray(self.arm.lower), jnp.asarray(self.arm.upper))
         self._band = reward_lib.joint_band(limits, self.task)
         self._speeds = jnp.asarray(reward_lib.speed_limits(self.arm.v_max, self.task), jnp.float32)
 
     @property
     def observation_size(self) -> int:
-        """Size of the flat observation ``state``: 16 + n (22 for a 6-joint arm)."""
-        return obs_lib.obs_size(self.arm.n_joints)
+        """Size of the flat observation ``state``: 16 + n (22 for a 6-joint arm), plus the
+        task's extra keys."""
+        return obs_lib.obs_size(self.arm.n_joints, self.spec.extra_obs)
 
     @property
     def action_size(self) -> int:
-        """One joint velocity command in [-1, 1] per arm joint."""
-        return self.arm.n_joints
+        """One joint velocity command in [-1, 1] per arm joint (and one for the gripper)."""
+        return action_size(self.arm, self.task)
 
     @property
     def backend(self) -> str:
         """Name of the physics backend."""
         return "mjx"
 
-    def sample_episode(self, rng: jax.Array) -> tuple[jax.Array, jax.Array]:
-        """Start joint angles ``(n,)`` and target body position ``(3,)`` from ``rng``."""
+    def sample_episode(self, rng: jax.Array) -> tuple[jax.Array, jax.Array, Any]:
+        """Start joint angles ``(n,)``, target body position ``(3,)`` and a gripper task's
+        object orientation ``(4,)`` (else None) from ``rng``."""
         n = self.arm.n_joints
         u = jax.random.uniform(rng, (sampling.n_uniforms(n),))
         return (
             sampling.initial_qpos(jnp, u[:n], self.task),
             sampling.target_body_pos(jnp, u[n:], self.task),
+            self.spec.object_quat(jnp, u[n:], self.task),
         )
 
     def reset(self, rng: jax.Array) -> State:
         """A new episode from ``rng`` (a single PRNG key)."""
         rng, key, key_rand = jax.random.split(rng, 3)
-        qpos, target_body = self.sample_episode(key)
+        qpos, target_body, quat = self.sample_episode(key)
         episode = sample_episode(key_rand, self.randomization, self.arm.n_joints)
-        data = self.physics.init(qpos, target_body + episode.box_offset)
+        data = self.physics.init(qpos, target_body + episode.box_offset, quat)
         reading = self.physics.read(data)
         d, force = self._distance_and_force(reading)
         zero = jnp.zeros(())
         metrics = {f"reward/{name}": zero for name in REWARD_TERMS}
         start = reward_lib.start_progress(jnp)
         metrics.update(self._measures(d, force, start, zero, zero, zero))
+        metrics.update(self._task_metrics(self._task_measures(reading)))
         metrics["diverged"] = zero
         return State(
             pipeline_state=data,
@@ -153,7 +161,7 @@ class MjxArmEnv(Env):
             reward=zero,
             done=zero,
             metrics=metrics,
-            info={"rng": rng, "task": TaskMemory.start(d, self.arm.n_joints), "episode": episode},
+            info={"rng": rng, "task": TaskMemory.start(d, self.action_size), "episode": episode},
         )
 
     def step(self, state: State, action: jax.Array) -> State:
@@ -176,9 +184,10 @@ class MjxArmEnv(Env):
         obs = jnp.where(sane, self.observe(reading, episode, noise), state.obs)
         d, force = self._distance_and_force(reading)
         change = reward_lib.action_change(jnp, action, memory.prev_action)
+        measures = self._task_measures(reading)
         score = rules.score_step(
             jnp, self.task, memory.progress, memory.prev_distance, change, d, force,
-            reading.qpos, reading.qvel, self._band, ~sane,
+            reading.qpos, reading.qvel, self._band, ~sane, measures,
         )  # fmt: skip
         progress, success = score.progress, score.success
         # strong float32 everywhere: a weak type would change the State's type and retrace
@@ -190,6 +199,7 @@ class MjxArmEnv(Env):
         metrics.update({f"reward/{name}": value for name, value in terms.items()})
         overflow = self.physics.overflow(data)
         metrics.update(self._measures(d, force, progress, success, score.over, overflow))
+        metrics.update(self._task_metrics(measures))
         metrics["diverged"] = (~sane).astype(jnp.float32)
         return state.replace(
             pipeline_state=data,
@@ -211,19 +221,19 @@ class MjxArmEnv(Env):
             (data, obs ``(16 + n,)``, the ``info`` entries of a new episode: task, episode).
         """
         key, key_rand = jax.random.split(rng)
-        _, target_body = self.sample_episode(key)
+        _, target_body, quat = self.sample_episode(key)
         episode = sample_episode(key_rand, self.randomization, self.arm.n_joints)
-        data = self.physics.set_target(data, target_body + episode.box_offset)
+        data = self.physics.set_target(data, target_body + episode.box_offset, quat)
         reading = self.physics.read(data)
         d, _ = self._distance_and_force(reading)
         obs = self.observe(reading, episode)
-        memory = TaskMemory.start(d, self.arm.n_joints)
+        memory = TaskMemory.start(d, self.action_size)
         return data, obs, {"task": memory, "episode": episode}
 
     def observe(
         self, reading: Reading, episode: Episode | None = None, noise: jax.Array | None = None
     ) -> jax.Array:
-        """The flat observation ``state (16 + n,)`` of a reading.
+        """The flat observation ``state (16 + n + k,)`` of a reading.
 
         Args:
             reading: the physics read-out.
@@ -232,10 +242,32 @@ class MjxArmEnv(Env):
         """
         target = reading.target_pos if episode is None else reading.target_pos - episode.box_offset
         wrench = reading.wrench if noise is None else reading.wrench + noise
+        extra = None
+        if self.spec.extra_obs:
+            values = self.spec.grip_observation(
+                jnp, reading.ee_pos, reading.ee_quat, reading.grip, self.task
+            )
+            extra = (self.spec.extra_obs, values)
         return obs_lib.flat_obs(
             jnp, reading.ee_pos, reading.ee_quat, reading.qpos, target, wrench,
-            self.task.force_clip,
+            self.task.force_clip, extra,
         )  # fmt: skip
+
+    def _task_measures(self, reading: Reading) -> dict[str, jax.Array] | None:
+        """A gripper task's measures of a reading (:meth:`mjx_arm.task.spec.Task.measures`)."""
+        if not self.spec.gripper:
+            return None
+        return self.spec.measures(jnp, reading.ee_pos, reading.ee_quat, reading.grip, self.task)
+
+    @staticmethod
+    def _task_metrics(measures: dict[str, jax.Array] | None) -> dict[str, jax.Array]:
+        """The task's measures as float32 metrics (``lift_height``, ``grasp``); none else."""
+        if measures is None:
+            return {}
+        return {
+            "lift_height": measures["height"].astype(jnp.float32),
+            "grasp": measures["grasp"].astype(jnp.float32),
+        }
 
     def _distance_and_force(self, reading: Reading) -> tuple[jax.Array, jax.Array]:
         d = reward_lib.target_distance(jnp, reading.ee_pos, reading.target_pos)

@@ -33,7 +33,7 @@ from mujoco import mjx
 
 from mjx_arm.envs import warp_compile
 from mjx_arm.envs.arm import ArmInfo
-from mjx_arm.envs.model_io import SensorReader
+from mjx_arm.envs.model_io import GripReader, SensorReader
 from mjx_arm.envs.physics_config import PhysicsConfig, resolve_impl
 from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
@@ -55,7 +55,8 @@ class Reading:
 
     Attributes:
         ee_pos ``(3,)``, ee_quat ``(4,)`` (w, x, y, z), qpos ``(n,)``, qvel ``(n,)``,
-        target_pos ``(3,)``, wrench ``(6,)`` (tared, ee frame, unclipped).
+        target_pos ``(3,)``, wrench ``(6,)`` (tared, ee frame, unclipped), grip ``(10,)`` for a
+        gripper task (:data:`mjx_arm.task.grip.GRIP_LAYOUT`), else ``(0,)``.
     """
 
     ee_pos: jax.Array
@@ -64,6 +65,7 @@ class Reading:
     qvel: jax.Array
     target_pos: jax.Array
     wrench: jax.Array
+    grip: jax.Array
 
 
 @struct.dataclass
@@ -146,7 +148,10 @@ class MjxPhysics:
             self.model = mjx.put_model(mj_model, impl="jax")
             self._template = mjx.make_data(self.model, impl="jax")
         self._joint_dofs = jnp.asarray(self.ids.dof_adr)
-        self._actuators = jnp.asarray(self.ids.actuators)
+        self.grip = GripReader(mj_model, arm) if task.spec.gripper else None
+        acts = list(self.ids.actuators) + ([self.grip.finger_act] if self.grip else [])
+        self._arm_actuators = jnp.asarray(self.ids.actuators)
+        self._actuators = jnp.asarray(acts)  # the arm's, then the gripper's for a gripper task
 
     def _warp_model_and_data(self) -> tuple[Any, Any]:
         contacts, rows = model_bounds(self.mj_model)
@@ -174,25 +179,38 @@ class MjxPhysics:
 
     # ------------------------------------------------------------------ state
 
-    def init(self, qpos: jax.Array, target_body: jax.Array) -> Any:
-        """Data at rest at joint angles ``qpos (n,)`` with the target body at ``(3,)``."""
+    def init(self, qpos: jax.Array, target_body: jax.Array, object_quat=None) -> Any:
+        """Data at rest at joint angles ``qpos (n,)`` with the target body at ``(3,)`` (and a
+        gripper task's cube there, orientation ``object_quat (4,)``)."""
         data = self._template
         data = data.replace(
             qpos=data.qpos.at[self.ids.qpos_adr].set(qpos),
             mocap_pos=data.mocap_pos.at[self.mocap].set(target_body),
         )
+        data = self._place_object(data, target_body, object_quat)
         return mjx.forward(self.model, data)
 
-    def set_target(self, data: Any, target_body: jax.Array) -> Any:
-        """Move the target body; takes effect in the next step's collision detection."""
-        return data.replace(mocap_pos=data.mocap_pos.at[self.mocap].set(target_body))
+    def set_target(self, data: Any, target_body: jax.Array, object_quat=None) -> Any:
+        """Move the target body (and a gripper task's cube, at rest); takes effect in the next
+        step's collision detection."""
+        data = data.replace(mocap_pos=data.mocap_pos.at[self.mocap].set(target_body))
+        return self._place_object(data, target_body, object_quat)
+
+    def _place_object(self, data: Any, pos: jax.Array, quat) -> Any:
+        """A gripper task's cube at ``pos (3,)`` with orientation ``quat (4,)``, at rest."""
+        if self.grip is None:
+            return data
+        start, dof = self.grip.cube_qpos, self.grip.cube_dof
+        qpos = data.qpos.at[start : start + 3].set(pos).at[start + 3 : start + 7].set(quat)
+        return data.replace(qpos=qpos, qvel=data.qvel.at[dof : dof + 6].set(0.0))
 
     def step(self, data: Any, ctrl: jax.Array, dynamics: Dynamics | None = None) -> Any:
-        """One control step: hold ``ctrl (n,)`` for ``n_substeps`` physics steps.
+        """One control step: hold ``ctrl`` for ``n_substeps`` physics steps.
 
         Args:
             data: one env's state (vmap for a batch).
-            ctrl: joint velocity targets (rad/s), ``(n,)``.
+            ctrl: joint velocity targets (rad/s), ``(n,)``, then for a gripper task the
+                finger's (m/s).
             dynamics: per-env multipliers of friction, damping, armature and servo gain;
                 None steps the model as built.
         """
@@ -209,7 +227,7 @@ class MjxPhysics:
 
     def randomized(self, dyn: Dynamics) -> Any:
         """The model with ``dyn``'s multipliers applied (one env; batched under vmap)."""
-        m, dofs, act = self.model, self._joint_dofs, self._actuators
+        m, dofs, act = self.model, self._joint_dofs, self._arm_actuators
         gain = m.actuator_gainprm.at[act, 0].multiply(dyn.gain)
         bias = m.actuator_biasprm.at[act, 2].multiply(dyn.gain)  # velocity servo: -kv * qdot
         return m.replace(
@@ -223,13 +241,19 @@ class MjxPhysics:
     def read(self, data: Any) -> Reading:
         """The contract's read-out of ``data``."""
         ids = self.ids
+        target = sampling.target_point(jnp, data.mocap_pos[self.mocap], self.task)
+        grip = jnp.zeros(0)
+        if self.grip is not None:  # the target is the cube, wherever it is now
+            grip = self.grip.read(jnp, data.qpos, data.sensordata)
+            target = grip[1:4]
         return Reading(
             ee_pos=data.site_xpos[ids.ee_site],
             ee_quat=data.xquat[ids.ee_body],
             qpos=data.qpos[ids.qpos_adr],
             qvel=data.qvel[ids.dof_adr],
-            target_pos=sampling.target_point(jnp, data.mocap_pos[self.mocap], self.task),
+            target_pos=target,
             wrench=ids.wrench(jnp, data.sensordata),
+            grip=grip,
         )
 
     # ------------------------------------------------------------------ batches

@@ -15,13 +15,24 @@ from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.wrench import SENSOR_BLOCK, SENSOR_BLOCK_SIZE, sensor_wrench
 from mjx_arm.urdf.convert import EE_SITE, SENSORS, ConvertConfig, load_model
 from mjx_arm.urdf.scene import TARGET_SITE
+from mjx_arm.urdf.scene_shapes import CUBE_BODY
+from mjx_arm.urdf.spec_edits import pad_sensor
 
 
 def task_convert_config(task: TaskConfig, arm: ArmInfo | None = None) -> ConvertConfig:
     """Conversion settings of a task model: the arm's ee and F/T point (default: the shipped
-    arm's), the task's scene and time step, no self-collision."""
+    arm's), the task's scene, time step and servo step, no self-collision; a gripper task's
+    finger pads get touch sensors."""
     arm = arm or arm_info()
-    return arm.convert_config(scene=task.spec.scene, sim_dt=task.sim_dt, self_collision=False)
+    spec = task.spec
+    pads = arm.gripper.pad_links if spec.gripper and arm.gripper else ()
+    return arm.convert_config(
+        scene=spec.scene,
+        sim_dt=task.sim_dt,
+        servo_dt=spec.servo_dt,
+        pad_links=pads,
+        self_collision=False,
+    )
 
 
 def arm_model(arm: ArmInfo, task: TaskConfig) -> mujoco.MjModel:
@@ -101,6 +112,44 @@ class SensorReader:
     def wrench(self, xp: Any, sensordata):
         """Tared external wrench on the tool in the ee frame, shape ``(..., 6)``."""
         return sensor_wrench(xp, self.block(sensordata), self.arm.tool)
+
+
+class GripReader:
+    """Addresses of what a gripper task reads (:data:`mjx_arm.task.grip.GRIP_LAYOUT`): the
+    driven finger, the free cube and the pads' touch sensors, looked up by name once.
+
+    Attributes:
+        finger_qpos: qpos address of the driven finger; finger_act: its actuator id.
+        lower, stroke: the finger's lower limit and travel (m).
+        cube_qpos: qpos address of the cube's free joint (position, then quaternion).
+        cube_dof: its dof address (6 velocities).
+        pad_index: ``sensordata`` positions of the pads' touch sensors, ``(2,)``.
+    """
+
+    def __init__(self, model: mujoco.MjModel, arm: ArmInfo) -> None:
+        gripper = arm.gripper
+        if gripper is None:
+            raise ValueError(f"{arm.urdf} has no parallel gripper")
+        joint = model.joint(gripper.joint)
+        self.finger_qpos = int(joint.qposadr[0])
+        self.finger_act = int(model.actuator(gripper.joint).id)
+        self.lower, self.stroke = float(joint.range[0]), gripper.stroke
+        cube = model.joint(CUBE_BODY)
+        self.cube_qpos, self.cube_dof = int(cube.qposadr[0]), int(cube.dofadr[0])
+        self.pad_index = np.array(
+            [int(model.sensor(pad_sensor(link)).adr[0]) for link in gripper.pad_links[:2]]
+        )
+
+    def read(self, xp: Any, qpos, sensordata):
+        """The ``grip`` vector ``(10,)`` of one state's ``qpos`` and ``sensordata``."""
+        closure = (qpos[self.finger_qpos : self.finger_qpos + 1] - self.lower) / self.stroke
+        cube = qpos[self.cube_qpos : self.cube_qpos + 7]
+        return xp.concatenate([closure, cube, sensordata[self.pad_index]])
+
+    def place(self, qpos, pos, quat) -> None:
+        """Write the cube's pose into a numpy ``qpos`` (in place)."""
+        qpos[self.cube_qpos : self.cube_qpos + 3] = pos
+        qpos[self.cube_qpos + 3 : self.cube_qpos + 7] = quat
 
 
 def as_slice(index: np.ndarray) -> slice | np.ndarray:

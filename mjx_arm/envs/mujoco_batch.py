@@ -156,6 +156,11 @@ class MujocoCallbackPhysics:
     ) -> None:
         self.mj_model = mj_model
         self.ids = SensorReader(mj_model, arm)
+        if task.spec.gripper:
+            raise ValueError(
+                f"task {task.task!r} drives a gripper, which the C batch does not step; "
+                "train it on MJX (--backend mjx)"
+            )
         self.task = task
         self.n_substeps = task.n_substeps
         self.mocap = int(mj_model.body_mocapid[mj_model.body(TARGET_BODY).id])
@@ -183,7 +188,7 @@ class MujocoCallbackPhysics:
 
         return jax.pure_callback(host, shapes, *args, vmap_method="broadcast_all")
 
-    def init(self, qpos: jax.Array, target_body: jax.Array) -> CState:
+    def init(self, qpos: jax.Array, target_body: jax.Array, object_quat=None) -> CState:
         """State at rest at ``qpos (n,)`` with the target body at ``(3,)``; sensors filled."""
         state = jnp.asarray(self._template, jnp.float32)
         state = state.at[self._qpos_slice.start + self.ids.qpos_adr].set(qpos)
@@ -191,7 +196,7 @@ class MujocoCallbackPhysics:
         _, sensors = self._call(state, ctrl, target_body.astype(jnp.float32), 0)
         return CState(state=state, mocap_pos=target_body.astype(jnp.float32), sensordata=sensors)
 
-    def set_target(self, data: CState, target_body: jax.Array) -> CState:
+    def set_target(self, data: CState, target_body: jax.Array, object_quat=None) -> CState:
         """Move the target body (sensors unaffected: the target carries none)."""
         return data.replace(mocap_pos=target_body.astype(jnp.float32))
 
@@ -234,4 +239,5 @@ class MujocoCallbackPhysics:
             qvel=data.state[self._qvel_slice][ids.dof_adr],
             target_pos=sampling.target_point(jnp, data.mocap_pos, self.task),
             wrench=ids.wrench(jnp, s),
+            grip=jnp.zeros(0),
         )

@@ -11,7 +11,7 @@ from mjx_arm.envs.base import DEFAULT_HEIGHT, DEFAULT_WIDTH, BaseRobotEnv, Physi
 from mjx_arm.envs.model_io import BLOCK as _BLOCK
 from mjx_arm.envs.model_io import EE_POS as _EE_POS
 from mjx_arm.envs.model_io import EE_QUAT as _EE_QUAT
-from mjx_arm.envs.model_io import SensorReader, arm_model, as_slice
+from mjx_arm.envs.model_io import GripReader, SensorReader, arm_model, as_slice
 from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.wrench import sensor_wrench
@@ -55,11 +55,16 @@ class MujocoArmEnv(BaseRobotEnv):
         self._read_index = self.ids.read_index.astype(np.intp)
         self._tool = self.arm.tool
         self._target_pos = np.zeros(3)  # the target point: fixed within an episode
+        self.grip = GripReader(self.model, self.arm) if self.task.spec.gripper else None
 
-    def _physics_reset(self, qpos: np.ndarray, target_body_pos: np.ndarray) -> None:
+    def _physics_reset(
+        self, qpos: np.ndarray, target_body_pos: np.ndarray, object_quat: np.ndarray | None = None
+    ) -> None:
         mujoco.mj_resetData(self.model, self.data)
         self.data.qpos[self.ids.qpos_adr] = qpos
         self.data.mocap_pos[self._mocap] = target_body_pos
+        if self.grip is not None:  # the cube at the target, the marker hidden inside it
+            self.grip.place(self.data.qpos, target_body_pos, object_quat)
         mujoco.mj_forward(self.model, self.data)
         mujoco.mj_rnePostConstraint(self.model, self.data)
         mujoco.mj_sensorAcc(self.model, self.data)
@@ -71,6 +76,9 @@ class MujocoArmEnv(BaseRobotEnv):
     def _physics_set_velocity_targets(self, qdot_target: np.ndarray) -> None:
         self._ctrl[self._act] = qdot_target
 
+    def _physics_set_gripper(self, speed: float) -> None:
+        self._ctrl[self.grip.finger_act] = speed
+
     def _physics_step(self, n_substeps: int) -> None:
         # Positions, sensors and contacts are read as the last substep's mj_forward left them
         # (one substep, 1/240 s, before the integrated qpos/qvel), as the MJX env and the
@@ -81,13 +89,18 @@ class MujocoArmEnv(BaseRobotEnv):
         # one gather of the sensors: the wrench block, the ee site's position and quaternion
         # (framepos / framequat of the ee site: the values of site_xpos and the body's xquat)
         s = self._sensordata[self._read_index]
+        target, grip = self._target_pos, PhysicsReading._field_defaults["grip"]
+        if self.grip is not None:  # the target is the cube, wherever it is now
+            grip = self.grip.read(np, self._qpos, self._sensordata)
+            target = grip[1:4]
         return PhysicsReading(  # fields in order: ee_pos, ee_quat, qpos, qvel, target_pos, wrench
             s[_EE_POS],
             s[_EE_QUAT],
             self._qpos[self._qpos_adr],
             self._qvel[self._dof_adr],
-            self._target_pos,
+            target,
             sensor_wrench(np, s[_BLOCK], self._tool),
+            grip,
         )
 
     def _render_frame(self) -> np.ndarray:

@@ -34,7 +34,10 @@ class RewardConfig:
     ``proximity`` = exp(-d / proximity_length): 1 at the target, 0.37 one length away (a
     near-field pull that ``distance``'s longer length scale lacks),
     ``streak`` = how far a press inside the band has held on: 0 on a one-step tap, 1 once it
-    has held ``success_hold_steps`` steps running (:func:`mjx_arm.task.reward.streak`).
+    has held ``success_hold_steps`` steps running (:func:`mjx_arm.task.reward.streak`),
+    ``lift`` = how far a gripper task's object is up, as a fraction of the task's lift height
+    (0 to 1), ``grasp`` = 1 while both finger pads press the object (gripper tasks; see
+    :mod:`mjx_arm.task.lift`).
     """
 
     distance: float = -10.0
@@ -49,6 +52,8 @@ class RewardConfig:
     overforce: float = 0.0
     proximity: float = 0.0
     streak: float = 0.0
+    lift: float = 0.0
+    grasp: float = 0.0
     distance_length: float = 0.1
     proximity_length: float = 0.01
     soft_limit: float = 0.95
@@ -72,6 +77,8 @@ REWARD_TERMS = (
     "overforce",
     "proximity",
     "streak",
+    "lift",
+    "grasp",
 )
 
 

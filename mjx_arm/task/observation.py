@@ -1,5 +1,6 @@
 """The observation contract: an ordered Dict of four keys and its flat vector (22 entries for
-a 6-joint arm: ``16 + n``).
+a 6-joint arm: ``16 + n``), then the keys a task adds (``extra``: ``(key, size)`` pairs, e.g.
+Lift's gripper, object and pad keys, :attr:`mjx_arm.task.spec.Task.extra_obs`).
 
 Functions take an array namespace ``xp`` (``numpy`` or ``jax.numpy``) so every engine, batched or
 not, assembles observations with the same code.
@@ -22,95 +23,132 @@ OBS_KEYS = ("ee_pose", "joint_angles", "target_rel", "contact_force")
 POSITION_BOUND = 2.0
 
 
-def obs_layout(n_joints: int = SHIPPED_JOINTS) -> tuple[tuple[str, int], ...]:
-    """(key, size) in contract order for an arm of ``n_joints``; Brax and exported policies
-    see the concatenation, ``state (16 + n_joints,)``."""
-    return tuple((key, FIXED_SIZES.get(key, n_joints)) for key in OBS_KEYS)
+Extra = tuple[tuple[str, int], ...]
 
 
-def obs_size(n_joints: int = SHIPPED_JOINTS) -> int:
-    """Length of the flat ``state``: 22 for a 6-joint arm."""
-    return sum(size for _, size in obs_layout(n_joints))
+def obs_layout(n_joints: int = SHIPPED_JOINTS, extra: Extra = ()) -> tuple[tuple[str, int], ...]:
+    """(key, size) in contract order for an arm of ``n_joints``, then the task's ``extra``
+    keys; Brax and exported policies see the concatenation, ``state (16 + n_joints + k,)``."""
+    base = tuple((key, FIXED_SIZES.get(key, n_joints)) for key in OBS_KEYS)
+    return base + tuple(extra)
+
+
+def obs_size(n_joints: int = SHIPPED_JOINTS, extra: Extra = ()) -> int:
+    """Length of the flat ``state``: 22 for a 6-joint arm (plus the extra keys' sizes)."""
+    return sum(size for _, size in obs_layout(n_joints, extra))
 
 
 # The shipped arm's layout and size.
 OBS_LAYOUT = obs_layout()
 OBS_SIZE = obs_size()
-# The force part (fx, fy, fz) of ``contact_force``, the last key: the same for every arm.
-FORCE_SLICE = slice(-6, -3)
 
 
-def n_joints_of(state_size: int) -> int:
-    """The joint count of a flat ``state`` of ``state_size`` entries."""
-    n = state_size - obs_size(0)
+def force_slice(n_joints: int = SHIPPED_JOINTS) -> slice:
+    """The force part (fx, fy, fz) of ``contact_force`` in the flat state (the extra keys come
+    after it)."""
+    start = obs_size(n_joints) - 6
+    return slice(start, start + 3)
+
+
+def n_joints_of(state_size: int, extra: Extra = ()) -> int:
+    """The joint count of a flat ``state`` of ``state_size`` entries (with ``extra`` keys)."""
+    n = state_size - obs_size(0, extra)
     if n < 1:
         raise ValueError(f"a flat state of {state_size} entries holds no joint angles")
     return n
 
 
 @functools.lru_cache(maxsize=16)
-def _slices(n_joints: int) -> tuple[tuple[str, slice], ...]:
+def _slices(n_joints: int, extra: Extra = ()) -> tuple[tuple[str, slice], ...]:
     """(key, slice of the flat vector) in contract order."""
     out, start = [], 0
-    for key, size in obs_layout(n_joints):
+    for key, size in obs_layout(n_joints, extra):
         out.append((key, slice(start, start + size)))
         start += size
     return tuple(out)
 
 
-def obs_slices(n_joints: int = SHIPPED_JOINTS) -> dict[str, slice]:
+def obs_slices(n_joints: int = SHIPPED_JOINTS, extra: Extra = ()) -> dict[str, slice]:
     """Where each key sits in the flat vector."""
-    return dict(_slices(n_joints))
+    return dict(_slices(n_joints, tuple(extra)))
+
+
+def _pose_bounds(dtype: Any) -> tuple[np.ndarray, np.ndarray]:
+    """A position (+-:data:`POSITION_BOUND`) and a quaternion with ``w >= 0``, ``(7,)`` each."""
+    high = np.array([POSITION_BOUND] * 3 + [1.0] * 4, dtype)
+    low = -high.copy()
+    low[3] = 0.0  # quaternion w >= 0
+    return low, high
+
+
+# Bounds of the extra keys tasks may add: a function of (force_clip, dtype).
+EXTRA_BOUNDS = {
+    "gripper": lambda clip, dtype: (np.zeros(1, dtype), np.ones(1, dtype)),
+    "object_rel": lambda clip, dtype: _pose_bounds(dtype),
+    "pad_force": lambda clip, dtype: (np.zeros(2, dtype), np.full(2, clip, dtype)),
+}
 
 
 def _bounds(
-    force_clip: float, n_joints: int, dtype: Any = np.float32
+    force_clip: float, n_joints: int, dtype: Any = np.float32, extra: Extra = ()
 ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """(low, high) of each key, arrays of ``dtype``."""
-    pose_high = np.array([POSITION_BOUND] * 3 + [1.0] * 4, dtype)
-    pose_low = -pose_high.copy()
-    pose_low[3] = 0.0  # quaternion w >= 0
-    return {
-        "ee_pose": (pose_low, pose_high),
+    bounds = {
+        "ee_pose": _pose_bounds(dtype),
         "joint_angles": (np.full(n_joints, -math.pi, dtype), np.full(n_joints, math.pi, dtype)),
         "target_rel": (np.full(3, -POSITION_BOUND, dtype), np.full(3, POSITION_BOUND, dtype)),
         "contact_force": (np.full(6, -force_clip, dtype), np.full(6, force_clip, dtype)),
     }
+    for key, size in extra:
+        if key not in EXTRA_BOUNDS:
+            raise ValueError(f"no bounds for observation key {key!r}; add it to EXTRA_BOUNDS")
+        low, high = EXTRA_BOUNDS[key](force_clip, dtype)
+        if low.shape != (size,):
+            raise ValueError(f"observation key {key!r} has {low.shape[0]} entries, not {size}")
+        bounds[key] = (low, high)
+    return bounds
+
+
+def _concat(bounds: dict, layout) -> tuple[np.ndarray, np.ndarray]:
+    low = np.concatenate([bounds[k][0] for k, _ in layout])
+    high = np.concatenate([bounds[k][1] for k, _ in layout])
+    return low, high
 
 
 @functools.lru_cache(maxsize=16)
 def state_bounds(
-    force_clip: float, n_joints: int = SHIPPED_JOINTS
+    force_clip: float, n_joints: int = SHIPPED_JOINTS, extra: Extra = ()
 ) -> tuple[np.ndarray, np.ndarray]:
     """Bounds of the flat ``state`` (float64, read-only), low and high, each ``(16 + n,)``.
 
     The float64 twins of :func:`flat_observation_space`'s bounds: clipping with them leaves
     wrapped joint angles (already inside [-pi, pi]) and canonical quaternions unchanged.
     """
-    bounds = _bounds(force_clip, n_joints, np.float64)
-    low = np.concatenate([bounds[k][0] for k in OBS_KEYS])
-    high = np.concatenate([bounds[k][1] for k in OBS_KEYS])
+    bounds = _bounds(force_clip, n_joints, np.float64, extra)
+    low, high = _concat(bounds, obs_layout(n_joints, extra))
     low.setflags(write=False)
     high.setflags(write=False)
     return low, high
 
 
-def observation_space(force_clip: float = 100.0, n_joints: int = SHIPPED_JOINTS) -> spaces.Dict:
+def observation_space(
+    force_clip: float = 100.0, n_joints: int = SHIPPED_JOINTS, extra: Extra = ()
+) -> spaces.Dict:
     """The Dict observation space, keys in contract order (built from a list: no sorting)."""
-    bounds = _bounds(force_clip, n_joints)
+    bounds = _bounds(force_clip, n_joints, extra=extra)
     return spaces.Dict(
         [
             (key, spaces.Box(*bounds[key], shape=(size,), dtype=np.float32))
-            for key, size in obs_layout(n_joints)
+            for key, size in obs_layout(n_joints, extra)
         ]
     )
 
 
-def flat_observation_space(force_clip: float = 100.0, n_joints: int = SHIPPED_JOINTS) -> spaces.Box:
-    """The flat ``state (16 + n,)`` space: the Dict bounds concatenated in contract order."""
-    bounds = _bounds(force_clip, n_joints)
-    low = np.concatenate([bounds[k][0] for k in OBS_KEYS])
-    high = np.concatenate([bounds[k][1] for k in OBS_KEYS])
+def flat_observation_space(
+    force_clip: float = 100.0, n_joints: int = SHIPPED_JOINTS, extra: Extra = ()
+) -> spaces.Box:
+    """The flat ``state (16 + n + k,)`` space: the Dict bounds concatenated in contract order."""
+    low, high = _concat(_bounds(force_clip, n_joints, extra=extra), obs_layout(n_joints, extra))
     return spaces.Box(low, high, dtype=np.float32)
 
 
@@ -129,7 +167,7 @@ def canonical_quat(xp: Any, quat):
     return quat / xp.copysign(norm, quat[..., :1] + 0.0)
 
 
-def raw_state(xp: Any, ee_pos, ee_quat, qpos, target_pos, wrench):
+def raw_state(xp: Any, ee_pos, ee_quat, qpos, target_pos, wrench, extra_obs=None):
     """The flat ``state`` before clipping, shape ``(..., 16 + n)``, the dtype of the inputs.
 
     Quaternion made canonical, joint angles wrapped, nothing clipped: a non-finite input shows
@@ -142,8 +180,11 @@ def raw_state(xp: Any, ee_pos, ee_quat, qpos, target_pos, wrench):
         qpos: the n joint angles (rad), shape ``(..., n)``.
         target_pos: target point (m), shape ``(..., 3)``.
         wrench: tared external wrench on the tool in the ee frame, shape ``(..., 6)``.
+        extra_obs: the task's extra keys, concatenated, ``(..., k)`` (None: none).
     """
     parts = [ee_pos, canonical_quat(xp, ee_quat), wrap_angle(xp, qpos), target_pos, wrench]
+    if extra_obs is not None:
+        parts.append(extra_obs)
     return xp.concatenate(parts, axis=-1)
 
 
@@ -153,10 +194,12 @@ def clip_state(xp: Any, state, bounds: tuple[Any, Any]):
     return xp.minimum(xp.maximum(state, low), high)
 
 
-def flat_obs(xp: Any, ee_pos, ee_quat, qpos, target_pos, wrench, force_clip: float):
-    """The observation as the flat float32 ``state (..., 16 + n)`` (see :func:`assemble_obs`)."""
-    raw = raw_state(xp, ee_pos, ee_quat, qpos, target_pos, wrench)
-    bounds = state_bounds(force_clip, qpos.shape[-1])
+def flat_obs(xp: Any, ee_pos, ee_quat, qpos, target_pos, wrench, force_clip: float, extra=None):
+    """The observation as the flat float32 ``state (..., 16 + n + k)`` (see
+    :func:`assemble_obs`); ``extra``: ``(layout, values (..., k))`` of the task's extra keys."""
+    layout, values = extra if extra is not None else ((), None)
+    raw = raw_state(xp, ee_pos, ee_quat, qpos, target_pos, wrench, values)
+    bounds = state_bounds(force_clip, qpos.shape[-1], tuple(layout))
     return xp.asarray(clip_state(xp, raw, bounds), dtype=xp.float32)
 
 
@@ -180,10 +223,13 @@ def assemble_obs(xp: Any, ee_pos, ee_quat, qpos, target_pos, wrench, force_clip:
 
 
 def flatten_obs(xp: Any, obs: dict):
-    """Concatenate an observation dict into ``state``, shape ``(..., 16 + n)``."""
-    return xp.concatenate([obs[key] for key in OBS_KEYS], axis=-1)
+    """Concatenate an observation dict into ``state``: the contract's four keys, then any
+    extra keys in the dict's order."""
+    extra = [value for key, value in obs.items() if key not in OBS_KEYS]
+    return xp.concatenate([obs[key] for key in OBS_KEYS] + extra, axis=-1)
 
 
-def unflatten_obs(state) -> dict:
-    """Split ``state (..., 16 + n)`` back into the observation dict (views, no copy)."""
-    return {key: state[..., s] for key, s in _slices(n_joints_of(state.shape[-1]))}
+def unflatten_obs(state, extra: Extra = ()) -> dict:
+    """Split ``state (..., 16 + n + k)`` back into the observation dict (views, no copy)."""
+    extra = tuple(extra)
+    return {key: state[..., s] for key, s in _slices(n_joints_of(state.shape[-1], extra), extra)}

@@ -77,11 +77,11 @@ def force_in_band(xp: Any, force_norm, cfg: TaskConfig):
     return ((force_norm >= low) & (force_norm <= high)) * 1.0
 
 
-def is_success(xp: Any, distance, force_norm, cfg: TaskConfig):
+def is_success(xp: Any, distance, force_norm, cfg: TaskConfig, extra=None):
     """The success condition of one step (bool array), as the task defines it
     (:meth:`mjx_arm.task.spec.Task.holds`). The episode succeeds once it has held for
     ``success_hold_steps`` (see :func:`advance`)."""
-    return get_task(cfg.task).holds(xp, distance, force_norm, cfg)
+    return get_task(cfg.task).holds(xp, distance, force_norm, cfg, extra)
 
 
 class Progress(NamedTuple):
@@ -101,7 +101,7 @@ def start_progress(xp: Any, shape: tuple[int, ...] = ()) -> Progress:
     return Progress(xp.zeros(shape), xp.zeros(shape, dtype=bool))
 
 
-def advance(xp: Any, progress: Progress, distance, force_norm, cfg: TaskConfig):
+def advance(xp: Any, progress: Progress, distance, force_norm, cfg: TaskConfig, extra=None):
     """One step of the success rule.
 
     Args:
@@ -109,12 +109,13 @@ def advance(xp: Any, progress: Progress, distance, force_norm, cfg: TaskConfig):
         progress: the progress before this step.
         distance: d (m), ``(...)``; force_norm: contact force norm (N), ``(...)``.
         cfg: the task configuration.
+        extra: the task's measures (:meth:`mjx_arm.task.spec.Task.measures`), or None.
 
     Returns:
         (progress after the step, success flag, over-band flag of this step), bool ``(...)``.
     """
     task = get_task(cfg.task)
-    holds = task.holds(xp, distance, force_norm, cfg)
+    holds = task.holds(xp, distance, force_norm, cfg, extra)
     over_now = task.over_band(xp, force_norm, cfg)
     hold = xp.where(holds, progress.hold + 1.0, 0.0)
     over = progress.over | over_now
@@ -197,12 +198,13 @@ def reward_terms(
     nonfinite,
     cfg: TaskConfig,
     motion: Motion | None = None,
+    extra: dict | None = None,
 ) -> dict:
     """Raw (unweighted) reward terms by name: :func:`band_reward_terms` with the joint limits
     given as ``(lower, upper)`` (rad, each ``(6,)``)."""
     band = joint_band(joint_limits, cfg)
     return band_reward_terms(
-        xp, distance, force_norm, qpos, qvel, band, success, nonfinite, cfg, motion
+        xp, distance, force_norm, qpos, qvel, band, success, nonfinite, cfg, motion, extra
     )
 
 
@@ -217,6 +219,7 @@ def band_reward_terms(
     nonfinite,
     cfg: TaskConfig,
     motion: Motion | None = None,
+    extra: dict | None = None,
 ) -> dict:
     """:func:`reward_terms` with the joint limits as a precomputed :class:`JointBand`.
 
@@ -232,14 +235,19 @@ def band_reward_terms(
         cfg: the task configuration.
         motion: the previous step's distance, the action change and the hold count (None: their
             terms are 0).
+        extra: the task's measures (:meth:`mjx_arm.task.spec.Task.measures`; None: the
+            ``lift`` and ``grasp`` terms are 0).
 
     Returns:
         Dict term name -> float array, shape ``(...)``; keys are ``REWARD_TERMS``.
     """
     beyond = xp.abs(qpos - band.mid) > band.reach
     near = distance < cfg.success_distance
-    contact, excess = get_task(cfg.task).contact_terms(xp, near, force_norm, cfg)
+    task = get_task(cfg.task)
+    contact, excess = task.contact_terms(xp, near, force_norm, cfg)
     closing, change, held = _motion_terms(xp, distance, cfg, motion)
+    zero = 0.0 * distance
+    grip = task.task_terms(xp, extra, zero) if extra else {"lift": zero, "grasp": zero}
     terms = {
         "distance": 1.0 - xp.exp(-distance / cfg.reward.distance_length),
         "contact": contact,
@@ -253,6 +261,8 @@ def band_reward_terms(
         "overforce": (excess > 0) * 1.0,
         "proximity": xp.exp(-distance / cfg.reward.proximity_length),
         "streak": held,
+        "lift": grip["lift"],
+        "grasp": grip["grasp"],
     }
     assert tuple(terms) == REWARD_TERMS
     return terms

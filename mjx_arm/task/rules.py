@@ -51,6 +51,7 @@ def score_step(
     qvel,
     band: reward_lib.JointBand,
     diverged,
+    extra: dict | None = None,
 ) -> StepScore:
     """Score one control step.
 
@@ -65,16 +66,17 @@ def score_step(
         qpos, qvel: joint angles (rad) and velocities (rad/s), ``(..., n)``.
         band: the joint-limit band (:func:`mjx_arm.task.reward.joint_band`).
         diverged: the physics diverged on this step (bool, ``(...)``).
+        extra: the task's measures (:meth:`mjx_arm.task.spec.Task.measures`), or None.
 
     Returns:
         The :class:`StepScore`.
     """
     sane = xp.logical_not(diverged)
-    progress, success, over = reward_lib.advance(xp, progress, distance, force_norm, cfg)
+    progress, success, over = reward_lib.advance(xp, progress, distance, force_norm, cfg, extra)
     success = xp.logical_and(success, sane)
     motion = reward_lib.Motion(prev_distance, action_change, progress.hold)
     terms = reward_lib.band_reward_terms(
-        xp, distance, force_norm, qpos, qvel, band, success, diverged, cfg, motion
+        xp, distance, force_norm, qpos, qvel, band, success, diverged, cfg, motion, extra
     )
     terms = {k: v if k == "nonfinite" else xp.where(sane, v, 0.0) for k, v in terms.items()}
     done = reward_lib.ends_episode(success, xp.where(sane, force_norm, 0.0), diverged, cfg, xp)

@@ -19,7 +19,11 @@ from typing import Any, ClassVar
 from mjx_arm import names
 from mjx_arm.task.config import TaskConfig
 
-SCENES = ("reach", "touch")  # what the converter can build around the arm (mjx_arm.urdf.scene)
+SCENES = (
+    "reach",
+    "touch",
+    "lift",
+)  # what the converter can build around the arm (mjx_arm.urdf.scene)
 
 
 class Task:
@@ -30,11 +34,19 @@ class Task:
         scene: the scene built around the arm: ``"reach"`` (a marker the arm can pass through)
             or ``"touch"`` (the 5 cm box standing on the table).
         uses_contact: whether the success condition reads the contact force.
+        gripper: the task drives a parallel gripper: the arm must have one, the action has one
+            more entry (the driven finger's speed, positive closes) and every engine fills the
+            reading's ``grip`` vector (:mod:`mjx_arm.task.grip`).
+        servo_dt: the step (s) the model's servo gains are computed for; 0 takes ``sim_dt``.
+        extra_obs: observation keys after the contract's four, ``(key, size)`` in order.
     """
 
     name: ClassVar[str]
     scene: ClassVar[str] = "reach"
     uses_contact: ClassVar[bool] = False
+    gripper: ClassVar[bool] = False
+    servo_dt: ClassVar[float] = 0.0
+    extra_obs: ClassVar[tuple[tuple[str, int], ...]] = ()
 
     @property
     def env_id(self) -> str:
@@ -55,10 +67,30 @@ class Task:
         """The point the ee must reach (m), ``(..., 3)``, given the target body's position."""
         return body_pos
 
-    def holds(self, xp: Any, distance, force_norm, cfg: TaskConfig):
+    def object_quat(self, xp: Any, u3, cfg: TaskConfig):
+        """The start orientation (w, x, y, z) of a free object the task places, ``(..., 4)``,
+        from the same draws as :meth:`target_body_pos`; None where the task has none."""
+        return None
+
+    def grip_observation(self, xp: Any, ee_pos, ee_quat, grip, cfg: TaskConfig):
+        """The :attr:`extra_obs` entries of a reading, ``(..., k)``, from the ee pose and the
+        ``grip`` vector (gripper tasks only)."""
+        raise NotImplementedError
+
+    def measures(self, xp: Any, ee_pos, ee_quat, grip, cfg: TaskConfig) -> dict[str, Any]:
+        """Named per-step measures that :meth:`holds` and :meth:`task_terms` read (gripper
+        tasks; empty otherwise)."""
+        return {}
+
+    def task_terms(self, xp: Any, extra: dict[str, Any], zero) -> dict[str, Any]:
+        """The raw ``lift`` and ``grasp`` reward terms from :meth:`measures`, each ``(...)``
+        (``zero``: a zero array of the batch shape)."""
+        return {"lift": zero, "grasp": zero}
+
+    def holds(self, xp: Any, distance, force_norm, cfg: TaskConfig, extra=None):
         """The success condition of one step (bool ``(...)``): the ee within
         ``success_distance`` of the target point. An episode succeeds once this has held
-        ``success_hold_steps`` steps running."""
+        ``success_hold_steps`` steps running. ``extra``: :meth:`measures`."""
         return distance < cfg.success_distance
 
     def over_band(self, xp: Any, force_norm, cfg: TaskConfig):

@@ -84,7 +84,7 @@ class Touch(Task):
         """The centre of the box's top face."""
         return body_pos + xp.asarray([0.0, 0.0, box_top_offset()])
 
-    def holds(self, xp: Any, distance, force_norm, cfg: TaskConfig):
+    def holds(self, xp: Any, distance, force_norm, cfg: TaskConfig, extra=None):
         """Near the top face and pressing it with a force inside the band."""
         near = distance < cfg.success_distance
         return near & (reward_lib.force_in_band(xp, force_norm, cfg) > 0)

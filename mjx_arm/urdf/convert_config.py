@@ -52,6 +52,11 @@ class ConvertConfig:
         ft_joint: fixed joint where the wrist force/torque reading is taken; None picks
             ``ft_sensor_joint`` if present, else the joint above the end-effector body.
         sim_dt: physics time step (s).
+        servo_dt: the step (s) the velocity gains are computed for (``kv_factor``); 0 takes
+            ``sim_dt``. A task that steps finer than its servos were tuned for (Lift at 480 Hz
+            keeps the 240 Hz gains) sets it, so a finer step changes the integration only.
+        pad_links: links that get a touch sensor ``LINK_touch`` over their collision box (the
+            finger pads of a gripper): the sum of the normal contact forces on the link (N).
         solver_iterations: constraint solver iterations (few, for MJX speed). On an H200 the
             Touch scene steps 1.6M physics steps/s at 4 iterations (line search 8), 3.2M at
             2 (4) and 5.0M at 1 (2), 32k envs (benchmarks/results/sweep_touch_*.json).
@@ -83,6 +88,8 @@ class ConvertConfig:
     ee_link: str | None = None
     ft_joint: str | None = None
     sim_dt: float = 1.0 / 240.0
+    servo_dt: float = 0.0
+    pad_links: tuple[str, ...] = ()
     solver_iterations: int = 2
     ls_iterations: int = 4
     scene: str = "none"

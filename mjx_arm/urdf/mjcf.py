@@ -31,6 +31,7 @@ from mjx_arm.urdf.scene import add_scene
 from mjx_arm.urdf.scene_shapes import SCENES
 from mjx_arm.urdf.spec_edits import (
     _add_actuators,
+    _add_pad_sensors,
     _add_sites_and_sensors,
     _edit_joints,
     _exclude_neighbours,
@@ -77,6 +78,7 @@ def _edit_spec(spec: mujoco.MjSpec, model: RobotModel, config: ConvertConfig, pa
         for body in spec.bodies[1:]:
             body.gravcomp = 1.0
     add_scene(spec, config.scene)
+    _add_pad_sensors(spec, config, path)
     _exclude_neighbours(spec, model)
 
 

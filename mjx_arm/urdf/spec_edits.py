@@ -86,7 +86,7 @@ def _add_actuators(spec: mujoco.MjSpec, joints, model: RobotModel, config: Conve
         act.name = joint.name
         act.target = joint.name
         act.trntype = mujoco.mjtTrn.mjTRN_JOINT
-        kv = config.kv_factor * inertia[joint.name] / config.sim_dt
+        kv = config.kv_factor * inertia[joint.name] / (config.servo_dt or config.sim_dt)
         act.set_to_velocity(
             kv=float(np.format_float_positional(kv, precision=4, unique=False, fractional=False))
         )
@@ -188,6 +188,36 @@ def _add_sites_and_sensors(spec, model: RobotModel, ee_body, ft_body, config) ->
         sensor.name = name
         sensor.type, sensor.objname = sensor_table[name]
         sensor.objtype = mujoco.mjtObj.mjOBJ_SITE
+
+
+PAD_MARGIN = 0.002  # m: the touch zone reaches this far past a pad's collision box
+
+
+def pad_sensor(link: str) -> str:
+    """Name of the touch sensor of pad link ``link``."""
+    return f"{link}_touch"
+
+
+def _add_pad_sensors(spec: mujoco.MjSpec, config: ConvertConfig, path: Path) -> None:
+    """A touch sensor on each of ``config.pad_links``: a box site :data:`PAD_MARGIN` larger
+    than the link's collision box, so every contact on the pad counts (MuJoCo's touch sensor
+    sums the normal forces of the body's contacts inside its site)."""
+    for link in config.pad_links:
+        body = spec.body(link)
+        geoms = body.geoms if body is not None else []
+        boxes = [g for g in geoms if g.type == mujoco.mjtGeom.mjGEOM_BOX and g.contype]
+        if not boxes:
+            raise ConversionError(f"{path}: pad link {link!r} needs a collision box")
+        site = body.add_site()
+        site.name = f"{link}_pad"
+        site.type = mujoco.mjtGeom.mjGEOM_BOX
+        site.pos, site.quat = list(boxes[0].pos), list(boxes[0].quat)
+        site.size = [s + PAD_MARGIN for s in boxes[0].size]
+        site.group = 4
+        sensor = spec.add_sensor()
+        sensor.name = pad_sensor(link)
+        sensor.type = mujoco.mjtSensor.mjSENS_TOUCH
+        sensor.objtype, sensor.objname = mujoco.mjtObj.mjOBJ_SITE, site.name
 
 
 def _subtree_com_in_body(spec: mujoco.MjSpec, body_name: str) -> list[float]:

@@ -1,0 +1,150 @@
+"""Lift: pick the cube off the table with the parallel gripper and hold it 10 cm up.
+
+The arm needs a parallel gripper (``assets/ur5e_gripper.urdf``). The action is the arm's joint
+velocities plus one entry for the driven finger (positive closes). A free 4.5 cm cube rests on the
+table at a random spot and yaw; success is the cube at least :data:`LIFT_HEIGHT` above its resting
+height and held by both pads, for 10 control steps running. The gentle rules of Touch apply to the
+wrist reading: one above 100 N (the tool struck the table) ends the episode.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from mjx_arm.task import grip as grip_lib
+from mjx_arm.task.config import RewardConfig, TaskConfig
+from mjx_arm.task.spec import Task
+from mjx_arm.urdf.scene_shapes import CUBE_HALF, table_top_extent
+
+LIFT_HEIGHT = 0.10  # m above the resting height
+GRASP_FORCE = 0.5  # N on each pad: the pad presses the cube
+GRASP_RADIUS = 0.03  # m: the cube's centre within this of the ee point (between the pads)
+YAW_RANGE = 0.7853981633974483  # rad: the cube's yaw is drawn in +-pi/4 (a cube repeats per pi/2)
+CUBE_EDGE_MARGIN = 0.08  # m: the cube keeps this far from the table's edges
+
+# Lift's reward. The distance charge and the near-field pull bring the ee to the cube; ``grasp``
+# pays for both pads pressing a cube that sits between them; ``lift`` pays its height, up to
+# LIFT_HEIGHT; success (10 steps held up) pays more than holding it up for the rest of an episode
+# (about (4 + 20) / (1 - 0.97) = 800 at the presets' discount). A wrist reading above the band
+# costs its excess, and one above 100 N (a strike on the table) ends the episode.
+LIFT_REWARD = RewardConfig(
+    distance=-4.0,
+    contact=0.0,
+    proximity=2.0,
+    proximity_length=0.02,
+    grasp=4.0,
+    lift=20.0,
+    success=1000.0,
+    force_excess=-20.0,
+    action_rate=-0.05,
+    joint_velocity=-0.05,
+)
+
+# The arm moves at most this fraction of each joint's URDF speed (about 0.45 rad/s on the
+# UR5e class): fast enough to reach the cube in a second, slow enough that touching the table
+# stays under the strike limit more often than not.
+LIFT_ACTION_SCALE = 0.15
+# Lift steps the physics at 480 Hz: at 240 Hz a cube picked off the table slips out of the
+# fingers in C MuJoCo and MJX (benchmarks/results/grasp/grasp_step.md); the servos keep the
+# gains of 240 Hz, so only the integration changes.
+LIFT_SIM_DT = 1.0 / 480.0
+SERVO_DT = 1.0 / 240.0
+# The shipped gripper arm's start: tool down, the ee (between the pads) 0.15 m above the table at
+# (0.49, 0.13), the middle of the cube's box (the arm's own home puts the ee 0.37 m up).
+LIFT_HOME = (0.0, -1.4149, 2.0035, -2.1594, -1.5708, 0.0)
+
+
+class Lift(Task):
+    """Pick the cube off the table and hold it :data:`LIFT_HEIGHT` up between both pads."""
+
+    name = "lift"
+    scene = "lift"
+    uses_contact = True
+    gripper = True
+    servo_dt = SERVO_DT
+    extra_obs = (("gripper", 1), ("object_rel", 7), ("pad_force", 2))
+
+    def config(self, **overrides: Any) -> TaskConfig:
+        """The Lift preset with ``overrides``; ``variant`` may only be ``"gentle"``."""
+        if overrides.pop("variant", "gentle") != "gentle":
+            raise ValueError("lift has a single variant, 'gentle'")
+        base = TaskConfig(
+            task="lift",
+            variant="gentle",
+            sim_dt=LIFT_SIM_DT,
+            action_scale=LIFT_ACTION_SCALE,
+            home_qpos=LIFT_HOME,
+            target_low=(0.39, 0.03, 0.0),
+            target_high=(0.59, 0.23, 0.0),
+            success_distance=GRASP_RADIUS,
+            success_hold_steps=10,
+            terminate_on_overforce=True,
+            strike_force=100.0,
+            reward=LIFT_REWARD,
+        )
+        return base.replace(**overrides)
+
+    def target_body_pos(self, xp: Any, u3, cfg: TaskConfig):
+        """The cube's centre at rest on the table (z = its half edge), x and y from the
+        target box, kept :data:`CUBE_EDGE_MARGIN` inside the table."""
+        body = super().target_body_pos(xp, u3, cfg) * xp.asarray([1.0, 1.0, 0.0])
+        low, high = table_top_extent(margin=CUBE_EDGE_MARGIN)
+        body = xp.clip(body, xp.asarray([*low, 0.0]), xp.asarray([*high, 0.0]))
+        return body + xp.asarray([0.0, 0.0, CUBE_HALF])
+
+    def object_quat(self, xp: Any, u3, cfg: TaskConfig):
+        """A yaw in +-:data:`YAW_RANGE` from the third draw (the table fixes the height)."""
+        return grip_lib.yaw_quat(xp, (2.0 * u3[..., 2] - 1.0) * YAW_RANGE)
+
+    def grip_observation(self, xp: Any, ee_pos, ee_quat, grip, cfg: TaskConfig):
+        """``gripper`` (closure, 0 open to 1 closed), ``object_rel`` (the cube's centre in the
+        ee frame, m, and its orientation relative to the ee, w >= 0) and ``pad_force`` (N),
+        ``(..., 10)``."""
+        parts = grip_lib.split_grip(grip)
+        rel_pos = grip_lib.rotate_inverse(xp, ee_quat, parts["object_pos"] - ee_pos)
+        conj = ee_quat * xp.asarray([1.0, -1.0, -1.0, -1.0])
+        rel_quat = grip_lib.quat_mul(xp, conj, parts["object_quat"])
+        rel_quat = rel_quat * xp.where(rel_quat[..., :1] < 0, -1.0, 1.0)
+        pads = xp.clip(parts["pad_force"], 0.0, cfg.force_clip)
+        return xp.concatenate([parts["closure"], rel_pos, rel_quat, pads], axis=-1)
+
+    def measures(self, xp: Any, ee_pos, ee_quat, grip, cfg: TaskConfig) -> dict[str, Any]:
+        """``height``: the cube's centre above its resting height (m); ``grasp``: 1 where both
+        pads press the cube (each at least :data:`GRASP_FORCE`, its centre within
+        :data:`GRASP_RADIUS` of the ee point), else 0."""
+        parts = grip_lib.split_grip(grip)
+        offset = parts["object_pos"] - ee_pos
+        near = xp.sqrt(xp.vecdot(offset, offset)) < GRASP_RADIUS
+        pressed = (parts["pad_force"] >= GRASP_FORCE).all(axis=-1)
+        height = parts["object_pos"][..., 2] - CUBE_HALF
+        return {"height": height, "grasp": (near & pressed) * 1.0}
+
+    def task_terms(self, xp: Any, extra: dict[str, Any], zero) -> dict[str, Any]:
+        """``lift``: the height as a fraction of :data:`LIFT_HEIGHT`, in [0, 1]; ``grasp``."""
+        lift = xp.clip(extra["height"] / LIFT_HEIGHT, 0.0, 1.0)
+        return {"lift": lift + zero, "grasp": extra["grasp"] + zero}
+
+    def holds(self, xp: Any, distance, force_norm, cfg: TaskConfig, extra=None):
+        """The cube up by :data:`LIFT_HEIGHT` or more, held by both pads."""
+        return (extra["height"] >= LIFT_HEIGHT) & (extra["grasp"] > 0)
+
+    def over_band(self, xp: Any, force_norm, cfg: TaskConfig):
+        """The wrist reading is above the band (the tool pressed the table or the cube)."""
+        return force_norm > cfg.force_band[1]
+
+    def strikes(self, xp: Any, force_norm, cfg: TaskConfig):
+        """A wrist reading above the strike limit ends the episode."""
+        return force_norm > cfg.strike_force
+
+    def contact_terms(self, xp: Any, near, force_norm, cfg: TaskConfig) -> tuple[Any, Any]:
+        """No ``contact`` pay; ``force_excess``: the wrist force above the band over its top."""
+        high = cfg.force_band[1]
+        return 0.0 * force_norm, xp.maximum(force_norm - high, 0.0) / high
+
+
+LIFT = Lift()
+
+
+def lift_config(**overrides: Any) -> TaskConfig:
+    """The Lift preset with ``overrides``."""
+    return LIFT.config(**overrides)
