@@ -45,20 +45,20 @@ class ScriptedLift:
         ee, cube = obs["ee_pose"][:3].astype(float), obs["target_rel"].astype(float)
         if self.cube0 is None:
             self.cube0 = cube.copy()
-        goal, grip = self.cube0 + [0.0, 0.0, 0.06], -1.0
+        goal, grip = np.add(self.cube0, [0.0, 0.0, 0.06]), -1.0
         if self.phase == "above" and np.linalg.norm(goal - ee) < 0.005:
             self.phase = "down"
         if self.phase == "down":
-            goal = self.cube0 + [0.0, 0.0, 0.005]
+            goal = np.add(self.cube0, [0.0, 0.0, 0.005])
             if np.linalg.norm(goal - ee) < 0.003:
                 self.phase = "close"
         if self.phase == "close":
-            goal, grip = self.cube0 + [0.0, 0.0, 0.005], 1.0
+            goal, grip = np.add(self.cube0, [0.0, 0.0, 0.005]), 1.0
             self.count += 1
             if self.count >= 15:
                 self.phase = "lift"
         if self.phase == "lift":
-            goal, grip = self.cube0 + [0.0, 0.0, 0.17], 1.0
+            goal, grip = np.add(self.cube0, [0.0, 0.0, 0.17]), 1.0
         qdot = self._qdot(obs["joint_angles"].astype(float), ee, goal, obs["ee_pose"][3:])
         arm = qdot / (self.task.action_scale * self.arm.v_max)
         return np.clip(np.append(arm, grip), -1.0, 1.0).astype(np.float32)
@@ -68,7 +68,8 @@ def run_scripted_lift(env, seed: int = 0, quat=(1.0, 0.0, 0.0, 0.0)) -> dict:
     """One scripted episode (the cube at yaw 0); returns success, steps and the last info."""
     obs, _ = env.reset(seed=seed, options={"object_quat": np.asarray(quat)})
     script = ScriptedLift(env)
-    for step in range(env.task.episode_steps):
+    step = 0
+    for step in range(env.task.episode_steps):  # noqa: B007  (the count is returned)
         obs, _, done, _, info = env.step(script(obs))
         if done:
             break

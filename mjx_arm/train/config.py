@@ -18,9 +18,10 @@ from typing import Any
 
 from mjx_arm.envs.physics_config import PhysicsConfig, RandomizationConfig
 from mjx_arm.names import BACKENDS, PRESET_NAMES
+from mjx_arm.paths import asset
 from mjx_arm.settings import config_fields, set_path, split_setting
 from mjx_arm.task.config import RewardConfig, TaskConfig
-from mjx_arm.task.registry import is_task, task_names
+from mjx_arm.task.registry import get_task, is_task, task_names
 from mjx_arm.urdf.arm_config import ArmConfig
 
 PARTITIONS = ("auto", "xla", "per_device")
@@ -199,12 +200,15 @@ CPU = TrainConfig(
 )
 
 PRESETS = {"seed": SEED, "fast": FAST, "cpu": CPU}
+GRIPPER_ARM = "ur5e_gripper.urdf"  # the arm a gripper task's presets train (assets/)
 assert tuple(PRESETS) == PRESET_NAMES
 
 # What a preset changes for one task: Touch needs more env steps than Reach (it must learn to
 # hold a press), so its budget and evaluation count are its own.
 TASK_PRESETS: dict[tuple[str, str], dict[str, Any]] = {
     ("fast", "touch"): {"num_timesteps": 30_000_000, "num_evals": 31},
+    # Lift: a longer task (reach, close, lift, hold 10 steps) at twice the physics steps.
+    ("fast", "lift"): {"num_timesteps": 40_000_000, "num_evals": 41},
     ("cpu", "touch"): {
         "num_timesteps": 8_000_000,
         "num_envs": 256,
@@ -225,7 +229,10 @@ def preset_config(name: str, task: str | None = None) -> TrainConfig:
         raise ValueError(f"unknown preset {name!r}; choose one of {sorted(PRESETS)}")
     config = PRESETS[name]
     task = task or config.task
-    return config.replace(task=task, **TASK_PRESETS.get((name, task), {}))
+    config = config.replace(task=task, **TASK_PRESETS.get((name, task), {}))
+    if is_task(task) and get_task(task).gripper:  # a gripper task trains the gripper arm
+        config = config.replace(arm=ArmConfig(urdf=str(asset(GRIPPER_ARM))))
+    return config
 
 
 def _set_task_field(task_changes: dict[str, Any], name: str, text: str) -> None:

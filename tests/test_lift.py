@@ -1,0 +1,169 @@
+"""Lift: the gripper task in CPU MuJoCo, PyBullet and MJX, its observation, rules and model."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from lift_script import run_scripted_lift
+
+from mjx_arm.envs.base import action_size
+from mjx_arm.envs.model_io import arm_model
+from mjx_arm.envs.mujoco_env import MujocoArmEnv
+from mjx_arm.paths import asset
+from mjx_arm.task import lift as lift_lib
+from mjx_arm.task.lift import LIFT_HEIGHT, lift_config
+from mjx_arm.task.observation import obs_size
+from mjx_arm.train.config import preset_config
+from mjx_arm.urdf.scene_shapes import CUBE_HALF
+
+GRIPPER = str(asset("ur5e_gripper.urdf"))
+
+
+@pytest.fixture(scope="module")
+def mujoco_env():
+    env = MujocoArmEnv(lift_config(), GRIPPER)
+    yield env
+    env.close()
+
+
+def test_spaces_add_the_gripper(mujoco_env):
+    """7 actions (6 joints and the gripper); the observation adds gripper, object and pads."""
+    env = mujoco_env
+    assert env.action_space.shape == (7,) == (action_size(env.arm, env.task),)
+    keys = list(env.observation_space.spaces)
+    assert keys[-3:] == ["gripper", "object_rel", "pad_force"]
+    assert obs_size(6, env.task.spec.extra_obs) == 32
+    obs, _ = env.reset(seed=3)
+    assert env.observation_space.contains(obs)
+    assert obs["gripper"][0] == pytest.approx(0.0, abs=1e-6)  # starts open
+    np.testing.assert_allclose(obs["pad_force"], 0.0, atol=1e-6)
+
+
+def test_cube_starts_at_rest_on_the_table(mujoco_env):
+    """The cube rests on the table (centre at its half edge) inside the target box, at the
+    drawn yaw; the target point is the cube's centre."""
+    env = mujoco_env
+    for seed in range(5):
+        obs, info = env.reset(seed=seed)
+        cube = obs["target_rel"]
+        assert cube[2] == pytest.approx(CUBE_HALF, abs=1e-6)
+        low, high = env.task.target_box()
+        assert low[0] - 1e-6 <= cube[0] <= high[0] + 1e-6
+        assert low[1] - 1e-6 <= cube[1] <= high[1] + 1e-6
+        for _ in range(5):
+            obs, _, _, _, info = env.step(np.zeros(7))
+        assert abs(info["height"]) < 1e-3  # still resting
+        assert info["grasp"] == 0.0
+
+
+def test_model_steps_at_480_hz_with_240_hz_servo_gains(mujoco_env):
+    """The physics steps at 1/480 s; the servo gains are those of the 240 Hz model."""
+    env = mujoco_env
+    assert env.model.opt.timestep == pytest.approx(1 / 480)
+    reach = arm_model(env.arm, env.task.replace(task="reach", sim_dt=1 / 240))
+    for name in (*env.arm.joint_names, env.arm.gripper.joint):
+        assert env.model.actuator(name).gainprm[0] == reach.actuator(name).gainprm[0]
+
+
+def test_pads_have_touch_sensors(mujoco_env):
+    """Each finger link gets a touch sensor over its collision box."""
+    names = [mujoco_env.model.sensor(i).name for i in range(mujoco_env.model.nsensor)]
+    for link in mujoco_env.arm.gripper.pad_links:
+        assert f"{link}_touch" in names
+
+
+@pytest.mark.parametrize("engine", ["mujoco", "pybullet"])
+def test_scripted_pick_succeeds(engine):
+    """A scripted pick (over the cube, down, close, lift) succeeds within the episode in each
+    CPU engine: the cube ends at least LIFT_HEIGHT up, held by both pads, and the wrist reads
+    the cube's weight (about 1 N), not the grip."""
+    if engine == "mujoco":
+        env = MujocoArmEnv(lift_config(), GRIPPER)
+    else:
+        from pybullet_ref.env import PybulletArmEnv
+
+        env = PybulletArmEnv(lift_config(), GRIPPER)
+    try:
+        for seed in (0, 1):
+            result = run_scripted_lift(env, seed)
+            info = result["info"]
+            assert result["success"], (engine, seed, info)
+            assert result["steps"] < env.task.episode_steps
+            assert info["height"] >= LIFT_HEIGHT and info["grasp"] == 1.0
+            assert info["contact_force_norm"] < 3.0
+    finally:
+        env.close()
+
+
+def test_success_needs_height_and_both_pads():
+    """The step condition: LIFT_HEIGHT up and grasped; either alone is not enough."""
+    task, cfg = lift_lib.LIFT, lift_config()
+    height = np.array([0.12, 0.12, 0.05])
+    grasp = np.array([1.0, 0.0, 1.0])
+    holds = task.holds(np, 0.0 * height, 0.0 * height, cfg, {"height": height, "grasp": grasp})
+    assert holds.tolist() == [True, False, False]
+
+
+def test_grasp_needs_the_cube_between_the_pads():
+    """Both pads pressing count as a grasp only with the cube's centre near the ee point (a
+    gripper closed on nothing, pressing the table, is no grasp)."""
+    task, cfg = lift_lib.LIFT, lift_config()
+    ee, quat = np.zeros((2, 3)), np.tile([1.0, 0.0, 0.0, 0.0], (2, 1))
+    grip = np.zeros((2, 10))
+    grip[:, 4] = 1.0  # cube quaternion w
+    grip[:, 8:] = 5.0  # both pads press
+    grip[0, 1:4] = [0.0, 0.0, 0.01]  # the cube between the pads
+    grip[1, 1:4] = [0.0, 0.0, 0.10]  # the cube 10 cm away
+    measures = task.measures(np, ee, quat, grip, cfg)
+    assert measures["grasp"].tolist() == [1.0, 0.0]
+
+
+def test_lift_needs_a_gripper_arm():
+    """Lift on the arm without a gripper is a named error that points at the gripper arm."""
+    with pytest.raises(ValueError, match=r"parallel gripper.*ur5e_gripper"):
+        MujocoArmEnv(lift_config())
+
+
+def test_presets_train_the_gripper_arm():
+    """A gripper task's presets train the gripper arm; the others the shipped arm."""
+    assert preset_config("fast", "lift").arm.urdf.endswith("ur5e_gripper.urdf")
+    assert preset_config("fast", "touch").arm.urdf == ""
+
+
+def test_c_batch_names_mjx_for_lift():
+    """The C batch does not step the gripper: a named error says to train on MJX."""
+    from mjx_arm.envs.arm import arm_info
+    from mjx_arm.envs.mujoco_batch import MujocoCallbackPhysics
+
+    arm = arm_info(GRIPPER)
+    task = lift_config().for_arm(tuple(arm.home_qpos), arm.reach_scale)
+    with pytest.raises(ValueError, match="backend mjx"):
+        MujocoCallbackPhysics(arm_model(arm, task), arm, task)
+
+
+@pytest.mark.slow
+def test_mjx_reset_matches_cpu_mujoco():
+    """MJX (JAX) and CPU MuJoCo start a Lift episode with the same observation layout and, for
+    the same cube and arm pose, the same values (float32 tolerance)."""
+    import jax
+    import jax.numpy as jnp
+
+    from mjx_arm.envs.mjx_env import MjxArmEnv
+    from mjx_arm.envs.physics_config import PhysicsConfig
+
+    env = MjxArmEnv(lift_config(), GRIPPER, physics=PhysicsConfig(impl="jax"))
+    state = jax.jit(env.reset)(jax.random.PRNGKey(0))
+    assert state.obs.shape == (env.observation_size,) == (32,)
+    qpos = state.pipeline_state.qpos
+    cpu = MujocoArmEnv(lift_config(), GRIPPER)
+    start = env.physics.grip.cube_qpos
+    cube, quat = np.asarray(qpos[start : start + 3]), np.asarray(qpos[start + 3 : start + 7])
+    arm = np.asarray(qpos[np.asarray(env.physics.ids.qpos_adr)])
+    cpu.reset(seed=0, options={"target": cube, "object_quat": quat})
+    cpu._physics_reset(arm, cube, quat)
+    obs = cpu._evaluate(cpu._physics_read())[0]
+    flat = np.concatenate(list(obs.values()))
+    np.testing.assert_allclose(np.asarray(state.obs), flat, atol=2e-4)
+    step = jax.jit(env.step)
+    state = step(state, jnp.zeros(7))
+    assert float(state.metrics["lift_height"]) == pytest.approx(0.0, abs=1e-3)
