@@ -115,6 +115,7 @@ def policy_metadata(config: Mapping[str, Any], checkpoint: Path, run_dir: Path) 
     task = TaskConfig.from_dict(config["task"])
     record = config.get("arm") or arm_record(arm_info())  # runs before the arm record: shipped
     n = len(record["joint_names"])
+    n_actions = n + int(task.spec.gripper)  # a gripper task adds the gripper's command
     meta = json.loads((checkpoint / "meta.json").read_text())
     return {
         "format": FORMAT,
@@ -124,8 +125,8 @@ def policy_metadata(config: Mapping[str, Any], checkpoint: Path, run_dir: Path) 
         "step": int(meta["step"]),
         "run_dir": str(run_dir.resolve()),
         "exported_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-        "obs_layout": [[key, size] for key, size in obs_layout(n)],
-        "action_size": n,
+        "obs_layout": [[key, size] for key, size in obs_layout(n, task.spec.extra_obs)],
+        "action_size": n_actions,
         "activation": brax_activation(),
         "distribution": "tanh_normal",
         "action_scale": task.action_scale,
