@@ -46,6 +46,7 @@ from mjx_arm.envs.base import DEFAULT_HEIGHT, DEFAULT_WIDTH
 from mjx_arm.envs.mujoco_env import MujocoArmEnv
 from mjx_arm.names import CPU_ENGINES as ENGINES
 from mjx_arm.sim2real.adapter import VelocityToPositionAdapter
+from mjx_arm.sim2real.gripper import GripperPassthrough
 from mjx_arm.sim2real.limiter import JointLimits, SafetyLimiter
 from mjx_arm.sim2real.settings import ChainConfig, ServoConfig
 from mjx_arm.task.config import TaskConfig
@@ -112,11 +113,13 @@ class EpisodeCommands:
         commands: the limiter's position commands (rad), one ``(n,)`` per step.
         velocities: their velocities (rad/s), one ``(n,)`` per step.
         measured: joint angles (rad) one control period after each command.
+        gripper: a gripper task's finger position targets (m), one per step (empty otherwise).
     """
 
     commands: list[np.ndarray] = field(default_factory=list)
     velocities: list[np.ndarray] = field(default_factory=list)
     measured: list[np.ndarray] = field(default_factory=list)
+    gripper: list[float] = field(default_factory=list)
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The three lists as ``(T, n)`` arrays (``(0, 0)`` for an episode without steps)."""
@@ -145,8 +148,22 @@ class _ChainActuation:
         dt, lim = self.task.ctrl_dt, self.limits
         self.adapter = VelocityToPositionAdapter(dt, config.tau, home, lim.lower, lim.upper)
         self.limiter = SafetyLimiter(lim, dt, home)
+        self.gripper_chain = None
+        gripper = self.arm.gripper
+        if gripper is not None and self.task.spec.gripper:
+            lower = float(self.gripper_lower())
+            upper = lower + gripper.stroke
+            self.gripper_chain = GripperPassthrough(lower, upper, gripper.v_max, dt, config.gripper)
         self.episodes: list[EpisodeCommands] = []
         self._holding = False
+
+    def _physics_set_gripper(self, speed: float) -> None:
+        """The gripper's command through its passthrough: a position target, then the
+        stand-in's position loop around the finger's velocity servo."""
+        if self._holding or self.gripper_chain is None:
+            return
+        self.gripper_chain.step(speed)
+        self._finger_velocity(self.gripper_chain.servo_speed(self.finger_position()))
 
     def _physics_set_velocity_targets(self, qdot_target: np.ndarray) -> None:
         if not self._holding:
@@ -158,6 +175,8 @@ class _ChainActuation:
         self.adapter.reset(q)
         self.limiter.reset(q)
         self._physics_set_position_targets(q)
+        if self.gripper_chain is not None:
+            self.gripper_chain.reset(self.finger_position())
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         """Reset the episode (see :meth:`BaseRobotEnv.reset`) and start a new command log."""
@@ -173,6 +192,8 @@ class _ChainActuation:
             log.commands.append(self.limiter.command)
             log.velocities.append(self.limiter.velocity)
             log.measured.append(self.measured_qpos())
+            if self.gripper_chain is not None:
+                log.gripper.append(self.gripper_chain.target)
         return result
 
     def measured_qpos(self) -> np.ndarray:
@@ -204,8 +225,8 @@ class MujocoPositionArmEnv(_ChainActuation, MujocoArmEnv):
         self._setup_chain(config)
         self.gains = use_position_servos(self.model, self.ids.actuators, self.arm, config.servo)
 
-    def _physics_reset(self, qpos: np.ndarray, target_body_pos: np.ndarray) -> None:
-        super()._physics_reset(qpos, target_body_pos)
+    def _physics_reset(self, qpos, target_body_pos, object_quat=None) -> None:
+        super()._physics_reset(qpos, target_body_pos, object_quat)
         self._start_chain()
         # the parent's forward pass saw ctrl = 0, a pull towards q = 0 that moves the
         # accelerations (and so the F/T reading): redo it with the servo holding the start
@@ -215,6 +236,17 @@ class MujocoPositionArmEnv(_ChainActuation, MujocoArmEnv):
 
     def _physics_set_position_targets(self, q_target: np.ndarray) -> None:
         self._ctrl[self._act] = q_target
+
+    def gripper_lower(self) -> float:
+        """The driven finger's open position (m)."""
+        return float(self.model.joint(self.arm.gripper.joint).range[0])
+
+    def finger_position(self) -> float:
+        """The driven finger's position (m)."""
+        return float(self.data.qpos[self.grip.finger_qpos])
+
+    def _finger_velocity(self, speed: float) -> None:
+        MujocoArmEnv._physics_set_gripper(self, speed)
 
 
 class PybulletPositionArmEnv(_ChainActuation, PybulletArmEnv):
@@ -245,16 +277,27 @@ class PybulletPositionArmEnv(_ChainActuation, PybulletArmEnv):
         self._start_chain()
         self.gains = servo_gains(self.servo.kv, self.servo.effort, config.servo)
 
-    def _physics_reset(self, qpos: np.ndarray, target_body_pos: np.ndarray) -> None:
+    def _physics_reset(self, qpos, target_body_pos, object_quat=None) -> None:
         self._physics_set_position_targets(qpos)  # hold the start pose while the world settles
         holding, self._holding = self._holding, True
-        super()._physics_reset(qpos, target_body_pos)
+        super()._physics_reset(qpos, target_body_pos, object_quat)
         self._holding = holding
         if hasattr(self, "limiter"):  # not during the parent's constructor
             self._start_chain()
 
     def _physics_set_position_targets(self, q_target: np.ndarray) -> None:
         self._q_target = [float(v) for v in q_target]
+
+    def gripper_lower(self) -> float:
+        """The driven finger's open position (m)."""
+        return self.ids.finger_lower
+
+    def finger_position(self) -> float:
+        """The driven finger's position (m)."""
+        return float(self.client.getJointState(self.body, self.ids.finger)[0])
+
+    def _finger_velocity(self, speed: float) -> None:
+        PybulletArmEnv._physics_set_gripper(self, speed)
 
     def _physics_step(self, n_substeps: int) -> None:
         # PybulletArmEnv._physics_step with the position loop in front of the velocity servo

@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from mjx_arm.sim2real.commands import ServojConfig
+from mjx_arm.sim2real.gripper import GripperConfig
 from mjx_arm.sim2real.limiter import LimiterConfig
 
 
@@ -38,11 +39,13 @@ class ChainConfig:
             adding only 20 ms of lag.
         limiter: how the limiter's limits are derived from the URDF.
         servo: the position servo.
+        gripper: the gripper command's passthrough (gripper tasks).
     """
 
     tau: float = 0.02
     limiter: LimiterConfig = field(default_factory=LimiterConfig)
     servo: ServoConfig = field(default_factory=ServoConfig)
+    gripper: GripperConfig = field(default_factory=GripperConfig)
 
     def __post_init__(self) -> None:
         if not self.tau >= 0:
@@ -54,13 +57,15 @@ class DeployConfig:
     """Settings of a deploy-sim run.
 
     Attributes:
-        tau, limiter, servo: the command chain and the servo (see :class:`ChainConfig`).
+        tau, limiter, servo, gripper: the command chain, the servo and the gripper's
+            passthrough (see :class:`ChainConfig`).
         lookahead_time, gain: the ``servoj`` arguments of the written URScript.
     """
 
     tau: float = 0.02
     limiter: LimiterConfig = field(default_factory=LimiterConfig)
     servo: ServoConfig = field(default_factory=ServoConfig)
+    gripper: GripperConfig = field(default_factory=GripperConfig)
     lookahead_time: float = 0.1
     gain: float = 300.0
 
@@ -70,4 +75,6 @@ class DeployConfig:
 
     def chain(self) -> ChainConfig:
         """The position env's chain and servo settings."""
-        return ChainConfig(tau=self.tau, limiter=self.limiter, servo=self.servo)
+        return ChainConfig(
+            tau=self.tau, limiter=self.limiter, servo=self.servo, gripper=self.gripper
+        )
