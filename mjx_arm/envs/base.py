@@ -97,8 +97,8 @@ class BaseRobotEnv(gym.Env):
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}")
         self.render_mode, self.width, self.height = render_mode, width, height
         n = self.arm.n_joints
-        self.spec = self.task.spec
-        self._extra = self.spec.extra_obs
+        self.task_spec = self.task.spec
+        self._extra = self.task_spec.extra_obs
         self._gripper_scale = gripper_speed(self.arm, self.task)
         na = action_size(self.arm, self.task)
         self.action_space = gym.spaces.Box(-1.0, 1.0, (na,), np.float32)
@@ -164,7 +164,7 @@ class BaseRobotEnv(gym.Env):
         u = self.np_random.uniform(size=sampling.n_uniforms(n))
         qpos = sampling.initial_qpos(np, u[:n], self.task)
         body = sampling.target_body_pos(np, u[n:], self.task)
-        quat = self.spec.object_quat(np, u[n:], self.task)
+        quat = self.task_spec.object_quat(np, u[n:], self.task)
         if options and "target" in options:
             body = np.asarray(options["target"], dtype=np.float64)
         if options and "object_quat" in options:
@@ -246,7 +246,7 @@ class BaseRobotEnv(gym.Env):
         ee_pos, ee_quat, qpos, _, target_pos, wrench, grip = reading
         extra = None
         if self._extra:
-            extra = self.spec.grip_observation(np, ee_pos, ee_quat, grip, self.task)
+            extra = self.task_spec.grip_observation(np, ee_pos, ee_quat, grip, self.task)
         raw = obs_lib.raw_state(np, ee_pos, ee_quat, qpos, target_pos, wrench, extra)
         state = obs_lib.clip_state(np, raw, self._bounds)
         d = float(reward_lib.target_distance(np, ee_pos, target_pos))
@@ -255,9 +255,9 @@ class BaseRobotEnv(gym.Env):
 
     def _measures(self, reading: PhysicsReading) -> dict[str, float] | None:
         """The task's measures of a reading (gripper tasks), else None."""
-        if not self.spec.gripper:
+        if not self.task_spec.gripper:
             return None
-        values = self.spec.measures(np, reading.ee_pos, reading.ee_quat, reading.grip, self.task)
+        values = self.task_spec.measures(np, reading.ee_pos, reading.ee_quat, reading.grip, self.task)
         return {key: float(value) for key, value in values.items()}
 
     def _evaluate(

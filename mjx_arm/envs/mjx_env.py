@@ -105,9 +105,9 @@ class MjxArmEnv(Env):
         else:
             self.physics = physics_factory(self.mj_model, self.arm, self.task)
         self.randomization = randomization or RandomizationConfig()
-        self.spec = self.task.spec
+        self.task_spec = self.task.spec
         scale = self.task.action_scale * self.arm.v_max
-        if self.spec.gripper:  # the gripper's entry moves the finger at up to its speed limit
+        if self.task_spec.gripper:  # the gripper's entry moves the finger at up to its speed limit
             scale = [*scale, gripper_speed(self.arm, self.task)]
         self._v_scale = jnp.asarray(scale, jnp.float32)
         limits = (jnp.asarray(self.arm.lower), jnp.asarray(self.arm.upper))
@@ -118,7 +118,7 @@ class MjxArmEnv(Env):
     def observation_size(self) -> int:
         """Size of the flat observation ``state``: 16 + n (22 for a 6-joint arm), plus the
         task's extra keys."""
-        return obs_lib.obs_size(self.arm.n_joints, self.spec.extra_obs)
+        return obs_lib.obs_size(self.arm.n_joints, self.task_spec.extra_obs)
 
     @property
     def action_size(self) -> int:
@@ -138,7 +138,7 @@ class MjxArmEnv(Env):
         return (
             sampling.initial_qpos(jnp, u[:n], self.task),
             sampling.target_body_pos(jnp, u[n:], self.task),
-            self.spec.object_quat(jnp, u[n:], self.task),
+            self.task_spec.object_quat(jnp, u[n:], self.task),
         )
 
     def reset(self, rng: jax.Array) -> State:
@@ -243,11 +243,11 @@ class MjxArmEnv(Env):
         target = reading.target_pos if episode is None else reading.target_pos - episode.box_offset
         wrench = reading.wrench if noise is None else reading.wrench + noise
         extra = None
-        if self.spec.extra_obs:
-            values = self.spec.grip_observation(
+        if self.task_spec.extra_obs:
+            values = self.task_spec.grip_observation(
                 jnp, reading.ee_pos, reading.ee_quat, reading.grip, self.task
             )
-            extra = (self.spec.extra_obs, values)
+            extra = (self.task_spec.extra_obs, values)
         return obs_lib.flat_obs(
             jnp, reading.ee_pos, reading.ee_quat, reading.qpos, target, wrench,
             self.task.force_clip, extra,
@@ -255,9 +255,9 @@ class MjxArmEnv(Env):
 
     def _task_measures(self, reading: Reading) -> dict[str, jax.Array] | None:
         """A gripper task's measures of a reading (:meth:`mjx_arm.task.spec.Task.measures`)."""
-        if not self.spec.gripper:
+        if not self.task_spec.gripper:
             return None
-        return self.spec.measures(jnp, reading.ee_pos, reading.ee_quat, reading.grip, self.task)
+        return self.task_spec.measures(jnp, reading.ee_pos, reading.ee_quat, reading.grip, self.task)
 
     @staticmethod
     def _task_metrics(measures: dict[str, jax.Array] | None) -> dict[str, jax.Array]:
