@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from mjx_arm.task.config import TaskConfig, task_config
-from mjx_arm.task.observation import n_joints_of, obs_slices
+from mjx_arm.task.observation import n_joints_of, obs_size, obs_slices
 
 REQUIRED_KEYS = ("obs", "reward", "ee_pos", "contact_force")
 DEFAULT_WIDTH, DEFAULT_HEIGHT = 800, 600
@@ -155,8 +155,20 @@ def _plot_reward(ax, steps: np.ndarray, reward: np.ndarray) -> None:
         )
 
 
+def state_layout(size: int) -> tuple[int, tuple]:
+    """``(joints, extra keys)`` of a flat state of ``size`` entries: the one reading among the
+    registered tasks' layouts with 5 to 7 joints (a gripper task adds its extra keys)."""
+    from mjx_arm.task.registry import get_task, task_names
+
+    for extra in dict.fromkeys(get_task(name).extra_obs for name in task_names()):
+        n = size - obs_size(0, extra)
+        if 5 <= n <= 7:
+            return n, extra
+    return n_joints_of(size), ()
+
+
 def _plot_position(ax, steps: np.ndarray, traj: dict[str, Any]) -> None:
-    target = traj["obs"][:, obs_slices(n_joints_of(traj["obs"].shape[-1]))["target_rel"]]
+    target = traj["obs"][:, obs_slices(*state_layout(traj["obs"].shape[-1]))["target_rel"]]
     colors = ("tab:red", "tab:green", "tab:blue")
     for i, (axis, color) in enumerate(zip("xyz", colors, strict=True)):
         ax.plot(steps, traj["ee_pos"][:, i], color=color, label=f"ee {axis}")
@@ -213,15 +225,33 @@ def render_frames(
     model, data = env.model, env.data
     mocap = int(model.body_mocapid[model.body(TARGET_BODY).id])
     offset = sampling.target_point(np, np.zeros(3), task)
-    s = obs_slices(env.arm.n_joints)
+    s = obs_slices(env.arm.n_joints, env.task_spec.extra_obs)
     try:
         for obs in np.asarray(traj["obs"], dtype=np.float64):
             data.qpos[env.ids.qpos_adr] = obs[s["joint_angles"]]
             data.mocap_pos[mocap] = obs[s["target_rel"]] - offset
+            if env.grip is not None:
+                _pose_gripper_task(env, obs, s)
             mujoco.mj_forward(model, data)
             yield env.render()
     finally:
         env.close()
+
+
+def _pose_gripper_task(env: Any, obs: np.ndarray, s: dict[str, slice]) -> None:
+    """A gripper task's fingers (from the closure) and object (its centre, and its orientation
+    relative to the ee turned into the world frame) into the env's ``qpos``."""
+    import mujoco
+
+    from mjx_arm.task.grip import quat_mul
+
+    grip, data, model = env.grip, env.data, env.model
+    finger = grip.lower + float(obs[s["gripper"]][0]) * grip.stroke
+    slides = np.flatnonzero(model.jnt_type == mujoco.mjtJoint.mjJNT_SLIDE)
+    data.qpos[model.jnt_qposadr[slides]] = finger  # the driven finger and its mimic
+    ee_quat = obs[s["ee_pose"]][3:]
+    quat = quat_mul(np, ee_quat, obs[s["object_rel"]][3:])
+    grip.place(data.qpos, obs[s["target_rel"]], quat / np.linalg.norm(quat))
 
 
 class VideoWriter:

@@ -119,9 +119,27 @@ def test_grasp_needs_the_cube_between_the_pads():
 
 
 def test_lift_needs_a_gripper_arm():
-    """Lift on the arm without a gripper is a named error that points at the gripper arm."""
+    """Lift on the arm without a gripper is a named error that points at the gripper arm;
+    without an arm it runs on the gripper arm."""
     with pytest.raises(ValueError, match=r"parallel gripper.*ur5e_gripper"):
-        MujocoArmEnv(lift_config())
+        MujocoArmEnv(lift_config(), asset("ur5e.urdf"))
+    env = MujocoArmEnv(lift_config())
+    assert env.arm.gripper is not None
+    env.close()
+
+
+def test_gymnasium_id():
+    """``mjx_arm/Lift-v0`` makes the Lift env on the gripper arm in both CPU engines."""
+    import gymnasium as gym
+
+    from mjx_arm.envs.registration import register_envs
+
+    register_envs()
+    for engine in ("mujoco", "pybullet"):
+        env = gym.make("mjx_arm/Lift-v0", engine=engine)
+        obs, _ = env.reset(seed=0)
+        assert env.action_space.shape == (7,) and obs["object_rel"].shape == (7,)
+        env.close()
 
 
 def test_presets_train_the_gripper_arm():

@@ -35,6 +35,7 @@ import numpy as np
 
 from mjx_arm.envs.arm import ArmInfo, arm_info
 from mjx_arm.paths import asset
+from mjx_arm.task.lift import LIFT_SIM_DT, SERVO_DT
 from mjx_arm.urdf.convert import build_spec
 from mjx_arm.urdf.scene_shapes import CUBE_BODY, CUBE_HALF, CUBE_MASS
 
@@ -45,7 +46,9 @@ FINGER, MIMIC = "left_finger_joint", "right_finger_joint"
 PHASES = (("close", 1.0), ("lift", 1.0), ("hold", 2.0))  # name, seconds
 LIFT_SPEED = 0.1  # m/s of the ee during the lift
 SLIP_GOAL = 0.005  # m over the hold
-SIM_DT, CTRL_DT = 1.0 / 240.0, 1.0 / 30.0  # the tasks' physics step and control period (s)
+# The Lift task's physics step and servo step, and the control period (s). At the other tasks'
+# 1/240 s a cube picked off the table slips out in C MuJoCo and MJX (bench_grasp_step.py).
+SIM_DT, SERVO_DT, CTRL_DT = LIFT_SIM_DT, SERVO_DT, 1.0 / 30.0
 
 
 @dataclass(frozen=True)
@@ -85,15 +88,15 @@ def gripper_arm() -> ArmInfo:
 def grasp_model(arm: ArmInfo, sim_dt: float = SIM_DT, cube: Cube = Cube()) -> mujoco.MjModel:
     """The gripper arm in the lift scene (table and free cube; gravity on), stepping ``sim_dt``
     (a whole fraction of :data:`CTRL_DT`). The servos keep the gains converted for
-    :data:`SIM_DT`, so the finger presses the same at every step."""
-    config = arm.convert_config(scene="lift", self_collision=False, sim_dt=SIM_DT)
+    :data:`SERVO_DT` (as the Lift task's model), so the finger presses the same at every step."""
+    config = arm.convert_config(
+        scene="lift", self_collision=False, sim_dt=sim_dt, servo_dt=SERVO_DT
+    )
     spec = build_spec(arm.urdf, config)
     (geom,) = spec.body(CUBE_BODY).geoms
     geom.size, geom.mass = [cube.half] * 3, cube.mass
     geom.friction = [cube.friction, *geom.friction[1:]]
-    model = spec.compile()
-    model.opt.timestep = sim_dt
-    return model
+    return spec.compile()
 
 
 def substeps(model: mujoco.MjModel) -> int:
@@ -258,48 +261,52 @@ def run_mjx(
 def run_pybullet(
     model: mujoco.MjModel, arm: ArmInfo, script: Script, frames: Frames = None
 ) -> dict[str, Any]:
-    """The script in PyBullet, through the reference env's servo and world (its table)."""
-    from mjx_arm.task import reach_config
-    from pybullet_ref.env import PybulletArmEnv, pybullet
+    """The script in PyBullet, through the Lift env's servo, world and cube; the driven finger
+    is the env's velocity motor, capped at the MuJoCo finger servo's press."""
+    from mjx_arm.task.lift import lift_config
+    from pybullet_ref.env import PybulletArmEnv
 
-    env = PybulletArmEnv(
-        reach_config(sim_dt=float(model.opt.timestep)),
-        arm.config,
-        width=FILM_SIZE[0],
-        height=FILM_SIZE[1],
-    )
+    task = lift_config(sim_dt=float(model.opt.timestep))
+    env = PybulletArmEnv(task, arm.config, width=FILM_SIZE[0], height=FILM_SIZE[1])
     try:
-        env._physics_reset(script.start_qpos, np.array([5.0, 0.0, 0.0]))  # the marker far away
+        env._physics_reset(script.start_qpos, script.cube_pos, np.array([1.0, 0.0, 0.0, 0.0]))
         client, body = env.client, env.body
-        joint = {
-            client.getJointInfo(body, j)[1].decode(): j for j in range(client.getNumJoints(body))
-        }
         for name in (FINGER, MIMIC):
-            client.resetJointState(body, joint[name], NEAR_CLOSED)
+            client.resetJointState(body, _joint_index(client, body, name), NEAR_CLOSED)
         spec = cube_of(model)
-        shape = client.createCollisionShape(pybullet.GEOM_BOX, halfExtents=[spec.half] * 3)
-        look = client.createVisualShape(
-            pybullet.GEOM_BOX, halfExtents=[spec.half] * 3, rgbaColor=[0.2, 0.35, 0.85, 1.0]
-        )
-        cube = client.createMultiBody(spec.mass, shape, look, basePosition=list(script.cube_pos))
-        client.changeDynamics(cube, -1, lateralFriction=spec.friction)
-        press = finger_press(model, script.finger_speed)
-        client.setJointMotorControl2(
-            body, joint[FINGER], pybullet.VELOCITY_CONTROL,
-            targetVelocity=script.finger_speed, force=press,
-        )  # fmt: skip
+        if spec.half != CUBE_HALF:  # another size: the env's cube is replaced
+            client.removeBody(env.cube)
+            env.cube = _box(client, spec.half, script.cube_pos)
+        client.changeDynamics(env.cube, -1, mass=spec.mass, lateralFriction=spec.friction)
+        env._physics_set_gripper(script.finger_speed)
         cubes, ees = [], []
         for qdot in script.qdot:
             env._physics_set_velocity_targets(qdot)
             env._physics_step(substeps(model))
-            cubes.append(np.array(client.getBasePositionAndOrientation(cube)[0]))
-            ees.append(env._physics_read().ee_pos)
+            reading = env._physics_read()
+            cubes.append(reading.target_pos)
+            ees.append(reading.ee_pos)
             if frames is not None:
                 frames.append(env._render_frame())
-        opening = 0.085 - 2 * float(client.getJointState(body, joint[FINGER])[0])
+        opening = 0.085 - 2 * float(client.getJointState(body, env.ids.finger)[0])
     finally:
         env.close()
     return summarize(np.array(cubes), np.array(ees), opening, script.hold_start)
+
+
+def _box(client: Any, half: float, position) -> int:
+    """A free box of half edge ``half`` (m) at ``position`` (its mass is set after)."""
+    from pybullet_ref.env import CUBE_RGBA, pybullet
+
+    shape = client.createCollisionShape(pybullet.GEOM_BOX, halfExtents=[half] * 3)
+    look = client.createVisualShape(pybullet.GEOM_BOX, halfExtents=[half] * 3, rgbaColor=CUBE_RGBA)
+    return client.createMultiBody(CUBE_MASS, shape, look, basePosition=list(position))
+
+
+def _joint_index(client: Any, body: int, name: str) -> int:
+    """PyBullet's index of joint ``name``."""
+    names = [client.getJointInfo(body, j)[1].decode() for j in range(client.getNumJoints(body))]
+    return names.index(name)
 
 
 FILM_SIZE = (480, 360)  # width, height (pixels) of the videos

@@ -90,8 +90,9 @@ class BaseRobotEnv(gym.Env):
         width: int = DEFAULT_WIDTH,
         height: int = DEFAULT_HEIGHT,
     ) -> None:
-        self.arm: ArmInfo = validated_arm_info(arm, self.engine)
-        self.task = task_for_arm(task or touch_config(), self.arm)
+        task = task or touch_config()
+        self.arm: ArmInfo = validated_arm_info(default_arm(task, arm), self.engine)
+        self.task = task_for_arm(task, self.arm)
         self.metadata = {**self.metadata, "render_fps": round(1.0 / self.task.ctrl_dt)}
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}")
@@ -257,7 +258,8 @@ class BaseRobotEnv(gym.Env):
         """The task's measures of a reading (gripper tasks), else None."""
         if not self.task_spec.gripper:
             return None
-        values = self.task_spec.measures(np, reading.ee_pos, reading.ee_quat, reading.grip, self.task)
+        spec, r = self.task_spec, reading
+        values = spec.measures(np, r.ee_pos, r.ee_quat, r.grip, self.task)
         return {key: float(value) for key, value in values.items()}
 
     def _evaluate(
@@ -348,6 +350,19 @@ def task_for_arm(task: TaskConfig, arm: ArmInfo) -> TaskConfig:
             "--arm assets/ur5e_gripper.urdf"
         )
     return task.for_arm(tuple(arm.home_qpos), arm.reach_scale)
+
+
+def default_arm(task: TaskConfig, arm: Any = None) -> Any:
+    """``arm``, or where it is None the arm a task runs on by default: the gripper arm
+    (``assets/ur5e_gripper.urdf``) for a gripper task, else the shipped arm (None)."""
+    if arm is None and task.spec.gripper:
+        from mjx_arm.paths import asset
+
+        return asset(GRIPPER_ARM)
+    return arm
+
+
+GRIPPER_ARM = "ur5e_gripper.urdf"  # assets/: the arm of the gripper tasks' presets
 
 
 def action_size(arm: ArmInfo, task: TaskConfig) -> int:

@@ -30,7 +30,7 @@ from brax.envs.base import Env, State
 from flax import struct
 
 from mjx_arm.envs.arm import validated_arm_info
-from mjx_arm.envs.base import action_size, gripper_speed, task_for_arm
+from mjx_arm.envs.base import action_size, default_arm, gripper_speed, task_for_arm
 from mjx_arm.envs.mjx_physics import MjxPhysics, Reading
 from mjx_arm.envs.model_io import arm_model
 from mjx_arm.envs.physics_config import PhysicsConfig
@@ -97,8 +97,9 @@ class MjxArmEnv(Env):
         batch_size: int = 1,
         randomization: RandomizationConfig | None = None,
     ) -> None:
-        self.arm = validated_arm_info(arm, "mujoco")
-        self.task = task_for_arm(task or touch_config(), self.arm)
+        task = task or touch_config()
+        self.arm = validated_arm_info(default_arm(task, arm), "mujoco")
+        self.task = task_for_arm(task, self.arm)
         self.mj_model = mj_model if mj_model is not None else arm_model(self.arm, self.task)
         if physics_factory is None:
             self.physics = MjxPhysics(self.mj_model, self.arm, self.task, physics, batch_size)
@@ -257,7 +258,8 @@ class MjxArmEnv(Env):
         """A gripper task's measures of a reading (:meth:`mjx_arm.task.spec.Task.measures`)."""
         if not self.task_spec.gripper:
             return None
-        return self.task_spec.measures(jnp, reading.ee_pos, reading.ee_quat, reading.grip, self.task)
+        spec, r = self.task_spec, reading
+        return spec.measures(jnp, r.ee_pos, r.ee_quat, r.grip, self.task)
 
     @staticmethod
     def _task_metrics(measures: dict[str, jax.Array] | None) -> dict[str, jax.Array]:

@@ -91,17 +91,23 @@ def make_eval_env(
 
 def eval_arm(policy: Any, source: str | Path | None = None) -> Any:
     """The arm to evaluate on: ``source`` (a URDF or an arm file), else the arm the policy
-    records (files from before arm records: the shipped arm).
+    records (files from before arm records: the shipped arm). A recorded arm of ``assets/``
+    (trained where this package lived elsewhere) is this install's copy; the model hash check
+    (:func:`mjx_arm.envs.arm.check_same_arm`) still compares the two.
 
     Raises:
         FileNotFoundError: the recorded arm's URDF is not on this machine (pass ``source``).
     """
-    from mjx_arm.urdf.arm_config import ArmConfig, load_arm
+    from mjx_arm.paths import asset
+    from mjx_arm.urdf.arm_config import SHIPPED_ARMS, ArmConfig, load_arm
 
     if source is not None:
         return load_arm(source)
     record = getattr(policy, "metadata", {}).get("arm") or {}
     arm = ArmConfig.from_dict(record.get("config", {}))
+    recorded = Path(arm.urdf)
+    if arm.urdf and recorded.parent.name == "assets" and recorded.name in SHIPPED_ARMS:
+        arm = arm.replace(urdf=str(asset(recorded.name)))
     if not arm.urdf_path.is_file():
         raise FileNotFoundError(
             f"the policy was trained on {arm.urdf}, which is not on this machine; pass the "

@@ -14,7 +14,7 @@ import numpy as np
 
 from mjx_arm.evaluate.stats import EpisodeStats, EvalRun
 from mjx_arm.task.config import TaskConfig
-from mjx_arm.task.observation import OBS_KEYS, flatten_obs
+from mjx_arm.task.observation import flatten_obs
 
 if TYPE_CHECKING:
     import gymnasium as gym
@@ -63,7 +63,8 @@ class _Recorder:
 
 
 def _flat(obs: Any) -> np.ndarray:
-    return flatten_obs(np, {k: np.asarray(obs[k], np.float32) for k in OBS_KEYS})
+    """The flat state of an observation dict: the contract's keys, then a task's extra ones."""
+    return flatten_obs(np, {k: np.asarray(v, np.float32) for k, v in obs.items()})
 
 
 def run_episode(

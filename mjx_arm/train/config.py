@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from mjx_arm.envs.base import GRIPPER_ARM
 from mjx_arm.envs.physics_config import PhysicsConfig, RandomizationConfig
 from mjx_arm.names import BACKENDS, PRESET_NAMES
 from mjx_arm.paths import asset
@@ -200,7 +201,6 @@ CPU = TrainConfig(
 )
 
 PRESETS = {"seed": SEED, "fast": FAST, "cpu": CPU}
-GRIPPER_ARM = "ur5e_gripper.urdf"  # the arm a gripper task's presets train (assets/)
 assert tuple(PRESETS) == PRESET_NAMES
 
 # What a preset changes for one task: Touch needs more env steps than Reach (it must learn to

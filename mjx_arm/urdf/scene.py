@@ -106,7 +106,8 @@ def add_scene(spec: mujoco.MjSpec, scene: str) -> None:
         marker.name = "target_marker"
         marker.type = mujoco.mjtGeom.mjGEOM_SPHERE
         marker.size = [0.02, 0, 0]
-        marker.rgba = [0.1, 0.8, 0.2, 0.5]
+        # the lift scene's target is the cube itself: its marker is not drawn
+        marker.rgba = [0.1, 0.8, 0.2, 0.0 if scene == "lift" else 0.5]
         marker.contype = marker.conaffinity = 0
     if scene == "lift":
         _add_cube(world)
