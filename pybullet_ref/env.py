@@ -61,6 +61,7 @@ from mjx_arm.envs.base import DEFAULT_HEIGHT, DEFAULT_WIDTH, BaseRobotEnv, Physi
 from mjx_arm.paths import asset
 from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
+from mjx_arm.task.grip import ObjectStart
 from mjx_arm.task.wrench import external_wrench
 from mjx_arm.urdf.arm_config import ArmConfig
 from mjx_arm.urdf.scene import CAMERA_EYE, CAMERA_FOVY, CAMERA_TARGET
@@ -186,7 +187,7 @@ class PybulletArmEnv(BaseRobotEnv):
         self._target_body = sampling.target_body_pos(np, np.full(3, 0.5), self.task)
         self._tool_before = (np.zeros(3), np.zeros(3))
         self._camera = self._camera_matrices()
-        self._object_quat = np.array([1.0, 0.0, 0.0, 0.0])
+        self._object = ObjectStart(np.array([1.0, 0.0, 0.0, 0.0]), CUBE_MASS, FRICTION)
         self.gripper = self.arm.gripper if self.task.spec.gripper else None
         # a complete world before the first reset (render, get_ee_pose): home pose, mid target
         self._physics_reset(np.asarray(self.task.home_qpos), self._target_body)
@@ -263,16 +264,17 @@ class PybulletArmEnv(BaseRobotEnv):
         elif self.render_mode and self.gripper is None:
             self._add_target_marker(position)
         if self.gripper is not None:
-            self.cube = self._add_cube(position, self._object_quat)
+            self.cube = self._add_cube(position, self._object)
 
-    def _add_cube(self, position: list[float], quat: np.ndarray) -> int:
-        """The free cube of a gripper task (the MuJoCo scene's size, mass and friction)."""
+    def _add_cube(self, position: list[float], obj: ObjectStart) -> int:
+        """The free cube of a gripper task: the MuJoCo scene's size, the episode's mass and
+        friction (Bullet multiplies the two bodies' coefficients: the pads keep 1.0)."""
         c, half = self.client, [CUBE_HALF] * 3
         shape = c.createCollisionShape(pybullet.GEOM_BOX, halfExtents=half)
         look = c.createVisualShape(pybullet.GEOM_BOX, halfExtents=half, rgbaColor=CUBE_RGBA)
-        w, x, y, z = (float(v) for v in quat)
-        cube = c.createMultiBody(CUBE_MASS, shape, look, position, [x, y, z, w])
-        c.changeDynamics(cube, BASE, lateralFriction=FRICTION)
+        w, x, y, z = (float(v) for v in obj.quat)
+        cube = c.createMultiBody(float(obj.mass), shape, look, position, [x, y, z, w])
+        c.changeDynamics(cube, BASE, lateralFriction=float(obj.friction))
         return cube
 
     def _setup_arm(self, qpos: np.ndarray) -> None:
@@ -303,11 +305,11 @@ class PybulletArmEnv(BaseRobotEnv):
     # ------------------------------------------------------------------ engine hooks
 
     def _physics_reset(
-        self, qpos: np.ndarray, target_body_pos: np.ndarray, object_quat: np.ndarray | None = None
+        self, qpos: np.ndarray, target_body_pos: np.ndarray, obj: ObjectStart | None = None
     ) -> None:
         self._target_body = np.asarray(target_body_pos, dtype=np.float64).copy()
-        if object_quat is not None:
-            self._object_quat = np.asarray(object_quat, dtype=np.float64)
+        if obj is not None:
+            self._object = obj
         self._build_world(qpos, self._target_body)
         self._physics_set_velocity_targets(np.zeros(len(self.ids.joints)))
         if self.gripper is not None:

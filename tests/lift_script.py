@@ -64,9 +64,10 @@ class ScriptedLift:
         return np.clip(np.append(arm, grip), -1.0, 1.0).astype(np.float32)
 
 
-def run_scripted_lift(env, seed: int = 0, quat=(1.0, 0.0, 0.0, 0.0)) -> dict:
-    """One scripted episode (the cube at yaw 0); returns success, steps and the last info."""
-    obs, _ = env.reset(seed=seed, options={"object_quat": np.asarray(quat)})
+def run_scripted_lift(env, seed: int = 0, quat=(1.0, 0.0, 0.0, 0.0), **options) -> dict:
+    """One scripted episode (the cube at yaw 0; ``options``: reset options such as
+    ``object_mass``); returns success, steps and the last info."""
+    obs, _ = env.reset(seed=seed, options={"object_quat": np.asarray(quat), **options})
     script = ScriptedLift(env)
     step = 0
     for step in range(env.task.episode_steps):  # noqa: B007  (the count is returned)

@@ -11,6 +11,7 @@ from mjx_arm.envs.model_io import arm_model
 from mjx_arm.envs.mujoco_env import MujocoArmEnv
 from mjx_arm.paths import asset
 from mjx_arm.task import lift as lift_lib
+from mjx_arm.task.grip import ObjectStart
 from mjx_arm.task.lift import LIFT_HEIGHT, lift_config
 from mjx_arm.task.observation import obs_size
 from mjx_arm.train.config import preset_config
@@ -63,6 +64,46 @@ def test_model_steps_at_480_hz_with_240_hz_servo_gains(mujoco_env):
     reach = arm_model(env.arm, env.task.replace(task="reach", sim_dt=1 / 240))
     for name in (*env.arm.joint_names, env.arm.gripper.joint):
         assert env.model.actuator(name).gainprm[0] == reach.actuator(name).gainprm[0]
+
+
+def test_cube_mass_and_friction_are_drawn_per_episode(mujoco_env):
+    """Each episode draws the cube's mass and friction inside the task's ranges; the model
+    carries them (friction on the cube and both pads) with the constants MuJoCo derives from
+    the mass, as ``mj_setConst`` recomputes them."""
+    import copy
+
+    import mujoco
+
+    env, grip = mujoco_env, mujoco_env.grip
+    masses = []
+    for seed in range(6):
+        env.reset(seed=seed)
+        mass = env.model.body_mass[grip.cube_body]
+        masses.append(mass)
+        assert lift_lib.CUBE_MASS_RANGE[0] <= mass <= lift_lib.CUBE_MASS_RANGE[1]
+        friction = env.model.geom_friction[grip.friction_geoms, 0]
+        assert len(friction) == 3 and np.ptp(friction) == 0.0
+        assert lift_lib.FRICTION_RANGE[0] <= friction[0] <= lift_lib.FRICTION_RANGE[1]
+    assert np.ptp(masses) > 0.02
+    fresh = copy.deepcopy(env.model)
+    mujoco.mj_setConst(fresh, mujoco.MjData(fresh))
+    for name in ("body_invweight0", "dof_invweight0", "dof_M0", "body_subtreemass"):
+        np.testing.assert_allclose(getattr(env.model, name), getattr(fresh, name), rtol=1e-9)
+
+
+@pytest.mark.parametrize("engine", ["mujoco", "pybullet"])
+def test_scripted_pick_holds_the_heaviest_cube(engine):
+    """The scripted pick succeeds with the heaviest, most slippery cube of the ranges."""
+    from pybullet_ref.env import PybulletArmEnv
+
+    cls = MujocoArmEnv if engine == "mujoco" else PybulletArmEnv
+    env = cls(lift_config(), GRIPPER)
+    try:
+        mass, friction = lift_lib.CUBE_MASS_RANGE[1], lift_lib.FRICTION_RANGE[0]
+        result = run_scripted_lift(env, 1, object_mass=mass, object_friction=friction)
+        assert result["success"], result["info"]
+    finally:
+        env.close()
 
 
 def test_pads_have_touch_sensors(mujoco_env):
@@ -177,8 +218,10 @@ def test_mjx_reset_matches_cpu_mujoco():
     start = env.physics.grip.cube_qpos
     cube, quat = np.asarray(qpos[start : start + 3]), np.asarray(qpos[start + 3 : start + 7])
     arm = np.asarray(qpos[np.asarray(env.physics.ids.qpos_adr)])
-    cpu.reset(seed=0, options={"target": cube, "object_quat": quat})
-    cpu._physics_reset(arm, cube, quat)
+    mass, friction = np.asarray(state.info["task"].object_params)
+    assert 0.05 <= mass <= 0.2 and 0.8 <= friction <= 1.0
+    cpu.reset(seed=0)
+    cpu._physics_reset(arm, cube, ObjectStart(quat, mass, friction))
     obs = cpu._evaluate(cpu._physics_read())[0]
     flat = np.concatenate(list(obs.values()))
     np.testing.assert_allclose(np.asarray(state.obs), flat, atol=2e-4)

@@ -35,6 +35,7 @@ import numpy as np
 
 from mjx_arm.envs.arm import ArmInfo, arm_info
 from mjx_arm.paths import asset
+from mjx_arm.task.grip import ObjectStart
 from mjx_arm.task.lift import LIFT_SIM_DT, SERVO_DT
 from mjx_arm.urdf.convert import build_spec
 from mjx_arm.urdf.scene_shapes import CUBE_BODY, CUBE_HALF, CUBE_MASS
@@ -269,15 +270,17 @@ def run_pybullet(
     task = lift_config(sim_dt=float(model.opt.timestep))
     env = PybulletArmEnv(task, arm.config, width=FILM_SIZE[0], height=FILM_SIZE[1])
     try:
-        env._physics_reset(script.start_qpos, script.cube_pos, np.array([1.0, 0.0, 0.0, 0.0]))
+        spec = cube_of(model)
+        upright = np.array([1.0, 0.0, 0.0, 0.0])
+        obj = ObjectStart(upright, spec.mass, spec.friction)
+        env._physics_reset(script.start_qpos, script.cube_pos, obj)
         client, body = env.client, env.body
         for name in (FINGER, MIMIC):
             client.resetJointState(body, _joint_index(client, body, name), NEAR_CLOSED)
-        spec = cube_of(model)
         if spec.half != CUBE_HALF:  # another size: the env's cube is replaced
             client.removeBody(env.cube)
             env.cube = _box(client, spec.half, script.cube_pos)
-        client.changeDynamics(env.cube, -1, mass=spec.mass, lateralFriction=spec.friction)
+            client.changeDynamics(env.cube, -1, mass=spec.mass, lateralFriction=spec.friction)
         env._physics_set_gripper(script.finger_speed)
         cubes, ees = [], []
         for qdot in script.qdot:

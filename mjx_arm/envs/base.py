@@ -27,6 +27,7 @@ from mjx_arm.task import observation as obs_lib
 from mjx_arm.task import reward as reward_lib
 from mjx_arm.task import rules, sampling
 from mjx_arm.task.config import TaskConfig
+from mjx_arm.task.grip import ObjectStart
 from mjx_arm.task.touch import touch_config
 from mjx_arm.urdf.arm_config import ArmConfig
 
@@ -125,11 +126,11 @@ class BaseRobotEnv(gym.Env):
 
     @abstractmethod
     def _physics_reset(
-        self, qpos: np.ndarray, target_body_pos: np.ndarray, object_quat: np.ndarray | None = None
+        self, qpos: np.ndarray, target_body_pos: np.ndarray, obj: ObjectStart | None = None
     ) -> None:
         """Put the arm at ``qpos`` (rad, at rest) and the target body at ``target_body_pos``;
-        a gripper task's free object goes there too, with orientation ``object_quat``
-        (w, x, y, z), the gripper open and at rest."""
+        a gripper task's free object goes there too, at rest, with the orientation, mass and
+        friction of ``obj``, and the gripper opens."""
 
     def _physics_set_gripper(self, speed: float) -> None:
         """Command the driven finger's velocity target (m/s; positive closes): gripper engines."""
@@ -158,19 +159,21 @@ class BaseRobotEnv(gym.Env):
         """Start an episode: home pose plus noise, a new target, both from the seeded generator.
 
         ``options``: ``target`` (the target body's position, m) and, for a gripper task,
-        ``object_quat`` (the object's orientation, w x y z) replace the drawn ones.
+        ``object_quat`` (the object's orientation, w x y z), ``object_mass`` (kg) and
+        ``object_friction`` replace the drawn ones.
         """
         super().reset(seed=seed)
         n = self.arm.n_joints
-        u = self.np_random.uniform(size=sampling.n_uniforms(n))
+        u = self.np_random.uniform(size=sampling.n_uniforms(n, self.task))
         qpos = sampling.initial_qpos(np, u[:n], self.task)
         body = sampling.target_body_pos(np, u[n:], self.task)
-        quat = self.task_spec.object_quat(np, u[n:], self.task)
+        obj = self.task_spec.object_start(np, u[n:], self.task)
         if options and "target" in options:
             body = np.asarray(options["target"], dtype=np.float64)
-        if options and "object_quat" in options:
-            quat = np.asarray(options["object_quat"], dtype=np.float64)
-        self._physics_reset(qpos, body, quat)
+        if obj is not None and options:
+            changes = {k: options[f"object_{k}"] for k in obj._fields if f"object_{k}" in options}
+            obj = obj._replace(**{k: np.asarray(v, dtype=np.float64) for k, v in changes.items()})
+        self._physics_reset(qpos, body, obj)
         self._reading = reading = self._physics_read()
         _, state, d, force = self._measure(reading)
         self._last_obs = obs = obs_lib.unflatten_obs(state.astype(np.float32), self._extra)

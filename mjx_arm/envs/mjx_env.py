@@ -58,16 +58,21 @@ class TaskMemory:
         progress: the success rule's progress (consecutive holds, strike seen).
         prev_action: the previous action, ``(n,)`` (also the delayed action under latency).
         prev_distance: d at the previous step (m), ``()``.
+        object_params: a gripper task's object mass (kg) and friction this episode, ``(2,)``;
+            ``(0,)`` for other tasks.
     """
 
     progress: reward_lib.Progress
     prev_action: jax.Array
     prev_distance: jax.Array
+    object_params: jax.Array
 
     @staticmethod
-    def start(distance: jax.Array, n_actions: int) -> TaskMemory:
-        """The memory at the start of an episode at distance ``d`` (``n_actions`` entries)."""
-        return TaskMemory(reward_lib.start_progress(jnp), jnp.zeros(n_actions), distance)
+    def start(distance: jax.Array, n_actions: int, obj: Any = None) -> TaskMemory:
+        """The memory at the start of an episode at distance ``d`` (``n_actions`` entries),
+        with the episode's object (:class:`mjx_arm.task.grip.ObjectStart`, or None)."""
+        params = jnp.zeros(0) if obj is None else jnp.stack([obj.mass, obj.friction])
+        return TaskMemory(reward_lib.start_progress(jnp), jnp.zeros(n_actions), distance, params)
 
 
 class MjxArmEnv(Env):
@@ -133,21 +138,21 @@ class MjxArmEnv(Env):
 
     def sample_episode(self, rng: jax.Array) -> tuple[jax.Array, jax.Array, Any]:
         """Start joint angles ``(n,)``, target body position ``(3,)`` and a gripper task's
-        object orientation ``(4,)`` (else None) from ``rng``."""
+        object (:class:`mjx_arm.task.grip.ObjectStart`, else None) from ``rng``."""
         n = self.arm.n_joints
-        u = jax.random.uniform(rng, (sampling.n_uniforms(n),))
+        u = jax.random.uniform(rng, (sampling.n_uniforms(n, self.task),))
         return (
             sampling.initial_qpos(jnp, u[:n], self.task),
             sampling.target_body_pos(jnp, u[n:], self.task),
-            self.task_spec.object_quat(jnp, u[n:], self.task),
+            self.task_spec.object_start(jnp, u[n:], self.task),
         )
 
     def reset(self, rng: jax.Array) -> State:
         """A new episode from ``rng`` (a single PRNG key)."""
         rng, key, key_rand = jax.random.split(rng, 3)
-        qpos, target_body, quat = self.sample_episode(key)
+        qpos, target_body, obj = self.sample_episode(key)
         episode = sample_episode(key_rand, self.randomization, self.arm.n_joints)
-        data = self.physics.init(qpos, target_body + episode.box_offset, quat)
+        data = self.physics.init(qpos, target_body + episode.box_offset, obj)
         reading = self.physics.read(data)
         d, force = self._distance_and_force(reading)
         zero = jnp.zeros(())
@@ -162,7 +167,11 @@ class MjxArmEnv(Env):
             reward=zero,
             done=zero,
             metrics=metrics,
-            info={"rng": rng, "task": TaskMemory.start(d, self.action_size), "episode": episode},
+            info={
+                "rng": rng,
+                "task": TaskMemory.start(d, self.action_size, obj),
+                "episode": episode,
+            },
         )
 
     def step(self, state: State, action: jax.Array) -> State:
@@ -172,7 +181,9 @@ class MjxArmEnv(Env):
         action = jnp.clip(action, -1.0, 1.0)
         applied = jnp.where(episode.latency > 0, memory.prev_action, action)
         dynamics = episode.dynamics if self.randomization.enabled else None
-        data = self.physics.step(state.pipeline_state, applied * self._v_scale, dynamics)
+        data = self.physics.step(
+            state.pipeline_state, applied * self._v_scale, dynamics, memory.object_params
+        )
         reading = self.physics.read(data)
         # sane: finite, and no joint running away (else the physics diverged)
         sane = _all_finite(reading) & ~reward_lib.runaway(jnp, reading.qvel, self._speeds)
@@ -195,7 +206,8 @@ class MjxArmEnv(Env):
         terms = {k: v.astype(jnp.float32) for k, v in score.terms.items()}
         reward = score.reward.astype(jnp.float32)
         done = score.done
-        info["task"] = TaskMemory(progress, action, jnp.where(sane, d, memory.prev_distance))
+        prev_distance = jnp.where(sane, d, memory.prev_distance)
+        info["task"] = TaskMemory(progress, action, prev_distance, memory.object_params)
         metrics = dict(state.metrics)  # keep keys wrappers added (EvalWrapper's "reward")
         metrics.update({f"reward/{name}": value for name, value in terms.items()})
         overflow = self.physics.overflow(data)
@@ -222,13 +234,13 @@ class MjxArmEnv(Env):
             (data, obs ``(16 + n,)``, the ``info`` entries of a new episode: task, episode).
         """
         key, key_rand = jax.random.split(rng)
-        _, target_body, quat = self.sample_episode(key)
+        _, target_body, obj = self.sample_episode(key)
         episode = sample_episode(key_rand, self.randomization, self.arm.n_joints)
-        data = self.physics.set_target(data, target_body + episode.box_offset, quat)
+        data = self.physics.set_target(data, target_body + episode.box_offset, obj)
         reading = self.physics.read(data)
         d, _ = self._distance_and_force(reading)
         obs = self.observe(reading, episode)
-        memory = TaskMemory.start(d, self.action_size)
+        memory = TaskMemory.start(d, self.action_size, obj)
         return data, obs, {"task": memory, "episode": episode}
 
     def observe(

@@ -179,32 +179,35 @@ class MjxPhysics:
 
     # ------------------------------------------------------------------ state
 
-    def init(self, qpos: jax.Array, target_body: jax.Array, object_quat=None) -> Any:
+    def init(self, qpos: jax.Array, target_body: jax.Array, obj: Any = None) -> Any:
         """Data at rest at joint angles ``qpos (n,)`` with the target body at ``(3,)`` (and a
-        gripper task's cube there, orientation ``object_quat (4,)``)."""
+        gripper task's cube there, oriented as ``obj`` says: an ObjectStart)."""
         data = self._template
         data = data.replace(
             qpos=data.qpos.at[self.ids.qpos_adr].set(qpos),
             mocap_pos=data.mocap_pos.at[self.mocap].set(target_body),
         )
-        data = self._place_object(data, target_body, object_quat)
+        data = self._place_object(data, target_body, obj)
         return mjx.forward(self.model, data)
 
-    def set_target(self, data: Any, target_body: jax.Array, object_quat=None) -> Any:
+    def set_target(self, data: Any, target_body: jax.Array, obj: Any = None) -> Any:
         """Move the target body (and a gripper task's cube, at rest); takes effect in the next
         step's collision detection."""
         data = data.replace(mocap_pos=data.mocap_pos.at[self.mocap].set(target_body))
-        return self._place_object(data, target_body, object_quat)
+        return self._place_object(data, target_body, obj)
 
-    def _place_object(self, data: Any, pos: jax.Array, quat) -> Any:
-        """A gripper task's cube at ``pos (3,)`` with orientation ``quat (4,)``, at rest."""
-        if self.grip is None:
+    def _place_object(self, data: Any, pos: jax.Array, obj: Any) -> Any:
+        """A gripper task's cube at ``pos (3,)`` with ``obj``'s orientation, at rest."""
+        if self.grip is None or obj is None:
             return data
+        quat = obj.quat
         start, dof = self.grip.cube_qpos, self.grip.cube_dof
         qpos = data.qpos.at[start : start + 3].set(pos).at[start + 3 : start + 7].set(quat)
         return data.replace(qpos=qpos, qvel=data.qvel.at[dof : dof + 6].set(0.0))
 
-    def step(self, data: Any, ctrl: jax.Array, dynamics: Dynamics | None = None) -> Any:
+    def step(
+        self, data: Any, ctrl: jax.Array, dynamics: Dynamics | None = None, object_params=None
+    ) -> Any:
         """One control step: hold ``ctrl`` for ``n_substeps`` physics steps.
 
         Args:
@@ -213,8 +216,11 @@ class MjxPhysics:
                 finger's (m/s).
             dynamics: per-env multipliers of friction, damping, armature and servo gain;
                 None steps the model as built.
+            object_params: a gripper task's cube mass (kg) and friction, ``(2,)``, else None.
         """
         model = self.model if dynamics is None else self.randomized(dynamics)
+        if self.grip is not None and object_params is not None:
+            model = self.grip.dress(model, object_params[0], object_params[1])
         data = data.replace(ctrl=data.ctrl.at[self._actuators].set(ctrl))
 
         def substep(d: Any, _: Any) -> tuple[Any, None]:

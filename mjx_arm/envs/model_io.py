@@ -124,6 +124,8 @@ class GripReader:
         cube_qpos: qpos address of the cube's free joint (position, then quaternion).
         cube_dof: its dof address (6 velocities).
         pad_index: ``sensordata`` positions of the pads' touch sensors, ``(2,)``.
+        cube_body: the cube's body id; friction_geoms: the cube's and the pads' geoms (their
+            friction is the episode's); mass0, inertia0: the cube's mass and inertia as built.
     """
 
     def __init__(self, model: mujoco.MjModel, arm: ArmInfo) -> None:
@@ -139,6 +141,48 @@ class GripReader:
         self.pad_index = np.array(
             [int(model.sensor(pad_sensor(link)).adr[0]) for link in gripper.pad_links[:2]]
         )
+        self.cube_body = int(model.body(CUBE_BODY).id)
+        bodies = [self.cube_body, *(int(model.body(link).id) for link in gripper.pad_links)]
+        collides = (model.geom_contype > 0) | (model.geom_conaffinity > 0)
+        self.friction_geoms = np.flatnonzero(np.isin(model.geom_bodyid, bodies) & collides)
+        self.mass0 = float(model.body_mass[self.cube_body])
+        self.inertia0 = model.body_inertia[self.cube_body].copy()
+        self.invweight0 = model.body_invweight0[self.cube_body].copy()
+        self.dof_invweight0 = model.dof_invweight0[self.cube_dof : self.cube_dof + 6].copy()
+        self.dof_m0 = model.dof_M0[self.cube_dof : self.cube_dof + 6].copy()
+        self.world_mass0 = float(model.body_subtreemass[0])
+
+    def dress(self, model: Any, mass, friction) -> Any:
+        """``model`` (an MjModel, in place; or an MJX model, returned) with the cube's mass
+        (kg) and the sliding friction of cube and pads.
+
+        The cube's inertia scales with its mass, and so do the constants MuJoCo precomputes
+        from it (``mj_setConst`` gives the same values): the subtree masses, the diagonal of
+        the mass matrix at ``qpos0`` and, inversely, the inverse weights of the contact
+        softness. Left stale, a heavier cube diverges in the grip.
+        """
+        body, geoms, dofs = (
+            self.cube_body,
+            self.friction_geoms,
+            slice(self.cube_dof, self.cube_dof + 6),
+        )
+        ratio = mass / self.mass0
+        fields = {
+            "body_mass": (body, mass),
+            "body_inertia": (body, self.inertia0 * ratio),
+            "body_invweight0": (body, self.invweight0 / ratio),
+            "dof_invweight0": (dofs, self.dof_invweight0 / ratio),
+            "dof_M0": (dofs, self.dof_m0 * ratio),
+            "body_subtreemass": (np.array([0, body]), [self.world_mass0 - self.mass0 + mass, mass]),
+        }
+        if isinstance(model, mujoco.MjModel):
+            for name, (index, value) in fields.items():
+                getattr(model, name)[index] = value
+            model.geom_friction[geoms, 0] = friction
+            return model
+        changes = {n: getattr(model, n).at[i].set(v) for n, (i, v) in fields.items()}
+        changes["geom_friction"] = model.geom_friction.at[geoms, 0].set(friction)
+        return model.replace(**changes)
 
     def read(self, xp: Any, qpos, sensordata):
         """The ``grip`` vector ``(10,)`` of one state's ``qpos`` and ``sensordata``."""

@@ -188,7 +188,7 @@ class MujocoCallbackPhysics:
 
         return jax.pure_callback(host, shapes, *args, vmap_method="broadcast_all")
 
-    def init(self, qpos: jax.Array, target_body: jax.Array, object_quat=None) -> CState:
+    def init(self, qpos: jax.Array, target_body: jax.Array, obj=None) -> CState:
         """State at rest at ``qpos (n,)`` with the target body at ``(3,)``; sensors filled."""
         state = jnp.asarray(self._template, jnp.float32)
         state = state.at[self._qpos_slice.start + self.ids.qpos_adr].set(qpos)
@@ -196,14 +196,17 @@ class MujocoCallbackPhysics:
         _, sensors = self._call(state, ctrl, target_body.astype(jnp.float32), 0)
         return CState(state=state, mocap_pos=target_body.astype(jnp.float32), sensordata=sensors)
 
-    def set_target(self, data: CState, target_body: jax.Array, object_quat=None) -> CState:
+    def set_target(self, data: CState, target_body: jax.Array, obj=None) -> CState:
         """Move the target body (sensors unaffected: the target carries none)."""
         return data.replace(mocap_pos=target_body.astype(jnp.float32))
 
-    def step(self, data: CState, ctrl: jax.Array, dynamics: Dynamics | None = None) -> CState:
+    def step(
+        self, data: CState, ctrl: jax.Array, dynamics: Dynamics | None = None, object_params=None
+    ) -> CState:
         """One control step of ``n_substeps`` physics steps with ``ctrl (n,)``.
 
         ``dynamics``: per-env multipliers (domain randomisation), or None for the model.
+        ``object_params``: a gripper task's object (never here: the C batch has no gripper).
         """
         full = jnp.zeros(self.mj_model.nu, jnp.float32).at[self.ids.actuators].set(ctrl)
         dyn = None if dynamics is None else dynamics_row(dynamics).astype(jnp.float32)

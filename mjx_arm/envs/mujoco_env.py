@@ -14,6 +14,7 @@ from mjx_arm.envs.model_io import EE_QUAT as _EE_QUAT
 from mjx_arm.envs.model_io import GripReader, SensorReader, arm_model, as_slice
 from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
+from mjx_arm.task.grip import ObjectStart
 from mjx_arm.task.wrench import sensor_wrench
 from mjx_arm.urdf.arm_config import ArmConfig
 from mjx_arm.urdf.scene import TARGET_BODY
@@ -58,13 +59,14 @@ class MujocoArmEnv(BaseRobotEnv):
         self.grip = GripReader(self.model, self.arm) if self.task.spec.gripper else None
 
     def _physics_reset(
-        self, qpos: np.ndarray, target_body_pos: np.ndarray, object_quat: np.ndarray | None = None
+        self, qpos: np.ndarray, target_body_pos: np.ndarray, obj: ObjectStart | None = None
     ) -> None:
         mujoco.mj_resetData(self.model, self.data)
         self.data.qpos[self.ids.qpos_adr] = qpos
         self.data.mocap_pos[self._mocap] = target_body_pos
-        if self.grip is not None:  # the cube at the target, the marker hidden inside it
-            self.grip.place(self.data.qpos, target_body_pos, object_quat)
+        if self.grip is not None:  # the cube at the target (its marker is not drawn)
+            self.grip.place(self.data.qpos, target_body_pos, obj.quat)
+            self.grip.dress(self.model, float(obj.mass), float(obj.friction))
         mujoco.mj_forward(self.model, self.data)
         mujoco.mj_rnePostConstraint(self.model, self.data)
         mujoco.mj_sensorAcc(self.model, self.data)

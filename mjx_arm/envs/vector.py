@@ -56,7 +56,8 @@ class ArmVectorEnv(VectorEnv):
         self.num_envs = num_envs
         self.env = make_batched_env(task, backend, physics, batch_size=num_envs, arm=arm)
         self.task, n = self.env.task, self.env.action_size
-        self.single_observation_space = obs_lib.observation_space(task.force_clip, n)
+        joints, extra = self.env.arm.n_joints, self.env.task_spec.extra_obs
+        self.single_observation_space = obs_lib.observation_space(task.force_clip, joints, extra)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.single_action_space = gym.spaces.Box(-1.0, 1.0, (n,), np.float32)
         self.action_space = batch_space(self.single_action_space, num_envs)
@@ -117,7 +118,10 @@ class ArmVectorEnv(VectorEnv):
 
     def _obs(self, flat) -> dict[str, np.ndarray]:
         flat = np.asarray(flat, dtype=np.float32)
-        return {k: np.ascontiguousarray(v) for k, v in obs_lib.unflatten_obs(flat).items()}
+        return {
+            k: np.ascontiguousarray(v)
+            for k, v in obs_lib.unflatten_obs(flat, self.env.task_spec.extra_obs).items()
+        }
 
     @staticmethod
     def _info(state) -> dict[str, Any]:

@@ -225,8 +225,8 @@ class MujocoPositionArmEnv(_ChainActuation, MujocoArmEnv):
         self._setup_chain(config)
         self.gains = use_position_servos(self.model, self.ids.actuators, self.arm, config.servo)
 
-    def _physics_reset(self, qpos, target_body_pos, object_quat=None) -> None:
-        super()._physics_reset(qpos, target_body_pos, object_quat)
+    def _physics_reset(self, qpos, target_body_pos, obj=None) -> None:
+        super()._physics_reset(qpos, target_body_pos, obj)
         self._start_chain()
         # the parent's forward pass saw ctrl = 0, a pull towards q = 0 that moves the
         # accelerations (and so the F/T reading): redo it with the servo holding the start
@@ -277,10 +277,10 @@ class PybulletPositionArmEnv(_ChainActuation, PybulletArmEnv):
         self._start_chain()
         self.gains = servo_gains(self.servo.kv, self.servo.effort, config.servo)
 
-    def _physics_reset(self, qpos, target_body_pos, object_quat=None) -> None:
+    def _physics_reset(self, qpos, target_body_pos, obj=None) -> None:
         self._physics_set_position_targets(qpos)  # hold the start pose while the world settles
         holding, self._holding = self._holding, True
-        super()._physics_reset(qpos, target_body_pos, object_quat)
+        super()._physics_reset(qpos, target_body_pos, obj)
         self._holding = holding
         if hasattr(self, "limiter"):  # not during the parent's constructor
             self._start_chain()

@@ -9,7 +9,7 @@ observation keys and its success measures (:mod:`mjx_arm.task.lift`).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, NamedTuple
 
 GRIP_LAYOUT = (("closure", 1), ("object_pos", 3), ("object_quat", 4), ("pad_force", 2))
 GRIP_SIZE = sum(size for _, size in GRIP_LAYOUT)
@@ -24,6 +24,22 @@ def _slices() -> dict[str, slice]:
 
 
 GRIP_SLICES = _slices()
+
+
+class ObjectStart(NamedTuple):
+    """A gripper task's object at the start of an episode (drawn by the task).
+
+    Attributes:
+        quat: orientation (w, x, y, z), ``(..., 4)``.
+        mass: mass (kg), ``(...)``.
+        friction: sliding friction of the object and the finger pads, ``(...)``: MuJoCo takes
+            the larger of two geoms' values, so both carry it; PyBullet multiplies them, so it
+            sets the object's and keeps the pads' 1.0.
+    """
+
+    quat: Any
+    mass: Any
+    friction: Any
 
 
 def split_grip(grip) -> dict[str, Any]:

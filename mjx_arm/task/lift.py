@@ -21,6 +21,11 @@ GRASP_FORCE = 0.5  # N on each pad: the pad presses the cube
 GRASP_RADIUS = 0.03  # m: the cube's centre within this of the ee point (between the pads)
 YAW_RANGE = 0.7853981633974483  # rad: the cube's yaw is drawn in +-pi/4 (a cube repeats per pi/2)
 CUBE_EDGE_MARGIN = 0.08  # m: the cube keeps this far from the table's edges
+# Each episode's cube: mass (kg) and sliding friction (of the cube and the pads), uniform. At
+# friction 0.7 the scripted pick (tests/lift_script.py) lost a 0.1-0.2 kg cube in C MuJoCo on
+# some starts; from 0.8 it held every corner of the range in both CPU engines.
+CUBE_MASS_RANGE = (0.05, 0.2)
+FRICTION_RANGE = (0.8, 1.0)
 
 # Lift's reward. The distance charge and the near-field pull bring the ee to the cube; ``grasp``
 # pays for both pads pressing a cube that sits between them; ``lift`` pays its height, up to
@@ -63,6 +68,7 @@ class Lift(Task):
     gripper = True
     servo_dt = SERVO_DT
     extra_obs = (("gripper", 1), ("object_rel", 7), ("pad_force", 2))
+    object_uniforms = 2
 
     def config(self, **overrides: Any) -> TaskConfig:
         """The Lift preset with ``overrides``; ``variant`` may only be ``"gentle"``."""
@@ -92,9 +98,16 @@ class Lift(Task):
         body = xp.clip(body, xp.asarray([*low, 0.0]), xp.asarray([*high, 0.0]))
         return body + xp.asarray([0.0, 0.0, CUBE_HALF])
 
-    def object_quat(self, xp: Any, u3, cfg: TaskConfig):
-        """A yaw in +-:data:`YAW_RANGE` from the third draw (the table fixes the height)."""
-        return grip_lib.yaw_quat(xp, (2.0 * u3[..., 2] - 1.0) * YAW_RANGE)
+    def object_start(self, xp: Any, u, cfg: TaskConfig) -> grip_lib.ObjectStart:
+        """A yaw in +-:data:`YAW_RANGE` from the target's third draw (the table fixes the
+        height); mass and friction uniform in :data:`CUBE_MASS_RANGE` and
+        :data:`FRICTION_RANGE` from the next two."""
+        (m0, m1), (f0, f1) = CUBE_MASS_RANGE, FRICTION_RANGE
+        return grip_lib.ObjectStart(
+            quat=grip_lib.yaw_quat(xp, (2.0 * u[..., 2] - 1.0) * YAW_RANGE),
+            mass=m0 + u[..., 3] * (m1 - m0),
+            friction=f0 + u[..., 4] * (f1 - f0),
+        )
 
     def grip_observation(self, xp: Any, ee_pos, ee_quat, grip, cfg: TaskConfig):
         """``gripper`` (closure, 0 open to 1 closed), ``object_rel`` (the cube's centre in the

@@ -14,9 +14,11 @@ from mjx_arm.task.registry import get_task
 N_TARGET_UNIFORMS = 3
 
 
-def n_uniforms(n_joints: int) -> int:
-    """Uniform draws per episode: one per joint for the start pose, 3 for the target."""
-    return n_joints + N_TARGET_UNIFORMS
+def n_uniforms(n_joints: int, cfg: TaskConfig | None = None) -> int:
+    """Uniform draws per episode: one per joint for the start pose, 3 for the target and, for
+    a gripper task (``cfg``), its object's."""
+    extra = get_task(cfg.task).object_uniforms if cfg is not None else 0
+    return n_joints + N_TARGET_UNIFORMS + extra
 
 
 def initial_qpos(xp: Any, u_n, cfg: TaskConfig):
@@ -33,7 +35,7 @@ def initial_qpos(xp: Any, u_n, cfg: TaskConfig):
 def target_body_pos(xp: Any, u3, cfg: TaskConfig):
     """Position (m) of the target body from uniform draws ``u3 (..., 3)``, as the task places
     it (:meth:`mjx_arm.task.spec.Task.target_body_pos`; Touch: the box on the table)."""
-    return get_task(cfg.task).target_body_pos(xp, u3, cfg)
+    return get_task(cfg.task).target_body_pos(xp, u3[..., :N_TARGET_UNIFORMS], cfg)
 
 
 def target_point(xp: Any, body_pos, cfg: TaskConfig):

@@ -39,6 +39,8 @@ class Task:
             reading's ``grip`` vector (:mod:`mjx_arm.task.grip`).
         servo_dt: the step (s) the model's servo gains are computed for; 0 takes ``sim_dt``.
         extra_obs: observation keys after the contract's four, ``(key, size)`` in order.
+        object_uniforms: uniform draws per episode for the object (:meth:`object_start`),
+            after the target's three.
     """
 
     name: ClassVar[str]
@@ -47,6 +49,7 @@ class Task:
     gripper: ClassVar[bool] = False
     servo_dt: ClassVar[float] = 0.0
     extra_obs: ClassVar[tuple[tuple[str, int], ...]] = ()
+    object_uniforms: ClassVar[int] = 0
 
     @property
     def env_id(self) -> str:
@@ -67,9 +70,10 @@ class Task:
         """The point the ee must reach (m), ``(..., 3)``, given the target body's position."""
         return body_pos
 
-    def object_quat(self, xp: Any, u3, cfg: TaskConfig):
-        """The start orientation (w, x, y, z) of a free object the task places, ``(..., 4)``,
-        from the same draws as :meth:`target_body_pos`; None where the task has none."""
+    def object_start(self, xp: Any, u, cfg: TaskConfig):
+        """The free object a gripper task places (:class:`mjx_arm.task.grip.ObjectStart`),
+        from the episode's draws after the joints' (``u (..., 3 + object_uniforms)``: the
+        target's three, then the object's); None where the task has none."""
         return None
 
     def grip_observation(self, xp: Any, ee_pos, ee_quat, grip, cfg: TaskConfig):
