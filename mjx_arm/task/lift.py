@@ -31,7 +31,8 @@ FRICTION_RANGE = (0.8, 1.0)
 # pays for both pads pressing a cube that sits between them; ``lift`` pays its height, up to
 # LIFT_HEIGHT; success (10 steps held up) pays more than holding it up for the rest of an episode
 # (about (4 + 20) / (1 - 0.97) = 800 at the presets' discount). A wrist reading above the band
-# costs its excess, and one above 100 N (a strike on the table) ends the episode.
+# costs its excess, and one above 100 N (a strike on the table) ends the episode. A gentler
+# charge (band 1-20 N, weight -100) stalled training: the policies stopped touching the cube.
 LIFT_REWARD = RewardConfig(
     distance=-4.0,
     contact=0.0,

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from mjx_arm.names import EXIT_INVALID, EXIT_OK
+from mjx_arm.urdf.scene_shapes import SCENES
 
 
 def _package_dirs(items: list[str]) -> dict[str, str]:
@@ -107,9 +108,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", required=True, help="MJCF file to write")
     p.add_argument(
         "--scene",
-        choices=["none", "reach", "touch"],
+        choices=sorted(SCENES),
         default="none",
-        help="add the task scene (floor, table, target) around the arm",
+        help="add the task scene (floor, table, target; lift: a free cube) around the arm",
     )
     p.add_argument(
         "--package",
