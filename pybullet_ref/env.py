@@ -353,13 +353,16 @@ class PybulletArmEnv(BaseRobotEnv):
         )
         x, y, z, w = ee[5]
         ee_pos = np.array(ee[4])
-        if self.ids.tool_links:  # the F/T point is an arm joint: weigh the tool's contacts
-            wrench = self._contact_wrench(ee_pos, ee[5])
+        # the arm's contacts, read once: the tool's make the wrench where the F/T point is an
+        # arm joint or the tool holds a gripper, the pads' make a gripper task's pad forces
+        contacts = self.client.getContactPoints(bodyA=self.body) if self.ids.tool_links else ()
+        if self.ids.tool_links:
+            wrench = self._contact_wrench(ee_pos, ee[5], contacts)
         else:
             wrench = self._wrench(states[-1][2], tool)
         target, grip = sampling.target_point(np, self._target_body, self.task), np.zeros(0)
         if self.gripper is not None:  # the target is the cube, wherever it is now
-            grip = self._grip()
+            grip = self._grip(contacts)
             target = grip[1:4]
         return PhysicsReading(
             ee_pos=ee_pos,
@@ -371,18 +374,15 @@ class PybulletArmEnv(BaseRobotEnv):
             grip=grip,
         )
 
-    def _grip(self) -> np.ndarray:
+    def _grip(self, contacts: Sequence[tuple]) -> np.ndarray:
         """The ``grip`` vector (:data:`mjx_arm.task.grip.GRIP_LAYOUT`): the finger's closure,
-        the cube's pose and the normal force on each pad (all its contacts, as MuJoCo's touch
-        sensor sums them)."""
+        the cube's pose and the normal force on each pad: the sum over its ``contacts`` (the
+        arm's ``getContactPoints`` rows), as MuJoCo's touch sensor sums them."""
         c = self.client
         q = c.getJointState(self.body, self.ids.finger)[0]
         closure = (q - self.ids.finger_lower) / self.gripper.stroke
         pos, (x, y, z, w) = c.getBasePositionAndOrientation(self.cube)
-        pads = [
-            sum(point[9] for point in c.getContactPoints(bodyA=self.body, linkIndexA=link))
-            for link in self.ids.pads
-        ]
+        pads = [sum(p[9] for p in contacts if p[3] == link) for link in self.ids.pads]
         return np.array([closure, *pos, w, x, y, z, *pads])
 
     def _render_frame(self) -> np.ndarray:
@@ -406,11 +406,14 @@ class PybulletArmEnv(BaseRobotEnv):
 
     # ------------------------------------------------------------------ helpers
 
-    def _contact_wrench(self, ee_pos: np.ndarray, ee_xyzw: Sequence[float]) -> np.ndarray:
+    def _contact_wrench(
+        self, ee_pos: np.ndarray, ee_xyzw: Sequence[float], contacts: Sequence[tuple]
+    ) -> np.ndarray:
         """External wrench on the tool in the ee frame about the ee point, ``(6,)``: the sum of
-        the contact forces (normal and friction) on the links of the tool subtree."""
+        the contact forces (normal and friction) on the links of the tool subtree, from the
+        arm's ``contacts`` (``getContactPoints(bodyA=arm)`` rows)."""
         force, torque = np.zeros(3), np.zeros(3)
-        for contact in self.client.getContactPoints(bodyA=self.body):
+        for contact in contacts:
             if contact[2] == self.body or contact[3] not in self.ids.tool_links:
                 continue
             f = contact[9] * np.array(contact[7])  # normal force along the normal on B (to A)

@@ -226,7 +226,7 @@ class BaseRobotEnv(gym.Env):
         """Send a clipped action to the physics: the arm's joint velocity targets (returned,
         rad/s) and, for a gripper task, the last entry as the finger's speed."""
         n = self.arm.n_joints
-        qdot = clipped[:n] * self._qdot_scale if self._gripper_scale else clipped * self._qdot_scale
+        qdot = clipped[:n] * self._qdot_scale
         self._physics_set_velocity_targets(qdot)
         if self._gripper_scale:
             self._physics_set_gripper(float(clipped[n]) * self._gripper_scale)

@@ -12,7 +12,6 @@ from __future__ import annotations
 from typing import Any, NamedTuple
 
 GRIP_LAYOUT = (("closure", 1), ("object_pos", 3), ("object_quat", 4), ("pad_force", 2))
-GRIP_SIZE = sum(size for _, size in GRIP_LAYOUT)
 
 
 def _slices() -> dict[str, slice]:

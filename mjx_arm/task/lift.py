@@ -12,8 +12,10 @@ from __future__ import annotations
 from typing import Any
 
 from mjx_arm.task import grip as grip_lib
+from mjx_arm.task import reward as reward_lib
 from mjx_arm.task.config import RewardConfig, TaskConfig
 from mjx_arm.task.spec import Task
+from mjx_arm.task.touch import Touch
 from mjx_arm.urdf.scene_shapes import CUBE_HALF, table_top_extent
 
 LIFT_HEIGHT = 0.10  # m above the resting height
@@ -142,18 +144,14 @@ class Lift(Task):
         """The cube up by :data:`LIFT_HEIGHT` or more, held by both pads."""
         return (extra["height"] >= LIFT_HEIGHT) & (extra["grasp"] > 0)
 
-    def over_band(self, xp: Any, force_norm, cfg: TaskConfig):
-        """The wrist reading is above the band (the tool pressed the table or the cube)."""
-        return force_norm > cfg.force_band[1]
-
-    def strikes(self, xp: Any, force_norm, cfg: TaskConfig):
-        """A wrist reading above the strike limit ends the episode."""
-        return force_norm > cfg.strike_force
+    # the wrist reading's rules are Touch's: above the band is over it, above the strike limit
+    # (while ``terminate_on_overforce``) ends the episode
+    over_band = Touch.over_band
+    strikes = Touch.strikes
 
     def contact_terms(self, xp: Any, near, force_norm, cfg: TaskConfig) -> tuple[Any, Any]:
         """No ``contact`` pay; ``force_excess``: the wrist force above the band over its top."""
-        high = cfg.force_band[1]
-        return 0.0 * force_norm, xp.maximum(force_norm - high, 0.0) / high
+        return 0.0 * force_norm, reward_lib.force_excess(xp, force_norm, cfg)
 
 
 LIFT = Lift()

@@ -77,6 +77,12 @@ def force_in_band(xp: Any, force_norm, cfg: TaskConfig):
     return ((force_norm >= low) & (force_norm <= high)) * 1.0
 
 
+def force_excess(xp: Any, force_norm, cfg: TaskConfig):
+    """The contact force above the band as a fraction of its top, else 0, shape ``(...)``."""
+    high = cfg.force_band[1]
+    return xp.maximum(force_norm - high, 0.0) / high
+
+
 def is_success(xp: Any, distance, force_norm, cfg: TaskConfig, extra=None):
     """The success condition of one step (bool array), as the task defines it
     (:meth:`mjx_arm.task.spec.Task.holds`). The episode succeeds once it has held for

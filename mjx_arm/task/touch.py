@@ -102,9 +102,8 @@ class Touch(Task):
     def contact_terms(self, xp: Any, near, force_norm, cfg: TaskConfig) -> tuple[Any, Any]:
         """``contact``: 1 when near and the force is in the band; ``force_excess``: the force
         above the band as a fraction of its top, else 0."""
-        high = cfg.force_band[1]
         contact = reward_lib.force_in_band(xp, force_norm, cfg) * near
-        return contact, xp.maximum(force_norm - high, 0.0) / high
+        return contact, reward_lib.force_excess(xp, force_norm, cfg)
 
 
 TOUCH = Touch()
