@@ -228,3 +228,41 @@ def test_mjx_reset_matches_cpu_mujoco():
     step = jax.jit(env.step)
     state = step(state, jnp.zeros(7))
     assert float(state.metrics["lift_height"]) == pytest.approx(0.0, abs=1e-3)
+
+
+def test_gripper_passthrough_rate_limits_the_target():
+    """The finger target moves at most v_max * speed_scale per second, inside the travel;
+    faster commands are clipped and counted, a non-finite one raises."""
+    from mjx_arm.sim2real.gripper import GripperConfig, GripperPassthrough
+
+    chain = GripperPassthrough(0.0, 0.0425, 0.15, 1 / 30, GripperConfig(speed_scale=0.5))
+    chain.reset(-1.0)
+    assert chain.target == 0.0  # a start outside the travel is brought inside it
+    assert chain.step(0.05) == pytest.approx(0.05 / 30, abs=1e-12)
+    assert chain.clips == 0
+    assert chain.step(1.0) == pytest.approx(0.05 / 30 + 0.075 / 30, abs=1e-12)
+    assert chain.clips == 1
+    for _ in range(30):
+        chain.step(0.075)
+    assert chain.target == 0.0425  # held at the closed end
+    assert chain.servo_speed(0.0) == pytest.approx(0.15)  # the stand-in's loop, capped
+    with pytest.raises(ValueError, match="not finite"):
+        chain.step(float("nan"))
+
+
+def test_position_chain_passes_the_gripper_through():
+    """Through the sim-to-real chain (position servos and the gripper's passthrough) the
+    scripted pick still lifts the cube; each step logs the finger target, which closes."""
+    from mjx_arm.sim2real.position_env import make_position_env
+
+    env = make_position_env(lift_config(), "mujoco", arm=GRIPPER)
+    try:
+        result = run_scripted_lift(env.unwrapped, 1)
+        log = env.unwrapped.episodes[-1]
+        assert result["success"], result["info"]
+        assert len(log.gripper) == result["steps"]
+        assert log.gripper[0] == pytest.approx(0.0, abs=1e-9)
+        assert max(log.gripper) == pytest.approx(env.unwrapped.arm.gripper.stroke)
+        assert env.unwrapped.gripper_chain.clips == 0
+    finally:
+        env.close()

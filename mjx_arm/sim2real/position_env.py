@@ -239,7 +239,7 @@ class MujocoPositionArmEnv(_ChainActuation, MujocoArmEnv):
 
     def gripper_lower(self) -> float:
         """The driven finger's open position (m)."""
-        return float(self.model.joint(self.arm.gripper.joint).range[0])
+        return self.grip.lower
 
     def finger_position(self) -> float:
         """The driven finger's position (m)."""
