@@ -266,10 +266,11 @@ class PybulletArmEnv(BaseRobotEnv):
         if self.gripper is not None:
             self.cube = self._add_cube(position, self._object)
 
-    def _add_cube(self, position: list[float], obj: ObjectStart) -> int:
-        """The free cube of a gripper task: the MuJoCo scene's size, the episode's mass and
-        friction (Bullet multiplies the two bodies' coefficients: the pads keep 1.0)."""
-        c, half = self.client, [CUBE_HALF] * 3
+    def _add_cube(self, position: list[float], obj: ObjectStart, half: float = CUBE_HALF) -> int:
+        """The free cube of a gripper task: the MuJoCo scene's size (or ``half`` edge, m), the
+        episode's mass and friction (Bullet multiplies the two bodies' coefficients: the pads
+        keep 1.0)."""
+        c, half = self.client, [half] * 3
         shape = c.createCollisionShape(pybullet.GEOM_BOX, halfExtents=half)
         look = c.createVisualShape(pybullet.GEOM_BOX, halfExtents=half, rgbaColor=CUBE_RGBA)
         w, x, y, z = (float(v) for v in obj.quat)

@@ -279,8 +279,7 @@ def run_pybullet(
             client.resetJointState(body, _joint_index(client, body, name), NEAR_CLOSED)
         if spec.half != CUBE_HALF:  # another size: the env's cube is replaced
             client.removeBody(env.cube)
-            env.cube = _box(client, spec.half, script.cube_pos)
-            client.changeDynamics(env.cube, -1, mass=spec.mass, lateralFriction=spec.friction)
+            env.cube = env._add_cube(list(script.cube_pos), obj, spec.half)
         env._physics_set_gripper(script.finger_speed)
         cubes, ees = [], []
         for qdot in script.qdot:
@@ -295,15 +294,6 @@ def run_pybullet(
     finally:
         env.close()
     return summarize(np.array(cubes), np.array(ees), opening, script.hold_start)
-
-
-def _box(client: Any, half: float, position) -> int:
-    """A free box of half edge ``half`` (m) at ``position`` (its mass is set after)."""
-    from pybullet_ref.env import CUBE_RGBA, pybullet
-
-    shape = client.createCollisionShape(pybullet.GEOM_BOX, halfExtents=[half] * 3)
-    look = client.createVisualShape(pybullet.GEOM_BOX, halfExtents=[half] * 3, rgbaColor=CUBE_RGBA)
-    return client.createMultiBody(CUBE_MASS, shape, look, basePosition=list(position))
 
 
 def _joint_index(client: Any, body: int, name: str) -> int:
