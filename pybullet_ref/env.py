@@ -73,6 +73,8 @@ from pybullet_ref.arm_model import (
     joint_servo,
     subtree_links,
 )
+from pybullet_ref.contact import SOFT, SceneContact, scene_contact
+from pybullet_ref.hulls import bullet_urdf
 from pybullet_ref.mimic import add_mimic_constraints
 
 GRAVITY = (0.0, 0.0, -9.81)
@@ -160,6 +162,9 @@ class PybulletArmEnv(BaseRobotEnv):
         arm: the arm (a URDF, an arm file or an ArmConfig; default: the shipped arm).
         render_mode: None, "rgb_array" or "human".
         width, height: frame size (pixels).
+        contact: how the table, the box and the cube push back: "soft" (compliant, calibrated
+            on MuJoCo's contacts; default), "rigid" (Bullet's hard contacts), a
+            :class:`~pybullet_ref.contact.SceneContact` or its text form.
     """
 
     engine = "pybullet"
@@ -171,8 +176,12 @@ class PybulletArmEnv(BaseRobotEnv):
         render_mode: str | None = None,
         width: int = DEFAULT_WIDTH,
         height: int = DEFAULT_HEIGHT,
+        contact: SceneContact | str = SOFT,
     ) -> None:
         super().__init__(task, arm, render_mode, width, height)
+        self.contact = scene_contact(contact)
+        self._fixed = SceneContact.dynamics_of(self.contact.fixed)
+        self._urdf = bullet_urdf(self.arm.urdf)
         self.servo = joint_servo(self.arm, self.task.spec.servo_dt or self.task.sim_dt)
         with native_output_silenced():  # "argv[0]="
             self.client = BulletClient(connection_mode=pybullet.DIRECT)
@@ -196,7 +205,7 @@ class PybulletArmEnv(BaseRobotEnv):
 
     def _load_arm(self) -> int:
         return self.client.loadURDF(
-            str(self.arm.urdf), useFixedBase=True, flags=ARM_FLAGS | self._load_flags
+            str(self._urdf), useFixedBase=True, flags=ARM_FLAGS | self._load_flags
         )
 
     def _lookup_ids(self) -> ArmIds:
@@ -251,7 +260,7 @@ class PybulletArmEnv(BaseRobotEnv):
         self._setup_arm(qpos)
         add_mimic_constraints(c, self.body, self.arm.urdf)  # after the joint states are set
         table = c.loadURDF(str(asset("table.urdf")), useFixedBase=True, flags=self._load_flags)
-        c.changeDynamics(table, BASE, lateralFriction=FRICTION)
+        c.changeDynamics(table, BASE, lateralFriction=FRICTION, **self._fixed)
         position = [float(v) for v in target_body_pos]
         if self.task.spec.scene == "touch":  # the box stands on the table
             box = c.loadURDF(
@@ -260,7 +269,7 @@ class PybulletArmEnv(BaseRobotEnv):
                 useFixedBase=True,
                 flags=self._load_flags,
             )
-            c.changeDynamics(box, BASE, lateralFriction=FRICTION)
+            c.changeDynamics(box, BASE, lateralFriction=FRICTION, **self._fixed)
         elif self.render_mode and self.gripper is None:
             self._add_target_marker(position)
         if self.gripper is not None:
@@ -275,7 +284,12 @@ class PybulletArmEnv(BaseRobotEnv):
         look = c.createVisualShape(pybullet.GEOM_BOX, halfExtents=half, rgbaColor=CUBE_RGBA)
         w, x, y, z = (float(v) for v in obj.quat)
         cube = c.createMultiBody(float(obj.mass), shape, look, position, [x, y, z, w])
-        c.changeDynamics(cube, BASE, lateralFriction=float(obj.friction))
+        c.changeDynamics(
+            cube,
+            BASE,
+            lateralFriction=float(obj.friction),
+            **SceneContact.dynamics_of(self.contact.cube),
+        )
         return cube
 
     def _setup_arm(self, qpos: np.ndarray) -> None:

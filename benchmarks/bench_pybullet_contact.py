@@ -1,0 +1,182 @@
+"""Which PyBullet scene contact matches MuJoCo's: trained policies run in CPU MuJoCo and in
+PyBullet with rigid contacts and with compliant ones of several nominal masses.
+
+A compliant contact of nominal mass ``m`` is MuJoCo's default solref spring and damper times
+``m`` (:meth:`pybullet_ref.contact.SceneContact.like_mujoco`), set on the table and the box.
+Each row: one policy, one engine and contact, the same episode seeds; the success rate and the
+median and 90th percentile of the episodes' peak wrist force (N), beside MuJoCo's. The contact
+whose peaks sit closest to MuJoCo's over all policies (median of |log ratio| of the median
+peaks) is printed last.
+
+Policies (committed under ``benchmarks/results/``): the shipped arm's Touch (fast preset, seeds
+0-2, and the gentle C-backend policy), the UR10's Touch (seeds 0-2; needs ``ROS_PACKAGE_PATH``
+to hold example-robot-data's ``robots`` folder, else skipped) and Lift (seeds 0 and 1).
+
+Run from the repository root:
+``python benchmarks/bench_pybullet_contact.py [--episodes 40] [--masses 0.5 1 2 4] [--jobs 2]``.
+Results: ``benchmarks/results/contact/pybullet_contact.{json,md}``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import numpy as np
+
+from benchmarks.common import RESULTS_DIR, environment_metadata, markdown_table, save_results
+
+UR10 = "benchmarks/arms/ur10.toml"
+CASES = {  # name: (policy file, arm file or None for the one the policy records)
+    **{f"touch_seed{s}": (f"seeds/policies/touch_fast_seed{s}.npz", None) for s in range(3)},
+    "touch_gentle_c": ("transfer/policies/touch_gentle_c_backend_cpu.npz", None),
+    **{
+        f"ur10_touch_seed{s}": (f"arms/policies_ur10/ur10-touch-fast-seed{s}.npz", UR10)
+        for s in range(3)
+    },
+    **{f"lift_seed{s}": (f"lift/policies/lift-fast-seed{s}.npz", None) for s in range(5)},
+}
+
+
+def run_case(case: str, engine: str, contact: str | None, episodes: int, seed: int) -> dict:
+    """Episodes of one policy in one engine (``contact``: PyBullet's scene contact, "rigid" or
+    "STIFFNESS:DAMPING" in N/m and N s/m; ignored by MuJoCo)."""
+    import gymnasium as gym
+
+    from mjx_arm.envs.registration import register_envs
+    from mjx_arm.evaluate.core import eval_arm, eval_task
+    from mjx_arm.evaluate.runners import run_episodes
+    from mjx_arm.names import env_id
+    from mjx_arm.policy import load
+
+    path, arm_file = CASES[case]
+    policy = load(RESULTS_DIR / path)
+    task, _ = eval_task(policy)
+    arm = eval_arm(policy, arm_file)
+    kwargs = {}
+    if engine == "pybullet":
+        kwargs["contact"] = contact
+    register_envs()
+    start = time.perf_counter()
+    env = gym.make(env_id(task.task), engine=engine, task=task, arm=arm, **kwargs)
+    try:
+        run = run_episodes(policy, env, episodes, seed)
+    finally:
+        env.close()
+    peaks = np.array([e.peak_contact_force for e in run.episodes])
+    return {
+        "case": case,
+        "engine": engine,
+        "contact": contact if kwargs else None,
+        "episodes": episodes,
+        "success_rate": float(np.mean([e.success for e in run.episodes])),
+        "peak_median_n": float(np.median(peaks)),
+        "peak_p90_n": float(np.percentile(peaks, 90)),
+        "seconds": time.perf_counter() - start,
+    }
+
+
+def available(case: str) -> bool:
+    """Whether the case's arm resolves on this machine (the UR10 needs its package)."""
+    from mjx_arm.urdf.arm_config import load_arm
+
+    arm_file = CASES[case][1]
+    if arm_file is None:
+        return True
+    try:
+        from mjx_arm.envs.arm import arm_info
+
+        arm_info(load_arm(arm_file))
+    except Exception as exc:  # reported, the case is skipped
+        print(f"skip {case}: {exc}", flush=True)
+        return False
+    return True
+
+
+def label(row: dict) -> str:
+    """Engine and contact of a row, e.g. ``pybullet m=1``."""
+    if row["engine"] != "pybullet":
+        return row["engine"]
+    return f"pybullet {row['contact']}"
+
+
+def closest(rows: list[dict]) -> tuple[str, dict[str, dict[str, float]]]:
+    """The PyBullet contact that acts most like MuJoCo on the same episodes: the smallest sum of
+    the mean |success rate difference| and the median |log(peak_pybullet / peak_mujoco)| of the
+    median peaks, both over the policies."""
+    ref = {r["case"]: r for r in rows if r["engine"] == "mujoco"}
+    parts: dict[str, dict[str, list[float]]] = {}
+    for r in rows:
+        m = ref.get(r["case"])
+        if r["engine"] != "pybullet" or m is None:
+            continue
+        gaps = parts.setdefault(label(r), {"success": [], "peak": []})
+        gaps["success"].append(abs(r["success_rate"] - m["success_rate"]))
+        if m["peak_median_n"] > 0.0 < r["peak_median_n"]:
+            gaps["peak"].append(abs(math.log(r["peak_median_n"] / m["peak_median_n"])))
+    score = {}
+    for k, v in parts.items():
+        success, peak = float(np.mean(v["success"])), float(np.median(v["peak"]))
+        score[k] = {"success_gap": success, "peak_log_gap": peak, "total": success + peak}
+    return min(score, key=lambda k: score[k]["total"]), score
+
+
+def table(rows: list[dict]) -> str:
+    """One line per case and engine/contact."""
+    body = []
+    for r in rows:
+        peaks = [f"{r['peak_median_n']:.1f}", f"{r['peak_p90_n']:.1f}"]
+        body.append([r["case"], label(r), f"{r['success_rate']:.3f}", *peaks])
+    head = ["policy", "engine / contact", "success", "peak median (N)", "peak p90 (N)"]
+    return markdown_table(head, body)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--episodes", type=int, default=40)
+    parser.add_argument("--seed", type=int, default=0, help="first episode's seed")
+    parser.add_argument(
+        "--contacts",
+        nargs="+",
+        default=["rigid", "soft"],
+        help='PyBullet scene contacts: "rigid", "soft" or FIXED/CUBE, each part "rigid" or '
+        "STIFFNESS:DAMPING (N/m:N s/m)",
+    )
+    parser.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
+    parser.add_argument("--jobs", type=int, default=2, help="worker processes")
+    parser.add_argument("--name", default="pybullet_contact")
+    args = parser.parse_args()
+    cases = [c for c in args.cases if available(c)]
+    jobs = [(c, "mujoco", None) for c in cases]
+    jobs += [(c, "pybullet", k) for c in cases for k in args.contacts]
+    rows = []
+    with ProcessPoolExecutor(args.jobs) as pool:
+        futures = [pool.submit(run_case, *job, args.episodes, args.seed) for job in jobs]
+        for future in futures:
+            row = future.result()
+            rows.append(row)
+            print(
+                f"{row['case']:>18} {label(row):>16}: success {row['success_rate']:.3f}, peak "
+                f"median {row['peak_median_n']:.1f} N ({row['seconds']:.0f} s)",
+                flush=True,
+            )
+    best, score = closest(rows)
+    gaps = [[k, f"{v['success_gap']:.3f}", f"{v['peak_log_gap']:.3f}", f"{v['total']:.3f}"]
+            for k, v in score.items()]  # fmt: skip
+    head = ["contact", "mean |success gap|", "median |log peak ratio|", "sum"]
+    text = table(rows) + "\n\nGap to MuJoCo over the policies:\n\n" + markdown_table(head, gaps)
+    text += f"\n\nClosest to MuJoCo: {best}.\n"
+    print(text)
+    out = {"meta": environment_metadata(), "config": vars(args), "rows": rows, "score": score,
+           "closest": best}  # fmt: skip
+    save_results(args.name, out, text, RESULTS_DIR / "contact")
+
+
+if __name__ == "__main__":
+    main()
