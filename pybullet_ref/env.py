@@ -21,6 +21,11 @@ is zeroed in PyBullet (Bullet applies it explicitly, which diverges on the light
 is part of the law above). ``kv``, ``d``, the effort and the armature are read from the
 converted MuJoCo model. Friction is MuJoCo's 1.0 per contact.
 
+Contacts as MuJoCo makes them: the arm is loaded from a copy of its URDF whose collision meshes
+are convex hulls shrunk by the 1 mm margin Bullet pads them with (:mod:`pybullet_ref.hulls`),
+and the table, the box and the cube are compliant, calibrated on trained policies against
+MuJoCo's soft contacts (:mod:`pybullet_ref.contact`; ``contact="rigid"`` keeps Bullet's).
+
 Wrist F/T: ``enableJointForceTorqueSensor`` on the fixed joint ``ft_sensor_joint``. Found with
 the tool hanging at rest in several orientations: ``getJointState(ft)[2]`` is the force the arm
 exerts on the tool subtree, in the tool link frame (the contract's sign), with the torque taken
