@@ -15,11 +15,12 @@ import mujoco
 import numpy as np
 import pytest
 
+from mjx_arm.cli import main
 from mjx_arm.envs.mujoco_env import MujocoArmEnv
 from mjx_arm.envs.registration import register_envs
 from mjx_arm.evaluate.core import eval_arm, eval_task
 from mjx_arm.evaluate.runners import run_episodes
-from mjx_arm.names import env_id
+from mjx_arm.names import EXIT_INVALID, EXIT_OK, env_id
 from mjx_arm.policy import load
 from mjx_arm.task import touch_config
 from mjx_arm.urdf.arm_config import ArmConfig
@@ -221,3 +222,30 @@ def test_lift_policy_sets_down_softly_in_pybullet() -> None:
     rigid = _success_rate(policy, task, arm, "rigid", 12)
     print(f"[contact] Lift seed 0 in PyBullet: soft {soft:.3f}, rigid {rigid:.3f}")
     assert soft >= 0.75 and rigid <= 0.35
+
+
+def test_eval_takes_the_contact_and_names_a_bad_one(capsys: pytest.CaptureFixture) -> None:
+    """``mjx-arm eval --pybullet-contact``: the summary names the contact it ran on; a bad text
+    is exit 2 with the parser's message, before anything is loaded."""
+    policy = str(LIFT_SEED0)
+    assert (
+        main(
+            [
+                "eval",
+                policy,
+                "--engine",
+                "pybullet",
+                "--episodes",
+                "1",
+                "--pybullet-contact",
+                "rigid",
+            ]
+        )
+        == EXIT_OK
+    )
+    assert '"contact": "rigid/rigid"' in capsys.readouterr().out
+    assert (
+        main(["eval", policy, "--engine", "pybullet", "--pybullet-contact", "1:2:3"])
+        == EXIT_INVALID
+    )
+    assert "STIFFNESS:DAMPING" in capsys.readouterr().err

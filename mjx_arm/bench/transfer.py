@@ -55,6 +55,9 @@ class TransferConfig:
     impl: str = setting("auto", "MJX implementation", IMPLS)
     mjx_on_cpu: bool = setting(False, "run MJX even without a GPU (minutes to compile)")
     arm: str = setting("", "the arm: a URDF or an arm file (default: the policy's own)")
+    pybullet_contact: str = setting(
+        "soft", "PyBullet's scene contact: soft, rigid or FIXED/CUBE (STIFFNESS:DAMPING each)"
+    )
     goal_success: float = setting(0.95, "goal: success rate in every engine")
     goal_peak_force: float = setting(50.0, "goal (Touch): mean peak contact force (N)")
 
@@ -64,6 +67,9 @@ class TransferConfig:
             raise ValueError(f"engines must be some of {tuple(TRANSFER_ENGINES)}")
         if self.task not in ("", *TASK_IDS):
             raise ValueError(f"task must be one of {tuple(TASK_IDS)}, got {self.task!r}")
+        from pybullet_ref.contact import SceneContact  # settings only: no PyBullet import
+
+        SceneContact.parse(self.pybullet_contact)  # a named ValueError on a bad text
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict."""
@@ -136,6 +142,7 @@ def transfer_matrix(
             backend=spec.backend,
             impl=config.impl,
             arm=arm,
+            contact=config.pybullet_contact,
         )
         result.pop("per_episode", None)
         rows.append({"key": key, "label": spec.label, **result, **row_goals(result, config, task)})

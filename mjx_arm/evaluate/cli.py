@@ -28,6 +28,14 @@ def cmd_eval(args: argparse.Namespace) -> int:
     if args.engine == "mjx":
         enable_compilation_cache()
         _warn_mjx_on_cpu()
+    if args.pybullet_contact is not None:
+        from pybullet_ref.contact import SceneContact
+
+        try:
+            SceneContact.parse(args.pybullet_contact)
+        except ValueError as err:
+            print(f"error: --pybullet-contact: {err}", file=sys.stderr)
+            return EXIT_INVALID
     policy, source = resolve_policy(args.policy, args.step)
     task, notes = eval_task(policy, args.task)
     try:
@@ -43,6 +51,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
             args.height,
             impl=args.impl,
             arm=arm,
+            contact=args.pybullet_contact,
         )
     except (ArmMismatchError, FileNotFoundError) as err:
         print(f"error: {err}", file=sys.stderr)
@@ -134,6 +143,11 @@ def _add_eval(sub: argparse._SubParsersAction) -> None:
         "--arm",
         help="the arm: a URDF or an arm file (.toml/.json) (default: the arm the policy was "
         "trained on; a policy run on another arm is an error)",
+    )
+    p.add_argument(
+        "--pybullet-contact",
+        help="PyBullet's scene contact: soft (compliant, calibrated on MuJoCo; the default), "
+        "rigid (Bullet's own), or FIXED/CUBE springs as STIFFNESS:DAMPING (N/m:N s/m)",
     )
     p.add_argument("--video", help="video of the first episode (.mp4 or .gif)")
     p.add_argument("--width", type=int, default=640, help="video width (default: 640)")

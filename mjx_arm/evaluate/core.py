@@ -75,17 +75,22 @@ def make_eval_env(
     width: int = 640,
     height: int = 480,
     arm: Any = None,
+    contact: str | None = None,
 ) -> gym.Env:
     """A Gymnasium env of ``task`` on a CPU engine ("mujoco" or "pybullet"), made through its
     registered id (:func:`mjx_arm.envs.registration.make_env` behind Gymnasium's wrappers: the
     time limit and the checks), with an ``rgb_array`` renderer when ``render``, for ``arm`` (a
-    URDF, an arm file or an ArmConfig; default: the shipped arm)."""
+    URDF, an arm file or an ArmConfig; default: the shipped arm). ``contact``: PyBullet's scene
+    contact ("soft", "rigid" or ``FIXED/CUBE``, :mod:`pybullet_ref.contact`; None: the env's
+    default); MuJoCo ignores it."""
     import gymnasium as gym
 
     from mjx_arm.envs.registration import register_envs
 
     register_envs()  # idempotent; also registers tasks added since import
     kwargs = {"render_mode": "rgb_array", "width": width, "height": height} if render else {}
+    if contact is not None and engine == "pybullet":
+        kwargs["contact"] = contact
     return gym.make(env_id(task.task), engine=engine, task=task, arm=arm, **kwargs)
 
 
@@ -129,6 +134,7 @@ def evaluate(
     video_episodes: int = 1,
     impl: str = "auto",
     arm: Any = None,
+    contact: str | None = None,
 ) -> tuple[dict[str, Any], EvalRun]:
     """Evaluate ``policy`` on ``engine`` and summarise.
 
@@ -145,6 +151,7 @@ def evaluate(
         impl: for the MJX backend: "auto" (Warp on a GPU where installed), "jax" or "warp".
         arm: the arm (a URDF, an arm file or an ArmConfig; default: the shipped arm). A policy
             that records another arm raises :class:`~mjx_arm.envs.arm.ArmMismatchError`.
+        contact: PyBullet's scene contact (see :func:`make_eval_env`); None: the default.
 
     Returns:
         The JSON-ready summary and the raw :class:`EvalRun`.
@@ -161,12 +168,14 @@ def evaluate(
             run.frames, note = _replay_video(run.trajectory, task, video, width, height, arm)
             run.notes += [note] if note else []
     else:
-        env = make_eval_env(task, engine, video is not None, width, height, arm)
+        env = make_eval_env(task, engine, video is not None, width, height, arm, contact)
         try:
             run = run_episodes(policy, env, episodes, seed, video, video_episodes)
         finally:
             env.close()
     result = {"engine": engine, "task": task.task, "seed": seed, **summarize(run.episodes)}
+    if engine == "pybullet":
+        result["contact"] = str(env.unwrapped.contact)
     if engine == "mjx":
         result.update(_batch_physics(backend, impl))
     result["wall_seconds"] = time.monotonic() - start
