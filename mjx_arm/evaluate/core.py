@@ -142,8 +142,7 @@ def evaluate(
         policy: observation -> action (single or batched).
         engine: "mujoco", "pybullet" (Gymnasium envs) or "mjx" (the batched env).
         task: the task configuration.
-        episodes: number of episodes.
-        seed: first episode's seed (CPU engines) or the batch key's seed (mjx).
+        episodes, seed: how many episodes; the first one's seed (CPU) or the batch key's (mjx).
         video: a video (.mp4 or .gif) of the first ``video_episodes`` episodes, or None
             (mjx: env 0's episode, re-rendered in CPU MuJoCo).
         width, height: video frame size (pixels).
@@ -167,17 +166,16 @@ def evaluate(
         if video is not None:
             run.frames, note = _replay_video(run.trajectory, task, video, width, height, arm)
             run.notes += [note] if note else []
+        physics = _batch_physics(backend, impl)
     else:
         env = make_eval_env(task, engine, video is not None, width, height, arm, contact)
         try:
             run = run_episodes(policy, env, episodes, seed, video, video_episodes)
         finally:
             env.close()
+        physics = {"contact": str(env.unwrapped.contact)} if engine == "pybullet" else {}
     result = {"engine": engine, "task": task.task, "seed": seed, **summarize(run.episodes)}
-    if engine == "pybullet":
-        result["contact"] = str(env.unwrapped.contact)
-    if engine == "mjx":
-        result.update(_batch_physics(backend, impl))
+    result.update(physics)
     result["wall_seconds"] = time.monotonic() - start
     result["video"] = str(video) if video is not None and run.frames else None
     result["notes"] = run.notes
