@@ -103,10 +103,16 @@ def bullet_urdf(urdf: Path, cache_dir: Path | None = None) -> Path:
     if target.is_file():
         return target
     _absolute_paths(root, urdf)  # the copy lives elsewhere: its visuals keep their files
-    for mesh in collisions:
-        mesh.set("filename", str(_eroded_file(mesh, sources[id(mesh)], folder)))
-        mesh.attrib.pop("scale", None)
-    _write_atomic(ET.tostring(root, encoding="unicode").encode(), target)
+    try:
+        for mesh in collisions:
+            mesh.set("filename", str(_eroded_file(mesh, sources[id(mesh)], folder)))
+            mesh.attrib.pop("scale", None)
+        _write_atomic(ET.tostring(root, encoding="unicode").encode(), target)
+    except OSError as exc:
+        raise ConversionError(
+            f"{urdf}: PyBullet's copy with shrunk collision hulls cannot be written to {folder} "
+            f"({exc}); set XDG_CACHE_HOME to a writable folder"
+        ) from exc
     return target
 
 

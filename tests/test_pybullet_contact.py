@@ -25,6 +25,7 @@ from mjx_arm.policy import load
 from mjx_arm.task import touch_config
 from mjx_arm.urdf.arm_config import ArmConfig
 from mjx_arm.urdf.convert import EE_SITE
+from mjx_arm.urdf.errors import ConversionError
 from mjx_arm.urdf.mesh_convert import load_mesh
 from pybullet_ref import PybulletArmEnv
 from pybullet_ref.contact import RIGID, SOFT, Compliance, SceneContact, scene_contact
@@ -126,6 +127,14 @@ def test_ur10_copy_has_eroded_hulls(tmp_path: Path) -> None:
     eroded = _support(load_mesh(hull).vertices, u) + BULLET_URDF_MARGIN
     gap = _support(load_mesh(source).vertices, u) - eroded
     assert gap.min() >= -1e-9 and np.median(gap) < 2e-4  # faces back in place, edges rounded
+
+
+@needs_ur10
+def test_an_unwritable_cache_is_a_named_error(tmp_path: Path) -> None:
+    blocked = tmp_path / "file"
+    blocked.write_text("")  # a file where the cache folder should be
+    with pytest.raises(ConversionError, match="XDG_CACHE_HOME"):
+        bullet_urdf(UR10, blocked / "cache")
 
 
 def _mujoco_distances(env: MujocoArmEnv, box_geom: int) -> dict[str, float]:
