@@ -5,8 +5,9 @@ every convex hull by a collision margin of 1 mm (``gUrdfDefaultCollisionMargin``
 ``changeDynamics(collisionMargin=)`` does not reach the hulls inside a link's compound shape).
 Measured on the UR10 of example-robot-data: at the same joint angles MuJoCo put the wrist mesh
 8 um above the Touch box and Bullet 0.89 mm into it, so PyBullet touched the box about a
-millimetre early, and a Touch policy trained in MuJoCo tapped the box without settling in 27 of
-100 episodes (3 of 100 with the box lowered by that millimetre).
+millimetre early. A UR10 Touch policy trained in MuJoCo tapped the box without settling: 0.730
+success over 200 episodes in PyBullet (rigid contacts), 0.990 with the shrunk hulls
+(``benchmarks/results/contact/touch_before_hulls.md``, ``calibrate_touch.md``).
 
 The fix is geometric: PyBullet loads a copy of the arm URDF whose collision meshes are their
 convex hulls shrunk by the margin (every face plane moved inward by 1 mm, the planes
