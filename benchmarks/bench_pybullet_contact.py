@@ -33,7 +33,7 @@ import numpy as np
 
 from benchmarks.common import RESULTS_DIR, environment_metadata, markdown_table, save_results
 
-UR10 = "benchmarks/arms/ur10.toml"
+UR10 = str(Path(__file__).resolve().parent / "arms" / "ur10.toml")
 CASES = {  # name: (policy file, arm file or None for the one the policy records)
     **{f"touch_seed{s}": (f"seeds/policies/touch_fast_seed{s}.npz", None) for s in range(3)},
     "touch_gentle_c": ("transfer/policies/touch_gentle_c_backend_cpu.npz", None),
@@ -46,26 +46,18 @@ CASES = {  # name: (policy file, arm file or None for the one the policy records
 
 
 def run_case(case: str, engine: str, contact: str | None, episodes: int, seed: int) -> dict:
-    """Episodes of one policy in one engine (``contact``: PyBullet's scene contact, "rigid" or
-    "STIFFNESS:DAMPING" in N/m and N s/m; ignored by MuJoCo)."""
-    import gymnasium as gym
-
-    from mjx_arm.envs.registration import register_envs
-    from mjx_arm.evaluate.core import eval_arm, eval_task
+    """Episodes of one policy in one engine (``contact``: PyBullet's scene contact in the text
+    form of :meth:`pybullet_ref.contact.SceneContact.parse`; ignored by MuJoCo)."""
+    from mjx_arm.evaluate.core import eval_arm, eval_task, make_eval_env
     from mjx_arm.evaluate.runners import run_episodes
-    from mjx_arm.names import env_id
     from mjx_arm.policy import load
 
     path, arm_file = CASES[case]
     policy = load(RESULTS_DIR / path)
     task, _ = eval_task(policy)
     arm = eval_arm(policy, arm_file)
-    kwargs = {}
-    if engine == "pybullet":
-        kwargs["contact"] = contact
-    register_envs()
     start = time.perf_counter()
-    env = gym.make(env_id(task.task), engine=engine, task=task, arm=arm, **kwargs)
+    env = make_eval_env(task, engine, arm=arm, contact=contact)
     try:
         run = run_episodes(policy, env, episodes, seed)
     finally:
@@ -74,7 +66,7 @@ def run_case(case: str, engine: str, contact: str | None, episodes: int, seed: i
     return {
         "case": case,
         "engine": engine,
-        "contact": contact if kwargs else None,
+        "contact": contact if engine == "pybullet" else None,
         "episodes": episodes,
         "success_rate": float(np.mean([e.success for e in run.episodes])),
         "peak_median_n": float(np.median(peaks)),
@@ -101,7 +93,7 @@ def available(case: str) -> bool:
 
 
 def label(row: dict) -> str:
-    """Engine and contact of a row, e.g. ``pybullet m=1``."""
+    """Engine and contact of a row, e.g. ``pybullet 4e4:200/3e3:100``."""
     if row["engine"] != "pybullet":
         return row["engine"]
     return f"pybullet {row['contact']}"
