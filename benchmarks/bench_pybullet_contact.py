@@ -162,7 +162,7 @@ def main() -> None:
     best, score = closest(rows)
     gaps = [[k, f"{v['success_gap']:.3f}", f"{v['peak_log_gap']:.3f}", f"{v['total']:.3f}"]
             for k, v in score.items()]  # fmt: skip
-    head = ["contact", "mean |success gap|", "median |log peak ratio|", "sum"]
+    head = ["contact", "mean abs. success gap", "median abs. log peak ratio", "sum"]
     text = table(rows) + "\n\nGap to MuJoCo over the policies:\n\n" + markdown_table(head, gaps)
     text += f"\n\nClosest to MuJoCo: {best}.\n"
     print(text)
