@@ -185,7 +185,6 @@ class PybulletArmEnv(BaseRobotEnv):
     ) -> None:
         super().__init__(task, arm, render_mode, width, height)
         self.contact = scene_contact(contact)
-        self._fixed = SceneContact.dynamics_of(self.contact.fixed)
         self._urdf = bullet_urdf(self.arm.urdf)
         self.servo = joint_servo(self.arm, self.task.spec.servo_dt or self.task.sim_dt)
         with native_output_silenced():  # "argv[0]="
@@ -264,8 +263,9 @@ class PybulletArmEnv(BaseRobotEnv):
         self.body = self._load_arm()
         self._setup_arm(qpos)
         add_mimic_constraints(c, self.body, self.arm.urdf)  # after the joint states are set
+        fixed = SceneContact.dynamics_of(self.contact.fixed)
         table = c.loadURDF(str(asset("table.urdf")), useFixedBase=True, flags=self._load_flags)
-        c.changeDynamics(table, BASE, lateralFriction=FRICTION, **self._fixed)
+        c.changeDynamics(table, BASE, lateralFriction=FRICTION, **fixed)
         position = [float(v) for v in target_body_pos]
         if self.task.spec.scene == "touch":  # the box stands on the table
             box = c.loadURDF(
@@ -274,7 +274,7 @@ class PybulletArmEnv(BaseRobotEnv):
                 useFixedBase=True,
                 flags=self._load_flags,
             )
-            c.changeDynamics(box, BASE, lateralFriction=FRICTION, **self._fixed)
+            c.changeDynamics(box, BASE, lateralFriction=FRICTION, **fixed)
         elif self.render_mode and self.gripper is None:
             self._add_target_marker(position)
         if self.gripper is not None:

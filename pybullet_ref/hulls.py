@@ -22,15 +22,13 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
-import os
-import tempfile
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
 
 from mjx_arm.urdf.errors import ConversionError
-from mjx_arm.urdf.mesh_convert import default_cache_dir, load_mesh
+from mjx_arm.urdf.mesh_convert import default_cache_dir, load_mesh, write_atomic
 from mjx_arm.urdf.meshes import existing_mesh, resolve_asset
 from mjx_arm.urdf.safe_xml import read_xml
 
@@ -108,7 +106,7 @@ def bullet_urdf(urdf: Path, cache_dir: Path | None = None) -> Path:
         for mesh in collisions:
             mesh.set("filename", str(_eroded_file(mesh, sources[id(mesh)], folder)))
             mesh.attrib.pop("scale", None)
-        _write_atomic(ET.tostring(root, encoding="unicode").encode(), target)
+        write_atomic(ET.tostring(root, encoding="unicode").encode(), target)
     except OSError as exc:
         raise ConversionError(
             f"{urdf}: PyBullet's copy with shrunk collision hulls cannot be written to {folder} "
@@ -135,19 +133,5 @@ def _eroded_file(mesh: ET.Element, source: Path, folder: Path) -> Path:
         vertices, faces = eroded_hull(load_mesh(source).vertices * scale, BULLET_URDF_MARGIN)
         lines = [f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in vertices]
         lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces]
-        _write_atomic(("\n".join(lines) + "\n").encode(), target)
+        write_atomic(("\n".join(lines) + "\n").encode(), target)
     return target
-
-
-def _write_atomic(data: bytes, target: Path) -> None:
-    """Write ``data`` to ``target`` through a temporary file in the same folder."""
-    target.parent.mkdir(parents=True, exist_ok=True)
-    handle, temporary = tempfile.mkstemp(suffix=".tmp", dir=target.parent)
-    try:
-        with os.fdopen(handle, "wb") as f:
-            f.write(data)
-        os.chmod(temporary, 0o644)
-        os.replace(temporary, target)
-    finally:
-        if os.path.exists(temporary):
-            os.unlink(temporary)

@@ -213,24 +213,33 @@ def _unit_scale(units: str | None, source: Path) -> float:
 
 
 def _write_atomic(mesh: Any, target: Path) -> None:
-    """Write ``mesh`` as binary STL to ``target`` through a temporary file in the same folder,
-    so a reader (or a second process converting the same file) never sees half a file."""
-    temporary = None
+    """Write ``mesh`` as binary STL to ``target`` (:func:`write_atomic`)."""
     try:
-        target.parent.mkdir(parents=True, exist_ok=True)
-        handle, temporary = tempfile.mkstemp(suffix=".tmp", dir=target.parent)
-        with os.fdopen(handle, "wb") as f:
-            f.write(mesh.export(file_type="stl"))
-        os.chmod(temporary, 0o644)
-        os.replace(temporary, target)
+        write_atomic(mesh.export(file_type="stl"), target)
     except OSError as exc:
         raise MeshConvertError(
             target,
             f"the converted mesh cannot be written ({one_line(exc)})",
             "set ConvertConfig.mesh_cache_dir to a writable folder",
         ) from exc
+
+
+def write_atomic(data: bytes, target: Path) -> None:
+    """Write ``data`` to ``target`` through a temporary file in the same folder (created if
+    missing), so a reader (or a second process writing the same file) never sees half a file.
+
+    Raises:
+        OSError: the folder or the file cannot be written.
+    """
+    target.parent.mkdir(parents=True, exist_ok=True)
+    handle, temporary = tempfile.mkstemp(suffix=".tmp", dir=target.parent)
+    try:
+        with os.fdopen(handle, "wb") as f:
+            f.write(data)
+        os.chmod(temporary, 0o644)
+        os.replace(temporary, target)
     finally:
-        if temporary is not None and os.path.exists(temporary):
+        if os.path.exists(temporary):
             os.unlink(temporary)
 
 
