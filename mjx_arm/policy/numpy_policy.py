@@ -164,8 +164,12 @@ class BasePolicy:
         return state
 
     def joint_velocity_targets(self, action: np.ndarray) -> np.ndarray:
-        """Joint velocity targets (rad/s) of ``action (..., 6)``: ``a * action_scale * v_max``."""
-        scale = float(self.metadata["action_scale"]) * np.asarray(self.metadata["v_max"])
+        """Joint velocity targets (rad/s) of ``action (..., n)``: ``a * joint_speeds`` (files
+        older than ``joint_speeds``: ``a * action_scale * v_max``, what they trained with)."""
+        scale = self.metadata.get("joint_speeds")
+        if scale is None:
+            scale = float(self.metadata["action_scale"]) * np.asarray(self.metadata["v_max"])
+        scale = np.asarray(scale, dtype=np.float64)
         return np.asarray(action, dtype=np.float64) * scale
 
     @property
