@@ -130,6 +130,8 @@ arms)
   # with jobs side by side say so in the file name).
   export ROS_PACKAGE_PATH="${ROBOTS:?folder that holds example-robot-data}"
   tag="${PARALLEL:-1}"; [ "$tag" = 1 ] && tag="" || tag="_x$tag"
+  # JAX takes 75% of the GPU's memory per process unless told otherwise; Warp needs its own
+  [ "${PARALLEL:-1}" -gt 1 ] && export XLA_PYTHON_CLIENT_MEM_FRACTION="0.$((60 / PARALLEL))"
   arm_task() {
     local urdf="$1" task="$2" name
     name=$(basename "$urdf" .urdf)

@@ -11,10 +11,18 @@ from pathlib import Path
 
 import numpy as np
 
+from mjx_arm.envs.ik import ToolDownSolver
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.observation import JointCoding, joint_coding
 from mjx_arm.task.wrench import ToolInertia, tool_inertia
-from mjx_arm.urdf.arm_config import ArmConfig, ResolvedArm, load_arm, resolve_arm
+from mjx_arm.urdf.arm_config import (
+    SHIPPED_HOME_QPOS,
+    ArmConfig,
+    ResolvedArm,
+    is_shipped,
+    load_arm,
+    resolve_arm,
+)
 from mjx_arm.urdf.convert_config import ConvertConfig
 
 # Poses drawn to measure an arm's reach (seeded: the same arm always gets the same scale).
@@ -83,6 +91,8 @@ class ArmInfo:
             arm): task targets are drawn in a box scaled by it.
         gripper: the parallel gripper's fingers, when the arm has one (:class:`Gripper`).
         full_turn: which joints turn without limits (URDF ``continuous``), bool ``(n,)``.
+        kv_factor: the servos' velocity gain factor the arm's models are converted with
+            (the config's, else :func:`press_kv_factor`).
     """
 
     config: ArmConfig
@@ -100,6 +110,7 @@ class ArmInfo:
     reach_scale: float
     gripper: Gripper | None = None
     full_turn: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, bool))
+    kv_factor: float = 1.0
 
     @property
     def n_joints(self) -> int:
@@ -107,7 +118,9 @@ class ArmInfo:
         return len(self.joint_names)
 
     def convert_config(self, **fields) -> ConvertConfig:
-        """Conversion settings that put the ee site and F/T sensors where this arm says."""
+        """Conversion settings that put the ee site and F/T sensors where this arm says, with
+        its servo gain."""
+        fields.setdefault("kv_factor", self.kv_factor)
         return self.config.convert_config(self.ee_link, self.ft_joint, **fields)
 
     def joint_coding(self, task: TaskConfig) -> JointCoding:
@@ -154,7 +167,91 @@ def _arm_info_cached(arm: ArmConfig, mtime: float) -> ArmInfo:
     reference = _reference_reach()
     shipped = arm.urdf_path == ArmConfig().urdf_path and not (arm.ee_link or arm.joints)
     reach = reference if shipped else horizontal_reach(resolved)
-    return _info(resolved, reach, reference)
+    info = _info(resolved, reach, reference)
+    if arm.kv_factor:
+        return dataclasses.replace(info, kv_factor=arm.kv_factor)
+    if is_shipped(arm):
+        return info
+    return dataclasses.replace(info, kv_factor=press_kv_factor(info))
+
+
+# The working height (m) of the ee point above the table at a home pose (mjx_arm.envs.setup).
+HOME_HEIGHT = 0.20
+KV_MIN = 0.25  # the lowest servo gain factor press_kv_factor gives
+
+
+def tool_down_solver(arm: ArmInfo) -> ToolDownSolver:
+    """The arm's :class:`~mjx_arm.envs.ik.ToolDownSolver` (one per arm config and file
+    version): its model in the Reach scene with self-collision on, servo gain factor 1."""
+    return _solver_cached(arm.config, arm.urdf.stat().st_mtime)
+
+
+@functools.cache
+def _solver_cached(config: ArmConfig, mtime: float) -> ToolDownSolver:
+    from mjx_arm.urdf.convert import EE_SITE, load_model
+
+    info = _arm_info_cached(config, mtime) if config.kv_factor else _bare_info(config)
+    model = load_model(
+        info.urdf, info.convert_config(scene="reach", self_collision=True, kv_factor=1.0)
+    )
+    return ToolDownSolver(model, info.joint_names, info.lower, info.upper, EE_SITE)
+
+
+def _bare_info(config: ArmConfig) -> ArmInfo:
+    """The arm's facts with servo gain factor 1 (what :func:`press_kv_factor` starts from)."""
+    return _arm_info_cached(config.replace(kv_factor=1.0), config.urdf_path.stat().st_mtime)
+
+
+def press_force(arm: ArmInfo, q: np.ndarray | None = None) -> float:
+    """The force (N) Touch's full downward action presses with, the tool held still, at the
+    tool-down pose ``q (n,)`` (default: the best-conditioned one over the middle of Touch's
+    area at :data:`HOME_HEIGHT`), with servo gain factor 1.
+
+    A velocity servo held still pushes with its gain times the commanded speed: the wrist force
+    is ``e_z . J+^T K J+ e_z * v`` for the least-norm joint motion ``J+ e_z`` that moves the
+    tool down, ``K`` the servo gains and ``v`` the fastest such motion at Touch's joint speeds.
+    """
+    from mjx_arm.task.touch import touch_config
+
+    solver = tool_down_solver(arm)
+    task = touch_config()
+    if q is None:
+        low, high = task.replace(workspace_scale=arm.reach_scale).target_box()
+        above = np.array([0.5 * (low[0] + high[0]), 0.5 * (low[1] + high[1]), HOME_HEIGHT])
+        homes = solver.homes(above)
+        if not homes:
+            return float("nan")
+        q = homes[0]
+    model = solver.ik.model
+    gains = np.array([model.actuator_gainprm[model.actuator(n).id, 0] for n in arm.joint_names])
+    jp, _ = solver.ik.jacobian(np.asarray(q, float))
+    pinv = np.linalg.pinv(jp)
+    down = pinv @ np.array([0.0, 0.0, -1.0])
+    speed = 1.0 / np.max(np.abs(down) / task.joint_speeds(arm.v_max))
+    return float((pinv[:, 2] @ (gains * pinv[:, 2])) * speed)
+
+
+@functools.cache
+def _reference_press() -> float:
+    """:func:`press_force` of the shipped arm at its home pose."""
+    shipped = arm_info()
+    return press_force(shipped, np.asarray(SHIPPED_HOME_QPOS))
+
+
+def press_kv_factor(arm: ArmInfo) -> float:
+    """The servo gain factor at which the arm presses like the shipped arm: the shipped arm's
+    :func:`press_force` over this arm's, in [:data:`KV_MIN`, 1].
+
+    Why: Touch's force band (1-50 N) is a band of the action along the pressing direction, and
+    a stiffer arm squeezes it into actions finer than PPO's exploration noise (policies then
+    rest on the box below 1 N, or strike it). On the H200 the arms that press at about the
+    shipped arm's 250 N or less at a full action (shipped, Panda, xArm7) solved Touch on every
+    seed tried; those at 360-430 N (UR3, UR5, UR10) on some (benchmarks/results/arms/).
+    """
+    force = press_force(arm)
+    if not np.isfinite(force) or force <= 0:
+        return 1.0
+    return float(np.clip(_reference_press() / force, KV_MIN, 1.0))
 
 
 @functools.cache

@@ -13,6 +13,7 @@ free.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -20,6 +21,10 @@ import mujoco
 import numpy as np
 
 DOWN = np.array([0.0, 0.0, -1.0])
+LIMIT_MARGIN = 0.10  # rad, or 5% of a narrower range: poses stay this far inside the limits
+HOME_STARTS = 24  # seeded IK starts for a home pose
+HOME_CANDIDATES = 6  # distinct home poses kept, best-conditioned first
+PENETRATION = 1e-3  # m: a contact deeper than this is a collision
 # Converged: within 1 mm of the point, the tool within 1 degree of vertical.
 POSITION_TOL = 1e-3
 TILT_TOL = np.radians(1.0)
@@ -188,3 +193,107 @@ def tool_axis(ik: ToolDownIk, q: np.ndarray, last_joint: str) -> np.ndarray:
         direction = axis if axis @ (anchor - parent_anchor) >= 0 else -axis
     local = rot.T @ direction
     return local / np.linalg.norm(local)
+
+
+class ToolDownSolver:
+    """Tool-down poses of one arm: IK inside its limits less a margin, with a collision check.
+
+    Args:
+        model: the arm in a scene with the table and self-collision on, so a pose that folds
+            the arm into itself or into the table shows as a contact.
+        joint_names: the n arm joints; the last one turns the tool (:func:`tool_axis`).
+        lower, upper: the joints' limits (rad), ``(n,)`` each.
+        site: the ee site.
+    """
+
+    def __init__(self, model, joint_names, lower, upper, site: str = "ee") -> None:
+        self.lower, self.upper = joint_box(np.asarray(lower), np.asarray(upper))
+        self.middle = 0.5 * (self.lower + self.upper)
+        up = np.array([0.0, 0.0, 1.0])
+        self.ik = ToolDownIk(model, tuple(joint_names), site, self.lower, self.upper, up)
+        self.last_joint = joint_names[-1]
+        self.ik.tool = tool_axis(self.ik, self.middle, self.last_joint)
+        self._full_turn = (np.asarray(upper) - np.asarray(lower)) > 2 * math.pi + 1e-6
+        self._static = model.body_weldid == 0
+
+    def canonical(self, q: np.ndarray) -> np.ndarray:
+        """``q (n,)`` with each joint of a range over a full turn moved by whole turns to the
+        angle nearest the middle of its range."""
+        turns = np.round((self.middle - q) / (2 * math.pi)) * self._full_turn
+        shifted = q + 2 * math.pi * turns
+        inside = (shifted >= self.lower) & (shifted <= self.upper)
+        return np.where(inside, shifted, q)
+
+    def collides(self, q: np.ndarray) -> bool:
+        """Whether the arm at ``q (n,)`` penetrates itself or the table by over 1 mm."""
+        model, data = self.ik.model, self.ik.data
+        data.qpos[self.ik.qadr] = q
+        mujoco.mj_fwdPosition(model, data)
+        for contact in data.contact[: data.ncon]:
+            bodies = model.geom_bodyid[contact.geom]
+            if contact.dist < -PENETRATION and not self._static[bodies].all():
+                return True
+        return False
+
+    def tool_reach(self, q: np.ndarray) -> float:
+        """How far (m) the collision shapes moved by the last arm joint stick out past the ee
+        point along the tool axis, at ``q (n,)``: what touches a surface below the ee first."""
+        model, data = self.ik.model, self.ik.data
+        _, axis = self.ik.pose(q)
+        ee = data.site_xpos[self.ik.site_id]
+        wrist = model.jnt_bodyid[model.joint(self.last_joint).id]
+        reach = 0.0
+        signs = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
+        for geom in range(model.ngeom):
+            if not (model.geom_contype[geom] or model.geom_conaffinity[geom]):
+                continue
+            if not _below(model, int(model.geom_bodyid[geom]), int(wrist)):
+                continue
+            centre, half = model.geom_aabb[geom, :3], model.geom_aabb[geom, 3:]
+            rot = data.geom_xmat[geom].reshape(3, 3)
+            corners = data.geom_xpos[geom] + (centre + signs * half) @ rot.T
+            reach = max(reach, float(((corners - ee) @ axis).max()))
+        return reach
+
+    def homes(self, point: np.ndarray) -> list[np.ndarray]:
+        """Distinct collision-free tool-down poses at ``point (3,)`` from seeded starts (the
+        middle of the limits first), best-conditioned first, at most HOME_CANDIDATES."""
+        rng = np.random.default_rng(0)
+        found: list[tuple[float, np.ndarray]] = []
+        for k in range(HOME_STARTS):
+            start = self.middle if k == 0 else rng.uniform(self.lower, self.upper)
+            result = self.ik.solve(point, start, prefer=self.middle)
+            if not result.converged:
+                continue
+            q = self.canonical(result.q)
+            if any(np.abs(q - other).max() < 0.05 for _, other in found) or self.collides(q):
+                continue
+            found.append((self.ik.manipulability(q), q))
+        found.sort(key=lambda item: -item[0])
+        return [q for _, q in found[:HOME_CANDIDATES]]
+
+    def reach_from(self, home: np.ndarray, points: np.ndarray) -> list[np.ndarray | None]:
+        """Tool-down poses at each of ``points (m, 3)``, each solved from ``home``; None where
+        the IK does not converge inside the limits."""
+        out = []
+        for point in points:
+            result = self.ik.solve(point, home, prefer=home)
+            out.append(result.q if result.converged else None)
+        return out
+
+
+def _below(model: mujoco.MjModel, body: int, root: int) -> bool:
+    """Whether ``body`` is ``root`` or hangs below it in the kinematic tree."""
+    while body > 0:
+        if body == root:
+            return True
+        body = int(model.body_parentid[body])
+    return body == root
+
+
+def joint_box(lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The joint limits ``(n,)`` shrunk by :data:`LIMIT_MARGIN` (or 5% of a narrower range),
+    and bounded to +-2 pi."""
+    lower, upper = np.maximum(lower, -2 * math.pi), np.minimum(upper, 2 * math.pi)
+    margin = np.minimum(LIMIT_MARGIN, 0.05 * (upper - lower))
+    return lower + margin, upper - margin

@@ -36,7 +36,9 @@ ENGINE_ENTRY_POINTS = {
 def make_env(
     task_name: str, engine: str = "mujoco", task: TaskConfig | dict | None = None, **kwargs: Any
 ) -> gym.Env:
-    """Build one env of ``task_name`` on ``engine`` ("mujoco" or "pybullet").
+    """Build one env of ``task_name`` on ``engine`` ("mujoco" or "pybullet"), inside a time
+    limit of its task's ``episode_steps`` as the arm's setup fills them in (a slow arm's
+    episode is longer: :mod:`mjx_arm.envs.setup`).
 
     Args:
         task_name: a registered task name.
@@ -49,7 +51,8 @@ def make_env(
         raise ValueError(f"unknown engine {engine!r}; choose one of {ENGINES}")
     from gymnasium.envs.registration import load_env_creator
 
-    return load_env_creator(ENGINE_ENTRY_POINTS[engine])(_task(task_name, task), **kwargs)
+    env = load_env_creator(ENGINE_ENTRY_POINTS[engine])(_task(task_name, task), **kwargs)
+    return gym.wrappers.TimeLimit(env, env.task.episode_steps)
 
 
 def make_vector(task_name: str, num_envs: int = 1, **kwargs: Any):
@@ -68,5 +71,6 @@ def register_envs() -> None:
             id=env_id(name),
             entry_point=functools.partial(make_env, name),
             vector_entry_point=functools.partial(make_vector, name),
-            max_episode_steps=TaskConfig().episode_steps,
+            # the time limit comes from the env's own task (make_env): it depends on the arm
+            max_episode_steps=None,
         )

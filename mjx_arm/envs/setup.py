@@ -27,22 +27,15 @@ import functools
 import math
 from dataclasses import dataclass, field
 
-import mujoco
 import numpy as np
 
-from mjx_arm.envs.arm import ArmInfo
-from mjx_arm.envs.ik import ToolDownIk, tool_axis
+from mjx_arm.envs.arm import HOME_HEIGHT, ArmInfo, tool_down_solver
+from mjx_arm.envs.ik import ToolDownSolver
 from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
-from mjx_arm.urdf.convert import EE_SITE, load_model
 
-HOME_HEIGHT = 0.20  # m: the ee point above the table top at home
-LIMIT_MARGIN = 0.10  # rad, or 5% of a narrower range: the IK stays this far inside the limits
-HOME_STARTS = 24  # seeded IK starts for the home pose
-HOME_CANDIDATES = 6  # the best-conditioned distinct homes whose reach over the area is tried
 SCALE_STEPS = (1.0, 0.9, 0.8, 0.7, 0.6, 0.5)  # fractions of the reach scale tried
 EPISODE_TIME_FACTOR = 2.0  # an episode lasts at least this many times the slowest motion
-PENETRATION = 1e-3  # m: a contact deeper than this is a collision
 
 
 @dataclass(frozen=True)
@@ -84,107 +77,6 @@ class ArmSetup:
         return self.reached == self.targets
 
 
-class ArmSolver:
-    """Tool-down IK of one arm with its collision check, built once per arm.
-
-    The model is the arm in the Reach scene (the table, no box) with self-collision on, so a
-    pose that folds the arm into itself or into the table shows as a contact.
-    """
-
-    def __init__(self, arm: ArmInfo) -> None:
-        model = load_model(arm.urdf, arm.convert_config(scene="reach", self_collision=True))
-        self.lower, self.upper = joint_box(arm.lower, arm.upper)
-        self.middle = 0.5 * (self.lower + self.upper)
-        self.ik = ToolDownIk(
-            model, arm.joint_names, EE_SITE, self.lower, self.upper, np.array([0.0, 0.0, 1.0])
-        )
-        self.ik.tool = tool_axis(self.ik, self.middle, arm.joint_names[-1])
-        self._full_turn = (arm.upper - arm.lower) > 2 * math.pi + 1e-6
-        self._static = model.body_weldid == 0
-
-    def canonical(self, q: np.ndarray) -> np.ndarray:
-        """``q (n,)`` with each joint of a range over a full turn moved by whole turns to the
-        angle nearest the middle of its range."""
-        turns = np.round((self.middle - q) / (2 * math.pi)) * self._full_turn
-        shifted = q + 2 * math.pi * turns
-        inside = (shifted >= self.lower) & (shifted <= self.upper)
-        return np.where(inside, shifted, q)
-
-    def collides(self, q: np.ndarray) -> bool:
-        """Whether the arm at ``q (n,)`` penetrates itself or the table by over 1 mm."""
-        model, data = self.ik.model, self.ik.data
-        data.qpos[self.ik.qadr] = q
-        mujoco.mj_fwdPosition(model, data)
-        for contact in data.contact[: data.ncon]:
-            bodies = model.geom_bodyid[contact.geom]
-            if contact.dist < -PENETRATION and not self._static[bodies].all():
-                return True
-        return False
-
-    def tool_reach(self, q: np.ndarray, last_joint: str) -> float:
-        """How far (m) the collision shapes moved by the last arm joint stick out past the ee
-        point along the tool axis, at ``q (n,)``: what touches a surface below the ee first."""
-        model, data = self.ik.model, self.ik.data
-        _, axis = self.ik.pose(q)
-        ee = data.site_xpos[self.ik.site_id]
-        wrist = model.jnt_bodyid[model.joint(last_joint).id]
-        reach = 0.0
-        signs = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
-        for geom in range(model.ngeom):
-            if not (model.geom_contype[geom] or model.geom_conaffinity[geom]):
-                continue
-            if not _below(model, int(model.geom_bodyid[geom]), int(wrist)):
-                continue
-            centre, half = model.geom_aabb[geom, :3], model.geom_aabb[geom, 3:]
-            rot = data.geom_xmat[geom].reshape(3, 3)
-            corners = data.geom_xpos[geom] + (centre + signs * half) @ rot.T
-            reach = max(reach, float(((corners - ee) @ axis).max()))
-        return reach
-
-    def homes(self, point: np.ndarray) -> list[np.ndarray]:
-        """Distinct collision-free tool-down poses at ``point (3,)`` from seeded starts (the
-        middle of the limits first), best-conditioned first, at most HOME_CANDIDATES."""
-        rng = np.random.default_rng(0)
-        found: list[tuple[float, np.ndarray]] = []
-        for k in range(HOME_STARTS):
-            start = self.middle if k == 0 else rng.uniform(self.lower, self.upper)
-            result = self.ik.solve(point, start, prefer=self.middle)
-            if not result.converged:
-                continue
-            q = self.canonical(result.q)
-            if any(np.abs(q - other).max() < 0.05 for _, other in found) or self.collides(q):
-                continue
-            found.append((self.ik.manipulability(q), q))
-        found.sort(key=lambda item: -item[0])
-        return [q for _, q in found[:HOME_CANDIDATES]]
-
-    def reach_from(self, home: np.ndarray, points: np.ndarray) -> list[np.ndarray | None]:
-        """Tool-down poses at each of ``points (m, 3)``, each solved from ``home``; None where
-        the IK does not converge inside the limits."""
-        out = []
-        for point in points:
-            result = self.ik.solve(point, home, prefer=home)
-            out.append(result.q if result.converged else None)
-        return out
-
-
-def _below(model: mujoco.MjModel, body: int, root: int) -> bool:
-    """Whether ``body`` is ``root`` or hangs below it in the kinematic tree."""
-    while body > 0:
-        if body == root:
-            return True
-        body = int(model.body_parentid[body])
-    return body == root
-
-
-def joint_box(lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The joint limits ``(n,)`` shrunk by :data:`LIMIT_MARGIN` (or 5% of a narrower range),
-    and bounded to +-2 pi."""
-    lower, upper = np.maximum(lower, -2 * math.pi), np.minimum(upper, 2 * math.pi)
-    margin = np.minimum(LIMIT_MARGIN, 0.05 * (upper - lower))
-    return lower + margin, upper - margin
-
-
 def grid_targets(task: TaskConfig) -> np.ndarray:
     """The target points (m) of a 3 x 3 x 3 grid of draws over the task's box, as the task
     places them (repeated points dropped), ``(m, 3)``."""
@@ -195,12 +87,6 @@ def grid_targets(task: TaskConfig) -> np.ndarray:
     return np.unique(np.round(points, 6), axis=0)
 
 
-@functools.cache
-def arm_solver(arm: ArmInfo) -> ArmSolver:
-    """The :class:`ArmSolver` of ``arm`` (one per arm and process)."""
-    return ArmSolver(arm)
-
-
 def arm_setup(arm: ArmInfo, task: TaskConfig) -> ArmSetup:
     """The setup of ``task`` on ``arm`` (cached per arm and task config; see the module)."""
     return _setup_cached(arm, task)
@@ -208,7 +94,7 @@ def arm_setup(arm: ArmInfo, task: TaskConfig) -> ArmSetup:
 
 @functools.cache
 def _setup_cached(arm: ArmInfo, task: TaskConfig) -> ArmSetup:
-    solver = arm_solver(arm)
+    solver = tool_down_solver(arm)
     home, source = given_home(arm, task)
     scales = [task.workspace_scale] if task.workspace_scale else _scales(arm, home)
     best: tuple | None = None
@@ -257,7 +143,7 @@ def shipped_home(arm: ArmInfo, task: TaskConfig) -> tuple[float, ...] | None:
     return LIFT_HOME if task.spec.gripper else SHIPPED_HOME_QPOS
 
 
-def _try_scale(solver: ArmSolver, task: TaskConfig, home: np.ndarray | None):
+def _try_scale(solver: ToolDownSolver, task: TaskConfig, home: np.ndarray | None):
     """(reached, targets, home, poses, scale) of the best home at ``task``'s scale, or None
     where no tool-down home exists over the area's middle."""
     points = grid_targets(task)
@@ -304,7 +190,7 @@ def _finish(arm, task, solver, q_home, source, scale, reached, targets, poses) -
         travel_time=travel,
         episode_steps=steps,
         manipulability=solver.ik.manipulability(q_home),
-        tool_reach=solver.tool_reach(q_home, arm.joint_names[-1]),
+        tool_reach=solver.tool_reach(q_home),
         notes=tuple(notes),
     )
 
@@ -325,7 +211,7 @@ def _unreachable(arm, task, solver, scale, home, source) -> ArmSetup:
         travel_time=0.0,
         episode_steps=task.episode_steps,
         manipulability=solver.ik.manipulability(q),
-        tool_reach=solver.tool_reach(q, arm.joint_names[-1]),
+        tool_reach=solver.tool_reach(q),
         notes=("no tool-down pose over the task area: the arm cannot reach it tool-down",),
     )
 

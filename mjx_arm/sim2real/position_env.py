@@ -318,7 +318,7 @@ class PybulletPositionArmEnv(_ChainActuation, PybulletArmEnv):
 
 def make_position_env(task: TaskConfig, engine: str, config: ChainConfig | None = None, **kwargs):
     """A position-controlled env of ``task`` on ``engine`` ("mujoco" or "pybullet"), truncated
-    at ``task.episode_steps`` like the registered envs.
+    at its task's ``episode_steps`` (as the arm's setup fills them in) like the registered envs.
 
     Args:
         task: the task configuration.
@@ -330,4 +330,4 @@ def make_position_env(task: TaskConfig, engine: str, config: ChainConfig | None 
     if engine not in classes:
         raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
     env = classes[engine](task, config=config, **kwargs)
-    return gym.wrappers.TimeLimit(env, task.episode_steps)
+    return gym.wrappers.TimeLimit(env, env.task.episode_steps)

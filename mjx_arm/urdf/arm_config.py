@@ -66,6 +66,11 @@ class ArmConfig:
         repair_inertia, default_effort, default_velocity: the converter's repairs
             (``--repair-inertia``, ``--default-effort``, ``--default-velocity``) for a URDF
             that needs them; the joints that use a default limit take it here too.
+        kv_factor: the joints' velocity servo gain as a multiple of ``I_min / sim_dt``
+            (:class:`~mjx_arm.urdf.convert_config.ConvertConfig`); 0 derives it from the
+            model so the arm presses the box like the shipped arm
+            (:func:`mjx_arm.envs.arm.press_kv_factor`; the shipped arms: 1). Configs recorded
+            before this field existed read 1, what they trained with.
     """
 
     urdf: str = ""
@@ -77,6 +82,7 @@ class ArmConfig:
     repair_inertia: bool = False
     default_effort: float = 0.0
     default_velocity: float = 0.0
+    kv_factor: float = 0.0
 
     def convert_config(self, ee_link: str, ft_joint: str, **fields: Any) -> ConvertConfig:
         """Conversion settings of this arm, given its resolved ``ee_link`` and ``ft_joint``
@@ -98,6 +104,8 @@ class ArmConfig:
     def __post_init__(self) -> None:
         if self.collision not in COLLISION_CHOICES:
             raise ArmConfigError(f"collision must be one of {COLLISION_CHOICES}")
+        if not 0.0 <= self.kv_factor <= 1.0:
+            raise ArmConfigError(f"kv_factor must be in [0, 1] (0: derived), got {self.kv_factor}")
 
     @property
     def urdf_path(self) -> Path:
@@ -114,7 +122,9 @@ class ArmConfig:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> ArmConfig:
-        """Inverse of :meth:`to_dict`; unknown keys are an error."""
+        """Inverse of :meth:`to_dict`; unknown keys are an error. A record without
+        ``kv_factor`` (written before it existed) reads 1, the gain it trained with."""
+        data = {"kv_factor": 1.0, **data}
         return cls(**config_fields(cls, data, "arm config", ArmConfigError))
 
 
@@ -167,7 +177,7 @@ def load_arm(source: str | Path | ArmConfig | None) -> ArmConfig:
         data = tomllib.loads(text) if path.suffix.lower() == ".toml" else json.loads(text)
     except (tomllib.TOMLDecodeError, json.JSONDecodeError) as err:
         raise ArmConfigError(f"{path}: not a valid arm file: {err}") from err
-    arm = ArmConfig.from_dict(data)
+    arm = ArmConfig.from_dict({"kv_factor": 0.0, **data})  # an arm file derives what it omits
     return arm.replace(urdf=_arm_file_urdf(arm.urdf, path)) if arm.urdf else arm
 
 
