@@ -196,7 +196,7 @@ def test_batched_env_under_extreme_actions_stays_finite_inside_the_space(batch_e
     run = jax.jit(lambda s, a: jax.lax.scan(body, s, a))
     _, (obs, diverged, reward, qpos) = run(jax.vmap(env.reset)(keys), actions)
     obs, qpos = np.asarray(obs), np.asarray(qpos)
-    space = flat_observation_space(env.task.force_clip)
+    space = flat_observation_space(env.task.force_clip, coding=env.joint_coding)
     assert obs.shape == (STEPS, len(PATTERNS), space.shape[0])
     assert np.isfinite(obs).all() and np.isfinite(np.asarray(reward)).all()
     assert ((obs >= space.low) & (obs <= space.high)).all()

@@ -36,9 +36,7 @@ ENGINE_ENTRY_POINTS = {
 def make_env(
     task_name: str, engine: str = "mujoco", task: TaskConfig | dict | None = None, **kwargs: Any
 ) -> gym.Env:
-    """Build one env of ``task_name`` on ``engine`` ("mujoco" or "pybullet"), inside a time
-    limit of its task's ``episode_steps`` as the arm's setup fills them in (a slow arm's
-    episode is longer: :mod:`mjx_arm.envs.setup`).
+    """Build one env of ``task_name`` on ``engine`` ("mujoco" or "pybullet").
 
     Args:
         task_name: a registered task name.
@@ -51,7 +49,14 @@ def make_env(
         raise ValueError(f"unknown engine {engine!r}; choose one of {ENGINES}")
     from gymnasium.envs.registration import load_env_creator
 
-    env = load_env_creator(ENGINE_ENTRY_POINTS[engine])(_task(task_name, task), **kwargs)
+    return load_env_creator(ENGINE_ENTRY_POINTS[engine])(_task(task_name, task), **kwargs)
+
+
+def make_timed_env(task_name: str, **kwargs: Any) -> gym.Env:
+    """:func:`make_env` inside a time limit of the env's own ``task.episode_steps``, as the
+    arm's setup fills them in (a slow arm's episode is longer: :mod:`mjx_arm.envs.setup`):
+    the entry point of the registered ids."""
+    env = make_env(task_name, **kwargs)
     return gym.wrappers.TimeLimit(env, env.task.episode_steps)
 
 
@@ -69,7 +74,7 @@ def register_envs() -> None:
             continue
         gym.register(
             id=env_id(name),
-            entry_point=functools.partial(make_env, name),
+            entry_point=functools.partial(make_timed_env, name),
             vector_entry_point=functools.partial(make_vector, name),
             # the time limit comes from the env's own task (make_env): it depends on the arm
             max_episode_steps=None,
