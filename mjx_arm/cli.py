@@ -28,7 +28,13 @@ def cmd_demo(args: argparse.Namespace) -> int:
     (a URDF or an arm file).
     """
     from mjx_arm.demo import run_demo
+    from mjx_arm.inputs import check_folder
+    from mjx_arm.urdf.arm_config import load_arm
 
+    if args.out:
+        check_folder(args.out, "--out")
+    if args.arm:
+        load_arm(args.arm)  # a missing or broken arm file fails before any work
     enable_compilation_cache()
     run_demo(args.out, quick=args.quick, arm=args.arm)
     return EXIT_OK

@@ -111,6 +111,24 @@ def check_output(path: str | Path, what: str, suffixes: tuple[str, ...] = ()) ->
     return path
 
 
+def check_folder(path: str | Path, what: str) -> Path:
+    """An output folder, checked before any work: not a file, and it exists or can be created
+    (its nearest existing parent is a writable folder).
+
+    Raises:
+        InputError: the path is a file, or no writable folder holds it.
+    """
+    path = Path(path).expanduser()
+    if path.exists() and not path.is_dir():
+        raise InputError(f"{what} {str(path)!r} is a file; give a folder")
+    parent = path
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir() or not os.access(parent, os.W_OK):
+        raise InputError(f"{what} {str(path)!r}: {parent} is not a writable folder")
+    return path
+
+
 def write_atomic(data: bytes, target: Path) -> None:
     """Write ``data`` to ``target`` through a temporary file in the same folder (created if
     missing), so a reader (or a second process writing the same file) never sees half a file,

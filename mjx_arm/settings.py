@@ -86,7 +86,13 @@ def set_path(config: Any, path: list[str], text: str, label: str = "setting") ->
         raise ConfigError(f"{path[0]!r} has no fields")
     else:
         value = coerce(text, hints[path[0]])
-    return dataclasses.replace(config, **{path[0]: value})
+        check_value(value, hints[path[0]], path[0])
+    try:
+        return dataclasses.replace(config, **{path[0]: value})
+    except ConfigError:
+        raise
+    except ValueError as err:  # a config's own range check (__post_init__)
+        raise ConfigError(str(err)) from err
 
 
 def apply_settings(config: Any, items: list[str], label: str = "setting") -> Any:

@@ -101,8 +101,24 @@ class RunDir:
     # ------------------------------------------------------------------ metrics
 
     def log_metrics(self, step: int, metrics: dict[str, float]) -> None:
-        """Append one evaluation's metrics to the CSV and to TensorBoard."""
+        """Append one evaluation's metrics to the CSV and to TensorBoard.
+
+        Raises:
+            RunDirError: the disk is full or the folder cannot be written (a cut row is
+                dropped on resume: :meth:`truncate_metrics`).
+        """
         row = {"step": step, "time": time.time(), **{k: _scalar(v) for k, v in metrics.items()}}
+        try:
+            self._append_row(row)
+        except OSError as err:
+            raise RunDirError(
+                f"cannot write the metrics of step {step} into {self.path} "
+                f"({err.strerror or err}); free some space and resume the run"
+            ) from err
+        self._write_tb(step, row)
+
+    def _append_row(self, row: dict[str, float]) -> None:
+        """Append ``row`` to metrics.csv (widening its header for a new metric)."""
         path = self.path / "metrics.csv"
         if self._csv_fields is None:
             self._csv_fields = _existing_fields(path) or list(row)
@@ -116,7 +132,6 @@ class RunDir:
             if new:
                 writer.writeheader()
             writer.writerow(row)
-        self._write_tb(step, row)
 
     def _write_tb(self, step: int, row: dict[str, float]) -> None:
         writer = self._tensorboard()
