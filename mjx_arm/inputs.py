@@ -39,6 +39,11 @@ class MissingInputError(InputFileError, FileNotFoundError):
     """An input file or folder that does not exist."""
 
 
+class OutputPathError(InputError, ValueError):
+    """An output path that cannot be written: a folder for a file, a file for a folder, the
+    wrong suffix, no writable folder."""
+
+
 def require_file(path: str | Path, what: str) -> Path:
     """``path`` as a Path, checked to be a readable file.
 
@@ -96,18 +101,18 @@ def check_output(path: str | Path, what: str, suffixes: tuple[str, ...] = ()) ->
     that exists or can be created.
 
     Raises:
-        InputError: the path is a folder, has the wrong suffix, or its folder is a file.
+        OutputPathError: the path is a folder, has the wrong suffix, or its folder is a file.
     """
     path = Path(path).expanduser()
     if suffixes and path.suffix not in suffixes:
-        raise InputError(f"{what} {str(path)!r} must end in one of {', '.join(suffixes)}")
+        raise OutputPathError(f"{what} {str(path)!r} must end in one of {', '.join(suffixes)}")
     if path.is_dir():
-        raise InputError(f"{what} {str(path)!r} is a folder; give a file name")
+        raise OutputPathError(f"{what} {str(path)!r} is a folder; give a file name")
     parent = path.parent
     while not parent.exists() and parent != parent.parent:
         parent = parent.parent
     if not parent.is_dir() or not os.access(parent, os.W_OK):
-        raise InputError(f"{what} {str(path)!r}: {parent} is not a writable folder")
+        raise OutputPathError(f"{what} {str(path)!r}: {parent} is not a writable folder")
     return path
 
 
@@ -116,16 +121,16 @@ def check_folder(path: str | Path, what: str) -> Path:
     (its nearest existing parent is a writable folder).
 
     Raises:
-        InputError: the path is a file, or no writable folder holds it.
+        OutputPathError: the path is a file, or no writable folder holds it.
     """
     path = Path(path).expanduser()
     if path.exists() and not path.is_dir():
-        raise InputError(f"{what} {str(path)!r} is a file; give a folder")
+        raise OutputPathError(f"{what} {str(path)!r} is a file; give a folder")
     parent = path
     while not parent.exists() and parent != parent.parent:
         parent = parent.parent
     if not parent.is_dir() or not os.access(parent, os.W_OK):
-        raise InputError(f"{what} {str(path)!r}: {parent} is not a writable folder")
+        raise OutputPathError(f"{what} {str(path)!r}: {parent} is not a writable folder")
     return path
 
 

@@ -167,8 +167,7 @@ def evaluate(
 
     if engine not in ENGINES:
         raise ConfigError(f"engine must be one of {ENGINES}, got {engine!r}")
-    check_policy_arm(policy, arm_info(arm))  # before the task meets the arm
-    check_policy_fits(policy, task, arm_info(arm))
+    check_policy_fits(policy, task, arm_info(arm))  # before the task meets the arm
     start = time.monotonic()
     if engine == "mjx":
         run = run_batched(policy, task, episodes, seed, backend or "mjx", impl, arm)
@@ -193,16 +192,19 @@ def evaluate(
 
 
 def check_policy_fits(policy: Any, task: TaskConfig, arm: Any) -> None:
-    """Check that ``policy`` takes the observation and gives the action of ``task`` on ``arm``
-    (an :class:`~mjx_arm.envs.arm.ArmInfo`).
+    """Check that ``policy`` was trained on ``arm`` (an :class:`~mjx_arm.envs.arm.ArmInfo`;
+    :func:`~mjx_arm.evaluate.runners.check_policy_arm`) and takes the observation and gives
+    the action of ``task`` on it.
 
     Raises:
-        PolicyFileError: its layer sizes do not fit (another task's or arm's policy).
+        ArmMismatchError: another arm's policy.
+        PolicyFileError: its layer sizes do not fit (another task's policy).
     """
     from mjx_arm.envs.base import action_size
     from mjx_arm.policy import PolicyFileError
     from mjx_arm.task.observation import obs_size
 
+    check_policy_arm(policy, arm)
     want = (obs_size(arm.n_joints, task.spec.extra_obs), action_size(arm, task))
     have = (getattr(policy, "obs_size", want[0]), getattr(policy, "action_size", want[1]))
     if have != want:

@@ -129,7 +129,10 @@ def _session_metadata(session: Any, path: str | Path) -> dict[str, Any]:
     Raises:
         PolicyFileError: no or broken metadata, or a graph of other inputs or sizes.
     """
-    props = session.get_modelmeta().custom_metadata_map
+    try:
+        props = session.get_modelmeta().custom_metadata_map
+    except UnicodeDecodeError as exc:  # onnxruntime decodes the properties as UTF-8
+        raise PolicyFileError(f"{path}: its metadata is not UTF-8 text ({exc})") from exc
     if METADATA_KEY not in props:
         raise PolicyFileError(f"{path} is not an mjx_arm policy file (no metadata)")
     try:

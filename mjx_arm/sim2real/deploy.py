@@ -27,7 +27,6 @@ from mjx_arm.evaluate import (
     run_episodes,
     summarize,
 )
-from mjx_arm.evaluate.runners import check_policy_arm
 from mjx_arm.inputs import write_atomic
 from mjx_arm.sim2real.commands import ServojConfig, joint_trajectory_msg, urscript_program
 from mjx_arm.sim2real.position_env import EpisodeCommands, make_position_env
@@ -103,7 +102,6 @@ def deploy_sim(
     config = config or DeployConfig()
     task = task or eval_task(policy)[0]
     arm = eval_arm(policy, arm)
-    check_policy_arm(policy, arm_info(arm))
     check_policy_fits(policy, task, arm_info(arm))
     velocity_env = make_eval_env(task, engine, arm=arm)
     velocity_run, _ = _run_closed(policy, velocity_env, episodes, seed)

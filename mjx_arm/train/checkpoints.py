@@ -62,13 +62,14 @@ def save_checkpoint(
     shutil.rmtree(partial, ignore_errors=True)
     try:
         _write_partial(partial, step, params, meta, transitions)
-    except OSError as err:
+    except (OSError, ValueError) as err:  # orbax (tensorstore) reports a full disk as ValueError
         shutil.rmtree(partial, ignore_errors=True)
         kept = latest_checkpoint(folder.parent)
+        cause = getattr(err, "strerror", None) or str(err).split(" [", 1)[0][:300]
         raise CheckpointError(
-            f"saving the checkpoint of step {step} in {folder.parent} failed "
-            f"({err.strerror or err}); the last good checkpoint is kept "
-            f"({kept.name if kept else 'none yet'}): free some space and resume the run"
+            f"saving the checkpoint of step {step} in {folder.parent} failed ({cause}); the "
+            f"last good checkpoint is kept ({kept.name if kept else 'none yet'}): free some "
+            "space and resume the run"
         ) from err
     old = folder.with_name(f"{OLD}{folder.name}")
     if folder.exists():  # the same step saved again (a resumed run's last checkpoint)
