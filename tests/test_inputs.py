@@ -21,7 +21,6 @@ from mjx_arm.policy.numpy_policy import read_npz, write_npz
 from mjx_arm.train.checkpoints import CheckpointError
 from mjx_arm.train.rundir import RunDir, RunDirError
 
-
 # orbax's restore threads outlive their event loop after a read error: noise, not our error
 pytestmark = pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
 
