@@ -39,6 +39,10 @@ class MissingInputError(InputFileError, FileNotFoundError):
     """An input file or folder that does not exist."""
 
 
+class OutputWriteError(InputError, OSError):
+    """An output that could not be written (a full disk, a folder that refuses files)."""
+
+
 class OutputPathError(InputError, ValueError):
     """An output path that cannot be written: a folder for a file, a file for a folder, the
     wrong suffix, no writable folder."""
@@ -140,21 +144,27 @@ def write_atomic(data: bytes, target: Path) -> None:
     and a failure (a full disk, a kill) leaves the old file whole.
 
     Raises:
-        OSError: the folder or the file cannot be written.
+        OutputWriteError: the folder or the file cannot be written (an OSError).
     """
     target = Path(target)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    folder = target.parent
-    handle, temporary = tempfile.mkstemp(suffix=".tmp", prefix=f".{target.name}.", dir=folder)
+    temporary = None
     try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        handle, temporary = tempfile.mkstemp(
+            suffix=".tmp", prefix=f".{target.name}.", dir=target.parent
+        )
         with os.fdopen(handle, "wb") as f:
             f.write(data)
             f.flush()
             os.fsync(f.fileno())
         os.chmod(temporary, 0o644)
         os.replace(temporary, target)
+    except OSError as err:
+        raise OutputWriteError(
+            f"cannot write {target}: {err.strerror or err}; any file already there is untouched"
+        ) from err
     finally:
-        if os.path.exists(temporary):
+        if temporary is not None and os.path.exists(temporary):
             os.unlink(temporary)
 
 
