@@ -82,8 +82,19 @@ def _short_episodes(real):
     return run
 
 
+def _cpu_envs_only(real):
+    """``make_envs`` for the C MuJoCo backend (built in well under a second); MJX is stopped."""
+
+    def make(config, task):
+        if config.backend != "mujoco":
+            raise WorkStarted
+        return real(config, task)
+
+    return make
+
+
 WORK_STUBS = {
-    "mjx_arm.train.ppo._train": _stop,
+    "mjx_arm.train.ppo.run_ppo": _stop,
     "mjx_arm.evaluate.core.run_batched": _stop,
     "mjx_arm.sim2real.deploy.make_eval_env": _stop,
     "mjx_arm.demo.train_reach": _stop,
@@ -99,6 +110,7 @@ WORK_STUBS = {
 def stubs() -> Iterator[None]:
     """The long work of every command stopped (:data:`WORK_STUBS`)."""
     import mjx_arm.evaluate.core as core
+    import mjx_arm.train.ppo as ppo
 
     with contextlib.ExitStack() as stack:
         for target, stub in WORK_STUBS.items():
@@ -106,6 +118,7 @@ def stubs() -> Iterator[None]:
         stack.enter_context(
             mock.patch.object(core, "run_episodes", _short_episodes(core.run_episodes))
         )
+        stack.enter_context(mock.patch.object(ppo, "make_envs", _cpu_envs_only(ppo.make_envs)))
         yield
 
 

@@ -14,7 +14,7 @@ import numpy as np
 
 from mjx_arm.evaluate.runners import Policy, check_policy_arm, run_batched, run_episodes
 from mjx_arm.evaluate.stats import EvalRun, summarize
-from mjx_arm.inputs import ConfigError
+from mjx_arm.inputs import ConfigError, MissingInputError
 from mjx_arm.names import EVAL_ENGINES as ENGINES
 from mjx_arm.names import env_id
 from mjx_arm.task.config import TaskConfig, task_config
@@ -109,7 +109,8 @@ def eval_arm(policy: Any, source: str | Path | None = None) -> Any:
     (:func:`mjx_arm.envs.arm.check_same_arm`) still compares the two.
 
     Raises:
-        FileNotFoundError: the recorded arm's URDF is not on this machine (pass ``source``).
+        FileNotFoundError: the recorded arm's URDF is not on this machine (pass ``source``; a
+            :class:`~mjx_arm.inputs.MissingInputError`).
     """
     from mjx_arm.paths import asset
     from mjx_arm.urdf.arm_config import SHIPPED_ARMS, ArmConfig, load_arm
@@ -122,7 +123,7 @@ def eval_arm(policy: Any, source: str | Path | None = None) -> Any:
     if arm.urdf and recorded.parent.name == "assets" and recorded.name in SHIPPED_ARMS:
         arm = arm.replace(urdf=str(asset(recorded.name)))
     if not arm.urdf_path.is_file():
-        raise FileNotFoundError(
+        raise MissingInputError(
             f"the policy was trained on {arm.urdf}, which is not on this machine; pass the "
             "same arm's URDF or arm file with --arm"
         )

@@ -31,6 +31,7 @@ from mjx_arm.policy.numpy_policy import (
     FORMAT,
     PolicyFileError,
     check_arrays,
+    check_metadata,
     npz_bytes,
 )
 
@@ -191,7 +192,8 @@ def load_run(run_dir: str | Path, step: int | None = None):
     except (KeyError, TypeError, ValueError, IndexError, AttributeError) as err:
         raise CheckpointError(f"{checkpoint} holds no Brax PPO policy ({err!r})") from err
     metadata = policy_metadata(config, checkpoint, run_dir)
-    try:
+    try:  # what loading the exported file will check, checked before it is written
+        check_metadata(metadata, str(checkpoint))
         check_arrays(arrays, metadata, str(checkpoint))
     except PolicyFileError as err:
         raise CheckpointError(str(err)) from err

@@ -81,7 +81,7 @@ def check_metadata(metadata: Any, source: str) -> None:
 
 
 def _version_message(source: str, version: str) -> str:
-    if version.isdigit() and int(version) > int(CONTRACT_VERSION):
+    if version.isascii() and version.isdigit() and int(version) > int(CONTRACT_VERSION):
         return (
             f"{source} was exported for contract version {version!r}, newer than this "
             f"runtime's {CONTRACT_VERSION!r}: upgrade mjx_arm to run it"
@@ -106,14 +106,11 @@ def _metadata_problems(meta: Mapping[str, Any]) -> list[str]:
     """What is wrong with the fields a runtime reads (empty: nothing)."""
     problems = []
     layout = meta.get("obs_layout")
-    if (
-        not isinstance(layout, list)
-        or not layout
-        or not all(
-            isinstance(e, list) and len(e) == 2 and isinstance(e[0], str) and _is_int(e[1], 1)
-            for e in layout
-        )
-    ):
+    pairs = isinstance(layout, list) and all(
+        isinstance(e, list) and len(e) == 2 and isinstance(e[0], str) and _is_int(e[1], 1)
+        for e in layout
+    )
+    if not layout or not pairs:
         problems.append("obs_layout must list [name, size] pairs")
     if not _is_int(meta.get("action_size"), 1):
         problems.append("action_size must be a whole number >= 1")
@@ -122,17 +119,34 @@ def _metadata_problems(meta: Mapping[str, Any]) -> list[str]:
     v_max = meta.get("v_max")
     if not isinstance(v_max, list) or not all(_is_number(v) for v in v_max):
         problems.append("v_max must list finite numbers")
-    if meta.get("activation", "swish") not in ACTIVATIONS:
-        problems.append(
-            f"unknown activation {meta.get('activation')!r}; known: {sorted(ACTIVATIONS)}"
-        )
+    activation = meta.get("activation", "swish")
+    if not isinstance(activation, str) or activation not in ACTIVATIONS:
+        problems.append(f"unknown activation {activation!r}; known: {sorted(ACTIVATIONS)}")
     if meta.get("distribution", "tanh_normal") != "tanh_normal":
         problems.append(f"unsupported distribution {meta.get('distribution')!r}")
-    for key in ("config", "arm"):
-        if not isinstance(meta.get(key, {}), Mapping):
-            problems.append(f"{key} must be a table")
+    if not isinstance(meta.get("config", {}), Mapping):
+        problems.append("config must be a table")
     if not isinstance(meta.get("task", ""), str):
         problems.append("task must be a text")
+    return problems + _arm_problems(meta.get("arm", {}), v_max)
+
+
+def _arm_problems(arm: Any, v_max: Any) -> list[str]:
+    """What is wrong with a policy's arm record (its joints, config and model hash)."""
+    if not isinstance(arm, Mapping):
+        return ["arm must be a table"]
+    if not arm:
+        return []  # files from before arm records: the shipped arm
+    names = arm.get("joint_names")
+    problems = []
+    if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+        problems.append("arm.joint_names must list joint names")
+    elif isinstance(v_max, list) and len(v_max) != len(names):
+        problems.append(f"v_max has {len(v_max)} entries for {len(names)} joints")
+    if not isinstance(arm.get("config", {}), Mapping):
+        problems.append("arm.config must be a table")
+    if not isinstance(arm.get("model_hash", ""), str):
+        problems.append("arm.model_hash must be a text")
     return problems
 
 

@@ -93,13 +93,10 @@ def train(
         InputError: a bad config, a run directory that cannot take the run, or (to resume) one
             without a usable checkpoint.
     """
-    from mjx_arm.envs.arm import validated_arm_info
-    from mjx_arm.envs.base import default_arm
-
     config.validate()
     config.check_devices(len(local_devices(config.devices)))
     task = config.task_config()
-    validated_arm_info(default_arm(task, config.arm), "mujoco")  # a bad arm fails here
+    _check_arm(config, task)
     if resume and not (Path(run_dir) / "config.json").is_file():
         raise MissingInputError(
             f"cannot resume {run_dir}: no checkpoint, it is not a run directory (no "
@@ -111,6 +108,23 @@ def train(
         run.check_writable()  # before any compilation
         run.truncate_metrics(step_offset)  # rows a killed run wrote after its last checkpoint
         return _train(run, config, task, step_offset, restore, quiet)
+
+
+def _check_arm(config: TrainConfig, task: TaskConfig) -> None:
+    """Validate the run's arm and check that the task fits it (a gripper task needs a
+    gripper, a home pose needs one angle per joint) before any env is built.
+
+    Raises:
+        InputError: an arm that does not validate or resolve, or a task that does not fit it.
+    """
+    from mjx_arm.envs.arm import validated_arm_info
+    from mjx_arm.envs.base import default_arm, task_for_arm
+
+    arm = validated_arm_info(default_arm(task, config.arm), "mujoco")
+    try:
+        task_for_arm(task, arm)
+    except ValueError as err:
+        raise ConfigError(str(err)) from err
 
 
 def _start_point(run: RunDir, config: TrainConfig, resume: bool) -> tuple[int, Any]:
