@@ -133,7 +133,7 @@ def main() -> None:
         "failures": [vars(o) for o in outcomes if o.status not in ("ok", "named", "work")],
         "named_error_examples": examples(outcomes),
     }
-    save_results(args.name, payload, f"{table}\n\n{summary}\n", args.results_dir)
+    save_results(args.name, payload, f"{table.rstrip()}\n\n{summary}\n", args.results_dir)
 
 
 if __name__ == "__main__":

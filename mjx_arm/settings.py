@@ -4,6 +4,11 @@ A setting names a field of a (nested) frozen dataclass config, ``field`` or ``gr
 text is parsed by the field's type (bool, int, float, str, tuples, else JSON). Commands add the
 option with :func:`add_set_argument` and apply it with :func:`apply_settings`; the training
 config also routes ``task.*`` keys to the task (``mjx_arm.train.config``).
+
+Values are checked in one place, whichever way a config is built: :func:`check_types` checks
+every field against its type hint (a config's ``__post_init__`` calls it), :func:`config_fields`
+does the same for a loaded file's fields and :func:`check_range` states a field's bounds. Each
+problem is a :class:`~mjx_arm.inputs.ConfigError` that names the field.
 """
 
 from __future__ import annotations

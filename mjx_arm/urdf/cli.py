@@ -8,6 +8,7 @@ from pathlib import Path
 
 from mjx_arm.inputs import InputError, check_output, float_in, write_atomic
 from mjx_arm.names import EXIT_INVALID, EXIT_OK
+from mjx_arm.urdf.errors import one_line
 from mjx_arm.urdf.scene_shapes import SCENES
 
 
@@ -29,10 +30,12 @@ def _package_dirs(items: list[str]) -> dict[str, str]:
 
 
 def _invalid(urdf: str, report) -> int:
-    """The one ``error:`` line after a failed validation's report; :data:`EXIT_INVALID`."""
+    """The one ``error:`` line after a failed validation's report (on stdout): each error's
+    element and problem; returns :data:`EXIT_INVALID`."""
+    errors = "; ".join(f"{f.element}: {f.problem.rstrip('. ')}" for f in report.errors)
     print(
-        f"error: {urdf}: {len(report.errors)} errors (the report above); fix them and run "
-        "mjx-arm validate again",
+        f"error: {urdf}: {len(report.errors)} errors ({one_line(errors)}); each with its fix in "
+        "the report above",
         file=sys.stderr,
     )
     return EXIT_INVALID
@@ -72,7 +75,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
         default_limits=config.default_limits(),
     )
     if not report.ok:
-        print(report.format(), file=sys.stderr)
+        print(report.format())
         return _invalid(args.urdf, report)
     xml = to_mjcf(args.urdf, config)  # a ConversionError is a named error (mjx_arm.cli.main)
     write_atomic(xml.encode(), Path(args.output))
