@@ -12,6 +12,7 @@
 #   bash benchmarks/gpu_suite.sh seeds        # the fast preset as shipped, seeds 0-9, both tasks
 #   bash benchmarks/gpu_suite.sh coldseed     # one Touch seed with every cache empty
 #   bash benchmarks/gpu_suite.sh transfer     # MJX rows of the transfer matrix, seeds' policies
+#   bash benchmarks/gpu_suite.sh arms         # published arms with no arm file, over seeds
 #
 # Results go to $OUT (default: benchmarks/results/gpu); the trained policies are exported to
 # $OUT/policies as .npz. Single-GPU stages use GPU 0 only.
@@ -121,6 +122,30 @@ transfer)
         --name "transfer_touch_fast_seed${seed}_mjx_$impl" --out "$OUT/transfer"
     done
   done
+  ;;
+arms)
+  # Published arm URDFs with no arm file and no --set: the fast preset as shipped over SEEDS,
+  # for each of TASKS. ARMS: URDF paths under ROBOTS (a folder that holds example-robot-data).
+  # PARALLEL: (arm, task) jobs at once on the one GPU (their compiles overlap; times measured
+  # with jobs side by side say so in the file name).
+  export ROS_PACKAGE_PATH="${ROBOTS:?folder that holds example-robot-data}"
+  tag="${PARALLEL:-1}"; [ "$tag" = 1 ] && tag="" || tag="_x$tag"
+  arm_task() {
+    local urdf="$1" task="$2" name
+    name=$(basename "$urdf" .urdf)
+    one_gpu timeout "${RUN_LIMIT:-580}" python3 -m mjx_arm.cli bench seeds --task "$task" \
+      --preset fast --seeds "${SEEDS:-0-1}" --arm "$ROBOTS/$urdf" \
+      --name "seeds_${task}_fast_${name}$tag" --runs "$OUT/runs_${name}_$task" --out "$OUT" \
+      > "$OUT/log_${name}_$task.txt" 2>&1
+    export_runs "$OUT/runs_${name}_$task" "$name"
+  }
+  for urdf in ${ARMS:?URDF paths}; do
+    for task in ${TASKS:-reach touch}; do
+      while [ "$(jobs -rp | wc -l)" -ge "${PARALLEL:-1}" ]; do sleep 1; done
+      arm_task "$urdf" "$task" &
+    done
+  done
+  wait
   ;;
 parity)
   one_gpu python3 -m mjx_arm.cli bench parity --engines mujoco mjx --impls warp jax \

@@ -35,7 +35,7 @@ from mjx_arm.inputs import (
     write_atomic,
 )
 from mjx_arm.task.config import TaskConfig, task_config
-from mjx_arm.task.observation import n_joints_of, obs_size, obs_slices
+from mjx_arm.task.observation import decode_joints, n_joints_of, obs_size, obs_slices
 
 REQUIRED_KEYS = ("obs", "reward", "ee_pos", "contact_force")
 DEFAULT_WIDTH, DEFAULT_HEIGHT = 800, 600
@@ -310,7 +310,7 @@ def render_frames(
         )
     try:
         for obs in np.asarray(traj["obs"], dtype=np.float64):
-            data.qpos[env.ids.qpos_adr] = obs[s["joint_angles"]]
+            data.qpos[env.ids.qpos_adr] = decode_joints(obs[s["joint_angles"]], env._coding)
             data.mocap_pos[mocap] = obs[s["target_rel"]] - offset
             if env.grip is not None:
                 _pose_gripper_task(env, obs, s)

@@ -129,7 +129,7 @@ class EnvEngine:
 
     def __init__(self, env: BaseRobotEnv) -> None:
         self.env, self.name = env, env.engine
-        self.scale = env.task.action_scale * env.arm.v_max
+        self.scale = env.task.joint_speeds(env.arm.v_max)
 
     def fk(self, qpos: np.ndarray) -> np.ndarray:
         """ee point (m) at joint angles ``qpos (B, 6)``, ``(B, 3)``."""
@@ -235,7 +235,7 @@ class MjxEngine:
         model = arm_model(arm, task)
         self.physics = MjxPhysics(model, arm, one_step, PhysicsConfig(impl=impl), batch_size)
         self.name = f"mjx-{self.physics.impl}"
-        self.scale = np.asarray(task.action_scale * arm.v_max, np.float32)
+        self.scale = np.asarray(task.joint_speeds(arm.v_max), np.float32)
         self._rollout = jax.jit(jax.vmap(self._run))
         self._fk = jax.jit(jax.vmap(self._ee))
         self.compile_seconds = 0.0

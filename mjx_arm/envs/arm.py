@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import hashlib
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from mjx_arm.task.config import TaskConfig
+from mjx_arm.task.observation import JointCoding, joint_coding
 from mjx_arm.task.wrench import ToolInertia, tool_inertia
 from mjx_arm.urdf.arm_config import ArmConfig, ResolvedArm, load_arm, resolve_arm
 from mjx_arm.urdf.convert_config import ConvertConfig
@@ -34,6 +38,11 @@ class Gripper:
     pad_links: tuple[str, ...]
     v_max: float
     stroke: float
+
+    @property
+    def opening(self) -> float:
+        """The widest gap (m) the two fingers open between them: each moves by the stroke."""
+        return 2.0 * self.stroke
 
 
 def find_gripper(resolved: ResolvedArm) -> Gripper | None:
@@ -73,6 +82,7 @@ class ArmInfo:
         reach_scale: the arm's horizontal reach over the shipped arm's (1.0 for the shipped
             arm): task targets are drawn in a box scaled by it.
         gripper: the parallel gripper's fingers, when the arm has one (:class:`Gripper`).
+        full_turn: which joints turn without limits (URDF ``continuous``), bool ``(n,)``.
     """
 
     config: ArmConfig
@@ -89,6 +99,7 @@ class ArmInfo:
     tool: ToolInertia
     reach_scale: float
     gripper: Gripper | None = None
+    full_turn: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, bool))
 
     @property
     def n_joints(self) -> int:
@@ -99,6 +110,12 @@ class ArmInfo:
         """Conversion settings that put the ee site and F/T sensors where this arm says."""
         return self.config.convert_config(self.ee_link, self.ft_joint, **fields)
 
+    def joint_coding(self, task: TaskConfig) -> JointCoding:
+        """How ``task``'s observation encodes this arm's joint angles (its ``joint_encoding``;
+        a full-turn joint is centred on ``task``'s home angle, which must be filled in)."""
+        home = task.home_qpos or tuple(self.home_qpos)
+        return joint_coding(task.joint_encoding, self.lower, self.upper, self.full_turn, home)
+
 
 def _info(resolved: ResolvedArm, reach: float, reference: float) -> ArmInfo:
     limits = [j.limit for j in resolved.joints]
@@ -107,8 +124,8 @@ def _info(resolved: ResolvedArm, reach: float, reference: float) -> ArmInfo:
         config=resolved.config,
         urdf=path,
         joint_names=resolved.joint_names,
-        lower=np.array([lim.lower for lim in limits]),
-        upper=np.array([lim.upper for lim in limits]),
+        lower=np.array([_range(j)[0] for j in resolved.joints]),
+        upper=np.array([_range(j)[1] for j in resolved.joints]),
         v_max=np.array([lim.velocity or resolved.config.default_velocity for lim in limits]),
         effort=np.array([lim.effort or resolved.config.default_effort for lim in limits]),
         home_qpos=np.array(resolved.home_qpos),
@@ -118,7 +135,17 @@ def _info(resolved: ResolvedArm, reach: float, reference: float) -> ArmInfo:
         tool=tool_inertia(resolved.model, resolved.ft_link, resolved.ee_link),
         reach_scale=reach / reference,
         gripper=find_gripper(resolved),
+        full_turn=np.array([j.type == "continuous" for j in resolved.joints]),
     )
+
+
+def _range(joint) -> tuple[float, float]:
+    """A joint's position range (rad): its URDF limits, or +-2 pi for a continuous joint whose
+    ``<limit>`` gives none (it turns freely in the physics either way)."""
+    lim = joint.limit
+    if joint.type == "continuous" and not lim.lower < lim.upper:
+        return -2 * math.pi, 2 * math.pi
+    return lim.lower, lim.upper
 
 
 @functools.cache

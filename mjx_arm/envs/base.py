@@ -23,6 +23,7 @@ import gymnasium as gym
 import numpy as np
 
 from mjx_arm.envs.arm import ArmInfo, validated_arm_info
+from mjx_arm.envs.setup import arm_setup
 from mjx_arm.task import observation as obs_lib
 from mjx_arm.task import reward as reward_lib
 from mjx_arm.task import rules, sampling
@@ -104,15 +105,18 @@ class BaseRobotEnv(gym.Env):
         self._gripper_scale = gripper_speed(self.arm, self.task)
         na = action_size(self.arm, self.task)
         self.action_space = gym.spaces.Box(-1.0, 1.0, (na,), np.float32)
-        self.observation_space = obs_lib.observation_space(self.task.force_clip, n, self._extra)
+        self._coding = self.arm.joint_coding(self.task)
+        self.observation_space = obs_lib.observation_space(
+            self.task.force_clip, n, self._extra, self._coding
+        )
         # constants of the per-step evaluation, computed once
         self._n_substeps = self.task.n_substeps
-        # a * (action_scale * v_max): bit-identical to (a * action_scale) * v_max for the
-        # power-of-two scales of the presets, within one rounding otherwise
-        self._qdot_scale = self.task.action_scale * self.arm.v_max
+        # a * (action_scale * v_max) where the limit is inside [V_LOW, V_HIGH] (TaskConfig):
+        # bit-identical to (a * action_scale) * v_max for power-of-two scales
+        self._qdot_scale = self.task.joint_speeds(self.arm.v_max)
         self._band = reward_lib.joint_band((self.arm.lower, self.arm.upper), self.task)
         self._speed_limits = reward_lib.speed_limits(self.arm.v_max, self.task)
-        self._bounds = obs_lib.state_bounds(self.task.force_clip, n, self._extra)
+        self._bounds = obs_lib.state_bounds(self.task.force_clip, n, self._extra, self._coding)
         self._force_slice = obs_lib.force_slice(n)
         self._reading: PhysicsReading | None = None
         self._last_obs: dict[str, np.ndarray] | None = None
@@ -251,7 +255,7 @@ class BaseRobotEnv(gym.Env):
         extra = None
         if self._extra:
             extra = self.task_spec.grip_observation(np, ee_pos, ee_quat, grip, self.task)
-        raw = obs_lib.raw_state(np, ee_pos, ee_quat, qpos, target_pos, wrench, extra)
+        raw = obs_lib.raw_state(np, ee_pos, ee_quat, qpos, target_pos, wrench, extra, self._coding)
         state = obs_lib.clip_state(np, raw, self._bounds)
         d = float(reward_lib.target_distance(np, ee_pos, target_pos))
         force = float(reward_lib.contact_force_norm(np, state[self._force_slice]))
@@ -341,7 +345,8 @@ _SHIPPED_BOUNDS = (np.full(6, -1.0, np.float32), np.full(6, 1.0, np.float32))
 
 
 def task_for_arm(task: TaskConfig, arm: ArmInfo) -> TaskConfig:
-    """``task`` with the arm's home pose and reach scale filled in where it leaves them empty.
+    """``task`` with the arm's setup (:func:`mjx_arm.envs.setup.arm_setup`: home pose,
+    workspace scale, episode length) filled in where it leaves them empty.
 
     Raises:
         ValueError: a gripper task on an arm without a parallel gripper.
@@ -352,7 +357,12 @@ def task_for_arm(task: TaskConfig, arm: ArmInfo) -> TaskConfig:
             f"one driven, the other its <mimic>); {arm.urdf} has none. Try "
             "--arm assets/ur5e_gripper.urdf"
         )
-    return task.for_arm(tuple(arm.home_qpos), arm.reach_scale)
+    if len(task.home_qpos) not in (0, arm.n_joints):
+        raise ValueError(
+            f"home_qpos has {len(task.home_qpos)} angles; the arm has {arm.n_joints} joints"
+        )
+    setup = arm_setup(arm, task)
+    return task.for_arm(setup.home_qpos, setup.workspace_scale, setup.episode_steps)
 
 
 def default_arm(task: TaskConfig, arm: Any = None) -> Any:

@@ -112,7 +112,8 @@ class MjxArmEnv(Env):
             self.physics = physics_factory(self.mj_model, self.arm, self.task)
         self.randomization = randomization or RandomizationConfig()
         self.task_spec = self.task.spec
-        scale = self.task.action_scale * self.arm.v_max
+        self.joint_coding = self.arm.joint_coding(self.task)
+        scale = self.task.joint_speeds(self.arm.v_max)
         if self.task_spec.gripper:  # the gripper's entry moves the finger at up to its speed limit
             scale = [*scale, gripper_speed(self.arm, self.task)]
         self._v_scale = jnp.asarray(scale, jnp.float32)
@@ -263,7 +264,7 @@ class MjxArmEnv(Env):
             extra = (self.task_spec.extra_obs, values)
         return obs_lib.flat_obs(
             jnp, reading.ee_pos, reading.ee_quat, reading.qpos, target, wrench,
-            self.task.force_clip, extra,
+            self.task.force_clip, extra, self.joint_coding,
         )  # fmt: skip
 
     def _task_measures(self, reading: Reading) -> dict[str, jax.Array] | None:

@@ -57,7 +57,10 @@ class ArmVectorEnv(VectorEnv):
         self.env = make_batched_env(task, backend, physics, batch_size=num_envs, arm=arm)
         self.task, n = self.env.task, self.env.action_size
         joints, extra = self.env.arm.n_joints, self.env.task_spec.extra_obs
-        self.single_observation_space = obs_lib.observation_space(task.force_clip, joints, extra)
+        coding = self.env.arm.joint_coding(self.task)
+        self.single_observation_space = obs_lib.observation_space(
+            task.force_clip, joints, extra, coding
+        )
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.single_action_space = gym.spaces.Box(-1.0, 1.0, (n,), np.float32)
         self.action_space = batch_space(self.single_action_space, num_envs)

@@ -19,9 +19,9 @@ from mjx_arm.names import EVAL_ENGINES as ENGINES
 from mjx_arm.names import env_id
 from mjx_arm.task.config import TaskConfig, task_config
 
-# Fields of a task that change what an action does; kept from the policy's training config when
-# it is evaluated on the other task.
-DYNAMICS_FIELDS = ("ctrl_dt", "sim_dt", "action_scale")
+# Fields of a task that change what an action does or what an observation reads; kept from the
+# policy's training config when it is evaluated on the other task.
+DYNAMICS_FIELDS = ("ctrl_dt", "sim_dt", "action_scale", "joint_encoding")
 
 if TYPE_CHECKING:
     import gymnasium as gym
@@ -53,7 +53,8 @@ def eval_task(policy: Any, name: str | None = None) -> tuple[TaskConfig, list[st
     """The task to evaluate in: the policy's training task, or preset ``name``.
 
     When ``name`` is another task than the training one, its preset is used with the
-    policy's ``ctrl_dt``, ``sim_dt`` and ``action_scale`` (so an action means the same).
+    policy's ``ctrl_dt``, ``sim_dt``, ``action_scale`` and ``joint_encoding`` (so an action
+    and an observation mean the same).
 
     Returns:
         The task config and notes.

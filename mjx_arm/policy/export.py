@@ -156,6 +156,7 @@ def policy_metadata(config: Mapping[str, Any], checkpoint: Path, run_dir: Path) 
         "distribution": "tanh_normal",
         "action_scale": task.action_scale,
         "v_max": list(record["v_max"]),
+        "joint_speeds": task.joint_speeds(record["v_max"]).tolist(),
         "joint_names": list(names),
         "arm": record,
         "ctrl_dt": task.ctrl_dt,

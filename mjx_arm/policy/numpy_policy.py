@@ -119,6 +119,11 @@ def _metadata_problems(meta: Mapping[str, Any]) -> list[str]:
     v_max = meta.get("v_max")
     if not isinstance(v_max, list) or not all(_is_number(v) for v in v_max):
         problems.append("v_max must list finite numbers")
+    speeds = meta.get("joint_speeds", v_max)  # files before joint_speeds: from v_max
+    if not isinstance(speeds, list) or not all(_is_number(v) for v in speeds):
+        problems.append("joint_speeds must list finite numbers")
+    elif isinstance(v_max, list) and len(speeds) != len(v_max):
+        problems.append(f"joint_speeds has {len(speeds)} entries, v_max {len(v_max)}")
     activation = meta.get("activation", "swish")
     if not isinstance(activation, str) or activation not in ACTIVATIONS:
         problems.append(f"unknown activation {activation!r}; known: {sorted(ACTIVATIONS)}")
@@ -293,8 +298,12 @@ class BasePolicy:
         return state
 
     def joint_velocity_targets(self, action: np.ndarray) -> np.ndarray:
-        """Joint velocity targets (rad/s) of ``action (..., 6)``: ``a * action_scale * v_max``."""
-        scale = float(self.metadata["action_scale"]) * np.asarray(self.metadata["v_max"])
+        """Joint velocity targets (rad/s) of ``action (..., n)``: ``a * joint_speeds`` (files
+        older than ``joint_speeds``: ``a * action_scale * v_max``, what they trained with)."""
+        scale = self.metadata.get("joint_speeds")
+        if scale is None:
+            scale = float(self.metadata["action_scale"]) * np.asarray(self.metadata["v_max"])
+        scale = np.asarray(scale, dtype=np.float64)
         return np.asarray(action, dtype=np.float64) * scale
 
     @property

@@ -37,6 +37,7 @@ class ObservationBuilder:
         self._qpos_adr = np.array([self.model.joint(n).qposadr[0] for n in self.arm.joint_names])
         self._site = self.model.site(EE_SITE).id
         self._body = int(self.model.site_bodyid[self._site])
+        self.coding = self.arm.joint_coding(task)
 
     def ee_pose(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Forward kinematics: ee point (m, base frame) ``(3,)`` and quaternion (w, x, y, z)
@@ -65,4 +66,6 @@ class ObservationBuilder:
         ee_pos, ee_quat = self.ee_pose(q)
         w = np.zeros(6) if wrench is None else np.asarray(wrench, dtype=np.float64)
         target = np.asarray(target, dtype=np.float64)
-        return obs_lib.assemble_obs(np, ee_pos, ee_quat, q, target, w, self.task.force_clip)
+        return obs_lib.assemble_obs(
+            np, ee_pos, ee_quat, q, target, w, self.task.force_clip, self.coding
+        )

@@ -125,7 +125,7 @@ class PolicyNode(Node):
             return
         adapter, limiter = self.chain
         obs = self.builder(self.q, self.target, self.wrench)
-        qdot = check_action(self.policy(obs)) * self.task.action_scale * self.builder.arm.v_max
+        qdot = check_action(self.policy(obs)) * self.task.joint_speeds(self.builder.arm.v_max)
         command = limiter(adapter.step(qdot))
         point = JointTrajectoryPoint(
             positions=command.tolist(),

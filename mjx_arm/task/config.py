@@ -11,10 +11,19 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from mjx_arm.inputs import ConfigError
 from mjx_arm.settings import check_range, check_types, config_fields
+from mjx_arm.task.observation import JOINT_ENCODINGS
 from mjx_arm.task.registry import get_task, is_task, task_names
 from mjx_arm.urdf.arm_config import SHIPPED_HOME_QPOS as HOME_QPOS  # noqa: F401  (re-export)
+
+# The speed limits (rad/s) a joint's command is scaled from (TaskConfig.joint_speeds): the arms
+# measured so far (URDF limits of 2.2 to 3.2 rad/s) command action_scale times their own limit;
+# a 0.6 rad/s arm is not slowed to a quarter of the others, and a joint whose URDF says 10000
+# rad/s does not get a command of thousands.
+V_LOW, V_HIGH = 2.0, 3.5
 
 
 @dataclass(frozen=True)
@@ -92,7 +101,10 @@ class TaskConfig:
             contact), "touch" (press the 5 cm box) or one added by a task file.
         ctrl_dt: control period (s); one action and one observation per period.
         sim_dt: physics step (s); ``ctrl_dt / sim_dt`` substeps per control step.
-        action_scale: joint velocity target = action * action_scale * v_max (URDF velocity).
+        action_scale: joint velocity target = action * speed, with speed =
+            ``action_scale * v_max`` of each joint's URDF velocity limit, that limit read as
+            at least :data:`V_LOW` and at most :data:`V_HIGH`, and never above the limit
+            itself (:meth:`joint_speeds`).
         episode_steps: control steps before truncation (150 = 5 s).
         terminate_on_success: end the episode on the first success step.
         home_qpos: joint angles (rad) episodes start around; () takes the arm's home pose
@@ -116,6 +128,10 @@ class TaskConfig:
             band still rules success out when ``fail_on_overforce``.
         variant: "seed" (the seed document's task) or "gentle" (Touch's default: hold, no strike).
         force_clip: bound (N and N m) of each contact_force component.
+        joint_encoding: how ``joint_angles`` encodes the joint angles
+            (:class:`mjx_arm.task.observation.JointCoding`): "centred" (each limited joint
+            relative to the middle of its range, so no jump inside a range) or "wrapped" (every
+            angle in [-pi, pi]: how configs recorded before the field was added read).
         divergence_speed_factor: the physics has diverged when a joint turns faster than this
             multiple of its URDF velocity limit (or any value is NaN or infinite). The velocity
             servos keep the joints near their limits, so a joint ten times faster means the
@@ -144,6 +160,7 @@ class TaskConfig:
     strike_force: float = 0.0
     variant: str = "seed"
     force_clip: float = 100.0
+    joint_encoding: str = "centred"
     divergence_speed_factor: float = 10.0
     reward: RewardConfig = field(default_factory=RewardConfig)
 
@@ -174,6 +191,16 @@ class TaskConfig:
             raise ConfigError("success_hold_steps must be >= 1")
         if not self.divergence_speed_factor > 1:
             raise ConfigError("divergence_speed_factor must be > 1")
+        if self.joint_encoding not in JOINT_ENCODINGS:
+            raise ConfigError(
+                f"joint_encoding must be one of {JOINT_ENCODINGS}, got {self.joint_encoding!r}"
+            )
+
+    def joint_speeds(self, v_max) -> np.ndarray:
+        """Joint velocity targets (rad/s) of a full action, ``(n,)``, from the URDF limits
+        ``v_max (n,)``: ``min(action_scale * clip(v_max, V_LOW, V_HIGH), v_max)``."""
+        v_max = np.asarray(v_max, dtype=np.float64)
+        return np.minimum(self.action_scale * np.clip(v_max, V_LOW, V_HIGH), v_max)
 
     @property
     def n_substeps(self) -> int:
@@ -186,8 +213,11 @@ class TaskConfig:
         low = tuple(scale * v for v in self.target_low)
         return low, tuple(scale * v for v in self.target_high)
 
-    def for_arm(self, home_qpos: tuple[float, ...], reach_scale: float) -> TaskConfig:
-        """This config with the arm's home pose and reach scale where it leaves them empty.
+    def for_arm(
+        self, home_qpos: tuple[float, ...], reach_scale: float, episode_steps: int = 0
+    ) -> TaskConfig:
+        """This config with the arm's home pose and workspace scale where it leaves them empty,
+        and an episode of at least ``episode_steps`` (0: as it is).
 
         Raises:
             ValueError: a ``home_qpos`` given here that does not fit the arm's joint count.
@@ -197,7 +227,11 @@ class TaskConfig:
             raise ValueError(
                 f"home_qpos has {len(home)} angles; the arm has {len(home_qpos)} joints"
             )
-        return self.replace(home_qpos=home, workspace_scale=self.workspace_scale or reach_scale)
+        return self.replace(
+            home_qpos=home,
+            workspace_scale=self.workspace_scale or reach_scale,
+            episode_steps=max(self.episode_steps, episode_steps),
+        )
 
     @property
     def spec(self) -> Any:
@@ -221,8 +255,9 @@ class TaskConfig:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> TaskConfig:
-        """Inverse of :meth:`to_dict`."""
-        data = dict(data)
+        """Inverse of :meth:`to_dict`; a config recorded before ``joint_encoding`` existed
+        reads as ``wrapped``, the encoding it was trained with."""
+        data = {"joint_encoding": "wrapped", **data}
         reward = RewardConfig(**config_fields(RewardConfig, data.pop("reward", {}), "reward"))
         return cls(reward=reward, **config_fields(cls, data, "task config"))
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import functools
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from gymnasium import spaces
@@ -24,6 +24,67 @@ POSITION_BOUND = 2.0
 
 
 Extra = tuple[tuple[str, int], ...]
+
+
+class JointCoding(NamedTuple):
+    """How ``joint_angles`` encodes the joint angles: ``angle = q - centre``, wrapped into
+    [-pi, pi] where ``wrap``; each entry bounded by ``bound``. Tuples of n (hashable).
+
+    ``centred`` (the default encoding): a limited joint relative to the middle of its range,
+    never wrapped, so the value moves without a jump over the whole range (also over ranges
+    beyond a full turn); a full-turn joint without limits relative to its home angle, wrapped
+    (the jump sits half a turn from home). ``wrapped`` (files from before the encoding was
+    recorded): every angle wrapped into [-pi, pi], centre 0.
+    """
+
+    centre: tuple[float, ...]
+    wrap: tuple[bool, ...]
+    bound: tuple[float, ...]
+
+
+JOINT_ENCODINGS = ("centred", "wrapped")
+
+
+def joint_coding(encoding: str, lower, upper, full_turn, home) -> JointCoding:
+    """The :class:`JointCoding` of ``encoding`` for joints of limits ``lower``/``upper``
+    (rad), ``full_turn`` (bool: no limits) and ``home`` angles, ``(n,)`` each.
+
+    Raises:
+        ValueError: an unknown encoding.
+    """
+    if encoding == "wrapped":
+        return wrapped_coding(len(lower))
+    if encoding != "centred":
+        raise ValueError(f"joint_encoding must be one of {JOINT_ENCODINGS}, got {encoding!r}")
+    centre, wrap, bound = [], [], []
+    for lo, hi, turn, q in zip(lower, upper, full_turn, home, strict=True):
+        centre.append(float(q) if turn else 0.5 * (float(lo) + float(hi)))
+        wrap.append(bool(turn))
+        bound.append(math.pi if turn else 0.5 * (float(hi) - float(lo)))
+    return JointCoding(tuple(centre), tuple(wrap), tuple(bound))
+
+
+def wrapped_coding(n_joints: int) -> JointCoding:
+    """The ``wrapped`` encoding of ``n_joints`` joints (every angle in [-pi, pi])."""
+    return JointCoding((0.0,) * n_joints, (True,) * n_joints, (math.pi,) * n_joints)
+
+
+def encode_joints(xp: Any, qpos, coding: JointCoding | None):
+    """``joint_angles`` of joint angles ``qpos (..., n)`` (rad); None codes as ``wrapped``."""
+    if coding is None:
+        return wrap_angle(xp, qpos)
+    shifted = qpos - xp.asarray(coding.centre)
+    if not any(coding.wrap):
+        return shifted
+    if all(coding.wrap):
+        return wrap_angle(xp, shifted)
+    return xp.where(xp.asarray(coding.wrap), wrap_angle(xp, shifted), shifted)
+
+
+def decode_joints(angles, coding: JointCoding | None) -> np.ndarray:
+    """Joint angles (rad) of ``joint_angles (..., n)`` (a wrapped entry: the angle within
+    half a turn of its centre)."""
+    return np.asarray(angles, dtype=np.float64) + (0.0 if coding is None else coding.centre)
 
 
 def obs_layout(n_joints: int = SHIPPED_JOINTS, extra: Extra = ()) -> tuple[tuple[str, int], ...]:
@@ -90,12 +151,19 @@ EXTRA_BOUNDS = {
 
 
 def _bounds(
-    force_clip: float, n_joints: int, dtype: Any = np.float32, extra: Extra = ()
+    force_clip: float,
+    n_joints: int,
+    dtype: Any = np.float32,
+    extra: Extra = (),
+    coding: JointCoding | None = None,
 ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """(low, high) of each key, arrays of ``dtype``."""
+    joint = np.asarray((coding or wrapped_coding(n_joints)).bound, dtype)
+    if joint.shape != (n_joints,):
+        raise ValueError(f"the joint coding has {joint.shape[0]} joints, not {n_joints}")
     bounds = {
         "ee_pose": _pose_bounds(dtype),
-        "joint_angles": (np.full(n_joints, -math.pi, dtype), np.full(n_joints, math.pi, dtype)),
+        "joint_angles": (-joint, joint.copy()),
         "target_rel": (np.full(3, -POSITION_BOUND, dtype), np.full(3, POSITION_BOUND, dtype)),
         "contact_force": (np.full(6, -force_clip, dtype), np.full(6, force_clip, dtype)),
     }
@@ -117,14 +185,18 @@ def _concat(bounds: dict, layout) -> tuple[np.ndarray, np.ndarray]:
 
 @functools.lru_cache(maxsize=16)
 def state_bounds(
-    force_clip: float, n_joints: int = SHIPPED_JOINTS, extra: Extra = ()
+    force_clip: float,
+    n_joints: int = SHIPPED_JOINTS,
+    extra: Extra = (),
+    coding: JointCoding | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Bounds of the flat ``state`` (float64, read-only), low and high, each ``(16 + n,)``.
 
     The float64 twins of :func:`flat_observation_space`'s bounds: clipping with them leaves
     wrapped joint angles (already inside [-pi, pi]) and canonical quaternions unchanged.
+    ``coding``: the joint encoding (None: ``wrapped``).
     """
-    bounds = _bounds(force_clip, n_joints, np.float64, extra)
+    bounds = _bounds(force_clip, n_joints, np.float64, extra, coding)
     low, high = _concat(bounds, obs_layout(n_joints, extra))
     low.setflags(write=False)
     high.setflags(write=False)
@@ -132,10 +204,14 @@ def state_bounds(
 
 
 def observation_space(
-    force_clip: float = 100.0, n_joints: int = SHIPPED_JOINTS, extra: Extra = ()
+    force_clip: float = 100.0,
+    n_joints: int = SHIPPED_JOINTS,
+    extra: Extra = (),
+    coding: JointCoding | None = None,
 ) -> spaces.Dict:
-    """The Dict observation space, keys in contract order (built from a list: no sorting)."""
-    bounds = _bounds(force_clip, n_joints, extra=extra)
+    """The Dict observation space, keys in contract order (built from a list: no sorting);
+    ``coding``: the joint encoding (None: ``wrapped``)."""
+    bounds = _bounds(force_clip, n_joints, extra=extra, coding=coding)
     return spaces.Dict(
         [
             (key, spaces.Box(*bounds[key], shape=(size,), dtype=np.float32))
@@ -145,10 +221,14 @@ def observation_space(
 
 
 def flat_observation_space(
-    force_clip: float = 100.0, n_joints: int = SHIPPED_JOINTS, extra: Extra = ()
+    force_clip: float = 100.0,
+    n_joints: int = SHIPPED_JOINTS,
+    extra: Extra = (),
+    coding: JointCoding | None = None,
 ) -> spaces.Box:
     """The flat ``state (16 + n + k,)`` space: the Dict bounds concatenated in contract order."""
-    low, high = _concat(_bounds(force_clip, n_joints, extra=extra), obs_layout(n_joints, extra))
+    bounds = _bounds(force_clip, n_joints, extra=extra, coding=coding)
+    low, high = _concat(bounds, obs_layout(n_joints, extra))
     return spaces.Box(low, high, dtype=np.float32)
 
 
@@ -167,11 +247,12 @@ def canonical_quat(xp: Any, quat):
     return quat / xp.copysign(norm, quat[..., :1] + 0.0)
 
 
-def raw_state(xp: Any, ee_pos, ee_quat, qpos, target_pos, wrench, extra_obs=None):
+def raw_state(xp: Any, ee_pos, ee_quat, qpos, target_pos, wrench, extra_obs=None, coding=None):
     """The flat ``state`` before clipping, shape ``(..., 16 + n)``, the dtype of the inputs.
 
-    Quaternion made canonical, joint angles wrapped, nothing clipped: a non-finite input shows
-    as a non-finite entry here (clipping would turn an infinity into a bound).
+    Quaternion made canonical, joint angles encoded (:func:`encode_joints`), nothing clipped: a
+    non-finite input shows as a non-finite entry here (clipping would turn an infinity into a
+    bound).
 
     Args:
         xp: ``numpy`` or ``jax.numpy``.
@@ -181,8 +262,10 @@ def raw_state(xp: Any, ee_pos, ee_quat, qpos, target_pos, wrench, extra_obs=None
         target_pos: target point (m), shape ``(..., 3)``.
         wrench: tared external wrench on the tool in the ee frame, shape ``(..., 6)``.
         extra_obs: the task's extra keys, concatenated, ``(..., k)`` (None: none).
+        coding: the joint encoding (:class:`JointCoding`; None: ``wrapped``).
     """
-    parts = [ee_pos, canonical_quat(xp, ee_quat), wrap_angle(xp, qpos), target_pos, wrench]
+    joints = encode_joints(xp, qpos, coding)
+    parts = [ee_pos, canonical_quat(xp, ee_quat), joints, target_pos, wrench]
     if extra_obs is not None:
         parts.append(extra_obs)
     return xp.concatenate(parts, axis=-1)
@@ -194,16 +277,21 @@ def clip_state(xp: Any, state, bounds: tuple[Any, Any]):
     return xp.minimum(xp.maximum(state, low), high)
 
 
-def flat_obs(xp: Any, ee_pos, ee_quat, qpos, target_pos, wrench, force_clip: float, extra=None):
+def flat_obs(
+    xp: Any, ee_pos, ee_quat, qpos, target_pos, wrench, force_clip: float, extra=None, coding=None
+):
     """The observation as the flat float32 ``state (..., 16 + n + k)`` (see
-    :func:`assemble_obs`); ``extra``: ``(layout, values (..., k))`` of the task's extra keys."""
+    :func:`assemble_obs`); ``extra``: ``(layout, values (..., k))`` of the task's extra keys;
+    ``coding``: the joint encoding (None: ``wrapped``)."""
     layout, values = extra if extra is not None else ((), None)
-    raw = raw_state(xp, ee_pos, ee_quat, qpos, target_pos, wrench, values)
-    bounds = state_bounds(force_clip, qpos.shape[-1], tuple(layout))
+    raw = raw_state(xp, ee_pos, ee_quat, qpos, target_pos, wrench, values, coding)
+    bounds = state_bounds(force_clip, qpos.shape[-1], tuple(layout), coding)
     return xp.asarray(clip_state(xp, raw, bounds), dtype=xp.float32)
 
 
-def assemble_obs(xp: Any, ee_pos, ee_quat, qpos, target_pos, wrench, force_clip: float) -> dict:
+def assemble_obs(
+    xp: Any, ee_pos, ee_quat, qpos, target_pos, wrench, force_clip: float, coding=None
+) -> dict:
     """Build the observation dict from physics quantities (world frame = base frame).
 
     Args:
@@ -214,12 +302,14 @@ def assemble_obs(xp: Any, ee_pos, ee_quat, qpos, target_pos, wrench, force_clip:
         target_pos: target point (m), shape ``(..., 3)``.
         wrench: tared external wrench on the tool in the ee frame, shape ``(..., 6)``.
         force_clip: bound of each wrench component.
+        coding: the joint encoding (:class:`JointCoding`; None: ``wrapped``).
 
     Returns:
         Dict of float32 arrays in contract key order, each inside :func:`observation_space`:
         views into one flat ``state (..., 16 + n)`` (:func:`flat_obs`).
     """
-    return unflatten_obs(flat_obs(xp, ee_pos, ee_quat, qpos, target_pos, wrench, force_clip))
+    state = flat_obs(xp, ee_pos, ee_quat, qpos, target_pos, wrench, force_clip, coding=coding)
+    return unflatten_obs(state)
 
 
 def flatten_obs(xp: Any, obs: dict):

@@ -233,7 +233,8 @@ def default_ee_link(model: RobotModel) -> str:
     joints, the one with the fewest joints in all wins (the first in file order on a tie).
     Where the chain passes a hand (a link with two or more branches that move: the fingers of
     a gripper, revolute or prismatic), the end effector is the hand: a leaf fixed to it (a TCP
-    frame), else the hand link itself.
+    frame), else the hand link itself. Where it ends in a single jaw (:func:`jaw_joint`), the
+    end effector is the link the jaw hangs from.
     """
     if NAMED_EE_LINK in model.links:
         return NAMED_EE_LINK
@@ -252,7 +253,33 @@ def default_ee_link(model: RobotModel) -> str:
         key=lambda n: (len(arm_chain(model, n)), -len(model.chain_to(n)), -order[n]),
     )
     hand = _hand(model, tip)
-    return tip if hand is None else _fixed_leaf(model, hand)
+    if hand is not None:
+        return _fixed_leaf(model, hand)
+    jaw = jaw_joint(model, tip)
+    return tip if jaw is None else jaw.parent
+
+
+# A gripper's single jaw turns less than this (rad); an arm's last joint turns a full turn or so.
+JAW_MAX_RANGE = math.pi
+
+
+def jaw_joint(model: RobotModel, tip: str) -> Joint | None:
+    """The single jaw of a gripper at the end of the chain to ``tip``, or None.
+
+    A jaw is the chain's last revolute joint when it moves a leaf link through less than
+    :data:`JAW_MAX_RANGE` and the chain keeps at least 5 arm joints without it (the SO-100's
+    and Unitree Z1's grippers, TALOS's hand motor). The end effector is then the link the jaw
+    hangs from: the hand, not the moving jaw.
+    """
+    chain = arm_chain(model, tip)
+    if len(chain) <= MIN_JOINTS or chain[-1].child != tip:
+        return None
+    last = chain[-1]
+    if last.type != "revolute" or last.limit is None:
+        return None
+    parents = {j.parent for j in model.joints.values()}
+    small = last.limit.upper - last.limit.lower < JAW_MAX_RANGE
+    return last if small and tip not in parents else None
 
 
 def _children(model: RobotModel) -> dict[str, list[Joint]]:
@@ -284,6 +311,14 @@ def _fixed_leaf(model: RobotModel, hand: str) -> str:
         if not fixed:
             return link
         link = fixed[0].child
+
+
+def is_shipped(arm: ArmConfig) -> bool:
+    """Whether ``arm`` is one of the shipped arms of ``assets/`` as shipped (its own end
+    effector and joints)."""
+    path = arm.urdf_path
+    shipped = path.parent == default_arm_urdf().parent and path.name in SHIPPED_ARMS
+    return shipped and not (arm.ee_link or arm.joints)
 
 
 def default_home(path: Path, joints: tuple[Joint, ...]) -> tuple[float, ...]:

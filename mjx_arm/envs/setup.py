@@ -1,0 +1,380 @@
+"""The task setup of an arm, derived from its model: home pose, task area and timing.
+
+No arm needs a hand-written file to train. For a task config and an arm:
+
+- **task area**: the task's target box (:meth:`TaskConfig.target_box`) scaled about the base
+  by ``workspace_scale``. It starts at the arm's reach scale (its horizontal reach over the
+  shipped arm's) and shrinks in steps of 10% until every target of a 3 x 3 x 3 grid over the
+  box (as the task places it: Touch's box on the table, Lift's cube) is reachable with the tool
+  pointing down from the home pose, within the joint limits less a margin and free of
+  collisions.
+- **home pose**: the tool pointing down, :data:`HOME_HEIGHT` above the table over the middle
+  of the task area, found by tool-down inverse kinematics (:mod:`mjx_arm.envs.ik`) from seeded
+  starts; among the poses free of self-collision and of the table, the one that reaches the
+  most grid targets wins, then the best-conditioned (manipulability). Angles of joints with a
+  range over a full turn are taken nearest the middle of the range.
+- **episode**: the time the home-to-target motions take at the task's commanded joint speeds
+  (:meth:`TaskConfig.joint_speeds`); an episode shorter than :data:`EPISODE_TIME_FACTOR` times the
+  slowest motion is lengthened.
+
+An explicit ``home_qpos`` (the task config's or the arm file's) and the shipped arms' measured
+homes are kept as they are; the area is still checked from them.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+
+from mjx_arm.envs.arm import ArmInfo
+from mjx_arm.envs.ik import ToolDownIk, tool_axis
+from mjx_arm.task import sampling
+from mjx_arm.task.config import TaskConfig
+from mjx_arm.urdf.convert import EE_SITE, load_model
+
+HOME_HEIGHT = 0.20  # m: the ee point above the table top at home
+LIMIT_MARGIN = 0.10  # rad, or 5% of a narrower range: the IK stays this far inside the limits
+HOME_STARTS = 24  # seeded IK starts for the home pose
+HOME_CANDIDATES = 6  # the best-conditioned distinct homes whose reach over the area is tried
+SCALE_STEPS = (1.0, 0.9, 0.8, 0.7, 0.6, 0.5)  # fractions of the reach scale tried
+EPISODE_TIME_FACTOR = 2.0  # an episode lasts at least this many times the slowest motion
+PENETRATION = 1e-3  # m: a contact deeper than this is a collision
+
+
+@dataclass(frozen=True)
+class ArmSetup:
+    """What a task needs of an arm, and how it was found.
+
+    Attributes:
+        home_qpos: home joint angles (rad), ``(n,)``.
+        home_source: "task config", "arm file", "shipped arm" or "derived".
+        workspace_scale: the task box's scale (1.0 for the shipped arm).
+        reach_scale: the arm's reach scale, where the search started.
+        tool_axis: the tool axis in the ee frame, ``(3,)``.
+        reached: grid targets reachable tool-down from home, of ``targets``.
+        targets: the grid targets tried.
+        travel_time: the slowest home-to-target motion at the task's speeds (s).
+        episode_steps: the episode's control steps for this arm (the task's, or longer).
+        manipulability: of the home pose (m^3).
+        tool_reach: how far the tool's collision shapes stick out past the ee point along the
+            tool axis (m): a contact task presses with them while the ee point stays this high.
+        notes: what the derivation had to do or could not do, one line each.
+    """
+
+    home_qpos: tuple[float, ...]
+    home_source: str
+    workspace_scale: float
+    reach_scale: float
+    tool_axis: tuple[float, float, float]
+    reached: int
+    targets: int
+    travel_time: float
+    episode_steps: int
+    manipulability: float
+    tool_reach: float = 0.0
+    notes: tuple[str, ...] = field(default=())
+
+    @property
+    def covers_area(self) -> bool:
+        """Every grid target is reachable with the tool down."""
+        return self.reached == self.targets
+
+
+class ArmSolver:
+    """Tool-down IK of one arm with its collision check, built once per arm.
+
+    The model is the arm in the Reach scene (the table, no box) with self-collision on, so a
+    pose that folds the arm into itself or into the table shows as a contact.
+    """
+
+    def __init__(self, arm: ArmInfo) -> None:
+        model = load_model(arm.urdf, arm.convert_config(scene="reach", self_collision=True))
+        self.lower, self.upper = joint_box(arm.lower, arm.upper)
+        self.middle = 0.5 * (self.lower + self.upper)
+        self.ik = ToolDownIk(
+            model, arm.joint_names, EE_SITE, self.lower, self.upper, np.array([0.0, 0.0, 1.0])
+        )
+        self.ik.tool = tool_axis(self.ik, self.middle, arm.joint_names[-1])
+        self._full_turn = (arm.upper - arm.lower) > 2 * math.pi + 1e-6
+        self._static = model.body_weldid == 0
+
+    def canonical(self, q: np.ndarray) -> np.ndarray:
+        """``q (n,)`` with each joint of a range over a full turn moved by whole turns to the
+        angle nearest the middle of its range."""
+        turns = np.round((self.middle - q) / (2 * math.pi)) * self._full_turn
+        shifted = q + 2 * math.pi * turns
+        inside = (shifted >= self.lower) & (shifted <= self.upper)
+        return np.where(inside, shifted, q)
+
+    def collides(self, q: np.ndarray) -> bool:
+        """Whether the arm at ``q (n,)`` penetrates itself or the table by over 1 mm."""
+        model, data = self.ik.model, self.ik.data
+        data.qpos[self.ik.qadr] = q
+        mujoco.mj_fwdPosition(model, data)
+        for contact in data.contact[: data.ncon]:
+            bodies = model.geom_bodyid[contact.geom]
+            if contact.dist < -PENETRATION and not self._static[bodies].all():
+                return True
+        return False
+
+    def tool_reach(self, q: np.ndarray, last_joint: str) -> float:
+        """How far (m) the collision shapes moved by the last arm joint stick out past the ee
+        point along the tool axis, at ``q (n,)``: what touches a surface below the ee first."""
+        model, data = self.ik.model, self.ik.data
+        _, axis = self.ik.pose(q)
+        ee = data.site_xpos[self.ik.site_id]
+        wrist = model.jnt_bodyid[model.joint(last_joint).id]
+        reach = 0.0
+        signs = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
+        for geom in range(model.ngeom):
+            if not (model.geom_contype[geom] or model.geom_conaffinity[geom]):
+                continue
+            if not _below(model, int(model.geom_bodyid[geom]), int(wrist)):
+                continue
+            centre, half = model.geom_aabb[geom, :3], model.geom_aabb[geom, 3:]
+            rot = data.geom_xmat[geom].reshape(3, 3)
+            corners = data.geom_xpos[geom] + (centre + signs * half) @ rot.T
+            reach = max(reach, float(((corners - ee) @ axis).max()))
+        return reach
+
+    def homes(self, point: np.ndarray) -> list[np.ndarray]:
+        """Distinct collision-free tool-down poses at ``point (3,)`` from seeded starts (the
+        middle of the limits first), best-conditioned first, at most HOME_CANDIDATES."""
+        rng = np.random.default_rng(0)
+        found: list[tuple[float, np.ndarray]] = []
+        for k in range(HOME_STARTS):
+            start = self.middle if k == 0 else rng.uniform(self.lower, self.upper)
+            result = self.ik.solve(point, start, prefer=self.middle)
+            if not result.converged:
+                continue
+            q = self.canonical(result.q)
+            if any(np.abs(q - other).max() < 0.05 for _, other in found) or self.collides(q):
+                continue
+            found.append((self.ik.manipulability(q), q))
+        found.sort(key=lambda item: -item[0])
+        return [q for _, q in found[:HOME_CANDIDATES]]
+
+    def reach_from(self, home: np.ndarray, points: np.ndarray) -> list[np.ndarray | None]:
+        """Tool-down poses at each of ``points (m, 3)``, each solved from ``home``; None where
+        the IK does not converge inside the limits."""
+        out = []
+        for point in points:
+            result = self.ik.solve(point, home, prefer=home)
+            out.append(result.q if result.converged else None)
+        return out
+
+
+def _below(model: mujoco.MjModel, body: int, root: int) -> bool:
+    """Whether ``body`` is ``root`` or hangs below it in the kinematic tree."""
+    while body > 0:
+        if body == root:
+            return True
+        body = int(model.body_parentid[body])
+    return body == root
+
+
+def joint_box(lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The joint limits ``(n,)`` shrunk by :data:`LIMIT_MARGIN` (or 5% of a narrower range),
+    and bounded to +-2 pi."""
+    lower, upper = np.maximum(lower, -2 * math.pi), np.minimum(upper, 2 * math.pi)
+    margin = np.minimum(LIMIT_MARGIN, 0.05 * (upper - lower))
+    return lower + margin, upper - margin
+
+
+def grid_targets(task: TaskConfig) -> np.ndarray:
+    """The target points (m) of a 3 x 3 x 3 grid of draws over the task's box, as the task
+    places them (repeated points dropped), ``(m, 3)``."""
+    axis = np.array([0.0, 0.5, 1.0])
+    u3 = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1).reshape(-1, 3)
+    body = sampling.target_body_pos(np, u3, task)
+    points = sampling.target_point(np, body, task)
+    return np.unique(np.round(points, 6), axis=0)
+
+
+@functools.cache
+def arm_solver(arm: ArmInfo) -> ArmSolver:
+    """The :class:`ArmSolver` of ``arm`` (one per arm and process)."""
+    return ArmSolver(arm)
+
+
+def arm_setup(arm: ArmInfo, task: TaskConfig) -> ArmSetup:
+    """The setup of ``task`` on ``arm`` (cached per arm and task config; see the module)."""
+    return _setup_cached(arm, task)
+
+
+@functools.cache
+def _setup_cached(arm: ArmInfo, task: TaskConfig) -> ArmSetup:
+    solver = arm_solver(arm)
+    home, source = given_home(arm, task)
+    scales = [task.workspace_scale] if task.workspace_scale else _scales(arm, home)
+    best: tuple | None = None
+    for scale in scales:
+        trial = _try_scale(solver, task.replace(workspace_scale=scale), home)
+        if trial is None:
+            continue
+        if best is None or trial[0] > best[0]:
+            best = trial
+        if trial[0] == trial[1]:  # every target reached
+            break
+    if best is None:
+        return _unreachable(arm, task, solver, scales[-1], home, source)
+    reached, targets, q_home, poses, scale = best
+    return _finish(arm, task, solver, q_home, source, scale, reached, targets, poses)
+
+
+def _scales(arm: ArmInfo, home: np.ndarray | None) -> list[float]:
+    """The workspace scales to try: the reach scale alone where the home is given (the arm
+    file's or the shipped arm's choice stands), else shrinking fractions of it."""
+    if home is not None:
+        return [arm.reach_scale]
+    return [arm.reach_scale * f for f in SCALE_STEPS]
+
+
+def given_home(arm: ArmInfo, task: TaskConfig) -> tuple[np.ndarray | None, str]:
+    """The home pose given for ``task`` on ``arm`` and where it comes from: the task config's,
+    the arm file's, the shipped arm's measured one, or (None, "derived")."""
+    if task.home_qpos:
+        return np.asarray(task.home_qpos, float), "task config"
+    if arm.config.home_qpos:
+        return np.asarray(arm.config.home_qpos, float), "arm file"
+    shipped = shipped_home(arm, task)
+    if shipped is not None:
+        return np.asarray(shipped, float), "shipped arm"
+    return None, "derived"
+
+
+def shipped_home(arm: ArmInfo, task: TaskConfig) -> tuple[float, ...] | None:
+    """The measured home of a shipped arm (Lift's for the gripper tasks), else None."""
+    from mjx_arm.task.lift import LIFT_HOME
+    from mjx_arm.urdf.arm_config import SHIPPED_HOME_QPOS, is_shipped
+
+    if not is_shipped(arm.config):
+        return None
+    return LIFT_HOME if task.spec.gripper else SHIPPED_HOME_QPOS
+
+
+def _try_scale(solver: ArmSolver, task: TaskConfig, home: np.ndarray | None):
+    """(reached, targets, home, poses, scale) of the best home at ``task``'s scale, or None
+    where no tool-down home exists over the area's middle."""
+    points = grid_targets(task)
+    low, high = points[:, :2].min(axis=0), points[:, :2].max(axis=0)
+    above = np.array([*(0.5 * (low + high)), HOME_HEIGHT])
+    homes = [home] if home is not None else solver.homes(above)
+    best = None
+    for q_home in homes:
+        poses = solver.reach_from(q_home, points)
+        reached = sum(p is not None for p in poses)
+        if best is None or reached > best[0]:
+            best = (reached, len(points), q_home, poses, task.workspace_scale)
+    return best
+
+
+def _finish(arm, task, solver, q_home, source, scale, reached, targets, poses) -> ArmSetup:
+    """The setup from the chosen home and scale: travel time, episode length and notes."""
+    speeds = task.joint_speeds(arm.v_max)
+    moves = [np.abs(p - q_home) / speeds for p in poses if p is not None]
+    travel = float(max(m.max() for m in moves)) if moves else 0.0
+    needed = math.ceil(EPISODE_TIME_FACTOR * travel / task.ctrl_dt)
+    steps = max(task.episode_steps, needed)
+    notes = []
+    if scale < arm.reach_scale - 1e-9:
+        notes.append(
+            f"task area shrunk to {scale / arm.reach_scale:.0%} of the reach scale: "
+            "targets farther out are not reachable with the tool down"
+        )
+    if reached < targets:
+        notes.append(f"{targets - reached} of {targets} grid targets not reachable tool-down")
+    if steps > task.episode_steps:
+        notes.append(
+            f"episode lengthened to {steps} steps ({steps * task.ctrl_dt:.1f} s): the slowest "
+            f"move from home takes {travel:.1f} s at the commanded speeds"
+        )
+    return ArmSetup(
+        home_qpos=tuple(float(q) for q in q_home),
+        home_source=source,
+        workspace_scale=float(scale),
+        reach_scale=arm.reach_scale,
+        tool_axis=tuple(float(v) for v in solver.ik.tool),
+        reached=reached,
+        targets=targets,
+        travel_time=travel,
+        episode_steps=steps,
+        manipulability=solver.ik.manipulability(q_home),
+        tool_reach=solver.tool_reach(q_home, arm.joint_names[-1]),
+        notes=tuple(notes),
+    )
+
+
+def _unreachable(arm, task, solver, scale, home, source) -> ArmSetup:
+    """The setup of an arm with no tool-down pose over the task area: the given home, else
+    the middle of the limits, and a note that says so."""
+    q = home if home is not None else solver.middle
+    targets = len(grid_targets(task.replace(workspace_scale=scale)))
+    return ArmSetup(
+        home_qpos=tuple(float(v) for v in q),
+        home_source=source if home is not None else "middle of the limits",
+        workspace_scale=float(scale),
+        reach_scale=arm.reach_scale,
+        tool_axis=tuple(float(v) for v in solver.ik.tool),
+        reached=0,
+        targets=targets,
+        travel_time=0.0,
+        episode_steps=task.episode_steps,
+        manipulability=solver.ik.manipulability(q),
+        tool_reach=solver.tool_reach(q, arm.joint_names[-1]),
+        notes=("no tool-down pose over the task area: the arm cannot reach it tool-down",),
+    )
+
+
+MAX_EPISODE_SECONDS = 15.0  # an arm that needs a longer episode is too slow for the task
+CUBE_CLEARANCE = 0.01  # m: the gripper opens at least this much wider than the cube
+
+
+def task_verdict(arm: ArmInfo, task: TaskConfig) -> tuple[bool, str]:
+    """Whether ``arm`` can do ``task`` as derived, and why not (or a short summary)."""
+    if task.spec.gripper:
+        reason = gripper_problem(arm)
+        if reason:
+            return False, reason
+    setup = arm_setup(arm, task)
+    if task.uses_contact and not task.spec.gripper and setup.tool_reach > task.success_distance:
+        return False, (
+            f"the tool's shapes reach {setup.tool_reach * 100:.1f} cm past the ee point, beyond "
+            f"the {task.success_distance * 100:.0f} cm success radius: pressing with them "
+            "leaves the ee point too far; name the tool's tip link as ee_link"
+        )
+    if setup.reached == 0:
+        return False, "no tool-down pose over the task area (limits or reach block it)"
+    if not setup.covers_area:
+        missing = setup.targets - setup.reached
+        return False, f"{missing} of {setup.targets} targets out of reach with the tool down"
+    seconds = setup.episode_steps * task.ctrl_dt
+    if seconds > MAX_EPISODE_SECONDS:
+        return False, (
+            f"too slow: the farthest target takes {setup.travel_time:.1f} s from home at the "
+            f"task's joint speeds (an episode of {seconds:.0f} s)"
+        )
+    return True, (
+        f"every target reachable tool-down; area x{setup.workspace_scale:.2f}, "
+        f"episode {seconds:.1f} s"
+    )
+
+
+def gripper_problem(arm: ArmInfo) -> str:
+    """Why the arm's gripper cannot hold the gripper tasks' cube ("" where it can)."""
+    from mjx_arm.urdf.scene_shapes import CUBE_HALF
+
+    if arm.gripper is None:
+        return (
+            "no parallel gripper (two prismatic fingers, one driven and the other its <mimic>, "
+            "or a mirrored pair)"
+        )
+    opening = arm.gripper.opening
+    if opening < 2 * CUBE_HALF + CUBE_CLEARANCE:
+        cube = 200 * CUBE_HALF
+        return f"the gripper opens {opening * 100:.1f} cm, too little for the {cube:.1f} cm cube"
+    return ""
