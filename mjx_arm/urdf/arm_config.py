@@ -245,7 +245,7 @@ def default_ee_link(model: RobotModel) -> str:
         raise ArmConfigError(
             f"{model.path}: no leaf link to take the end effector from ({len(model.links)} "
             "links): an empty robot, or a xacro source? Give a URDF with the arm's links and "
-            "joints (xacro's output), or set ee_link in an arm file"
+            "joints (xacro's output)"
         )
     order = {name: i for i, name in enumerate(model.links)}
     tip = max(
