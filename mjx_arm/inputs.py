@@ -211,7 +211,6 @@ def float_in(low: float, high: float | None = None) -> Callable[[str], float]:
     return parse
 
 
-positive_int = int_in(1)
 nonnegative_int = int_in(0)
 seed_int = int_in(0, MAX_SEED)
 pixels = int_in(16, 4096)  # video and plot sizes
