@@ -17,6 +17,7 @@ whole and the newest of them the latest, and a checkpoint that cannot be read is
 from __future__ import annotations
 
 import functools
+import hashlib
 import json
 import os
 import shutil
@@ -29,6 +30,7 @@ from mjx_arm.inputs import InputFileError, read_json_object
 
 CHECKPOINT_PREFIX = "step_"
 PARTIAL, OLD = ".partial-", ".old-"
+PARAMS_FILES = "params_files"  # meta.json: each params file's size and hash, checked on load
 
 
 class CheckpointError(InputFileError):
@@ -65,9 +67,8 @@ def save_checkpoint(
     except (OSError, ValueError) as err:  # orbax (tensorstore) reports a full disk as ValueError
         shutil.rmtree(partial, ignore_errors=True)
         kept = latest_checkpoint(folder.parent)
-        cause = getattr(err, "strerror", None) or str(err).split(" [", 1)[0][:300]
         raise CheckpointError(
-            f"saving the checkpoint of step {step} in {folder.parent} failed ({cause}); the "
+            f"saving the checkpoint of step {step} in {folder.parent} failed ({_cause(err)}); the "
             f"last good checkpoint is kept ({kept.name if kept else 'none yet'}): free some "
             "space and resume the run"
         ) from err
@@ -94,8 +95,33 @@ def _write_partial(
     ocp.PyTreeCheckpointer().save((partial / "params").resolve(), params, force=True)
     if transitions is not None:
         save_transitions(partial, transitions)
-    (partial / "meta.json").write_text(json.dumps({"step": step, **meta}, indent=2))
+    files = {PARAMS_FILES: params_files(partial / "params")}
+    (partial / "meta.json").write_text(json.dumps({"step": step, **meta, **files}, indent=2))
     _fsync_tree(partial)
+
+
+def params_files(params: Path) -> dict[str, list]:
+    """``{relative path: [bytes, sha256]}`` of every file orbax wrote under ``params``."""
+    return {
+        str(p.relative_to(params)): [p.stat().st_size, hashlib.sha256(p.read_bytes()).hexdigest()]
+        for p in sorted(params.rglob("*"))
+        if p.is_file()
+    }
+
+
+def _damage(folder: Path) -> str:
+    """What differs between a checkpoint's params files and the list its meta.json recorded
+    when it was saved ("" where they agree, or for checkpoints saved before the list)."""
+    recorded = load_meta(folder).get(PARAMS_FILES)
+    if not isinstance(recorded, dict):
+        return ""
+    found = params_files(folder / "params")
+    for name, entry in recorded.items():
+        if name not in found:
+            return f"params/{name} is missing"
+        if found[name] != entry:
+            return f"params/{name} has changed since it was saved ({found[name][0]} bytes)"
+    return ""
 
 
 def usable(folder: Path) -> bool:
@@ -153,13 +179,24 @@ def load_params(folder: Path) -> Any:
     path = (folder / "params").resolve()
     if not path.is_dir():
         raise CheckpointError(f"checkpoint {folder} has no params/ folder; it is incomplete")
+    damage = _damage(folder)  # checked first: orbax's threads print tracebacks on a bad file
+    if damage:
+        raise CheckpointError(
+            f"checkpoint {folder} cannot be read: {damage}; delete it to use the one before"
+        )
     try:
         return ocp.PyTreeCheckpointer().restore(path)
     except Exception as err:  # orbax and tensorstore raise many types for a damaged file
         raise CheckpointError(
-            f"checkpoint {folder} cannot be read ({type(err).__name__}: {err}); delete it to "
-            "use the one before"
+            f"checkpoint {folder} cannot be read ({type(err).__name__}: {_cause(err)}); "
+            "delete it to use the one before"
         ) from err
+
+
+def _cause(err: Exception) -> str:
+    """An OSError's reason, or the head of another error's message (tensorstore's messages
+    carry a long spec in brackets)."""
+    return getattr(err, "strerror", None) or str(err).split(" [", 1)[0][:300]
 
 
 def save_transitions(folder: Path, transitions: dict[str, np.ndarray]) -> Path:
