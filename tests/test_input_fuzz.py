@@ -4,7 +4,7 @@ through ``mjx_arm.cli.main``.
 
 A case passes when it exits 0, or 2 with one ``error:`` line, or reaches the work its command
 would start (stopped there: no training, no MJX); a traceback, another exit code, a hang or a
-spoiled good output fails it. :data:`FUZZ_EXAMPLES` cases take about 30 s on a 2-core CPU
+spoiled good output fails it. :data:`FUZZ_EXAMPLES` cases take about 20 s on a 2-core CPU
 (benchmarks/bench_input_fuzz.py runs 2,000 and more).
 """
 
