@@ -1,11 +1,19 @@
 """The ``mjx-arm`` command line: each package adds its own subcommands (``register``); this
-module assembles them and owns ``demo``, the whole product in one command."""
+module assembles them and owns ``demo``, the whole product in one command.
+
+Every bad input ends the same way, here in :func:`main`: a named error
+(:class:`~mjx_arm.inputs.InputError`, or a policy file's
+:class:`~mjx_arm.policy.PolicyFileError`) becomes one ``error:`` line on stderr and exit code
+:data:`~mjx_arm.names.EXIT_INVALID` (2); argparse reports bad arguments with the same code. Any
+other exception is a bug: its traceback shows and the exit code is 1.
+"""
 
 from __future__ import annotations
 
 import argparse
 import sys
 
+from mjx_arm.inputs import InputError
 from mjx_arm.jax_cache import enable_compilation_cache
 from mjx_arm.names import EXIT_INVALID, EXIT_OK
 
@@ -19,15 +27,16 @@ def cmd_demo(args: argparse.Namespace) -> int:
     About 1-2 minutes on a 2-core CPU (--quick: under a minute). --arm runs it on another arm
     (a URDF or an arm file).
     """
-    from mjx_arm.demo import DemoError, run_demo
-    from mjx_arm.urdf.arm_config import ArmConfigError
+    from mjx_arm.demo import run_demo
+    from mjx_arm.inputs import check_folder
+    from mjx_arm.urdf.arm_config import load_arm
 
+    if args.out:
+        check_folder(args.out, "--out")
+    if args.arm:
+        load_arm(args.arm)  # a missing or broken arm file fails before any work
     enable_compilation_cache()
-    try:
-        run_demo(args.out, quick=args.quick, arm=args.arm)
-    except (DemoError, ArmConfigError, FileNotFoundError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return EXIT_INVALID
+    run_demo(args.out, quick=args.quick, arm=args.arm)
     return EXIT_OK
 
 
@@ -69,10 +78,29 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def named_errors() -> tuple[type[Exception], ...]:
+    """The exceptions that mean a bad input: :class:`InputError` and the named errors that
+    keep their own base (the standalone numpy runtime's, the arm config's, an arm mismatch)."""
+    from mjx_arm.envs.arm import ArmMismatchError
+    from mjx_arm.policy.numpy_policy import PolicyFileError
+    from mjx_arm.urdf.arm_config import ArmConfigError
+
+    return InputError, PolicyFileError, ArmConfigError, ArmMismatchError
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``mjx-arm`` console script."""
+    """Entry point of the ``mjx-arm`` console script: parse, run the command, and turn a named
+    input error (:func:`named_errors`) into one ``error:`` line and :data:`EXIT_INVALID`."""
+    from mjx_arm.urdf.errors import one_line
+
     args = build_parser().parse_args(argv)
-    return int(args.func(args) or 0)
+    try:
+        return int(args.func(args) or 0)
+    except Exception as err:
+        if not isinstance(err, named_errors()):
+            raise  # a bug: its traceback shows, exit code 1
+        print(f"error: {one_line(err) or type(err).__name__}", file=sys.stderr)
+        return EXIT_INVALID
 
 
 if __name__ == "__main__":

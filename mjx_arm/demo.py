@@ -24,13 +24,15 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mjx_arm.inputs import InputError
+
 if TYPE_CHECKING:
     from mjx_arm.evaluate import EvalRun
     from mjx_arm.task.config import TaskConfig
     from mjx_arm.urdf.arm_config import ArmConfig
 
 
-class DemoError(RuntimeError):
+class DemoError(InputError, RuntimeError):
     """The demo cannot run (e.g. its output folder already holds a run)."""
 
 

@@ -14,15 +14,26 @@ target of ``obs[t]`` in the CPU MuJoCo env's model and renders it from the scene
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import warnings
+import zipfile
+import zlib
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from mjx_arm.inputs import (
+    ConfigError,
+    InputError,
+    InputFileError,
+    read_json_object,
+    require_file,
+    write_atomic,
+)
 from mjx_arm.task.config import TaskConfig, task_config
 from mjx_arm.task.observation import decode_joints, n_joints_of, obs_size, obs_slices
 
@@ -34,33 +45,74 @@ DPI = 100
 # --------------------------------------------------------------------------- files
 
 
+class TrajectoryError(InputError, ValueError):
+    """A file that is not a usable trajectory (not an .npz, keys missing, bad shapes)."""
+
+
 def load_trajectory(path: str | Path) -> dict[str, Any]:
-    """Arrays of a trajectory ``.npz`` (and its ``task`` config, when the file holds one).
+    """Arrays of a trajectory ``.npz`` (and its ``task`` config, when the file holds one),
+    checked: the required keys, one length, numeric finite values, an observation layout.
 
     Raises:
-        ValueError: a required key is missing or the arrays disagree in length.
+        TrajectoryError: not a readable trajectory file.
     """
-    with np.load(path, allow_pickle=False) as data:
-        traj: dict[str, Any] = {k: data[k] for k in data.files}
+    path = require_file(path, "trajectory file")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            traj: dict[str, Any] = {k: data[k] for k in data.files}
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as err:
+        raise TrajectoryError(
+            f"cannot read {path} as a trajectory .npz: {type(err).__name__}: {err}"
+        ) from err
     missing = [k for k in REQUIRED_KEYS if k not in traj]
     if missing:
-        raise ValueError(f"{path} is not a trajectory file: it lacks {missing}")
+        raise TrajectoryError(f"{path} is not a trajectory file: it lacks {missing}")
+    _check_arrays(path, traj)
+    if "task_config" in traj:
+        try:
+            traj["task_config"] = json.loads(str(traj["task_config"]))
+        except (ValueError, RecursionError) as err:
+            raise TrajectoryError(f"{path}: its task_config is not JSON ({err})") from err
+    return traj
+
+
+def _check_arrays(path: Path, traj: dict[str, Any]) -> None:
+    """Shapes and values of the required arrays: ``obs (T, k)`` of a known layout,
+    ``reward (T,)``, ``ee_pos (T, 3)``, ``contact_force (T,)``, all finite, T >= 1."""
+    shapes = {"obs": (2,), "reward": (1,), "ee_pos": (2,), "contact_force": (1, 2)}
+    for key, ndims in shapes.items():
+        value = traj[key]
+        if value.ndim not in ndims or value.dtype.kind not in "fiub" or not len(value):
+            raise TrajectoryError(
+                f"{path}: {key} must be a non-empty numeric array of {ndims[0]} dimensions, got "
+                f"shape {value.shape} ({value.dtype})"
+            )
+        if not np.all(np.isfinite(value)):
+            raise TrajectoryError(f"{path}: {key} holds NaN or infinite numbers")
     lengths = {k: len(traj[k]) for k in REQUIRED_KEYS}
     if len(set(lengths.values())) != 1:
-        raise ValueError(f"{path}: arrays differ in length {lengths}")
-    if "task_config" in traj:
-        traj["task_config"] = json.loads(str(traj["task_config"]))
-    return traj
+        raise TrajectoryError(f"{path}: arrays differ in length {lengths}")
+    if traj["ee_pos"].shape[1] != 3:
+        raise TrajectoryError(f"{path}: ee_pos must be (T, 3), got {traj['ee_pos'].shape}")
+    try:
+        joints = state_layout(traj["obs"].shape[1])[0]
+    except ValueError:
+        joints = 0
+    if not 5 <= joints <= 7:
+        raise TrajectoryError(
+            f"{path}: obs has {traj['obs'].shape[1]} entries per step, the layout of no task "
+            "on an arm of 5 to 7 joints"
+        )
 
 
 def save_trajectory(path: str | Path, rows: dict[str, np.ndarray], task: TaskConfig) -> Path:
     """Write a trajectory ``.npz`` (the arrays plus the task config as JSON)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     payload = {k: np.asarray(v) for k, v in rows.items()}
     payload["task_config"] = np.array(json.dumps(task.to_dict()))
-    with path.open("wb") as f:
-        np.savez_compressed(f, **payload)
+    buffer = io.BytesIO()
+    np.savez_compressed(buffer, **payload)
+    write_atomic(buffer.getvalue(), path)
     return path
 
 
@@ -69,18 +121,39 @@ def trajectory_task(path: str | Path, traj: dict[str, Any], name: str | None = N
 
     Order: the ``name`` given; the file's own ``task_config``; the ``config.json`` of the run
     directory a ``checkpoints/step_N/transitions.npz`` sits in; else Touch.
+
+    Raises:
+        TrajectoryError: the file's task config, or its run's, is not usable.
     """
     if "task_config" in traj:
-        task = TaskConfig.from_dict(traj["task_config"])
+        task = _task_from(traj["task_config"], f"{path} (its task_config)")
         if name is None or name == task.task:
             return task, "the trajectory file"
     if name is not None:
         return task_config(name), "--task"
     parents = Path(path).resolve().parents
     config = parents[2] / "config.json" if len(parents) > 2 else None
-    if config is not None and config.exists():
-        return TaskConfig.from_dict(json.loads(config.read_text())["task"]), str(config)
+    if config is not None and config.is_file():
+        try:
+            saved = read_json_object(config, "run config")
+        except InputFileError as err:
+            raise TrajectoryError(str(err)) from err
+        return _task_from(saved.get("task"), str(config)), str(config)
     return task_config("touch"), "default (touch): the file names no task"
+
+
+def _task_from(data: Any, where: str) -> TaskConfig:
+    """A :class:`TaskConfig` from a recorded task dict.
+
+    Raises:
+        TrajectoryError: not a dict of task fields.
+    """
+    if not isinstance(data, dict):
+        raise TrajectoryError(f"{where}: no task config (a table of fields)")
+    try:
+        return TaskConfig.from_dict(data)
+    except (ConfigError, TypeError) as err:
+        raise TrajectoryError(f"{where}: not a usable task config: {err}") from err
 
 
 # --------------------------------------------------------------------------- plot
@@ -131,9 +204,10 @@ def plot_trajectory(
         fig.suptitle(title)
     fig.tight_layout()
     output = Path(output)
-    output.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(output, dpi=DPI)
+    buffer = io.BytesIO()
+    fig.savefig(buffer, dpi=DPI, format="png")
     plt.close(fig)
+    write_atomic(buffer.getvalue(), output)
     return output
 
 
@@ -226,6 +300,14 @@ def render_frames(
     mocap = int(model.body_mocapid[model.body(TARGET_BODY).id])
     offset = sampling.target_point(np, np.zeros(3), task)
     s = obs_slices(env.arm.n_joints, env.task_spec.extra_obs)
+    width = obs_size(env.arm.n_joints, env.task_spec.extra_obs)
+    if np.shape(traj["obs"])[-1] != width:
+        env.close()
+        raise TrajectoryError(
+            f"the trajectory's observations have {np.shape(traj['obs'])[-1]} entries; "
+            f"{task.task} on {env.arm.urdf.name} has {width}: pass the task it was recorded in "
+            "(--task)"
+        )
     try:
         for obs in np.asarray(traj["obs"], dtype=np.float64):
             data.qpos[env.ids.qpos_adr] = decode_joints(obs[s["joint_angles"]], env._coding)

@@ -4,26 +4,36 @@ A setting names a field of a (nested) frozen dataclass config, ``field`` or ``gr
 text is parsed by the field's type (bool, int, float, str, tuples, else JSON). Commands add the
 option with :func:`add_set_argument` and apply it with :func:`apply_settings`; the training
 config also routes ``task.*`` keys to the task (``mjx_arm.train.config``).
+
+Values are checked in one place, whichever way a config is built: :func:`check_types` checks
+every field against its type hint (a config's ``__post_init__`` calls it), :func:`config_fields`
+does the same for a loaded file's fields and :func:`check_range` states a field's bounds. Each
+problem is a :class:`~mjx_arm.inputs.ConfigError` that names the field.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import json
+import math
+import types
 import typing
 from typing import Any
+
+from mjx_arm.inputs import ConfigError
 
 
 def split_setting(item: str) -> tuple[list[str], str]:
     """``"a.b=1"`` -> ``(["a", "b"], "1")``.
 
     Raises:
-        ValueError: no ``=`` in ``item``.
+        ConfigError: no ``=`` in ``item``.
     """
     key, sep, text = item.partition("=")
     if not sep:
-        raise ValueError(f"--set expects KEY=VALUE, got {item!r}")
+        raise ConfigError(f"--set expects KEY=VALUE, got {item!r}")
     return key.strip().split("."), text.strip()
 
 
@@ -31,8 +41,15 @@ def coerce(text: str, kind: Any) -> Any:
     """Parse a setting's text for a field of type ``kind``.
 
     Raises:
-        ValueError: the text is not a value of that type.
+        ConfigError: the text is not a value of that type.
     """
+    try:
+        return _parse(text, kind)
+    except (ValueError, OverflowError, RecursionError):
+        raise ConfigError(f"{text!r} is not {_describe(kind)}") from None
+
+
+def _parse(text: str, kind: Any) -> Any:
     if isinstance(kind, str):  # an alias such as Range, unresolved
         kind = tuple
     if kind is bool:
@@ -40,13 +57,18 @@ def coerce(text: str, kind: Any) -> Any:
             return True
         if text.lower() in ("0", "false", "no", "off"):
             return False
-        raise ValueError(f"not a boolean: {text!r}")
-    if kind in (int, float, str):
-        return kind(float(text)) if kind is int else kind(text)
+        raise ValueError(text)
+    if kind is int:
+        value = float(text)
+        if not value.is_integer():
+            raise ValueError(text)
+        return int(value)
+    if kind in (float, str):
+        return kind(text)
     if typing.get_origin(kind) is tuple or kind is tuple:
         args = typing.get_args(kind)
-        number = float if args and args[0] is float else int
-        return tuple(number(v) for v in text.strip("()[] ").split(",") if v.strip())
+        number = {float: float, str: str}.get(args[0] if args else int, int)
+        return tuple(number(v.strip()) for v in text.strip("()[] ").split(",") if v.strip())
     return json.loads(text)
 
 
@@ -54,29 +76,42 @@ def set_path(config: Any, path: list[str], text: str, label: str = "setting") ->
     """A copy of the dataclass ``config`` with the field at ``path`` set from ``text``.
 
     Raises:
-        ValueError: an unknown field (the message lists the known ones), a group set as a
-            value, a value given fields, or a value of the wrong type.
+        ConfigError: an unknown field (the message lists the known ones), a group set as a
+            value, a value given fields, a value of the wrong type or out of range.
     """
-    hints = typing.get_type_hints(type(config))
+    hints = field_types(type(config))
     if path[0] not in hints:
-        raise ValueError(f"unknown {label} {path[0]!r}; choose one of {sorted(hints)}")
+        raise ConfigError(f"unknown {label} {path[0]!r}; choose one of {sorted(hints)}")
     current = getattr(config, path[0])
     if dataclasses.is_dataclass(current):
         if len(path) == 1:
-            raise ValueError(f"{path[0]!r} is a group; set one of its fields ({path[0]}.NAME)")
+            raise ConfigError(f"{path[0]!r} is a group; set one of its fields ({path[0]}.NAME)")
         value = set_path(current, path[1:], text, label)
     elif len(path) > 1:
-        raise ValueError(f"{path[0]!r} has no fields")
+        raise ConfigError(f"{path[0]!r} has no fields")
     else:
         value = coerce(text, hints[path[0]])
-    return dataclasses.replace(config, **{path[0]: value})
+        check_value(value, hints[path[0]], path[0])
+    try:
+        return dataclasses.replace(config, **{path[0]: value})
+    except ConfigError:
+        raise
+    except ValueError as err:  # a config's own range check (__post_init__)
+        raise ConfigError(str(err)) from err
 
 
 def apply_settings(config: Any, items: list[str], label: str = "setting") -> Any:
-    """``config`` with every ``KEY=VALUE`` of ``items`` set, in order (the last one wins)."""
+    """``config`` with every ``KEY=VALUE`` of ``items`` set, in order (the last one wins).
+
+    Raises:
+        ConfigError: a bad item; the message starts with ``--set ITEM:``.
+    """
     for item in items:
         path, text = split_setting(item)
-        config = set_path(config, path, text, label)
+        try:
+            config = set_path(config, path, text, label)
+        except ConfigError as err:
+            raise ConfigError(f"--set {item}: {err}") from err
     return config
 
 
@@ -102,10 +137,11 @@ def add_set_argument(parser: argparse.ArgumentParser, help_text: str) -> None:
 
 
 def config_fields(
-    cls: type, data: dict[str, Any], what: str, error: type[Exception] = ValueError
+    cls: type, data: Any, what: str, error: type[Exception] = ConfigError
 ) -> dict[str, Any]:
     """The keyword arguments of frozen dataclass ``cls`` from a JSON-loaded dict (the inverse of
-    ``dataclasses.asdict`` for flat configs): lists become tuples, unknown keys are an error.
+    ``dataclasses.asdict`` for flat configs): lists become tuples, unknown keys are an error,
+    and each value is checked against its field's type (:func:`check_value`).
 
     Args:
         cls: the config class.
@@ -114,10 +150,144 @@ def config_fields(
         error: the exception class to raise.
 
     Raises:
-        error: a key that is not a field of ``cls``, with the known ones listed.
+        error: not a dict, a key that is not a field of ``cls`` (the known ones listed), or a
+            value of the wrong type.
     """
-    known = {f.name for f in dataclasses.fields(cls)}
-    unknown = sorted(set(data) - known)
+    if not isinstance(data, dict):
+        raise error(f"{what} must be a table of fields, not {type(data).__name__}")
+    hints = field_types(cls)
+    unknown = sorted(str(k) for k in set(data) - set(hints))
     if unknown:
-        raise error(f"unknown {what} keys: {unknown}; known: {sorted(known)}")
-    return {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
+        raise error(f"unknown {what} keys: {unknown}; known: {sorted(hints)}")
+    out, wrong = {}, []
+    for key, value in data.items():
+        value = tuple(value) if isinstance(value, list) else value
+        if not isinstance(value, dict):  # a nested section: its own from_dict checks it
+            try:
+                check_value(value, hints[key], key)
+            except ConfigError as err:
+                wrong.append(str(err))
+        out[key] = value
+    if wrong:
+        raise error(f"{what}: {'; '.join(wrong)}")
+    return out
+
+
+# --------------------------------------------------------------------------- type checks
+
+
+@functools.cache
+def field_types(cls: type) -> dict[str, Any]:
+    """Field name -> resolved type hint of the dataclass ``cls``."""
+    hints = typing.get_type_hints(cls)
+    return {f.name: hints.get(f.name, Any) for f in dataclasses.fields(cls)}
+
+
+def check_types(config: Any, prefix: str = "") -> None:
+    """Check every field of the dataclass ``config`` against its type hint; for a config's
+    ``__post_init__``, so that every way of building it (a file, ``--set``, code) is checked.
+
+    Args:
+        config: the dataclass instance.
+        prefix: put before each field's name in a message ("physics.").
+
+    Raises:
+        ConfigError: the first field whose value is not of its type (or a non-finite float).
+    """
+    for name, kind in field_types(type(config)).items():
+        check_value(getattr(config, name), kind, prefix + name)
+
+
+def check_value(value: Any, kind: Any, name: str) -> None:
+    """Check one value against a type hint: bool, int, float (finite; an int is fine), str,
+    tuples of those (``tuple[float, ...]`` or fixed length), dicts, dataclasses, unions.
+
+    Raises:
+        ConfigError: ``value`` is not a ``kind``.
+    """
+    if not _fits(value, kind):
+        raise ConfigError(f"{name} must be {_describe(kind)}, got {value!r}")
+
+
+def _fits(value: Any, kind: Any) -> bool:
+    origin, args = typing.get_origin(kind), typing.get_args(kind)
+    if kind is Any or isinstance(kind, typing.TypeVar):
+        return True
+    if origin in (typing.Union, types.UnionType):
+        return any(_fits(value, a) for a in args)
+    if kind is bool:
+        return isinstance(value, bool)
+    if kind is int:
+        return isinstance(value, int) and not isinstance(value, bool)
+    if kind is float:
+        ok = isinstance(value, int | float) and not isinstance(value, bool)
+        return ok and math.isfinite(value)
+    if origin is tuple or kind is tuple:
+        return _fits_tuple(value, args)
+    if origin is dict or kind is dict:
+        return isinstance(value, dict)
+    if isinstance(kind, type):
+        return isinstance(value, kind)
+    return True  # a hint this check does not know: accepted
+
+
+def _fits_tuple(value: Any, args: tuple) -> bool:
+    if not isinstance(value, tuple):
+        return False
+    if not args:
+        return True
+    if len(args) == 2 and args[1] is Ellipsis:
+        return all(_fits(v, args[0]) for v in value)
+    return len(value) == len(args) and all(_fits(v, a) for v, a in zip(value, args, strict=True))
+
+
+def _describe(kind: Any) -> str:
+    """``kind`` in words, for a message ("a list of numbers")."""
+    origin, args = typing.get_origin(kind), typing.get_args(kind)
+    names = {bool: "true or false", int: "an integer", float: "a finite number", str: "a text"}
+    if kind in names:
+        return names[kind]
+    if origin is tuple or kind is tuple or isinstance(kind, str):
+        if len(args) == 2 and args[1] is Ellipsis:
+            return f"a list of {_describe(args[0]).removeprefix('a ').removeprefix('an ')}s"
+        return f"a list of {len(args)} values" if args else "a list"
+    if origin is dict or kind is dict:
+        return "a table (dict)"
+    return f"a {getattr(kind, '__name__', kind)}"
+
+
+def check_range(
+    config: Any,
+    names: str | tuple[str, ...],
+    low: float | None = None,
+    high: float | None = None,
+    above: float | None = None,
+    prefix: str = "",
+) -> None:
+    """Check fields of ``config``: each ``>= low``, ``<= high`` and ``> above`` (None: no bound);
+    a tuple field must have entries, each in range. ``prefix`` goes before each name in a
+    message ("physics.").
+
+    Raises:
+        ConfigError: a field out of range, named with its bounds.
+    """
+    for field_name in (names,) if isinstance(names, str) else names:
+        value, name = getattr(config, field_name), prefix + field_name
+        values = value if isinstance(value, tuple) else (value,)
+        if not values:
+            raise ConfigError(f"{name} must list at least one value, got ()")
+        if any(not _within(v, low, high, above) for v in values):
+            bounds = (
+                f">= {low:g}" if low is not None else "",
+                f"> {above:g}" if above is not None else "",
+                f"<= {high:g}" if high is not None else "",
+            )
+            span = " and ".join(b for b in bounds if b)
+            each = "each entry of " if isinstance(value, tuple) else ""
+            raise ConfigError(f"{each}{name} must be {span}, got {value!r}")
+
+
+def _within(v: float, low: float | None, high: float | None, above: float | None) -> bool:
+    return (
+        (low is None or v >= low) and (high is None or v <= high) and (above is None or v > above)
+    )

@@ -32,7 +32,10 @@ The arm's own links set nothing, so the arm's contacts with the cube take the cu
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+
+from mjx_arm.inputs import ConfigError
 
 
 @dataclass(frozen=True)
@@ -43,10 +46,11 @@ class Compliance:
     damping: float
 
     def __post_init__(self) -> None:
-        if not (self.stiffness > 0.0 and self.damping >= 0.0):
-            raise ValueError(
-                f"contact stiffness must be > 0 and damping >= 0, got {self.stiffness}, "
-                f"{self.damping}"
+        finite = math.isfinite(self.stiffness) and math.isfinite(self.damping)
+        if not (finite and self.stiffness > 0.0 and self.damping >= 0.0):
+            raise ConfigError(
+                f"contact stiffness must be > 0 and damping >= 0 (finite), got "
+                f"{self.stiffness}, {self.damping}"
             )
 
     def dynamics(self) -> dict[str, float]:
@@ -62,7 +66,7 @@ class Compliance:
             stiffness, damping = (float(v) for v in text.split(":"))
         except ValueError:
             msg = f'a compliance is "rigid" or STIFFNESS:DAMPING, got {text!r}'
-            raise ValueError(msg) from None
+            raise ConfigError(msg) from None
         return cls(stiffness, damping)
 
     def __str__(self) -> str:

@@ -8,12 +8,12 @@ ParityConfig`, :class:`~mjx_arm.bench.transfer.TransferConfig`).
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
 from mjx_arm.bench.settings import add_arguments, from_arguments
-from mjx_arm.names import EXIT_INVALID, EXIT_OK, PARITY_ENGINES
+from mjx_arm.inputs import check_folder
+from mjx_arm.names import EXIT_OK, PARITY_ENGINES
 from mjx_arm.settings import add_set_argument
 
 PARITY_OUT = Path("benchmarks/results/parity")
@@ -26,6 +26,18 @@ def _enable_jax_cache() -> None:
     from mjx_arm.jax_cache import enable_compilation_cache
 
     enable_compilation_cache()
+
+
+def _check_arm(arm: str) -> None:
+    """Validate a benchmark's ``--arm`` before any work ("" is the shipped arm).
+
+    Raises:
+        InputError: no such file, or an arm that does not validate or resolve.
+    """
+    if arm:
+        from mjx_arm.envs.arm import validated_arm_info
+
+        validated_arm_info(arm, "mujoco")
 
 
 def _print_paths(paths: list[Path]) -> None:
@@ -49,11 +61,9 @@ def cmd_parity(args: argparse.Namespace) -> int:
     from mjx_arm.bench.parity_report import goals_table, write_report
     from mjx_arm.bench.results import environment_metadata
 
-    try:
-        config = from_arguments(ParityConfig.quick() if args.quick else ParityConfig(), args)
-    except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return EXIT_INVALID
+    config = from_arguments(ParityConfig.quick() if args.quick else ParityConfig(), args)
+    check_folder(args.out, "--out")
+    _check_arm(config.arm)
     if "mjx" in config.engines:
         _enable_jax_cache()
     meta = environment_metadata(accelerator="mjx" in config.engines)
@@ -93,6 +103,7 @@ def cmd_grasp(args: argparse.Namespace) -> int:
     """
     from mjx_arm.bench.results import environment_metadata
 
+    check_folder(args.out, "--out")
     _enable_jax_cache()
     meta = environment_metadata(accelerator="mjx" in args.engines)
     _print_paths(_grasp_report(tuple(args.engines), meta, args.out, args.video))
@@ -114,12 +125,10 @@ def cmd_transfer(args: argparse.Namespace) -> int:
     from mjx_arm.bench.transfer import TransferConfig, transfer_matrix, write_report
     from mjx_arm.evaluate import eval_task, resolve_policy
 
-    try:
-        config = from_arguments(TransferConfig(), args)
-        policy, source = resolve_policy(args.policy)
-    except (ValueError, FileNotFoundError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return EXIT_INVALID
+    config = from_arguments(TransferConfig(), args)
+    check_folder(args.out, "--out")
+    _check_arm(config.arm)
+    policy, source = resolve_policy(args.policy)
     _enable_jax_cache()
     task, task_notes = eval_task(policy, config.task or None)
     meta = environment_metadata(accelerator=True)
@@ -144,14 +153,13 @@ def cmd_seeds(args: argparse.Namespace) -> int:
     """
     start = time.time()
     from mjx_arm.bench.results import environment_metadata
-    from mjx_arm.bench.seeds import SeedsConfig, parse_seeds, run_seeds, write_report
+    from mjx_arm.bench.seeds import SeedsConfig, check_seed_settings, run_seeds, write_report
 
-    try:
-        config = from_arguments(SeedsConfig(), args)
-        parse_seeds(config.seeds)
-    except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return EXIT_INVALID
+    config = from_arguments(SeedsConfig(), args)
+    check_folder(args.out, "--out")
+    if args.runs:
+        check_folder(args.runs, "--runs")
+    check_seed_settings(config, tuple(args.set or ()))
     _enable_jax_cache()
     meta = environment_metadata(accelerator=True)
     stamp = time.strftime("%Y%m%d-%H%M%S")

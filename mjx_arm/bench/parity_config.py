@@ -12,7 +12,9 @@ from typing import Any
 
 from mjx_arm.bench.settings import setting
 from mjx_arm.envs.physics_config import IMPLS
+from mjx_arm.inputs import MAX_SEED
 from mjx_arm.names import PARITY_ENGINES as ENGINES
+from mjx_arm.settings import check_range
 
 # Bottom-face centres (m) of the box in the pressing check, the first ``press_boxes`` are used.
 BOX_POSITIONS = (
@@ -64,6 +66,12 @@ class ParityConfig:
     seed: int = setting(0, "seed of the random poses and actions")
 
     def __post_init__(self) -> None:
+        check_range(self, ("fk_poses", "sequences", "hold_steps", "press_average_steps"), low=1)
+        check_range(self, ("fk_poses", "sequences"), high=100_000)
+        check_range(self, ("seconds", "press_seconds", "jitter_window"), above=0, high=600)
+        check_range(self, ("amplitude",), above=0, high=1)
+        check_range(self, ("press_depth", "goal_fk_m", "goal_mjx_rad", "goal_pybullet_rad"), low=0)
+        check_range(self, "seed", low=0, high=MAX_SEED)
         unknown = set(self.engines) - set(ENGINES)
         if unknown or not self.engines:
             raise ValueError(f"engines must be some of {ENGINES}, got {self.engines}")

@@ -16,6 +16,8 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from mjx_arm.inputs import write_atomic
+
 DEFAULT_PACKAGES = (
     "mujoco",
     "mujoco-mjx",
@@ -141,12 +143,15 @@ def save_results(
 
     Returns:
         The paths of the JSON and markdown files.
+
+    Both are written atomically, after the JSON is encoded: a failing or killed benchmark
+    leaves the files of an earlier run whole.
     """
     folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
     json_path, md_path = folder / f"{name}.json", folder / f"{name}.md"
-    json_path.write_text(json.dumps(payload, indent=2, default=_json_default) + "\n")
-    md_path.write_text(table_md if table_md.endswith("\n") else table_md + "\n")
+    text = json.dumps(payload, indent=2, default=_json_default) + "\n"
+    write_atomic(text.encode(), json_path)
+    write_atomic((table_md if table_md.endswith("\n") else table_md + "\n").encode(), md_path)
     return json_path, md_path
 
 

@@ -30,7 +30,9 @@ import numpy as np
 
 from mjx_arm.bench.results import fmt, markdown_table, save_results
 from mjx_arm.bench.settings import setting
+from mjx_arm.inputs import MAX_SEED, ConfigError
 from mjx_arm.names import BACKENDS, PRESET_NAMES
+from mjx_arm.settings import check_range
 from mjx_arm.task.registry import task_names
 
 SUCCESS_KEY = "eval/episode_success"
@@ -40,7 +42,8 @@ def parse_seeds(text: str) -> tuple[int, ...]:
     """Seeds from ``"0-9"``, ``"0,3,7"`` or a mix (``"0-2,5"``); ranges are inclusive.
 
     Raises:
-        ValueError: an empty list, a negative seed, a reversed range or a repeated seed.
+        ConfigError: an empty list (or over 1000 seeds), a negative seed, a reversed range or
+            a repeated seed.
     """
     seeds: list[int] = []
     for part in filter(None, (p.strip() for p in text.split(","))):
@@ -48,14 +51,14 @@ def parse_seeds(text: str) -> tuple[int, ...]:
         try:
             first, last = int(low), int(high) if dash else int(low)
         except ValueError:
-            raise ValueError(f"not a seed or range: {part!r} (use e.g. 0-9 or 0,3,7)") from None
-        if first < 0 or last < first:
-            raise ValueError(f"bad seed range {part!r}: seeds are >= 0, low-high with low <= high")
+            raise ConfigError(f"not a seed or range: {part!r} (use e.g. 0-9 or 0,3,7)") from None
+        if first < 0 or last < first or last > MAX_SEED:
+            raise ConfigError(f"bad seed range {part!r}: seeds are >= 0, low-high with low <= high")
         seeds.extend(range(first, last + 1))
-    if not seeds:
-        raise ValueError("no seeds given")
+    if not seeds or len(seeds) > 1000:
+        raise ConfigError(f"give 1 to 1000 seeds, got {len(seeds)} ({text!r})")
     if len(set(seeds)) != len(seeds):
-        raise ValueError(f"a seed is listed twice: {text!r}")
+        raise ConfigError(f"a seed is listed twice: {text!r}")
     return tuple(seeds)
 
 
@@ -70,6 +73,11 @@ class SeedsConfig:
     threshold: float = setting(0.95, "evaluation success that counts as solved")
     devices: int = setting(0, "local devices to train on (0: all)")
     arm: str = setting("", "the arm: a URDF or an arm file (.toml/.json); '' is the shipped arm")
+
+    def __post_init__(self) -> None:
+        check_range(self, "threshold", low=0, high=1)
+        check_range(self, "devices", low=0)
+        parse_seeds(self.seeds)
 
 
 @dataclass
@@ -271,6 +279,26 @@ def plot_curves(runs: list[SeedRun], threshold: float, title: str, path: Path) -
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def check_seed_settings(config: SeedsConfig, overrides: tuple[str, ...] = ()) -> None:
+    """Check everything the seeds' trainings take before the first starts: the preset with
+    the task, backend and ``overrides`` (:func:`~mjx_arm.train.config.load_config`), and the
+    arm.
+
+    Raises:
+        InputError: a bad override, an arm that does not validate, a bad device count.
+    """
+    from mjx_arm.envs.arm import validated_arm_info
+    from mjx_arm.envs.base import default_arm
+    from mjx_arm.train.config import load_config
+    from mjx_arm.train.learner import local_devices
+
+    items = [f"task={config.task}", f"backend={config.backend}", *overrides]
+    train_config = load_config(config.preset, None, items)
+    train_config.check_devices(len(local_devices(config.devices)))
+    arm = config.arm or train_config.arm
+    validated_arm_info(default_arm(train_config.task_config(), arm), "mujoco")
 
 
 def run_seeds(

@@ -11,6 +11,9 @@ import dataclasses
 from dataclasses import field
 from typing import Any
 
+from mjx_arm.inputs import ConfigError
+from mjx_arm.settings import check_value, field_types
+
 
 def setting(default: Any, help_text: str, choices: tuple | None = None) -> Any:
     """A dataclass field with its command-line help (and the values it may take)."""
@@ -41,10 +44,21 @@ def add_arguments(parser: argparse.ArgumentParser, cls: type) -> None:
 
 
 def from_arguments(base: Any, args: argparse.Namespace) -> Any:
-    """``base`` with every field that ``args`` gives replaced."""
+    """``base`` with every field that ``args`` gives replaced.
+
+    Raises:
+        ConfigError: a value the settings' own checks refuse (out of range, not finite).
+    """
     changes = {}
     for f in dataclasses.fields(base):
         value = getattr(args, f.name, None)
         if value is not None:
             changes[f.name] = tuple(value) if isinstance(value, list) else value
-    return dataclasses.replace(base, **changes)
+    try:
+        for name, value in changes.items():
+            check_value(value, field_types(type(base))[name], "--" + name.replace("_", "-"))
+        return dataclasses.replace(base, **changes)
+    except ConfigError:
+        raise
+    except ValueError as err:  # the settings' __post_init__ range checks
+        raise ConfigError(str(err)) from err

@@ -20,7 +20,9 @@ from typing import Any
 from mjx_arm.bench.results import fmt, markdown_table, save_results, verdict
 from mjx_arm.bench.settings import setting
 from mjx_arm.envs.physics_config import IMPLS
+from mjx_arm.inputs import MAX_SEED
 from mjx_arm.names import TASK_IDS
+from mjx_arm.settings import check_range
 from mjx_arm.task.config import TaskConfig
 
 
@@ -62,6 +64,10 @@ class TransferConfig:
     goal_peak_force: float = setting(50.0, "goal (Touch): mean peak contact force (N)")
 
     def __post_init__(self) -> None:
+        check_range(self, "episodes", low=1, high=100_000)
+        check_range(self, "seed", low=0, high=MAX_SEED)
+        check_range(self, "goal_success", low=0, high=1)
+        check_range(self, "goal_peak_force", above=0)
         unknown = set(self.engines) - set(TRANSFER_ENGINES)
         if unknown or not self.engines:
             raise ValueError(f"engines must be some of {tuple(TRANSFER_ENGINES)}")

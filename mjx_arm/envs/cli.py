@@ -5,10 +5,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
-from mjx_arm.names import EXIT_INVALID, EXIT_OK
+from mjx_arm.names import EXIT_OK
 
 
 def cmd_arm(args: argparse.Namespace) -> int:
@@ -17,20 +16,18 @@ def cmd_arm(args: argparse.Namespace) -> int:
     With -o, also writes the resolved config as an arm file (TOML) to edit and pass to --arm.
     """
     from mjx_arm.envs.arm import validated_arm_info
-    from mjx_arm.urdf.arm_config import ArmConfigError, load_arm
-    from mjx_arm.urdf.errors import UrdfError
+    from mjx_arm.inputs import check_output, write_atomic
+    from mjx_arm.urdf.arm_config import load_arm
 
-    try:
-        config = load_arm(args.arm)
-        if args.ee_link:
-            config = config.replace(ee_link=args.ee_link, joints=())
-        arm = validated_arm_info(config, "mujoco")
-    except (ArmConfigError, UrdfError, FileNotFoundError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return EXIT_INVALID
+    if args.output:  # named errors (bad files, bad arm) go to mjx_arm.cli.main
+        check_output(args.output, "-o", (".toml",))
+    config = load_arm(args.arm)
+    if args.ee_link:
+        config = config.replace(ee_link=args.ee_link, joints=())
+    arm = validated_arm_info(config, "mujoco")
     print(describe(arm))
     if args.output:
-        Path(args.output).write_text(arm_file_text(arm))
+        write_atomic(arm_file_text(arm).encode(), Path(args.output))
         print(f"wrote {args.output}")
     return EXIT_OK
 

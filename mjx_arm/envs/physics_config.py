@@ -10,8 +10,9 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
+from mjx_arm.inputs import ConfigError
 from mjx_arm.names import IMPLS
-from mjx_arm.settings import config_fields
+from mjx_arm.settings import check_range, check_types, config_fields
 
 
 @dataclass(frozen=True)
@@ -38,12 +39,11 @@ class PhysicsConfig:
     compile_threads: int = 8
 
     def __post_init__(self) -> None:
+        check_types(self, "physics.")
         if self.impl not in IMPLS:
-            raise ValueError(f"physics.impl must be one of {IMPLS}, got {self.impl!r}")
-        if min(self.naconmax_per_env, self.njmax, self.compile_threads) < 0:
-            raise ValueError(
-                "physics.naconmax_per_env, physics.njmax and physics.compile_threads must be >= 0"
-            )
+            raise ConfigError(f"physics.impl must be one of {IMPLS}, got {self.impl!r}")
+        check_range(self, ("naconmax_per_env", "njmax"), low=0, high=2**16, prefix="physics.")
+        check_range(self, "compile_threads", low=0, high=256, prefix="physics.")
 
     def replace(self, **changes: Any) -> PhysicsConfig:
         """A copy with fields changed."""
@@ -88,6 +88,18 @@ class RandomizationConfig:
     ft_torque_noise: float = 0.02
     latency_prob: float = 0.3
 
+    def __post_init__(self) -> None:
+        check_types(self, "randomization.")
+        ranges = ("friction", "damping", "armature", "gain")
+        check_range(self, ranges, low=0, prefix="randomization.")
+        for name in ranges:
+            low, high = getattr(self, name)
+            if low > high:
+                raise ConfigError(f"randomization.{name} must be (low, high), low <= high")
+        noises = ("box_offset", "ft_force_noise", "ft_torque_noise")
+        check_range(self, noises, low=0, prefix="randomization.")
+        check_range(self, "latency_prob", low=0, high=1, prefix="randomization.")
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict."""
         return dataclasses.asdict(self)
@@ -113,17 +125,17 @@ def resolve_impl(impl: str) -> str:
     """``auto`` -> ``warp`` on a CUDA GPU with Warp installed, else ``jax``; checks names.
 
     Raises:
-        ValueError: an unknown name, or ``warp`` without warp-lang installed.
+        ConfigError: an unknown name, or ``warp`` without warp-lang installed.
     """
     if impl not in IMPLS:
-        raise ValueError(f"physics.impl must be one of {IMPLS}, got {impl!r}")
+        raise ConfigError(f"physics.impl must be one of {IMPLS}, got {impl!r}")
     if impl == "auto":
         import jax
 
         on_gpu = jax.default_backend() in ("gpu", "cuda")
         return "warp" if on_gpu and warp_available() else "jax"
     if impl == "warp" and not warp_available():
-        raise ValueError(
+        raise ConfigError(
             "physics.impl=warp needs warp-lang: pip install 'mjx_arm[gpu]' "
             "(or choose physics.impl=jax)"
         )

@@ -14,6 +14,7 @@ start poses and targets. The batched env draws its episodes from JAX's generator
 
 from mjx_arm.evaluate.core import (
     DYNAMICS_FIELDS,
+    check_policy_fits,
     eval_arm,
     eval_task,
     evaluate,
@@ -29,6 +30,7 @@ __all__ = [
     "EpisodeStats",
     "EvalRun",
     "Policy",
+    "check_policy_fits",
     "eval_arm",
     "eval_task",
     "evaluate",

@@ -7,9 +7,21 @@ import sys
 from pathlib import Path
 
 from mjx_arm import names
+from mjx_arm.inputs import (
+    ConfigError,
+    check_output,
+    int_in,
+    nonnegative_int,
+    pixels,
+    seed_int,
+    write_atomic,
+)
 from mjx_arm.jax_cache import enable_compilation_cache
-from mjx_arm.names import EXIT_INVALID, EXIT_OK
+from mjx_arm.names import EXIT_OK
 from mjx_arm.task.registry import task_names
+
+VIDEO_SUFFIXES = (".mp4", ".gif")
+MAX_EPISODES = 100_000
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
@@ -21,41 +33,36 @@ def cmd_eval(args: argparse.Namespace) -> int:
     """
     import json
 
-    from mjx_arm.envs.arm import ArmMismatchError
     from mjx_arm.evaluate import eval_arm, eval_task, evaluate, format_summary, resolve_policy
     from mjx_arm.replay import save_trajectory
 
-    if args.engine == "mjx":
-        enable_compilation_cache()
-        _warn_mjx_on_cpu()
+    _check_eval_outputs(args)
     if args.pybullet_contact is not None:
         from pybullet_ref.contact import SceneContact
 
         try:
             SceneContact.parse(args.pybullet_contact)
-        except ValueError as err:
-            print(f"error: --pybullet-contact: {err}", file=sys.stderr)
-            return EXIT_INVALID
+        except ConfigError as err:
+            raise ConfigError(f"--pybullet-contact: {err}") from err
     policy, source = resolve_policy(args.policy, args.step)
     task, notes = eval_task(policy, args.task)
-    try:
-        arm = eval_arm(policy, args.arm)
-        result, run = evaluate(
-            policy,
-            args.engine,
-            task,
-            args.episodes,
-            args.seed,
-            args.video,
-            args.width,
-            args.height,
-            impl=args.impl,
-            arm=arm,
-            contact=args.pybullet_contact,
-        )
-    except (ArmMismatchError, FileNotFoundError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return EXIT_INVALID
+    arm = eval_arm(policy, args.arm)
+    if args.engine == "mjx":
+        enable_compilation_cache()
+        _warn_mjx_on_cpu()
+    result, run = evaluate(
+        policy,
+        args.engine,
+        task,
+        args.episodes,
+        args.seed,
+        args.video,
+        args.width,
+        args.height,
+        impl=args.impl,
+        arm=arm,
+        contact=args.pybullet_contact,
+    )
     result = {"policy": str(source), **result, "notes": notes + result["notes"]}
     print(format_summary(result))
     if args.trajectory:
@@ -63,11 +70,20 @@ def cmd_eval(args: argparse.Namespace) -> int:
     if result["video"]:
         print(f"video: {result['video']}")
     if args.output:
-        Path(args.output).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.output).write_text(json.dumps(result, indent=2))
+        write_atomic(json.dumps(result, indent=2).encode(), Path(args.output))
         print(f"results: {args.output}")
     print(json.dumps({k: v for k, v in result.items() if k != "per_episode"}))
     return EXIT_OK
+
+
+def _check_eval_outputs(args: argparse.Namespace) -> None:
+    """Check eval's output paths before any work (:func:`~mjx_arm.inputs.check_output`)."""
+    if args.video:
+        check_output(args.video, "--video", VIDEO_SUFFIXES)
+    if args.trajectory:
+        check_output(args.trajectory, "--trajectory", (".npz",))
+    if args.output:
+        check_output(args.output, "-o")
 
 
 def _warn_mjx_on_cpu() -> None:
@@ -89,13 +105,10 @@ def cmd_replay(args: argparse.Namespace) -> int:
     """
     from mjx_arm.replay import replay
 
-    try:
-        summary = replay(
-            args.trajectory, args.output, args.video, args.width, args.height, args.task
-        )
-    except (OSError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return EXIT_INVALID
+    check_output(args.output, "-o", (".png",))
+    if args.video:
+        check_output(args.video, "--video", VIDEO_SUFFIXES)
+    summary = replay(args.trajectory, args.output, args.video, args.width, args.height, args.task)
     drop = summary["largest_reward_drop_step"]
     print(
         f"{summary['steps']} steps, return {summary['return']:.2f}, task {summary['task']} "
@@ -130,9 +143,15 @@ def _add_eval(sub: argparse._SubParsersAction) -> None:
         default="auto",
         help="MJX implementation for --engine mjx (default: auto: Warp on a GPU where installed)",
     )
-    p.add_argument("--step", type=int, help="checkpoint step of a run directory (default: newest)")
-    p.add_argument("--episodes", type=int, default=50, help="episodes (default: 50)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the first episode (default: 0)")
+    p.add_argument(
+        "--step", type=nonnegative_int, help="checkpoint step of a run directory (default: newest)"
+    )
+    p.add_argument(
+        "--episodes", type=int_in(1, MAX_EPISODES), default=50, help="episodes (default: 50)"
+    )
+    p.add_argument(
+        "--seed", type=seed_int, default=0, help="seed of the first episode (default: 0)"
+    )
     p.add_argument(
         "--task",
         type=str.lower,
@@ -150,8 +169,8 @@ def _add_eval(sub: argparse._SubParsersAction) -> None:
         "rigid (Bullet's own), or FIXED/CUBE springs as STIFFNESS:DAMPING (N/m:N s/m)",
     )
     p.add_argument("--video", help="video of the first episode (.mp4 or .gif)")
-    p.add_argument("--width", type=int, default=640, help="video width (default: 640)")
-    p.add_argument("--height", type=int, default=480, help="video height (default: 480)")
+    p.add_argument("--width", type=pixels, default=640, help="video width (default: 640)")
+    p.add_argument("--height", type=pixels, default=480, help="video height (default: 480)")
     p.add_argument("--trajectory", help="save the first episode as a trajectory .npz (replay)")
     p.add_argument("-o", "--output", help="JSON file for the results")
     p.set_defaults(func=cmd_eval)
@@ -164,8 +183,10 @@ def _add_replay(sub: argparse._SubParsersAction) -> None:
     p.add_argument("trajectory", help="trajectory .npz (transitions.npz or from eval)")
     p.add_argument("-o", "--output", required=True, help="PNG plot to write")
     p.add_argument("--video", help="also render a video (.mp4 or .gif) through MuJoCo")
-    p.add_argument("--width", type=int, default=800, help="plot and video width (default: 800)")
-    p.add_argument("--height", type=int, default=600, help="plot and video height (default: 600)")
+    p.add_argument("--width", type=pixels, default=800, help="plot and video width (default: 800)")
+    p.add_argument(
+        "--height", type=pixels, default=600, help="plot and video height (default: 600)"
+    )
     p.add_argument(
         "--task",
         type=str.lower,

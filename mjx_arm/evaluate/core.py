@@ -14,6 +14,7 @@ import numpy as np
 
 from mjx_arm.evaluate.runners import Policy, check_policy_arm, run_batched, run_episodes
 from mjx_arm.evaluate.stats import EvalRun, summarize
+from mjx_arm.inputs import ConfigError, MissingInputError
 from mjx_arm.names import EVAL_ENGINES as ENGINES
 from mjx_arm.names import env_id
 from mjx_arm.task.config import TaskConfig, task_config
@@ -58,10 +59,17 @@ def eval_task(policy: Any, name: str | None = None) -> tuple[TaskConfig, list[st
     Returns:
         The task config and notes.
     """
+    from mjx_arm.policy import PolicyFileError
+
     trained_dict = getattr(policy, "config", {}).get("task")
     if trained_dict is None:
         return task_config(name or "touch"), ["the policy names no training task"]
-    trained = TaskConfig.from_dict(trained_dict)
+    if not isinstance(trained_dict, dict):
+        raise PolicyFileError("the policy's config.task is not a table: a damaged policy file")
+    try:
+        trained = TaskConfig.from_dict(trained_dict)
+    except ConfigError as err:
+        raise PolicyFileError(f"the policy's training task is not usable: {err}") from err
     if name is None or name == trained.task:
         return trained, []
     dynamics = {k: getattr(trained, k) for k in DYNAMICS_FIELDS}
@@ -102,7 +110,8 @@ def eval_arm(policy: Any, source: str | Path | None = None) -> Any:
     (:func:`mjx_arm.envs.arm.check_same_arm`) still compares the two.
 
     Raises:
-        FileNotFoundError: the recorded arm's URDF is not on this machine (pass ``source``).
+        FileNotFoundError: the recorded arm's URDF is not on this machine (pass ``source``; a
+            :class:`~mjx_arm.inputs.MissingInputError`).
     """
     from mjx_arm.paths import asset
     from mjx_arm.urdf.arm_config import SHIPPED_ARMS, ArmConfig, load_arm
@@ -115,7 +124,7 @@ def eval_arm(policy: Any, source: str | Path | None = None) -> Any:
     if arm.urdf and recorded.parent.name == "assets" and recorded.name in SHIPPED_ARMS:
         arm = arm.replace(urdf=str(asset(recorded.name)))
     if not arm.urdf_path.is_file():
-        raise FileNotFoundError(
+        raise MissingInputError(
             f"the policy was trained on {arm.urdf}, which is not on this machine; pass the "
             "same arm's URDF or arm file with --arm"
         )
@@ -159,8 +168,8 @@ def evaluate(
     from mjx_arm.envs.arm import arm_info
 
     if engine not in ENGINES:
-        raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
-    check_policy_arm(policy, arm_info(arm))  # before the task meets the arm
+        raise ConfigError(f"engine must be one of {ENGINES}, got {engine!r}")
+    check_policy_fits(policy, task, arm_info(arm))  # before the task meets the arm
     start = time.monotonic()
     if engine == "mjx":
         run = run_batched(policy, task, episodes, seed, backend or "mjx", impl, arm)
@@ -182,6 +191,30 @@ def evaluate(
     result["notes"] = run.notes
     result["per_episode"] = [asdict(e) for e in run.episodes]
     return result, run
+
+
+def check_policy_fits(policy: Any, task: TaskConfig, arm: Any) -> None:
+    """Check that ``policy`` was trained on ``arm`` (an :class:`~mjx_arm.envs.arm.ArmInfo`;
+    :func:`~mjx_arm.evaluate.runners.check_policy_arm`) and takes the observation and gives
+    the action of ``task`` on it.
+
+    Raises:
+        ArmMismatchError: another arm's policy.
+        PolicyFileError: its layer sizes do not fit (another task's policy).
+    """
+    from mjx_arm.envs.base import action_size
+    from mjx_arm.policy import PolicyFileError
+    from mjx_arm.task.observation import obs_size
+
+    check_policy_arm(policy, arm)
+    want = (obs_size(arm.n_joints, task.spec.extra_obs), action_size(arm, task))
+    have = (getattr(policy, "obs_size", want[0]), getattr(policy, "action_size", want[1]))
+    if have != want:
+        raise PolicyFileError(
+            f"the policy takes {have[0]} observations and gives {have[1]} actions; {task.task} "
+            f"on {arm.urdf.name} has {want[0]} and {want[1]}: pass the task (--task) and arm "
+            "(--arm) it was trained on"
+        )
 
 
 def _batch_physics(backend: str | None, impl: str) -> dict[str, str]:

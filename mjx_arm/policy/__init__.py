@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from mjx_arm.inputs import require_file
 from mjx_arm.policy.numpy_policy import (
     CONTRACT_VERSION,
     BasePolicy,
@@ -45,11 +46,10 @@ def load(path: str | Path, deterministic: bool = True, seed: int | None = None) 
         action ``(6,)`` / ``(N, 6)`` in [-1, 1].
 
     Raises:
+        FileNotFoundError: no such file (an :class:`~mjx_arm.inputs.InputError`).
         PolicyFileError: not a policy file; ContractVersionError: another contract version.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"no policy file {path}")
+    path = require_file(path, "policy file")
     if path.suffix == ".onnx":
         from mjx_arm.policy.onnx_export import OnnxPolicy
 

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import sys
 
-from mjx_arm.names import EXIT_INVALID, EXIT_OK
+from mjx_arm.inputs import nonnegative_int
+from mjx_arm.names import EXIT_OK
 
 
 def cmd_export(args: argparse.Namespace) -> int:
@@ -13,14 +13,13 @@ def cmd_export(args: argparse.Namespace) -> int:
 
     The suffix of each -o picks the format: .npz runs with numpy alone, .onnx with onnxruntime.
     """
-    from mjx_arm.policy.export import export_run
+    from mjx_arm.inputs import check_output
+    from mjx_arm.policy.export import SUFFIXES, export_run
 
+    for output in args.output:  # every output checked before any is written
+        check_output(output, "-o", SUFFIXES)
     for output in args.output:
-        try:
-            path = export_run(args.run_dir, output, step=args.step)
-        except (FileNotFoundError, ValueError, ImportError) as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return EXIT_INVALID
+        path = export_run(args.run_dir, output, step=args.step)
         print(f"wrote {path} ({path.stat().st_size / 1024:.0f} KiB)")
     return EXIT_OK
 
@@ -39,7 +38,7 @@ def _add_export(sub: argparse._SubParsersAction) -> None:
         required=True,
         help="policy file to write, .npz or .onnx (repeatable)",
     )
-    p.add_argument("--step", type=int, help="checkpoint step (default: the newest)")
+    p.add_argument("--step", type=nonnegative_int, help="checkpoint step (default: the newest)")
     p.set_defaults(func=cmd_export)
 
 

@@ -11,7 +11,6 @@ Reading a checkpoint needs orbax (and so jax); running the exported file does no
 from __future__ import annotations
 
 import inspect
-import json
 import time
 import warnings
 from collections.abc import Callable, Mapping
@@ -20,31 +19,49 @@ from typing import Any
 
 import numpy as np
 
-from mjx_arm.policy.numpy_policy import CONTRACT_VERSION, FORMAT, write_npz
+from mjx_arm.inputs import (
+    ConfigError,
+    MissingInputError,
+    check_output,
+    read_json_object,
+    write_atomic,
+)
+from mjx_arm.policy.numpy_policy import (
+    CONTRACT_VERSION,
+    FORMAT,
+    PolicyFileError,
+    check_arrays,
+    check_metadata,
+    npz_bytes,
+)
 
 SUFFIXES = (".npz", ".onnx")
 
 
 def find_checkpoint(run_dir: str | Path, step: int | None = None) -> Path:
-    """The checkpoint folder of ``run_dir``: the newest, or the one at ``step``.
+    """The checkpoint folder of ``run_dir``: the newest usable one, or the one at ``step``.
 
     Raises:
-        FileNotFoundError: no run directory, no checkpoint, or none at ``step``.
+        FileNotFoundError: no run directory, no checkpoint, or none at ``step`` (each an
+            :class:`~mjx_arm.inputs.InputError`).
     """
     from mjx_arm.train.rundir import RunDir
 
     run_dir = Path(run_dir)
-    if not (run_dir / "config.json").exists():
-        raise FileNotFoundError(f"{run_dir} is not a run directory (no config.json)")
+    if not (run_dir / "config.json").is_file():
+        raise MissingInputError(
+            f"{run_dir} is not a run directory (no config.json); give the RUN_DIR that "
+            "mjx-arm train wrote"
+        )
     run = RunDir(run_dir)
     if step is None:
         latest = run.latest_checkpoint()
         if latest is None:
-            raise FileNotFoundError(f"no checkpoint in {run.checkpoints}")
+            raise MissingInputError(f"no usable checkpoint in {run.checkpoints}")
         return latest
     folder = run.checkpoint_dir(int(step))
     if not (folder / "meta.json").exists():
-        raise FileNotFoundError(
+        raise MissingInputError(
             f"no checkpoint at step {step} in {run.checkpoints}; "
             f"steps available: {available_steps(run_dir)}"
         )
@@ -106,17 +123,25 @@ def brax_activation() -> str:
 
 
 def policy_metadata(config: Mapping[str, Any], checkpoint: Path, run_dir: Path) -> dict:
-    """Everything but the weights a runtime needs, as a JSON-ready dict."""
+    """Everything but the weights a runtime needs, as a JSON-ready dict.
+
+    Raises:
+        InputError: the run's config.json or the checkpoint's meta.json is not usable.
+    """
     from mjx_arm import __version__
     from mjx_arm.envs.arm import arm_info, arm_record
     from mjx_arm.task.config import TaskConfig
     from mjx_arm.task.observation import obs_layout
+    from mjx_arm.train.rundir import RunDir
 
-    task = TaskConfig.from_dict(config["task"])
+    task = TaskConfig.from_dict(_table(config, "task", run_dir))
     record = config.get("arm") or arm_record(arm_info())  # runs before the arm record: shipped
-    n = len(record["joint_names"])
+    names = record.get("joint_names") if isinstance(record, dict) else None
+    if not isinstance(names, list) or not isinstance(record.get("v_max"), list):
+        raise ConfigError(f"{run_dir / 'config.json'}: 'arm' must record joint_names and v_max")
+    n = len(names)
     n_actions = n + int(task.spec.gripper)  # a gripper task adds the gripper's command
-    meta = json.loads((checkpoint / "meta.json").read_text())
+    meta = RunDir.load_meta(checkpoint)
     return {
         "format": FORMAT,
         "contract_version": CONTRACT_VERSION,
@@ -132,30 +157,53 @@ def policy_metadata(config: Mapping[str, Any], checkpoint: Path, run_dir: Path) 
         "action_scale": task.action_scale,
         "v_max": list(record["v_max"]),
         "joint_speeds": task.joint_speeds(record["v_max"]).tolist(),
-        "joint_names": list(record["joint_names"]),
+        "joint_names": list(names),
         "arm": record,
         "ctrl_dt": task.ctrl_dt,
         "config": dict(config),
     }
 
 
+def _table(config: Mapping[str, Any], key: str, run_dir: Path) -> dict[str, Any]:
+    """``config[key]``, checked to be a table (a section of a run's config.json)."""
+    value = config.get(key)
+    if not isinstance(value, dict):
+        raise ConfigError(f"{run_dir / 'config.json'} has no {key!r} table: a damaged run")
+    return value
+
+
 def load_run(run_dir: str | Path, step: int | None = None):
-    """(arrays, metadata, raw params) of a run's checkpoint (newest, or at ``step``)."""
-    from mjx_arm.train.rundir import RunDir
+    """(arrays, metadata, raw params) of a run's checkpoint (newest, or at ``step``), checked
+    as a policy file's are (:func:`~mjx_arm.policy.numpy_policy.check_arrays`).
+
+    Raises:
+        InputError: no usable run directory or checkpoint, or params that do not fit it.
+    """
+    from mjx_arm.train.rundir import CheckpointError, RunDir
 
     run_dir = Path(run_dir)
     checkpoint = find_checkpoint(run_dir, step)
-    config = json.loads((run_dir / "config.json").read_text())
+    config = read_json_object(run_dir / "config.json", "run config")
     with warnings.catch_warnings():  # orbax: "Sharding info not provided when restoring"
         warnings.filterwarnings("ignore", message="Sharding info not provided")
         params = RunDir.load_params(checkpoint)
-    normalize = bool(config.get("train", {}).get("normalize_observations", True))
-    arrays = policy_arrays(params, normalize)
-    return arrays, policy_metadata(config, checkpoint, run_dir), params
+    normalize = bool(_table(config, "train", run_dir).get("normalize_observations", True))
+    try:
+        arrays = policy_arrays(params, normalize)
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as err:
+        raise CheckpointError(f"{checkpoint} holds no Brax PPO policy ({err!r})") from err
+    metadata = policy_metadata(config, checkpoint, run_dir)
+    try:  # what loading the exported file will check, checked before it is written
+        check_metadata(metadata, str(checkpoint))
+        check_arrays(arrays, metadata, str(checkpoint))
+    except PolicyFileError as err:
+        raise CheckpointError(str(err)) from err
+    return arrays, metadata, params
 
 
 def export_run(run_dir: str | Path, output: str | Path, step: int | None = None) -> Path:
-    """Export a run's policy to ``output`` (``.npz`` or ``.onnx``).
+    """Export a run's policy to ``output`` (``.npz`` or ``.onnx``), atomically: a failure or a
+    kill leaves an older file at ``output`` whole.
 
     Args:
         run_dir: the training run directory.
@@ -166,17 +214,17 @@ def export_run(run_dir: str | Path, output: str | Path, step: int | None = None)
         The written path.
 
     Raises:
-        ValueError: an unknown suffix. FileNotFoundError: no such run or checkpoint.
+        InputError: an unknown suffix or unwritable output, no such run or checkpoint, or a
+            checkpoint that does not hold a usable policy.
     """
-    output = Path(output)
-    if output.suffix not in SUFFIXES:
-        raise ValueError(f"output must end in one of {SUFFIXES}, got {output.name!r}")
+    output = check_output(output, "output", SUFFIXES)
     arrays, metadata, _ = load_run(run_dir, step)
     if output.suffix == ".onnx":
         from mjx_arm.policy.onnx_export import write_onnx
 
         return write_onnx(output, arrays, metadata)
-    return write_npz(output, arrays, metadata)
+    write_atomic(npz_bytes(arrays, metadata), output)
+    return output
 
 
 def brax_policy(run_dir: str | Path, step: int | None = None) -> Callable[[Any], np.ndarray]:

@@ -15,7 +15,10 @@ distribution whose samples pass through ``tanh``. The deterministic action is ``
 
 from __future__ import annotations
 
+import io
 import json
+import zipfile
+import zlib
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -56,23 +59,154 @@ def _softplus(x: np.ndarray) -> np.ndarray:
     return np.logaddexp(x, 0.0)
 
 
-def check_metadata(metadata: Mapping[str, Any], source: str) -> None:
-    """Check a policy file's metadata: its format and contract version.
+def check_metadata(metadata: Any, source: str) -> None:
+    """Check a policy file's metadata: its format, contract version and the fields a runtime
+    reads (observation layout, action size and scaling, activation, distribution).
 
     Raises:
-        PolicyFileError: not an mjx_arm policy file.
+        PolicyFileError: not an mjx_arm policy file, or a field missing or of the wrong type.
         ContractVersionError: written for another contract version.
     """
-    if metadata.get("format") != FORMAT:
+    if not isinstance(metadata, Mapping) or metadata.get("format") != FORMAT:
         raise PolicyFileError(f"{source} is not an mjx_arm policy file (format {FORMAT!r})")
     version = str(metadata.get("contract_version"))
     if version != CONTRACT_VERSION:
-        raise ContractVersionError(
-            f"{source} was exported for contract version {version!r}, but this runtime "
-            f"implements contract version {CONTRACT_VERSION!r}: the observation or action "
-            "layout differs. Export the run again with this version of mjx_arm "
-            "(mjx-arm export RUN_DIR -o POLICY)."
+        raise ContractVersionError(_version_message(source, version))
+    problems = _metadata_problems(metadata)
+    if problems:
+        raise PolicyFileError(
+            f"{source} is a damaged policy file: {'; '.join(problems)}. Export it again "
+            "(mjx-arm export RUN_DIR -o POLICY)"
         )
+
+
+def _version_message(source: str, version: str) -> str:
+    if version.isascii() and version.isdigit() and int(version) > int(CONTRACT_VERSION):
+        return (
+            f"{source} was exported for contract version {version!r}, newer than this "
+            f"runtime's {CONTRACT_VERSION!r}: upgrade mjx_arm to run it"
+        )
+    return (
+        f"{source} was exported for contract version {version!r}, but this runtime "
+        f"implements contract version {CONTRACT_VERSION!r}: the observation or action "
+        "layout differs. Export the run again with this version of mjx_arm "
+        "(mjx-arm export RUN_DIR -o POLICY)."
+    )
+
+
+def _is_int(value: Any, low: int = 0) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value >= low
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and np.isfinite(value)
+
+
+def _metadata_problems(meta: Mapping[str, Any]) -> list[str]:
+    """What is wrong with the fields a runtime reads (empty: nothing)."""
+    problems = []
+    layout = meta.get("obs_layout")
+    pairs = isinstance(layout, list) and all(
+        isinstance(e, list) and len(e) == 2 and isinstance(e[0], str) and _is_int(e[1], 1)
+        for e in layout
+    )
+    if not layout or not pairs:
+        problems.append("obs_layout must list [name, size] pairs")
+    if not _is_int(meta.get("action_size"), 1):
+        problems.append("action_size must be a whole number >= 1")
+    if not _is_number(meta.get("action_scale")):
+        problems.append("action_scale must be a finite number")
+    v_max = meta.get("v_max")
+    if not isinstance(v_max, list) or not all(_is_number(v) for v in v_max):
+        problems.append("v_max must list finite numbers")
+    speeds = meta.get("joint_speeds", v_max)  # files before joint_speeds: from v_max
+    if not isinstance(speeds, list) or not all(_is_number(v) for v in speeds):
+        problems.append("joint_speeds must list finite numbers")
+    elif isinstance(v_max, list) and len(speeds) != len(v_max):
+        problems.append(f"joint_speeds has {len(speeds)} entries, v_max {len(v_max)}")
+    activation = meta.get("activation", "swish")
+    if not isinstance(activation, str) or activation not in ACTIVATIONS:
+        problems.append(f"unknown activation {activation!r}; known: {sorted(ACTIVATIONS)}")
+    if meta.get("distribution", "tanh_normal") != "tanh_normal":
+        problems.append(f"unsupported distribution {meta.get('distribution')!r}")
+    if not isinstance(meta.get("config", {}), Mapping):
+        problems.append("config must be a table")
+    if not isinstance(meta.get("task", ""), str):
+        problems.append("task must be a text")
+    return problems + _arm_problems(meta.get("arm", {}), v_max)
+
+
+def _arm_problems(arm: Any, v_max: Any) -> list[str]:
+    """What is wrong with a policy's arm record (its joints, config and model hash)."""
+    if not isinstance(arm, Mapping):
+        return ["arm must be a table"]
+    if not arm:
+        return []  # files from before arm records: the shipped arm
+    names = arm.get("joint_names")
+    problems = []
+    if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+        problems.append("arm.joint_names must list joint names")
+    elif isinstance(v_max, list) and len(v_max) != len(names):
+        problems.append(f"v_max has {len(v_max)} entries for {len(names)} joints")
+    if not isinstance(arm.get("config", {}), Mapping):
+        problems.append("arm.config must be a table")
+    if not isinstance(arm.get("model_hash", ""), str):
+        problems.append("arm.model_hash must be a text")
+    return problems
+
+
+def check_arrays(arrays: Mapping[str, np.ndarray], metadata: Mapping[str, Any], source: str):
+    """Check a policy's normaliser and layers against its metadata: shapes that chain from the
+    observation (``obs_size``) to the distribution params (``2 * action_size``), finite
+    numbers, a positive ``obs_std``.
+
+    Returns:
+        The layers ``[(kernel (n_in, n_out), bias (n_out,)), ...]``, float32.
+
+    Raises:
+        PolicyFileError: a missing array, a shape that does not fit, a non-finite number.
+    """
+    obs_size = sum(int(n) for _, n in metadata["obs_layout"])
+    outputs = 2 * int(metadata["action_size"])
+    try:
+        normaliser = [_array(arrays, k, (obs_size,)) for k in ("obs_mean", "obs_std")]
+        if not np.all(normaliser[1] > 0):
+            raise ValueError("obs_std must be > 0")
+        layers, width, i = [], obs_size, 0
+        while f"kernel_{i}" in arrays or i == 0:
+            kernel = _array(arrays, f"kernel_{i}", (width, None))
+            width = kernel.shape[1]
+            layers.append((kernel, _array(arrays, f"bias_{i}", (width,))))
+            i += 1
+        if width != outputs:
+            raise ValueError(f"the last layer has {width} outputs, not 2 * action_size = {outputs}")
+    except ValueError as err:
+        raise PolicyFileError(
+            f"{source}: {err} (observation {obs_size}, actions {outputs // 2}); export the "
+            "policy again (mjx-arm export RUN_DIR -o POLICY)"
+        ) from err
+    return layers
+
+
+def _array(arrays: Mapping[str, np.ndarray], key: str, shape: tuple) -> np.ndarray:
+    """``arrays[key]`` as float32, checked for ``shape`` (None: any size) and finite values.
+
+    Raises:
+        ValueError: missing, of another shape or type, or not finite.
+    """
+    if key not in arrays:
+        raise ValueError(f"it has no {key}")
+    value = np.asarray(arrays[key])
+    fits = value.ndim == len(shape) and all(
+        s in (None, n) for s, n in zip(shape, value.shape, strict=True)
+    )
+    if not fits or value.dtype.kind not in "fiu":
+        want = "x".join("N" if s is None else str(s) for s in shape)
+        raise ValueError(f"{key} has shape {value.shape} ({value.dtype}), expected ({want})")
+    value = value.astype(np.float32)
+    if not np.all(np.isfinite(value)):
+        raise ValueError(f"{key} holds NaN or infinite numbers")
+    return value
 
 
 class BasePolicy:
@@ -200,16 +334,12 @@ class NumpyPolicy(BasePolicy):
         deterministic: bool = True,
         seed: int | None = None,
     ) -> None:
+        check_metadata(metadata, "the policy")
         super().__init__(metadata, deterministic, seed)
-        name = self.metadata.get("activation", "swish")
-        if name not in ACTIVATIONS:
-            raise PolicyFileError(f"unknown activation {name!r}; known: {sorted(ACTIVATIONS)}")
-        if self.metadata.get("distribution", "tanh_normal") != "tanh_normal":
-            raise PolicyFileError(f"unsupported distribution {self.metadata['distribution']!r}")
-        self.activation = ACTIVATIONS[name]
+        self.activation = ACTIVATIONS[self.metadata.get("activation", "swish")]
+        self.layers = check_arrays(arrays, self.metadata, "the policy")
         self.mean = np.asarray(arrays["obs_mean"], dtype=np.float32)
         self.std = np.asarray(arrays["obs_std"], dtype=np.float32)
-        self.layers = _layers(arrays)
 
     def distribution_params(self, state: np.ndarray) -> np.ndarray:
         """Normaliser then MLP: ``(N, 22)`` -> ``(N, 2 * action_size)``, float32."""
@@ -232,39 +362,47 @@ class NumpyPolicy(BasePolicy):
         return cls(arrays, metadata, deterministic, seed)
 
 
-def _layers(arrays: Mapping[str, np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
-    layers, i = [], 0
-    while f"kernel_{i}" in arrays:
-        kernel = np.asarray(arrays[f"kernel_{i}"], dtype=np.float32)
-        bias = np.asarray(arrays[f"bias_{i}"], dtype=np.float32)
-        layers.append((kernel, bias))
-        i += 1
-    if not layers:
-        raise PolicyFileError("the policy file holds no layers (kernel_0, bias_0, ...)")
-    return layers
-
-
 def read_npz(path: str | Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-    """Arrays and metadata of a ``policy.npz`` (checked for format and contract version)."""
+    """Arrays and metadata of a ``policy.npz``, checked: format, contract version, fields,
+    shapes and finite weights.
+
+    Raises:
+        PolicyFileError: not a readable policy file (truncated, not a zip, not ours, damaged).
+        ContractVersionError: another contract version.
+    """
     path = Path(path)
     try:
         with np.load(path, allow_pickle=False) as data:
             arrays = {k: data[k] for k in data.files}
-    except (OSError, ValueError) as exc:
-        raise PolicyFileError(f"cannot read {path} as a policy .npz: {exc}") from exc
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as exc:
+        raise PolicyFileError(
+            f"cannot read {path} as a policy .npz (truncated or not an exported policy?): "
+            f"{type(exc).__name__}: {exc}"
+        ) from exc
     if "metadata" not in arrays:
         raise PolicyFileError(f"{path} is not an mjx_arm policy file (no metadata)")
-    metadata = json.loads(str(arrays.pop("metadata")))
+    try:
+        metadata = json.loads(str(arrays.pop("metadata")))
+    except (ValueError, RecursionError) as exc:
+        raise PolicyFileError(f"{path}: its metadata is not valid JSON ({exc})") from exc
     check_metadata(metadata, str(path))
+    check_arrays(arrays, metadata, str(path))
     return arrays, metadata
 
 
-def write_npz(path: str | Path, arrays: Mapping[str, np.ndarray], metadata: Mapping) -> Path:
-    """Write a ``policy.npz``: the arrays plus the metadata as a JSON string."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+def npz_bytes(arrays: Mapping[str, np.ndarray], metadata: Mapping) -> bytes:
+    """The bytes of a ``policy.npz``: the arrays (float32) plus the metadata as a JSON string."""
     payload = {k: np.asarray(v, dtype=np.float32) for k, v in arrays.items()}
     payload["metadata"] = np.array(json.dumps(dict(metadata), sort_keys=True))
-    with path.open("wb") as f:
-        np.savez(f, **payload)
+    buffer = io.BytesIO()
+    np.savez(buffer, **payload)
+    return buffer.getvalue()
+
+
+def write_npz(path: str | Path, arrays: Mapping[str, np.ndarray], metadata: Mapping) -> Path:
+    """Write a ``policy.npz`` (:func:`npz_bytes`); :func:`mjx_arm.policy.export.export_run`
+    writes it atomically instead."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(npz_bytes(arrays, metadata))
     return path

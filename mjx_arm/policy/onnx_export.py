@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from mjx_arm.inputs import InputError, write_atomic
 from mjx_arm.policy.numpy_policy import BasePolicy, PolicyFileError, check_metadata
 
 OPSET = 17
@@ -92,26 +93,63 @@ def build_model(arrays: Mapping[str, np.ndarray], metadata: Mapping[str, Any]):
     return model
 
 
+class OnnxMissingError(InputError, ImportError):
+    """An ``.onnx`` file asked for where onnx or onnxruntime is not installed."""
+
+
 def _require(module: str):
-    """Import ``module`` or explain how to install it."""
+    """Import ``module`` or explain how to install it.
+
+    Raises:
+        OnnxMissingError: it is not installed (an ImportError and an input error).
+    """
     import importlib
 
     try:
         return importlib.import_module(module)
     except ImportError as exc:
-        raise ImportError(
-            f"{module} is not installed: pip install 'mjx_arm[onnx]' (onnx + onnxruntime)"
+        raise OnnxMissingError(
+            f"{module} is not installed: pip install 'mjx_arm[onnx]' (onnx + onnxruntime), "
+            "or use a .npz policy"
         ) from exc
 
 
 def write_onnx(path: str | Path, arrays: Mapping[str, np.ndarray], metadata: Mapping) -> Path:
-    """Write the policy as an ONNX file; returns the path."""
-    onnx = _require("onnx")
-
+    """Write the policy as an ONNX file (atomically: a failure leaves an older file whole);
+    returns the path."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    onnx.save(build_model(arrays, metadata), str(path))
+    write_atomic(build_model(arrays, metadata).SerializeToString(), path)
     return path
+
+
+def _session_metadata(session: Any, path: str | Path) -> dict[str, Any]:
+    """The checked metadata of an ONNX policy, whose graph must take ``state (batch, obs)``
+    and give ``action`` and ``distribution_params`` of the sizes it records.
+
+    Raises:
+        PolicyFileError: no or broken metadata, or a graph of other inputs or sizes.
+    """
+    try:
+        props = session.get_modelmeta().custom_metadata_map
+    except UnicodeDecodeError as exc:  # onnxruntime decodes the properties as UTF-8
+        raise PolicyFileError(f"{path}: its metadata is not UTF-8 text ({exc})") from exc
+    if METADATA_KEY not in props:
+        raise PolicyFileError(f"{path} is not an mjx_arm policy file (no metadata)")
+    try:
+        metadata = json.loads(props[METADATA_KEY])
+    except (ValueError, RecursionError) as exc:
+        raise PolicyFileError(f"{path}: its metadata is not valid JSON ({exc})") from exc
+    check_metadata(metadata, str(path))
+    obs = sum(int(n) for _, n in metadata["obs_layout"])
+    action = int(metadata["action_size"])
+    shapes = {x.name: list(x.shape) for x in [*session.get_inputs(), *session.get_outputs()]}
+    expected = {INPUT: obs, ACTION: action, PARAMS: 2 * action}
+    if any(shapes.get(name, [None, None])[1:] != [size] for name, size in expected.items()):
+        raise PolicyFileError(
+            f"{path}: the graph's inputs and outputs {shapes} do not fit its metadata "
+            f"(state {obs}, action {action}); export the policy again"
+        )
+    return metadata
 
 
 class OnnxPolicy(BasePolicy):
@@ -132,11 +170,7 @@ class OnnxPolicy(BasePolicy):
             session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
         except Exception as exc:  # onnxruntime raises its own exception types
             raise PolicyFileError(f"cannot read {path} as an ONNX model: {exc}") from exc
-        props = session.get_modelmeta().custom_metadata_map
-        if METADATA_KEY not in props:
-            raise PolicyFileError(f"{path} is not an mjx_arm policy file (no metadata)")
-        metadata = json.loads(props[METADATA_KEY])
-        check_metadata(metadata, str(path))
+        metadata = _session_metadata(session, path)
         super().__init__(metadata, deterministic, seed)
         self.session = session
 

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 from typing import Any
 
-from mjx_arm.names import CPU_ENGINES, EXIT_INVALID, EXIT_OK
+from mjx_arm.inputs import check_output, int_in, seed_int, write_atomic
+from mjx_arm.names import CPU_ENGINES, EXIT_OK
 from mjx_arm.settings import add_set_argument, apply_settings, describe
 
 
@@ -25,13 +25,16 @@ def cmd_deploy_sim(args: argparse.Namespace) -> int:
     from mjx_arm.evaluate import resolve_policy
     from mjx_arm.sim2real.deploy import DeployConfig, deploy_sim, write_commands
 
-    try:
-        config = apply_settings(DeployConfig(), args.set or [])
-        policy, source = resolve_policy(args.policy)
-        report = deploy_sim(policy, args.engine, args.episodes, args.seed, config, arm=args.arm)
-    except (ValueError, FileNotFoundError) as exc:  # ArmMismatchError is a ValueError
-        print(f"error: {exc}", file=sys.stderr)
-        return EXIT_INVALID
+    for flag, path, suffixes in (
+        ("--script", args.script, (".script",)),
+        ("--trajectory", args.trajectory, (".json",)),
+        ("-o", args.output, ()),
+    ):
+        if path:
+            check_output(path, flag, suffixes)
+    config = apply_settings(DeployConfig(), args.set or [])
+    policy, source = resolve_policy(args.policy)
+    report = deploy_sim(policy, args.engine, args.episodes, args.seed, config, arm=args.arm)
     write_commands(report, config, args.script, args.trajectory)
     commands = report.pop("commands")
     report = {
@@ -44,8 +47,7 @@ def cmd_deploy_sim(args: argparse.Namespace) -> int:
     }
     print(format_report(report))
     if args.output:
-        Path(args.output).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.output).write_text(json.dumps(report, indent=2))
+        write_atomic(json.dumps(report, indent=2).encode(), Path(args.output))
         print(f"results: {args.output}")
     return EXIT_OK
 
@@ -111,11 +113,15 @@ def register(sub: argparse._SubParsersAction) -> None:
         default="mujoco",
         help="physics engine (default: mujoco)",
     )
-    p.add_argument("--episodes", type=int, default=20, help="episodes per run (default: 20)")
+    p.add_argument(
+        "--episodes", type=int_in(1, 100_000), default=20, help="episodes per run (default: 20)"
+    )
     p.add_argument(
         "--arm", help="a URDF or an arm file (default: the arm the policy was trained on)"
     )
-    p.add_argument("--seed", type=int, default=0, help="seed of the first episode (default: 0)")
+    p.add_argument(
+        "--seed", type=seed_int, default=0, help="seed of the first episode (default: 0)"
+    )
     add_set_argument(p, "chain settings (defaults: " + ", ".join(describe(DeployConfig())) + ")")
     p.add_argument(
         "--script",

@@ -20,13 +20,14 @@ from mjx_arm.envs.arm import arm_info
 from mjx_arm.evaluate import (
     EvalRun,
     Policy,
+    check_policy_fits,
     eval_arm,
     eval_task,
     make_eval_env,
     run_episodes,
     summarize,
 )
-from mjx_arm.evaluate.runners import check_policy_arm
+from mjx_arm.inputs import write_atomic
 from mjx_arm.sim2real.commands import ServojConfig, joint_trajectory_msg, urscript_program
 from mjx_arm.sim2real.position_env import EpisodeCommands, make_position_env
 from mjx_arm.sim2real.settings import DeployConfig
@@ -101,7 +102,7 @@ def deploy_sim(
     config = config or DeployConfig()
     task = task or eval_task(policy)[0]
     arm = eval_arm(policy, arm)
-    check_policy_arm(policy, arm_info(arm))
+    check_policy_fits(policy, task, arm_info(arm))
     velocity_env = make_eval_env(task, engine, arm=arm)
     velocity_run, _ = _run_closed(policy, velocity_env, episodes, seed)
     position_env = make_position_env(task, engine, config.chain(), arm=arm)
@@ -146,7 +147,8 @@ def write_commands(
     episode, names, dt = report["commands"], report["joint_names"], report["ctrl_dt"]
     if script_path is not None:
         servoj = ServojConfig(t=dt, lookahead_time=config.lookahead_time, gain=config.gain)
-        Path(script_path).write_text(urscript_program(episode["commands"], servoj, names))
+        text = urscript_program(episode["commands"], servoj, names)
+        write_atomic(text.encode(), Path(script_path))
     if trajectory_path is not None:
         msg = joint_trajectory_msg(episode["commands"], dt, names, episode["velocities"])
-        Path(trajectory_path).write_text(json.dumps(msg, indent=1))
+        write_atomic(json.dumps(msg, indent=1).encode(), Path(trajectory_path))

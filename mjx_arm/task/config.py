@@ -13,7 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from mjx_arm.settings import config_fields
+from mjx_arm.inputs import ConfigError
+from mjx_arm.settings import check_range, check_types, config_fields
 from mjx_arm.task.observation import JOINT_ENCODINGS
 from mjx_arm.task.registry import get_task, is_task, task_names
 from mjx_arm.urdf.arm_config import SHIPPED_HOME_QPOS as HOME_QPOS  # noqa: F401  (re-export)
@@ -164,21 +165,34 @@ class TaskConfig:
     reward: RewardConfig = field(default_factory=RewardConfig)
 
     def __post_init__(self) -> None:
+        check_types(self)
+        check_types(self.reward)
         if not is_task(self.task):
-            raise ValueError(f"task must be one of {list(task_names())}, got {self.task!r}")
+            raise ConfigError(f"task must be one of {list(task_names())}, got {self.task!r}")
+        check_range(self, ("ctrl_dt", "sim_dt", "action_scale", "success_distance"), above=0)
+        check_range(self, ("force_clip", "divergence_speed_factor"), above=0)
+        check_range(self, ("init_noise", "strike_force"), low=0)
+        check_range(self, "episode_steps", low=1, high=100_000)  # up to about an hour
         ratio = self.ctrl_dt / self.sim_dt
-        if abs(ratio - round(ratio)) > 1e-6 or round(ratio) < 1:
-            raise ValueError(
-                f"ctrl_dt {self.ctrl_dt} is not a whole multiple of sim_dt {self.sim_dt}"
+        if abs(ratio - round(ratio)) > 1e-6 or not 1 <= round(ratio) <= 1000:
+            raise ConfigError(
+                f"ctrl_dt {self.ctrl_dt} is not a whole multiple of sim_dt {self.sim_dt} "
+                "(1 to 1000 physics steps per control step)"
             )
+        if not 0 <= self.force_band[0] < self.force_band[1]:
+            raise ConfigError(
+                f"force_band must be (low, high), 0 <= low < high, got {self.force_band}"
+            )
+        if any(lo > hi for lo, hi in zip(self.target_low, self.target_high, strict=True)):
+            raise ConfigError("target_low must be <= target_high in x, y and z")
         if self.workspace_scale < 0:
-            raise ValueError("workspace_scale must be >= 0 (0: from the arm)")
+            raise ConfigError("workspace_scale must be >= 0 (0: from the arm)")
         if self.success_hold_steps < 1:
-            raise ValueError("success_hold_steps must be >= 1")
+            raise ConfigError("success_hold_steps must be >= 1")
         if not self.divergence_speed_factor > 1:
-            raise ValueError("divergence_speed_factor must be > 1")
+            raise ConfigError("divergence_speed_factor must be > 1")
         if self.joint_encoding not in JOINT_ENCODINGS:
-            raise ValueError(
+            raise ConfigError(
                 f"joint_encoding must be one of {JOINT_ENCODINGS}, got {self.joint_encoding!r}"
             )
 

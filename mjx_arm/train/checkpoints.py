@@ -8,11 +8,16 @@ Layout, under ``RUN_DIR/checkpoints/``::
 
 Checkpoints hold params only: a resumed run starts the optimiser's moment estimates from zero
 (google/brax#655) and may run on any number of devices.
+
+Nothing is lost: a save that fails (a full disk) or is killed leaves the checkpoints before it
+whole and the newest of them the latest, and a checkpoint that cannot be read is a named
+:class:`CheckpointError`.
 """
 
 from __future__ import annotations
 
 import functools
+import hashlib
 import json
 import os
 import shutil
@@ -21,7 +26,15 @@ from typing import Any
 
 import numpy as np
 
+from mjx_arm.inputs import InputFileError, read_json_object
+
 CHECKPOINT_PREFIX = "step_"
+PARTIAL, OLD = ".partial-", ".old-"
+PARAMS_FILES = "params_files"  # meta.json: each params file's size and hash, checked on load
+
+
+class CheckpointError(InputFileError):
+    """A checkpoint that cannot be read, or that could not be saved (a full disk)."""
 
 
 def checkpoint_dir(checkpoints: Path, step: int) -> Path:
@@ -40,46 +53,150 @@ def save_checkpoint(
 
     Atomic: everything is written into a hidden folder that is then renamed to ``folder``, so a
     run killed mid-save never leaves a half-written checkpoint behind under a name
-    :func:`latest_checkpoint` would take.
+    :func:`latest_checkpoint` would take, and a checkpoint saved again at the same step
+    replaces the old one only once the new one is complete.
+
+    Raises:
+        CheckpointError: the save failed (a full disk, no permission); the partial folder is
+            removed and the earlier checkpoints are untouched.
     """
+    partial = folder.with_name(f"{PARTIAL}{folder.name}")
+    shutil.rmtree(partial, ignore_errors=True)
+    try:
+        _write_partial(partial, step, params, meta, transitions)
+    except (OSError, ValueError) as err:  # orbax (tensorstore) reports a full disk as ValueError
+        shutil.rmtree(partial, ignore_errors=True)
+        kept = latest_checkpoint(folder.parent)
+        raise CheckpointError(
+            f"saving the checkpoint of step {step} in {folder.parent} failed ({_cause(err)}); the "
+            f"last good checkpoint is kept ({kept.name if kept else 'none yet'}): free some "
+            "space and resume the run"
+        ) from err
+    old = folder.with_name(f"{OLD}{folder.name}")
+    if folder.exists():  # the same step saved again (a resumed run's last checkpoint)
+        shutil.rmtree(old, ignore_errors=True)
+        os.replace(folder, old)
+    os.replace(partial, folder)
+    shutil.rmtree(old, ignore_errors=True)
+    return folder
+
+
+def _write_partial(
+    partial: Path,
+    step: int,
+    params: Any,
+    meta: dict[str, Any],
+    transitions: dict[str, np.ndarray] | None,
+) -> None:
+    """Write a whole checkpoint into ``partial`` and flush it to disk."""
     import orbax.checkpoint as ocp
 
-    partial = folder.with_name(f".partial-{folder.name}")
-    shutil.rmtree(partial, ignore_errors=True)
     partial.mkdir(parents=True)
     ocp.PyTreeCheckpointer().save((partial / "params").resolve(), params, force=True)
     if transitions is not None:
         save_transitions(partial, transitions)
-    (partial / "meta.json").write_text(json.dumps({"step": step, **meta}, indent=2))
+    files = {PARAMS_FILES: params_files(partial / "params")}
+    (partial / "meta.json").write_text(json.dumps({"step": step, **meta, **files}, indent=2))
     _fsync_tree(partial)
-    if folder.exists():  # the same step saved again (a resumed run's last checkpoint)
-        shutil.rmtree(folder)
-    os.replace(partial, folder)
-    return folder
+
+
+def params_files(params: Path) -> dict[str, list]:
+    """``{relative path: [bytes, sha256]}`` of every file orbax wrote under ``params``."""
+    return {
+        str(p.relative_to(params)): [p.stat().st_size, hashlib.sha256(p.read_bytes()).hexdigest()]
+        for p in sorted(params.rglob("*"))
+        if p.is_file()
+    }
+
+
+def _damage(folder: Path) -> str:
+    """What differs between a checkpoint's params files and the list its meta.json recorded
+    when it was saved ("" where they agree, or for checkpoints saved before the list)."""
+    recorded = load_meta(folder).get(PARAMS_FILES)
+    if not isinstance(recorded, dict):
+        return ""
+    found = params_files(folder / "params")
+    for name, entry in recorded.items():
+        if name not in found:
+            return f"params/{name} is missing"
+        if found[name] != entry:
+            return f"params/{name} has changed since it was saved ({found[name][0]} bytes)"
+    return ""
+
+
+def usable(folder: Path) -> bool:
+    """Whether a checkpoint folder is complete: ``meta.json`` with a step, and params."""
+    try:
+        step = json.loads((folder / "meta.json").read_text()).get("step")
+    except (OSError, ValueError, AttributeError, RecursionError):
+        return False
+    ok_step = isinstance(step, int) and not isinstance(step, bool) and step >= 0
+    return ok_step and (folder / "params").is_dir()
 
 
 def latest_checkpoint(checkpoints: Path) -> Path | None:
-    """The newest complete checkpoint folder under ``checkpoints``, or None."""
-    if not checkpoints.exists():
+    """The newest usable checkpoint folder under ``checkpoints`` (:func:`usable`), or None.
+
+    A save killed between moving an old checkpoint of the same step aside and renaming the new
+    one into place left the old one as ``.old-step_N``: it is moved back first.
+    """
+    if not checkpoints.is_dir():
         return None
+    for old in checkpoints.glob(f"{OLD}{CHECKPOINT_PREFIX}*"):
+        target = old.with_name(old.name.removeprefix(OLD))
+        if not target.exists():
+            os.replace(old, target)
     found = sorted(
-        p
-        for p in checkpoints.iterdir()
-        if p.name.startswith(CHECKPOINT_PREFIX) and (p / "meta.json").exists()
+        p for p in checkpoints.iterdir() if p.name.startswith(CHECKPOINT_PREFIX) and usable(p)
     )
     return found[-1] if found else None
 
 
 def load_meta(folder: Path) -> dict[str, Any]:
-    """The ``meta.json`` of a checkpoint folder."""
-    return json.loads((folder / "meta.json").read_text())
+    """The ``meta.json`` of a checkpoint folder.
+
+    Raises:
+        CheckpointError: missing, not JSON, or without a whole-number ``step``.
+    """
+    try:
+        meta = read_json_object(folder / "meta.json", "checkpoint metadata")
+    except InputFileError as err:
+        raise CheckpointError(str(err)) from err
+    step = meta.get("step")
+    if not isinstance(step, int) or isinstance(step, bool) or step < 0:
+        raise CheckpointError(f"{folder / 'meta.json'}: 'step' must be a whole number >= 0")
+    return meta
 
 
 def load_params(folder: Path) -> Any:
-    """The params saved in a checkpoint folder, as orbax reads them back (plain dicts)."""
+    """The params saved in a checkpoint folder, as orbax reads them back (plain dicts).
+
+    Raises:
+        CheckpointError: the params are missing or cannot be read (a damaged checkpoint).
+    """
     import orbax.checkpoint as ocp
 
-    return ocp.PyTreeCheckpointer().restore((folder / "params").resolve())
+    path = (folder / "params").resolve()
+    if not path.is_dir():
+        raise CheckpointError(f"checkpoint {folder} has no params/ folder; it is incomplete")
+    damage = _damage(folder)  # checked first: orbax's threads print tracebacks on a bad file
+    if damage:
+        raise CheckpointError(
+            f"checkpoint {folder} cannot be read: {damage}; delete it to use the one before"
+        )
+    try:
+        return ocp.PyTreeCheckpointer().restore(path)
+    except Exception as err:  # orbax and tensorstore raise many types for a damaged file
+        raise CheckpointError(
+            f"checkpoint {folder} cannot be read ({type(err).__name__}: {_cause(err)}); "
+            "delete it to use the one before"
+        ) from err
+
+
+def _cause(err: Exception) -> str:
+    """An OSError's reason, or the head of another error's message (tensorstore's messages
+    carry a long spec in brackets)."""
+    return getattr(err, "strerror", None) or str(err).split(" [", 1)[0][:300]
 
 
 def save_transitions(folder: Path, transitions: dict[str, np.ndarray]) -> Path:

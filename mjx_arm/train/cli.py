@@ -4,30 +4,27 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 from pathlib import Path
 
 from mjx_arm import names
+from mjx_arm.inputs import nonnegative_int
 from mjx_arm.jax_cache import enable_compilation_cache
-from mjx_arm.names import EXIT_INVALID, EXIT_OK
+from mjx_arm.names import EXIT_OK
 from mjx_arm.settings import add_set_argument
 from mjx_arm.task.registry import task_names
 
 
 def cmd_train(args: argparse.Namespace) -> int:
     """Train a PPO policy with Brax on the batched env and write a run directory."""
-    import json
     import time
 
-    from mjx_arm.train.config import TrainConfig, load_config
+    from mjx_arm.train.config import load_config, saved_config
     from mjx_arm.train.ppo import train
-    from mjx_arm.train.rundir import RunDirError
 
     enable_compilation_cache()
     if args.resume:
         run_dir = Path(args.resume)
-        saved = json.loads((run_dir / "config.json").read_text())["train"]
-        config = TrainConfig.from_dict(saved)
+        config = saved_config(run_dir)
         if args.devices is not None:  # a run resumes on any number of devices
             config = config.replace(devices=args.devices)
     else:
@@ -43,11 +40,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         stamp = time.strftime("%Y%m%d-%H%M%S")
         run_dir = Path(args.run_dir or Path("runs") / f"{config.task}-{stamp}")
     print(f"run directory: {run_dir}")
-    try:
-        result = train(config, run_dir, resume=bool(args.resume), quiet=args.quiet)
-    except RunDirError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return EXIT_INVALID
+    result = train(config, run_dir, resume=bool(args.resume), quiet=args.quiet)
     print(done_line(result))
     return EXIT_OK
 
@@ -101,7 +94,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--devices",
-        type=int,
+        type=nonnegative_int,
         help="local devices to train on, the env batch split evenly over them "
         "(default: all; also on --resume, which may change it)",
     )

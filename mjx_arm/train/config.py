@@ -18,10 +18,11 @@ from typing import Any
 
 from mjx_arm.envs.base import GRIPPER_ARM
 from mjx_arm.envs.physics_config import PhysicsConfig, RandomizationConfig
+from mjx_arm.inputs import MAX_SEED, ConfigError, MissingInputError, read_json_object
 from mjx_arm.names import BACKENDS, PRESET_NAMES
 from mjx_arm.paths import asset
-from mjx_arm.settings import config_fields, set_path, split_setting
-from mjx_arm.task.config import RewardConfig, TaskConfig
+from mjx_arm.settings import check_range, check_types, config_fields, set_path, split_setting
+from mjx_arm.task.config import RewardConfig, TaskConfig, task_config
 from mjx_arm.task.registry import get_task, is_task, task_names
 from mjx_arm.urdf.arm_config import ArmConfig
 
@@ -103,6 +104,18 @@ class TrainConfig:
     devices: int = 0
     partition: str = "auto"
 
+    def __post_init__(self) -> None:
+        check_types(self)
+        check_range(self, _POSITIVE_INTS, low=1)
+        check_range(self, ("policy_hidden", "value_hidden"), low=1, high=MAX_LAYER)
+        check_range(self, ("num_envs", "num_eval_envs", "batch_size"), high=MAX_BATCH)
+        check_range(self, ("seed",), low=0, high=MAX_SEED)
+        check_range(self, ("devices",), low=0)
+        check_range(self, ("learning_rate", "clipping_epsilon", "max_grad_norm"), above=0)
+        check_range(self, ("reward_scaling", "discounting"), above=0)
+        check_range(self, ("discounting", "gae_lambda", "stop_at_success"), low=0, high=1)
+        check_range(self, ("vf_loss_coefficient", "entropy_cost"), low=0)
+
     def samples_per_update(self) -> int:
         """Env steps consumed by one PPO update (one rollout batch)."""
         return self.batch_size * self.num_minibatches * self.unroll_length
@@ -129,34 +142,67 @@ class TrainConfig:
         return cls(**data)
 
     def validate(self) -> None:
-        """Check names and the batch arithmetic PPO requires."""
+        """Check names, the task's settings, the arm's URDF and the batch arithmetic PPO
+        requires (the field types and ranges are checked on construction).
+
+        Raises:
+            ConfigError: the first problem found.
+        """
         if not is_task(self.task):
-            raise ValueError(f"task must be one of {list(task_names())}, got {self.task!r}")
+            raise ConfigError(f"task must be one of {list(task_names())}, got {self.task!r}")
         if self.backend not in BACKENDS:
-            raise ValueError(f"backend must be one of {BACKENDS}, got {self.backend!r}")
+            raise ConfigError(f"backend must be one of {BACKENDS}, got {self.backend!r}")
         if self.partition not in PARTITIONS:
-            raise ValueError(f"partition must be one of {PARTITIONS}, got {self.partition!r}")
-        if self.devices < 0:
-            raise ValueError(f"devices must be >= 0 (0: all), got {self.devices}")
+            raise ConfigError(f"partition must be one of {PARTITIONS}, got {self.partition!r}")
+        if self.arm.urdf and not self.arm.urdf_path.is_file():
+            raise ConfigError(f"arm.urdf {self.arm.urdf!r} is not a file")
         if (self.batch_size * self.num_minibatches) % self.num_envs:
-            raise ValueError(
+            raise ConfigError(
                 f"batch_size * num_minibatches ({self.batch_size * self.num_minibatches}) must "
                 f"be a multiple of num_envs ({self.num_envs})"
             )
+        self.task_config()
+
+    def task_config(self) -> TaskConfig:
+        """The task config of ``task`` with ``task_overrides``.
+
+        Raises:
+            ConfigError: an override that is not a task field, or of the wrong type or range.
+        """
+        try:
+            return task_config(self.task, **self.task_overrides)
+        except ConfigError as err:
+            raise ConfigError(f"task settings: {err}") from err
+        except (TypeError, ValueError) as err:  # an unknown field, a bad variant
+            raise ConfigError(f"task settings {self.task_overrides}: {err}") from err
 
     def check_devices(self, count: int) -> None:
         """Check that the batches split evenly over ``count`` devices.
 
         Raises:
-            ValueError: ``num_envs`` or ``batch_size`` is not a multiple of ``count``.
+            ConfigError: ``num_envs`` or ``batch_size`` is not a multiple of ``count``.
         """
         for name in ("num_envs", "batch_size"):
             if getattr(self, name) % count:
-                raise ValueError(
+                raise ConfigError(
                     f"{name} ({getattr(self, name)}) must be a multiple of the device count "
                     f"({count}); change it with --set {name}=N or choose --devices"
                 )
 
+
+_POSITIVE_INTS = (
+    "num_timesteps",
+    "num_envs",
+    "unroll_length",
+    "batch_size",
+    "num_minibatches",
+    "num_updates_per_batch",
+    "num_evals",
+    "num_eval_envs",
+    "checkpoint_every",
+)
+MAX_BATCH = 2**20  # envs or sequences in one batch: beyond any accelerator's memory
+MAX_LAYER = 2**14  # units in one hidden layer
 
 # The seed document's PPO settings mapped onto a GPU batch, on the seed document's task (Touch
 # succeeds on the first in-band step; no force or speed terms) and without randomisation.
@@ -223,10 +269,10 @@ def preset_config(name: str, task: str | None = None) -> TrainConfig:
     """Preset ``name`` for ``task`` (default: the preset's own task), with the task's changes.
 
     Raises:
-        ValueError: an unknown preset.
+        ConfigError: an unknown preset.
     """
     if name not in PRESETS:
-        raise ValueError(f"unknown preset {name!r}; choose one of {sorted(PRESETS)}")
+        raise ConfigError(f"unknown preset {name!r}; choose one of {sorted(PRESETS)}")
     config = PRESETS[name]
     task = task or config.task
     config = config.replace(task=task, **TASK_PRESETS.get((name, task), {}))
@@ -239,7 +285,7 @@ def _set_task_field(task_changes: dict[str, Any], name: str, text: str) -> None:
     """Put ``task.NAME=text`` into ``task_changes`` (``reward.TERM`` into its ``reward`` dict).
 
     Raises:
-        ValueError: NAME is not a field of the task config or of its reward.
+        ConfigError: NAME is not a field of the task config or of its reward.
     """
     try:
         value = json.loads(text)
@@ -249,12 +295,12 @@ def _set_task_field(task_changes: dict[str, Any], name: str, text: str) -> None:
     if dot and head == "reward":
         terms = {f.name for f in dataclasses.fields(RewardConfig)}
         if term not in terms:
-            raise ValueError(f"unknown reward key 'task.{name}'; known: {sorted(terms)}")
+            raise ConfigError(f"unknown reward key 'task.{name}'; known: {sorted(terms)}")
         task_changes["reward"] = {**task_changes.get("reward", {}), term: value}
         return
     fields = {f.name for f in dataclasses.fields(TaskConfig)}
     if name not in fields:
-        raise ValueError(f"unknown task key 'task.{name}'; known: {sorted(fields)}")
+        raise ConfigError(f"unknown task key 'task.{name}'; known: {sorted(fields)}")
     task_changes[name] = value
 
 
@@ -264,10 +310,13 @@ def apply_overrides(config: TrainConfig, items: list[str]) -> TrainConfig:
     task_changes = dict(config.task_overrides)
     for item in items:
         path, text = split_setting(item)
-        if path[0] == "task" and len(path) > 1:
-            _set_task_field(task_changes, ".".join(path[1:]), text)
-        else:
-            config = set_path(config, path, text, "config key")
+        try:
+            if path[0] == "task" and len(path) > 1:
+                _set_task_field(task_changes, ".".join(path[1:]), text)
+            else:
+                config = set_path(config, path, text, "config key")
+        except ConfigError as err:
+            raise ConfigError(f"--set {item}: {err}") from err
     return config.replace(task_overrides=task_changes)
 
 
@@ -285,20 +334,59 @@ def load_config(
     preset: str = "seed", file: str | Path | None = None, overrides: list[str] | None = None
 ) -> TrainConfig:
     """Resolve a config: the preset for the task named (:func:`preset_config`), then a JSON
-    file, then ``--set`` overrides."""
+    file, then ``--set`` overrides.
+
+    Raises:
+        InputError: the file cannot be read, or a field (of the file or an override) is
+            unknown, of the wrong type or out of range; the message names the file or item.
+    """
     data: dict[str, Any] = {}
     if file is not None:
-        data = json.loads(Path(file).read_text())
+        data = read_json_object(file, "config file")
         data = data.get("train", data)
+        if not isinstance(data, dict):
+            raise ConfigError(f"config file {str(file)!r}: 'train' must be a table of fields")
     config = preset_config(preset, _task_named(data, overrides or []))
     if file is not None:
-        merged = config.to_dict()
-        for key, value in data.items():
-            if key in SECTIONS and isinstance(value, dict):
-                merged[key] = {**merged[key], **value}
-            else:
-                merged[key] = value
-        config = TrainConfig.from_dict(merged)
+        config = _merge_file(config, data, file)
     config = apply_overrides(config, overrides or [])
     config.validate()
     return config
+
+
+def _merge_file(config: TrainConfig, data: dict[str, Any], file: str | Path) -> TrainConfig:
+    """``config`` with the fields of a config file (sections merged field by field)."""
+    merged = config.to_dict()
+    for key, value in data.items():
+        if key in SECTIONS and isinstance(value, dict):
+            merged[key] = {**merged[key], **value}
+        else:
+            merged[key] = value
+    try:
+        return TrainConfig.from_dict(merged)
+    except ConfigError as err:
+        raise ConfigError(f"config file {str(file)!r}: {err}") from err
+
+
+def saved_config(run_dir: str | Path) -> TrainConfig:
+    """The training config a run directory saved (``config.json``), to resume it.
+
+    Raises:
+        InputError: no run directory or config.json, or one that is not a training config.
+    """
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise MissingInputError(f"--resume {str(run_dir)!r}: no such run directory")
+    path = run_dir / "config.json"
+    if not path.is_file():
+        raise MissingInputError(
+            f"--resume {str(run_dir)!r} is not a run directory (no config.json): no checkpoint "
+            "to resume from"
+        )
+    saved = read_json_object(path, "run config").get("train")
+    if not isinstance(saved, dict):
+        raise ConfigError(f"{path} has no 'train' table: not the config of a training run")
+    try:
+        return TrainConfig.from_dict(saved)
+    except ConfigError as err:
+        raise ConfigError(f"{path}: not a usable training config: {err}") from err

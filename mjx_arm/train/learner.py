@@ -36,6 +36,7 @@ from brax.training.agents.ppo.train import TrainingState
 from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
+from mjx_arm.inputs import ConfigError
 from mjx_arm.train.config import TrainConfig
 from mjx_arm.train.losses import init_params, loss_and_grad
 from mjx_arm.train.networks import make_networks
@@ -51,12 +52,13 @@ def local_devices(count: int = 0) -> list[jax.Device]:
     """The first ``count`` local devices of the default backend (0: all of them).
 
     Raises:
-        ValueError: more devices asked for than there are.
+        ConfigError: more devices asked for than there are.
     """
     devices = jax.local_devices()
     if count < 0 or count > len(devices):
-        raise ValueError(
-            f"asked for {count} devices, {len(devices)} available ({devices[0].platform})"
+        raise ConfigError(
+            f"asked for {count} devices, {len(devices)} available ({devices[0].platform}); "
+            "choose --devices 0 (all) or fewer"
         )
     return devices[: count or len(devices)]
 

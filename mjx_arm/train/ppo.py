@@ -20,13 +20,14 @@ import jax
 import numpy as np
 
 from mjx_arm.envs.backend import make_batched_env, resolve_backend
-from mjx_arm.task.config import TaskConfig, task_config
-from mjx_arm.train.checkpoints import restore_brax_params
+from mjx_arm.inputs import ConfigError, MissingInputError
+from mjx_arm.task.config import TaskConfig
+from mjx_arm.train.checkpoints import CheckpointError, restore_brax_params
 from mjx_arm.train.config import TrainConfig
 from mjx_arm.train.learner import local_devices
 from mjx_arm.train.loop import Callbacks, resolve_partition, run_ppo
 from mjx_arm.train.progress import Solved, _Progress
-from mjx_arm.train.rundir import RunDir
+from mjx_arm.train.rundir import RunDir, RunDirError
 
 
 @dataclass
@@ -78,32 +79,98 @@ def train(
 ) -> TrainResult:
     """Train a PPO policy and fill ``run_dir``.
 
+    Every input is checked before any compilation: the config, the devices, the run directory
+    (writable, not in use by another training, no earlier run to overwrite) and, to resume,
+    its newest usable checkpoint.
+
     Args:
         config: the resolved training config.
         run_dir: the run directory (created if missing).
         resume: continue from the newest checkpoint in ``run_dir`` (on any device count).
         quiet: no progress bar.
+
+    Raises:
+        InputError: a bad config, a run directory that cannot take the run, or (to resume) one
+            without a usable checkpoint.
     """
     config.validate()
-    task = task_config(config.task, **config.task_overrides)
+    config.check_devices(len(local_devices(config.devices)))
+    task = config.task_config()
+    _check_arm(config, task)
+    if resume and not (Path(run_dir) / "config.json").is_file():
+        raise MissingInputError(
+            f"cannot resume {run_dir}: no checkpoint, it is not a run directory (no "
+            "config.json); give the RUN_DIR of an earlier mjx-arm train"
+        )
     run = RunDir(run_dir)
-    step_offset, restore = 0, None
-    if resume:
-        latest = run.latest_checkpoint()
-        if latest is None:
-            raise FileNotFoundError(f"no checkpoint to resume from in {run.path}")
-        step_offset = int(RunDir.load_meta(latest)["step"])
-        restore = restore_brax_params(RunDir.load_params(latest))
-    if step_offset >= config.num_timesteps:
-        raise ValueError(f"run already has {step_offset} of {config.num_timesteps} steps")
-    run.check_writable()  # before any compilation
-    run.truncate_metrics(step_offset)  # rows a killed run wrote after its last checkpoint
+    with run.lock():
+        step_offset, restore = _start_point(run, config, resume)
+        run.check_writable()  # before any compilation
+        run.truncate_metrics(step_offset)  # rows a killed run wrote after its last checkpoint
+        return _train(run, config, task, step_offset, restore, quiet)
 
+
+def _check_arm(config: TrainConfig, task: TaskConfig) -> None:
+    """Validate the run's arm and check that the task fits it (a gripper task needs a
+    gripper, a home pose needs one angle per joint) before any env is built.
+
+    Raises:
+        InputError: an arm that does not validate or resolve, or a task that does not fit it.
+    """
+    from mjx_arm.envs.arm import validated_arm_info
+    from mjx_arm.envs.base import default_arm, task_for_arm
+
+    arm = validated_arm_info(default_arm(task, config.arm), "mujoco")
+    try:
+        task_for_arm(task, arm)
+    except ValueError as err:
+        raise ConfigError(str(err)) from err
+
+
+def _start_point(run: RunDir, config: TrainConfig, resume: bool) -> tuple[int, Any]:
+    """(step to start from, params to restore or None).
+
+    Raises:
+        InputError: a new run on a folder that holds one, or a resume without a usable
+            checkpoint or with nothing left to train.
+    """
+    latest = run.latest_checkpoint()
+    if not resume:
+        if latest is not None:
+            raise RunDirError(
+                f"{run.path} already holds a run (checkpoint {latest.name}); resume it with "
+                "--resume, or choose another --run-dir"
+            )
+        return 0, None
+    if latest is None:
+        raise CheckpointError(f"no checkpoint to resume from in {run.path}")
+    step_offset = int(RunDir.load_meta(latest)["step"])
+    if step_offset >= config.num_timesteps:
+        raise ConfigError(
+            f"nothing to resume: {run.path} already has {step_offset} of its "
+            f"{config.num_timesteps} steps"
+        )
+    raw = RunDir.load_params(latest)
+    try:
+        return step_offset, restore_brax_params(raw)
+    except (KeyError, TypeError, ValueError, IndexError) as err:
+        raise CheckpointError(f"checkpoint {latest} holds no Brax PPO params ({err})") from err
+
+
+def _train(
+    run: RunDir,
+    config: TrainConfig,
+    task: TaskConfig,
+    step_offset: int,
+    restore: Any,
+    quiet: bool,
+) -> TrainResult:
+    """Build the envs and run PPO from ``step_offset`` (the checks are done)."""
     env, eval_env = make_envs(config, task)
     task = env.task  # with the arm's home pose and reach scale
     progress = _Progress(run, config, task, step_offset, quiet)
     progress.physics = env.physics.describe()
-    if not resume:
+    if restore is None:
         run.save_config(full_config(config, task, env.physics.describe(), env.arm))
     start = time.monotonic()
     progress.times.append((start, step_offset))

@@ -6,33 +6,39 @@ Layout::
     RUN_DIR/metrics.csv                      one row per evaluation
     RUN_DIR/tb/                              TensorBoard event files
     RUN_DIR/checkpoints/step_000001234/      params (orbax) + meta.json + transitions.npz
+    RUN_DIR/.lock                            held by the training that writes the run (its pid)
 
 The checkpoints themselves are written and read by :mod:`mjx_arm.train.checkpoints`.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
 import math
 import os
 import shutil
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from mjx_arm.inputs import InputError, write_atomic
 from mjx_arm.train import checkpoints as ckpt
-from mjx_arm.train.checkpoints import CHECKPOINT_PREFIX
+from mjx_arm.train.checkpoints import CHECKPOINT_PREFIX, CheckpointError
 
-__all__ = ["CHECKPOINT_PREFIX", "MIN_FREE_BYTES", "RunDir", "RunDirError"]
+__all__ = ["CHECKPOINT_PREFIX", "MIN_FREE_BYTES", "CheckpointError", "RunDir", "RunDirError"]
 
 MIN_FREE_BYTES = 64 * 2**20  # a checkpoint of the default networks takes about 3 MiB
+LOCK_NAME = ".lock"
 
 
-class RunDirError(OSError):
-    """The run directory cannot hold a run (not writable, disk full)."""
+class RunDirError(InputError, OSError):
+    """The run directory cannot hold a run (not writable, disk full, in use by another
+    training)."""
 
 
 class RunDir:
@@ -53,8 +59,40 @@ class RunDir:
     # ------------------------------------------------------------------ config
 
     def save_config(self, config: dict[str, Any]) -> None:
-        """Write ``config.json``."""
-        (self.path / "config.json").write_text(json.dumps(config, indent=2, sort_keys=True))
+        """Write ``config.json`` (atomically)."""
+        text = json.dumps(config, indent=2, sort_keys=True)
+        write_atomic(text.encode(), self.path / "config.json")
+
+    @contextlib.contextmanager
+    def lock(self) -> Iterator[None]:
+        """Hold the run directory for one training: a second one started on it fails at once
+        instead of writing the same checkpoints and metrics. The lock (``fcntl.flock`` on
+        ``.lock``) ends with the process, so a killed run leaves none behind.
+
+        Raises:
+            RunDirError: another process holds the run directory (its pid named).
+        """
+        import fcntl
+
+        path = self.path / LOCK_NAME
+        with path.open("a+") as f:
+            try:
+                fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                f.seek(0)
+                owner = f.read().strip() or "unknown"
+                raise RunDirError(
+                    f"the run directory {self.path} is in use by another training (pid "
+                    f"{owner}); wait for it to end, or choose another --run-dir"
+                ) from None
+            f.seek(0)
+            f.truncate()
+            f.write(str(os.getpid()))
+            f.flush()
+            try:
+                yield
+            finally:
+                fcntl.flock(f, fcntl.LOCK_UN)
 
     def load_config(self) -> dict[str, Any]:
         """Read ``config.json``."""
@@ -63,8 +101,24 @@ class RunDir:
     # ------------------------------------------------------------------ metrics
 
     def log_metrics(self, step: int, metrics: dict[str, float]) -> None:
-        """Append one evaluation's metrics to the CSV and to TensorBoard."""
+        """Append one evaluation's metrics to the CSV and to TensorBoard.
+
+        Raises:
+            RunDirError: the disk is full or the folder cannot be written (a cut row is
+                dropped on resume: :meth:`truncate_metrics`).
+        """
         row = {"step": step, "time": time.time(), **{k: _scalar(v) for k, v in metrics.items()}}
+        try:
+            self._append_row(row)
+        except OSError as err:
+            raise RunDirError(
+                f"cannot write the metrics of step {step} into {self.path} "
+                f"({err.strerror or err}); free some space and resume the run"
+            ) from err
+        self._write_tb(step, row)
+
+    def _append_row(self, row: dict[str, float]) -> None:
+        """Append ``row`` to metrics.csv (widening its header for a new metric)."""
         path = self.path / "metrics.csv"
         if self._csv_fields is None:
             self._csv_fields = _existing_fields(path) or list(row)
@@ -78,7 +132,6 @@ class RunDir:
             if new:
                 writer.writeheader()
             writer.writerow(row)
-        self._write_tb(step, row)
 
     def _write_tb(self, step: int, row: dict[str, float]) -> None:
         writer = self._tensorboard()

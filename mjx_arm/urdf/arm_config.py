@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from mjx_arm.inputs import MissingInputError, read_text, require_file
 from mjx_arm.paths import default_arm_urdf
 from mjx_arm.settings import config_fields
 from mjx_arm.urdf.convert_config import ConvertConfig
@@ -124,7 +125,8 @@ class ArmConfig:
     def from_dict(cls, data: dict[str, Any]) -> ArmConfig:
         """Inverse of :meth:`to_dict`; unknown keys are an error. A record without
         ``kv_factor`` (written before it existed) reads 1, the gain it trained with."""
-        data = {"kv_factor": 1.0, **data}
+        if isinstance(data, dict):
+            data = {"kv_factor": 1.0, **data}
         return cls(**config_fields(cls, data, "arm config", ArmConfigError))
 
 
@@ -160,8 +162,10 @@ def load_arm(source: str | Path | ArmConfig | None) -> ArmConfig:
     """An :class:`ArmConfig` from a URDF path, an arm file (.toml/.json), a config or None.
 
     Raises:
-        ArmConfigError: an arm file that cannot be read or has unknown keys.
-        FileNotFoundError: a path that does not exist.
+        ArmConfigError: an arm file that cannot be parsed, has unknown keys, values of the
+            wrong type, or a ``urdf`` that is not a file.
+        FileNotFoundError: a path that does not exist (an :class:`~mjx_arm.inputs.InputError`).
+        InputFileError: a path that is a folder or cannot be read.
     """
     if source is None:
         return ArmConfig()
@@ -169,20 +173,24 @@ def load_arm(source: str | Path | ArmConfig | None) -> ArmConfig:
         return source
     path = Path(source).expanduser()
     if not path.exists():
-        raise FileNotFoundError(f"arm {str(source)!r}: no such URDF or arm file")
+        raise MissingInputError(f"arm {str(source)!r}: no such URDF or arm file")
     if path.suffix.lower() not in ARM_FILE_SUFFIXES:
-        return ArmConfig(urdf=str(path.resolve()))
+        return ArmConfig(urdf=str(require_file(path, "arm URDF").resolve()))
+    text = read_text(path, "arm file")
     try:
-        text = path.read_text()
         data = tomllib.loads(text) if path.suffix.lower() == ".toml" else json.loads(text)
-    except (tomllib.TOMLDecodeError, json.JSONDecodeError) as err:
+        if isinstance(data, dict):
+            data = {"kv_factor": 0.0, **data}  # an arm file derives what it omits
+        arm = ArmConfig.from_dict(data)
+    except (tomllib.TOMLDecodeError, json.JSONDecodeError, RecursionError) as err:
         raise ArmConfigError(f"{path}: not a valid arm file: {err}") from err
-    arm = ArmConfig.from_dict({"kv_factor": 0.0, **data})  # an arm file derives what it omits
+    except ArmConfigError as err:
+        raise ArmConfigError(f"{path}: {err}") from err
     return arm.replace(urdf=_arm_file_urdf(arm.urdf, path)) if arm.urdf else arm
 
 
 def _arm_file_urdf(urdf: str, arm_file: Path) -> str:
-    """The absolute path of an arm file's ``urdf`` entry."""
+    """The absolute path of an arm file's ``urdf`` entry, checked to be a file."""
     if urdf.startswith(PACKAGE_PREFIX):
         package, _, rest = urdf[len(PACKAGE_PREFIX) :].partition("/")
         root = find_package_dir(package, arm_file.resolve(), {})
@@ -191,10 +199,17 @@ def _arm_file_urdf(urdf: str, arm_file: Path) -> str:
                 f"{arm_file}: package {package!r} of {urdf!r} not found; add the folder that "
                 "holds it to the ROS_PACKAGE_PATH variable"
             )
-        return str((root / rest).resolve())
-    if Path(urdf).expanduser().is_absolute():
-        return urdf
-    return str((arm_file.parent / urdf).resolve())
+        resolved = (root / rest).resolve()
+    elif Path(urdf).expanduser().is_absolute():
+        resolved = Path(urdf).expanduser()
+    else:
+        resolved = (arm_file.parent / urdf).resolve()
+    if not resolved.is_file():
+        raise ArmConfigError(
+            f"{arm_file}: urdf {urdf!r} ({resolved}) is not a file; give the URDF's path, "
+            "relative to the arm file's folder or absolute"
+        )
+    return urdf if Path(urdf).expanduser().is_absolute() else str(resolved)
 
 
 def resolve_arm(arm: ArmConfig) -> ResolvedArm:
@@ -239,6 +254,12 @@ def default_ee_link(model: RobotModel) -> str:
     parents = {j.parent for j in model.joints.values()}
     leaves = [name for name in model.links if name not in parents]
     tips = [leaf for leaf in leaves if not _below_prismatic(model, leaf)] or leaves
+    if not tips:
+        raise ArmConfigError(
+            f"{model.path}: no leaf link to take the end effector from ({len(model.links)} "
+            "links): an empty robot, or a xacro source? Give a URDF with the arm's links and "
+            "joints (xacro's output)"
+        )
     order = {name: i for i, name in enumerate(model.links)}
     tip = max(
         tips,

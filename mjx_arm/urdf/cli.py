@@ -6,18 +6,39 @@ import argparse
 import sys
 from pathlib import Path
 
+from mjx_arm.inputs import InputError, check_output, float_in, write_atomic
 from mjx_arm.names import EXIT_INVALID, EXIT_OK
+from mjx_arm.urdf.errors import one_line
 from mjx_arm.urdf.scene_shapes import SCENES
 
 
 def _package_dirs(items: list[str]) -> dict[str, str]:
+    """``--package NAME=DIR`` items as ``{NAME: DIR}``.
+
+    Raises:
+        InputError: an item without ``=`` or a DIR that is not a folder.
+    """
     out = {}
     for item in items or []:
         name, sep, folder = item.partition("=")
-        if not sep:
-            raise SystemExit(f"--package expects NAME=DIR, got {item!r}")
+        if not sep or not name:
+            raise InputError(f"--package expects NAME=DIR, got {item!r}")
+        if not Path(folder).expanduser().is_dir():
+            raise InputError(f"--package {item!r}: {folder!r} is not a folder")
         out[name] = folder
     return out
+
+
+def _invalid(urdf: str, report) -> int:
+    """The one ``error:`` line after a failed validation's report (on stdout): each error's
+    element and problem; returns :data:`EXIT_INVALID`."""
+    errors = "; ".join(f"{f.element}: {f.problem.rstrip('. ')}" for f in report.errors)
+    print(
+        f"error: {urdf}: {len(report.errors)} errors ({one_line(errors)}); each with its fix in "
+        "the report above",
+        file=sys.stderr,
+    )
+    return EXIT_INVALID
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
@@ -26,15 +47,16 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
     report = validate(args.urdf, engine=args.engine, package_dirs=_package_dirs(args.package))
     print(report.format())
-    return EXIT_OK if report.ok else EXIT_INVALID
+    return EXIT_OK if report.ok else _invalid(args.urdf, report)
 
 
 def cmd_convert(args: argparse.Namespace) -> int:
     """Validate a URDF for MuJoCo, convert it to MJCF and write the XML."""
-    from mjx_arm.urdf import ConversionError, ConvertConfig, to_mjcf
+    from mjx_arm.urdf import ConvertConfig, to_mjcf
     from mjx_arm.urdf.mesh_convert import cache_dir_for
     from mjx_arm.urdf.validate import validate
 
+    check_output(args.output, "-o", (".xml",))
     package_dirs = _package_dirs(args.package)
     config = ConvertConfig(
         scene=args.scene,
@@ -53,14 +75,10 @@ def cmd_convert(args: argparse.Namespace) -> int:
         default_limits=config.default_limits(),
     )
     if not report.ok:
-        print(report.format(), file=sys.stderr)
-        return EXIT_INVALID
-    try:
-        xml = to_mjcf(args.urdf, config)
-    except ConversionError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return EXIT_INVALID
-    Path(args.output).write_text(xml)
+        print(report.format())
+        return _invalid(args.urdf, report)
+    xml = to_mjcf(args.urdf, config)  # a ConversionError is a named error (mjx_arm.cli.main)
+    write_atomic(xml.encode(), Path(args.output))
     print(_summary(args.output))
     return EXIT_OK
 
@@ -126,7 +144,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     for attr, unit in (("effort", "N m or N"), ("velocity", "rad/s or m/s")):
         p.add_argument(
             f"--default-{attr}",
-            type=float,
+            type=float_in(0.0),
             default=0.0,
             metavar="VALUE",
             help=f"{attr} limit ({unit}) of every moving joint whose URDF gives none "

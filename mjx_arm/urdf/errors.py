@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+from mjx_arm.inputs import InputError
 
-class UrdfError(ValueError):
+
+class UrdfError(InputError, ValueError):
     """A URDF that cannot be used, with a message that names the element and the fix."""
 
 

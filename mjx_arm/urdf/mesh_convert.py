@@ -16,13 +16,13 @@ import importlib
 import logging
 import os
 import re
-import tempfile
 import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from mjx_arm.inputs import write_atomic
 from mjx_arm.urdf.errors import ConversionError, one_line
 
 # Mesh formats trimesh reads, with the modules each needs (import name -> pip name).
@@ -222,25 +222,6 @@ def _write_atomic(mesh: Any, target: Path) -> None:
             f"the converted mesh cannot be written ({one_line(exc)})",
             "set ConvertConfig.mesh_cache_dir to a writable folder",
         ) from exc
-
-
-def write_atomic(data: bytes, target: Path) -> None:
-    """Write ``data`` to ``target`` through a temporary file in the same folder (created if
-    missing), so a reader (or a second process writing the same file) never sees half a file.
-
-    Raises:
-        OSError: the folder or the file cannot be written.
-    """
-    target.parent.mkdir(parents=True, exist_ok=True)
-    handle, temporary = tempfile.mkstemp(suffix=".tmp", dir=target.parent)
-    try:
-        with os.fdopen(handle, "wb") as f:
-            f.write(data)
-        os.chmod(temporary, 0o644)
-        os.replace(temporary, target)
-    finally:
-        if os.path.exists(temporary):
-            os.unlink(temporary)
 
 
 def _content_hash(source: Path) -> str:

@@ -1,0 +1,216 @@
+"""What the user gives a command: named errors for bad inputs, and the checks every command shares.
+
+An :class:`InputError` is a file, setting or argument that cannot be used; ``mjx-arm`` prints its
+message as one ``error:`` line and exits with :data:`mjx_arm.names.EXIT_INVALID` (2), in one
+place (:func:`mjx_arm.cli.main`). Anything else is a bug: its traceback shows and the exit code
+is 1. The named errors of the packages (arm configs, URDFs, policy files, run directories)
+derive from it, and each is also the builtin error it always was (ValueError, OSError, ...).
+
+Outputs are written with :func:`write_atomic` (a temporary file in the same folder, renamed into
+place), so a failing or killed command never leaves half a file where a good one was.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+
+class InputError(Exception):
+    """An input (file, setting, argument) that cannot be used; the message names it, says what
+    is wrong and how to fix it."""
+
+
+class ConfigError(InputError, ValueError):
+    """A config value of the wrong type or out of range, or an unknown key."""
+
+
+class InputFileError(InputError, OSError):
+    """An input file that is not a file, or cannot be read or parsed."""
+
+
+class MissingInputError(InputFileError, FileNotFoundError):
+    """An input file or folder that does not exist."""
+
+
+class OutputWriteError(InputError, OSError):
+    """An output that could not be written (a full disk, a folder that refuses files)."""
+
+
+class OutputPathError(InputError, ValueError):
+    """An output path that cannot be written: a folder for a file, a file for a folder, the
+    wrong suffix, no writable folder."""
+
+
+def require_file(path: str | Path, what: str) -> Path:
+    """``path`` as a Path, checked to be a readable file.
+
+    Args:
+        path: the file given.
+        what: what it should be, for the message ("policy file").
+
+    Raises:
+        MissingInputError: it does not exist.
+        InputFileError: it is a folder, or cannot be read.
+    """
+    path = Path(path).expanduser()
+    if not path.exists():
+        raise MissingInputError(f"{what} {str(path)!r} does not exist; check the path")
+    if not path.is_file():
+        raise InputFileError(f"{what} {str(path)!r} is not a file; give the path of a file")
+    if not os.access(path, os.R_OK):
+        raise InputFileError(f"{what} {str(path)!r} cannot be read; check its permissions")
+    return path
+
+
+def read_text(path: str | Path, what: str) -> str:
+    """The text of a readable UTF-8 file.
+
+    Raises:
+        InputFileError: missing, not a file, unreadable, or not UTF-8 text.
+    """
+    path = require_file(path, what)
+    try:
+        return path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        raise InputFileError(f"{what} {str(path)!r} cannot be read as UTF-8 text: {err}") from err
+
+
+def read_json_object(path: str | Path, what: str) -> dict[str, Any]:
+    """A JSON file holding one object (a dict).
+
+    Raises:
+        InputFileError: missing, unreadable, not JSON, or not an object.
+    """
+    text = read_text(path, what)
+    try:
+        data = json.loads(text)
+    except (json.JSONDecodeError, RecursionError) as err:
+        raise InputFileError(f"{what} {str(path)!r} is not valid JSON: {err}") from err
+    if not isinstance(data, dict):
+        raise InputFileError(
+            f"{what} {str(path)!r} must hold a JSON object ({{...}}), not {type(data).__name__}"
+        )
+    return data
+
+
+def check_output(path: str | Path, what: str, suffixes: tuple[str, ...] = ()) -> Path:
+    """An output path, checked before any work: not a folder, the right suffix, and a folder
+    that exists or can be created.
+
+    Raises:
+        OutputPathError: the path is a folder, has the wrong suffix, or its folder is a file.
+    """
+    path = Path(path).expanduser()
+    if suffixes and path.suffix not in suffixes:
+        raise OutputPathError(f"{what} {str(path)!r} must end in one of {', '.join(suffixes)}")
+    if path.is_dir():
+        raise OutputPathError(f"{what} {str(path)!r} is a folder; give a file name")
+    parent = path.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir() or not os.access(parent, os.W_OK):
+        raise OutputPathError(f"{what} {str(path)!r}: {parent} is not a writable folder")
+    return path
+
+
+def check_folder(path: str | Path, what: str) -> Path:
+    """An output folder, checked before any work: not a file, and it exists or can be created
+    (its nearest existing parent is a writable folder).
+
+    Raises:
+        OutputPathError: the path is a file, or no writable folder holds it.
+    """
+    path = Path(path).expanduser()
+    if path.exists() and not path.is_dir():
+        raise OutputPathError(f"{what} {str(path)!r} is a file; give a folder")
+    parent = path
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir() or not os.access(parent, os.W_OK):
+        raise OutputPathError(f"{what} {str(path)!r}: {parent} is not a writable folder")
+    return path
+
+
+def write_atomic(data: bytes, target: Path) -> None:
+    """Write ``data`` to ``target`` through a temporary file in the same folder (created if
+    missing), so a reader (or a second process writing the same file) never sees half a file,
+    and a failure (a full disk, a kill) leaves the old file whole.
+
+    Raises:
+        OutputWriteError: the folder or the file cannot be written (an OSError).
+    """
+    target = Path(target)
+    temporary = None
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        handle, temporary = tempfile.mkstemp(
+            suffix=".tmp", prefix=f".{target.name}.", dir=target.parent
+        )
+        with os.fdopen(handle, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.chmod(temporary, 0o644)
+        os.replace(temporary, target)
+    except OSError as err:
+        raise OutputWriteError(
+            f"cannot write {target}: {err.strerror or err}; any file already there is untouched"
+        ) from err
+    finally:
+        if temporary is not None and os.path.exists(temporary):
+            os.unlink(temporary)
+
+
+# --------------------------------------------------------------------------- argparse types
+
+MAX_SEED = 2**32 - 1  # JAX's and NumPy's seeds: an unsigned 32-bit integer
+
+
+def _integer(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+
+
+def int_in(low: int, high: int | None = None) -> Callable[[str], int]:
+    """An argparse ``type``: an integer in ``[low, high]`` (no upper bound: ``high`` None)."""
+
+    def parse(text: str) -> int:
+        value = _integer(text)
+        if value < low or (high is not None and value > high):
+            span = f">= {low}" if high is None else f"in [{low}, {high}]"
+            raise argparse.ArgumentTypeError(f"must be an integer {span}, got {value}")
+        return value
+
+    parse.__name__ = "integer"  # argparse names the type in some messages
+    return parse
+
+
+def float_in(low: float, high: float | None = None) -> Callable[[str], float]:
+    """An argparse ``type``: a finite number in ``[low, high]``."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+        if not math.isfinite(value) or value < low or (high is not None and value > high):
+            span = f">= {low:g}" if high is None else f"in [{low:g}, {high:g}]"
+            raise argparse.ArgumentTypeError(f"must be a finite number {span}, got {text}")
+        return value
+
+    parse.__name__ = "number"
+    return parse
+
+
+nonnegative_int = int_in(0)
+seed_int = int_in(0, MAX_SEED)
+pixels = int_in(16, 4096)  # video and plot sizes
