@@ -186,6 +186,7 @@ class PybulletArmEnv(BaseRobotEnv):
         super().__init__(task, arm, render_mode, width, height)
         self.contact = scene_contact(contact)
         self._urdf = bullet_urdf(self.arm.urdf)
+        self._ee_offset = self.arm.ee_offset.copy() if np.any(self.arm.ee_offset) else None
         self.servo = joint_servo(self.arm, self.task.spec.servo_dt or self.task.sim_dt)
         with native_output_silenced():  # "argv[0]="
             self.client = BulletClient(connection_mode=pybullet.DIRECT)
@@ -373,6 +374,9 @@ class PybulletArmEnv(BaseRobotEnv):
         )
         x, y, z, w = ee[5]
         ee_pos = np.array(ee[4])
+        if self._ee_offset is not None:  # the ee point off the ee link's origin
+            rot = np.array(pybullet.getMatrixFromQuaternion(ee[5])).reshape(3, 3)
+            ee_pos += rot @ self._ee_offset
         # the arm's contacts, read once: the tool's make the wrench where the F/T point is an
         # arm joint or the tool holds a gripper, the pads' make a gripper task's pad forces
         contacts = self.client.getContactPoints(bodyA=self.body) if self.ids.tool_links else ()

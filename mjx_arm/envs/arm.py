@@ -93,6 +93,8 @@ class ArmInfo:
         full_turn: which joints turn without limits (URDF ``continuous``), bool ``(n,)``.
         kv_factor: the servos' velocity gain factor the arm's models are converted with
             (the config's, else :func:`press_kv_factor`).
+        ee_offset: the ee point in the ee link's frame (m), ``(3,)`` (the config's, else
+            :func:`derive_ee_offset`).
     """
 
     config: ArmConfig
@@ -111,6 +113,7 @@ class ArmInfo:
     gripper: Gripper | None = None
     full_turn: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, bool))
     kv_factor: float = 1.0
+    ee_offset: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(3))
 
     @property
     def n_joints(self) -> int:
@@ -121,6 +124,7 @@ class ArmInfo:
         """Conversion settings that put the ee site and F/T sensors where this arm says, with
         its servo gain."""
         fields.setdefault("kv_factor", self.kv_factor)
+        fields.setdefault("ee_offset", tuple(float(v) for v in self.ee_offset))
         return self.config.convert_config(self.ee_link, self.ft_joint, **fields)
 
     def joint_coding(self, task: TaskConfig) -> JointCoding:
@@ -131,6 +135,7 @@ class ArmInfo:
 
 
 def _info(resolved: ResolvedArm, reach: float, reference: float) -> ArmInfo:
+    offset = np.asarray(resolved.config.ee_offset or (0.0, 0.0, 0.0), dtype=float)
     limits = [j.limit for j in resolved.joints]
     path = resolved.config.urdf_path
     return ArmInfo(
@@ -145,10 +150,11 @@ def _info(resolved: ResolvedArm, reach: float, reference: float) -> ArmInfo:
         ee_link=resolved.ee_link,
         ft_joint=resolved.ft_joint,
         ft_link=resolved.ft_link,
-        tool=tool_inertia(resolved.model, resolved.ft_link, resolved.ee_link),
+        tool=tool_inertia(resolved.model, resolved.ft_link, resolved.ee_link, offset),
         reach_scale=reach / reference,
         gripper=find_gripper(resolved),
         full_turn=np.array([j.type == "continuous" for j in resolved.joints]),
+        ee_offset=offset,
     )
 
 
@@ -168,11 +174,41 @@ def _arm_info_cached(arm: ArmConfig, mtime: float) -> ArmInfo:
     shipped = arm.urdf_path == ArmConfig().urdf_path and not (arm.ee_link or arm.joints)
     reach = reference if shipped else horizontal_reach(resolved)
     info = _info(resolved, reach, reference)
-    if arm.kv_factor:
-        return dataclasses.replace(info, kv_factor=arm.kv_factor)
-    if is_shipped(arm):
-        return info
-    return dataclasses.replace(info, kv_factor=press_kv_factor(info))
+    if not arm.ee_offset and not is_shipped(arm):
+        info = _with_ee_offset(info, resolved, derive_ee_offset(info))
+    kv = arm.kv_factor or (1.0 if is_shipped(arm) else press_kv_factor(info))
+    return dataclasses.replace(info, kv_factor=kv)
+
+
+def _with_ee_offset(info: ArmInfo, resolved: ResolvedArm, offset: np.ndarray) -> ArmInfo:
+    """``info`` with its ee point at ``offset (3,)`` in the ee link's frame."""
+    tool = tool_inertia(resolved.model, resolved.ft_link, resolved.ee_link, offset)
+    return dataclasses.replace(info, ee_offset=np.asarray(offset, float), tool=tool)
+
+
+# The smallest offset (m) derive_ee_offset moves the ee point by: closer, the link's origin is
+# the tool's working point already.
+MIN_EE_OFFSET = 0.005
+
+
+def derive_ee_offset(arm: ArmInfo) -> np.ndarray:
+    """The ee point in the ee link's frame, ``(3,)``: on the tool axis where the tool meets a
+    surface pressed against it (:meth:`~mjx_arm.envs.ik.ToolDownSolver.tool_protrusion` over
+    the Touch box's top face), so the ee point is where the tool touches (a jaw's tips, the
+    palm of an open hand). An arm with a parallel gripper keeps the link's origin (between the
+    pads: what Lift grasps around); so does a tool that meets the surface within
+    :data:`MIN_EE_OFFSET` of it, or one with no shape near its axis.
+    """
+    from mjx_arm.urdf.scene_shapes import box_half_width
+
+    zero = np.zeros(3)
+    if arm.gripper is not None:
+        return zero
+    solver = tool_down_solver(arm)
+    reach = solver.tool_protrusion(solver.middle, box_half_width())
+    if reach is None or abs(reach) < MIN_EE_OFFSET:
+        return zero
+    return reach * solver.ik.tool
 
 
 # The working height (m) of the ee point above the table at a home pose (mjx_arm.envs.setup).
@@ -181,25 +217,18 @@ KV_MIN = 0.25  # the lowest servo gain factor press_kv_factor gives
 
 
 def tool_down_solver(arm: ArmInfo) -> ToolDownSolver:
-    """The arm's :class:`~mjx_arm.envs.ik.ToolDownSolver` (one per arm config and file
-    version): its model in the Reach scene with self-collision on, servo gain factor 1."""
-    return _solver_cached(arm.config, arm.urdf.stat().st_mtime)
+    """The arm's :class:`~mjx_arm.envs.ik.ToolDownSolver` (one per arm, file version and ee
+    point): its model in the Reach scene with self-collision on, servo gain factor 1."""
+    return _solver_cached(arm, arm.urdf.stat().st_mtime, tuple(arm.ee_offset))
 
 
 @functools.cache
-def _solver_cached(config: ArmConfig, mtime: float) -> ToolDownSolver:
+def _solver_cached(arm: ArmInfo, mtime: float, ee_offset: tuple) -> ToolDownSolver:
     from mjx_arm.urdf.convert import EE_SITE, load_model
 
-    info = _arm_info_cached(config, mtime) if config.kv_factor else _bare_info(config)
-    model = load_model(
-        info.urdf, info.convert_config(scene="reach", self_collision=True, kv_factor=1.0)
-    )
-    return ToolDownSolver(model, info.joint_names, info.lower, info.upper, EE_SITE)
-
-
-def _bare_info(config: ArmConfig) -> ArmInfo:
-    """The arm's facts with servo gain factor 1 (what :func:`press_kv_factor` starts from)."""
-    return _arm_info_cached(config.replace(kv_factor=1.0), config.urdf_path.stat().st_mtime)
+    config = arm.convert_config(scene="reach", self_collision=True, kv_factor=1.0)
+    model = load_model(arm.urdf, config)
+    return ToolDownSolver(model, arm.joint_names, arm.lower, arm.upper, EE_SITE)
 
 
 def press_force(arm: ArmInfo, q: np.ndarray | None = None) -> float:
@@ -338,6 +367,8 @@ def _model_hash_cached(config: ArmConfig, mtime: float) -> str:
     arm = arm_info(config)
     model = load_model(arm.urdf, arm.convert_config())
     digest = hashlib.sha256(",".join(arm.joint_names).encode())
+    if np.any(arm.ee_offset):  # (hashes of arms at the link's origin read as before)
+        digest.update(np.char.mod("%.6g", np.asarray(arm.ee_offset)).tobytes())
     for name in _HASHED_FIELDS:
         values = np.asarray(getattr(model, name), np.float64)
         digest.update(np.char.mod("%.6g", values.ravel()).tobytes())

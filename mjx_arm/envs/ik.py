@@ -25,6 +25,8 @@ LIMIT_MARGIN = 0.10  # rad, or 5% of a narrower range: poses stay this far insid
 HOME_STARTS = 24  # seeded IK starts for a home pose
 HOME_CANDIDATES = 6  # distinct home poses kept, best-conditioned first
 PENETRATION = 1e-3  # m: a contact deeper than this is a collision
+COLLISION_GROUP = 3  # the converter's group of collision shapes
+RAY_START = 0.5  # m: rays for the tool's surface start this far out along the tool axis
 # Converged: within 1 mm of the point, the tool within 1 degree of vertical.
 POSITION_TOL = 1e-3
 TILT_TOL = np.radians(1.0)
@@ -101,7 +103,11 @@ class ToolDownIk:
         return float(np.sqrt(max(np.linalg.det(jp @ jp.T), 0.0)))
 
     def solve(
-        self, target: np.ndarray, q0: np.ndarray, prefer: np.ndarray | None = None
+        self,
+        target: np.ndarray,
+        q0: np.ndarray,
+        prefer: np.ndarray | None = None,
+        tool_down: bool = True,
     ) -> IkResult:
         """Joint angles that put the ee site at ``target (3,)`` with the tool down.
 
@@ -112,6 +118,8 @@ class ToolDownIk:
             target: the point (m, base frame).
             q0: the start, ``(n,)``; clipped into the box first.
             prefer: the pose the redundant directions are pulled towards (default: ``q0``).
+            tool_down: ask for the tool pointing down; False asks for the point alone (the
+                result's ``converged`` then ignores the tilt).
         """
         q = np.clip(np.asarray(q0, float), self.lower, self.upper)
         prefer = q.copy() if prefer is None else np.asarray(prefer, float)
@@ -121,7 +129,8 @@ class ToolDownIk:
         # would hold the solution off by a millimetre or so
         for iteration in range(MAX_ITERATIONS):
             pos, axis = self.pose(q)
-            err_p, err_o = target - pos, _cross(axis, DOWN)
+            err_p = target - pos
+            err_o = _cross(axis, DOWN) if tool_down else np.zeros(3)
             error = float(np.sqrt(err_p @ err_p + err_o @ err_o))
             if error < min(POSITION_TOL, TILT_TOL) / 10 and (polish or iteration > 0):
                 break
@@ -134,22 +143,25 @@ class ToolDownIk:
                 polish, since, best = True, 0, np.inf
             polish = polish or iteration >= POLISH_FROM
             pull = None if polish else NULL_GAIN * (prefer - q)
-            q = np.clip(q + self._step(axis, err_p, err_o, pull), self.lower, self.upper)
+            step = self._step(axis, err_p, err_o if tool_down else None, pull)
+            q = np.clip(q + step, self.lower, self.upper)
         pos, axis = self.pose(q)
         position_error, tilt = float(np.linalg.norm(target - pos)), _tilt(axis)
-        converged = position_error < POSITION_TOL and tilt < TILT_TOL
+        converged = position_error < POSITION_TOL and (tilt < TILT_TOL or not tool_down)
         return IkResult(q, position_error, tilt, converged)
 
     def _step(self, axis, err_p, err_o, pull) -> np.ndarray:
         """One damped least-squares step ``(n,)`` at the pose the data holds, with ``pull
-        (n,)`` (or None) in its null space."""
+        (n,)`` (or None) in its null space; ``err_o`` None asks for the position alone."""
         jp, jr = self._jacobian_here()
-        # only the tilt of the tool axis is asked for: drop the spin about it
-        jo = jr - np.outer(axis, axis @ jr)
-        jac = np.concatenate([jp, jo])
-        err = np.concatenate([err_p, err_o])
+        if err_o is None:
+            jac, err = jp, err_p
+        else:
+            # only the tilt of the tool axis is asked for: drop the spin about it
+            jo = jr - np.outer(axis, axis @ jr)
+            jac, err = np.concatenate([jp, jo]), np.concatenate([err_p, err_o])
         gram = jac @ jac.T
-        gram[np.diag_indices(6)] += DAMPING**2
+        gram[np.diag_indices(len(err))] += DAMPING**2
         step = jac.T @ np.linalg.solve(gram, err)
         if pull is not None:
             step += pull - jac.T @ np.linalg.solve(gram, jac @ pull)
@@ -255,6 +267,33 @@ class ToolDownSolver:
             reach = max(reach, float(((corners - ee) @ axis).max()))
         return reach
 
+    def tool_protrusion(self, q: np.ndarray, half_width: float) -> float | None:
+        """Where the tool meets a flat surface pressed square against it: how far (m) its
+        collision shapes within ``half_width`` of the tool axis (a square across it) reach
+        past the ee point along the tool axis, at ``q (n,)``. Negative where they stay behind
+        it (an open hand around the ee point); None where no shape lies within the square.
+
+        Rays (5 x 5 over the square) come back along the tool axis from half a metre out and
+        stop at the first collision shape of the arm (MuJoCo's ``mj_ray`` over group 3).
+        """
+        model, data = self.ik.model, self.ik.data
+        ee, axis = self.ik.pose(q)
+        across = np.linalg.svd(axis[None, :])[2][1:]  # two unit vectors across the axis
+        wrist = int(model.jnt_bodyid[model.joint(self.last_joint).id])
+        groups = np.zeros(6, np.uint8)
+        groups[COLLISION_GROUP] = 1
+        geom, best = np.zeros(1, np.int32), None
+        steps = np.linspace(-half_width, half_width, 5)
+        for u in steps:
+            for v in steps:
+                start = ee + RAY_START * axis + u * across[0] + v * across[1]
+                dist = mujoco.mj_ray(model, data, start, -axis, groups, 0, -1, geom)
+                if dist < 0 or not _below(model, int(model.geom_bodyid[geom[0]]), wrist):
+                    continue
+                reach = RAY_START - dist
+                best = reach if best is None else max(best, reach)
+        return best
+
     def homes(self, point: np.ndarray) -> list[np.ndarray]:
         """Distinct collision-free tool-down poses at ``point (3,)`` from seeded starts (the
         middle of the limits first), best-conditioned first, at most HOME_CANDIDATES."""
@@ -272,12 +311,14 @@ class ToolDownSolver:
         found.sort(key=lambda item: -item[0])
         return [q for _, q in found[:HOME_CANDIDATES]]
 
-    def reach_from(self, home: np.ndarray, points: np.ndarray) -> list[np.ndarray | None]:
-        """Tool-down poses at each of ``points (m, 3)``, each solved from ``home``; None where
-        the IK does not converge inside the limits."""
+    def reach_from(
+        self, home: np.ndarray, points: np.ndarray, tool_down: bool = True
+    ) -> list[np.ndarray | None]:
+        """Poses at each of ``points (m, 3)`` (tool down, or any orientation), each solved
+        from ``home``; None where the IK does not converge inside the limits."""
         out = []
         for point in points:
-            result = self.ik.solve(point, home, prefer=home)
+            result = self.ik.solve(point, home, prefer=home, tool_down=tool_down)
             out.append(result.q if result.converged else None)
         return out
 

@@ -1,24 +1,27 @@
 """The task setup of an arm, derived from its model: home pose, task area and timing.
 
-No arm needs a hand-written file to train. For a task config and an arm:
+No arm needs a hand-written file to train. What an arm brings by itself (its ee point at the
+tool's working point, its servo gain) is derived in :mod:`mjx_arm.envs.arm`; what a task needs
+of it is derived here, for a task config and an arm:
 
 - **task area**: the task's target box (:meth:`TaskConfig.target_box`) scaled about the base
   by ``workspace_scale``. It starts at the arm's reach scale (its horizontal reach over the
   shipped arm's) and shrinks in steps of 10% until every target of a 3 x 3 x 3 grid over the
   box (as the task places it: Touch's box on the table, Lift's cube) is reachable with the tool
-  pointing down from the home pose, within the joint limits less a margin and free of
-  collisions.
-- **home pose**: the tool pointing down, :data:`HOME_HEIGHT` above the table over the middle
-  of the task area, found by tool-down inverse kinematics (:mod:`mjx_arm.envs.ik`) from seeded
-  starts; among the poses free of self-collision and of the table, the one that reaches the
-  most grid targets wins, then the best-conditioned (manipulability). Angles of joints with a
-  range over a full turn are taken nearest the middle of the range.
+  pointing down from the home pose, within the joint limits less a margin.
+- **home pose**: the tool pointing down, :data:`HOME_HEIGHT` above the table (lower where no
+  pose holds the tool down that high: :data:`HOME_HEIGHTS`) over the middle of the task area,
+  found by tool-down inverse kinematics (:mod:`mjx_arm.envs.ik`) from seeded starts; among the
+  poses free of self-collision and of the table, the one that reaches the most grid targets
+  wins, then the best-conditioned (manipulability). Angles of joints with a range over a full
+  turn are taken nearest the middle of the range.
 - **episode**: the time the home-to-target motions take at the task's commanded joint speeds
-  (:meth:`TaskConfig.joint_speeds`); an episode shorter than :data:`EPISODE_TIME_FACTOR` times the
-  slowest motion is lengthened.
+  (:meth:`TaskConfig.joint_speeds`); an episode shorter than :data:`EPISODE_TIME_FACTOR` times
+  the slowest motion is lengthened.
 
 An explicit ``home_qpos`` (the task config's or the arm file's) and the shipped arms' measured
-homes are kept as they are; the area is still checked from them.
+homes are kept as they are, with the reach scale; the area is still checked from them.
+:func:`task_verdict` says whether an arm can do a task and why not.
 """
 
 from __future__ import annotations
@@ -33,8 +36,10 @@ from mjx_arm.envs.arm import HOME_HEIGHT, ArmInfo, tool_down_solver
 from mjx_arm.envs.ik import ToolDownSolver
 from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
+from mjx_arm.urdf.scene_shapes import box_half_width, box_top_offset
 
 SCALE_STEPS = (1.0, 0.9, 0.8, 0.7, 0.6, 0.5)  # fractions of the reach scale tried
+HOME_HEIGHTS = (HOME_HEIGHT, 0.15, 0.10)  # m: the home heights tried, highest first
 EPISODE_TIME_FACTOR = 2.0  # an episode lasts at least this many times the slowest motion
 
 
@@ -54,7 +59,9 @@ class ArmSetup:
         episode_steps: the episode's control steps for this arm (the task's, or longer).
         manipulability: of the home pose (m^3).
         tool_reach: how far the tool's collision shapes stick out past the ee point along the
-            tool axis (m): a contact task presses with them while the ee point stays this high.
+            tool axis (m), anywhere.
+        contact_offset: how far past the ee point the tool meets the Touch box's top face
+            pressed square against it (m; negative: behind it; None: no shape on the axis).
         notes: what the derivation had to do or could not do, one line each.
     """
 
@@ -69,6 +76,7 @@ class ArmSetup:
     episode_steps: int
     manipulability: float
     tool_reach: float = 0.0
+    contact_offset: float | None = 0.0
     notes: tuple[str, ...] = field(default=())
 
     @property
@@ -148,15 +156,24 @@ def _try_scale(solver: ToolDownSolver, task: TaskConfig, home: np.ndarray | None
     where no tool-down home exists over the area's middle."""
     points = grid_targets(task)
     low, high = points[:, :2].min(axis=0), points[:, :2].max(axis=0)
-    above = np.array([*(0.5 * (low + high)), HOME_HEIGHT])
-    homes = [home] if home is not None else solver.homes(above)
+    homes = [home] if home is not None else _homes(solver, 0.5 * (low + high))
     best = None
     for q_home in homes:
-        poses = solver.reach_from(q_home, points)
+        poses = solver.reach_from(q_home, points, tool_down=task.uses_contact)
         reached = sum(p is not None for p in poses)
         if best is None or reached > best[0]:
             best = (reached, len(points), q_home, poses, task.workspace_scale)
     return best
+
+
+def _homes(solver: ToolDownSolver, centre: np.ndarray) -> list[np.ndarray]:
+    """Tool-down homes over ``centre (2,)`` (x, y) at the first of :data:`HOME_HEIGHTS` that
+    has any (a small arm, or a long tool, may not hold the tool down higher up)."""
+    for height in HOME_HEIGHTS:
+        homes = solver.homes(np.array([*centre, height]))
+        if homes:
+            return homes
+    return []
 
 
 def _finish(arm, task, solver, q_home, source, scale, reached, targets, poses) -> ArmSetup:
@@ -172,6 +189,9 @@ def _finish(arm, task, solver, q_home, source, scale, reached, targets, poses) -
             f"task area shrunk to {scale / arm.reach_scale:.0%} of the reach scale: "
             "targets farther out are not reachable with the tool down"
         )
+    height = float(solver.ik.pose(np.asarray(q_home, float))[0][2])
+    if height < HOME_HEIGHT - 0.01:
+        notes.append(f"home {height:.2f} m above the table: none holds the tool down higher")
     if reached < targets:
         notes.append(f"{targets - reached} of {targets} grid targets not reachable tool-down")
     if steps > task.episode_steps:
@@ -191,6 +211,7 @@ def _finish(arm, task, solver, q_home, source, scale, reached, targets, poses) -
         episode_steps=steps,
         manipulability=solver.ik.manipulability(q_home),
         tool_reach=solver.tool_reach(q_home),
+        contact_offset=solver.tool_protrusion(q_home, box_half_width()),
         notes=tuple(notes),
     )
 
@@ -212,6 +233,7 @@ def _unreachable(arm, task, solver, scale, home, source) -> ArmSetup:
         episode_steps=task.episode_steps,
         manipulability=solver.ik.manipulability(q),
         tool_reach=solver.tool_reach(q),
+        contact_offset=solver.tool_protrusion(q, box_half_width()),
         notes=("no tool-down pose over the task area: the arm cannot reach it tool-down",),
     )
 
@@ -227,17 +249,15 @@ def task_verdict(arm: ArmInfo, task: TaskConfig) -> tuple[bool, str]:
         if reason:
             return False, reason
     setup = arm_setup(arm, task)
-    if task.uses_contact and not task.spec.gripper and setup.tool_reach > task.success_distance:
-        return False, (
-            f"the tool's shapes reach {setup.tool_reach * 100:.1f} cm past the ee point, beyond "
-            f"the {task.success_distance * 100:.0f} cm success radius: pressing with them "
-            "leaves the ee point too far; name the tool's tip link as ee_link"
-        )
+    problem = press_problem(setup, task) if task.uses_contact and not task.spec.gripper else ""
+    if problem:
+        return False, problem
+    how = " with the tool down" if task.uses_contact else ""
     if setup.reached == 0:
         return False, "no tool-down pose over the task area (limits or reach block it)"
     if not setup.covers_area:
         missing = setup.targets - setup.reached
-        return False, f"{missing} of {setup.targets} targets out of reach with the tool down"
+        return False, f"{missing} of {setup.targets} targets out of reach{how}"
     seconds = setup.episode_steps * task.ctrl_dt
     if seconds > MAX_EPISODE_SECONDS:
         return False, (
@@ -245,9 +265,29 @@ def task_verdict(arm: ArmInfo, task: TaskConfig) -> tuple[bool, str]:
             f"task's joint speeds (an episode of {seconds:.0f} s)"
         )
     return True, (
-        f"every target reachable tool-down; area x{setup.workspace_scale:.2f}, "
-        f"episode {seconds:.1f} s"
+        f"every target reachable{how}; area x{setup.workspace_scale:.2f}, episode {seconds:.1f} s"
     )
+
+
+def press_problem(setup: ArmSetup, task: TaskConfig) -> str:
+    """Why the tool cannot press the box top with the ee point on it ("" where it can): no
+    shape on the tool axis, a contact too far from the ee point, or shapes around it that
+    reach deeper than the box is tall (they meet the table first)."""
+    contact = setup.contact_offset
+    if contact is None:
+        return "no collision shape of the tool on its axis: nothing presses the box"
+    if abs(contact) >= task.success_distance:
+        return (
+            f"the tool meets the box {abs(contact) * 100:.1f} cm from the ee point, beyond the "
+            f"{task.success_distance * 100:.0f} cm success radius: set ee_offset in an arm file"
+        )
+    depth = setup.tool_reach - contact
+    if depth >= box_top_offset():
+        return (
+            f"shapes beside the tool axis reach {depth * 100:.1f} cm past where it meets the box "
+            f"(the box is {box_top_offset() * 100:.0f} cm tall): they meet the table first"
+        )
+    return ""
 
 
 def gripper_problem(arm: ArmInfo) -> str:

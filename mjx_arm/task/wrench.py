@@ -164,9 +164,12 @@ def _frozen(a: np.ndarray) -> np.ndarray:
     return out
 
 
-def tool_inertia(model: RobotModel, root: str, ee_link: str) -> ToolInertia:
+def tool_inertia(
+    model: RobotModel, root: str, ee_link: str, ee_offset=(0.0, 0.0, 0.0)
+) -> ToolInertia:
     """Mass properties of link ``root`` and everything below it (the tool the F/T reading
-    weighs), from the URDF, in ``root``'s frame (the sensor frame)."""
+    weighs), from the URDF, in ``root``'s frame (the sensor frame); the ee point is
+    ``ee_offset`` (m) in ``ee_link``'s frame."""
     frames = {root: np.eye(4)}
     for joint in model.joints_in_tree_order():
         if joint.parent in frames:
@@ -188,7 +191,8 @@ def tool_inertia(model: RobotModel, root: str, ee_link: str) -> ToolInertia:
         r = p - com
         inertia += i_local + m * (np.dot(r, r) * np.eye(3) - np.outer(r, r))  # parallel axis
     ee = frames[ee_link]
-    return ToolInertia(mass, com, inertia, ee[:3, 3].copy(), ee[:3, :3].T.copy())
+    point = ee[:3, 3] + ee[:3, :3] @ np.asarray(ee_offset, dtype=float)
+    return ToolInertia(mass, com, inertia, point, ee[:3, :3].T.copy())
 
 
 def external_wrench(xp: Any, force_s, torque_s, acc, omega, alpha, tool: ToolInertia):

@@ -72,6 +72,11 @@ class ArmConfig:
             model so the arm presses the box like the shipped arm
             (:func:`mjx_arm.envs.arm.press_kv_factor`; the shipped arms: 1). Configs recorded
             before this field existed read 1, what they trained with.
+        ee_offset: the end-effector point in ``ee_link``'s frame (m, 3 values); () derives it:
+            where the tool's shapes meet a surface pressed against them along the tool axis
+            (:func:`mjx_arm.envs.arm.derive_ee_offset`; the shipped arms and arms with a
+            parallel gripper: the link's origin). Configs recorded before this field existed
+            read (0, 0, 0).
     """
 
     urdf: str = ""
@@ -84,6 +89,7 @@ class ArmConfig:
     default_effort: float = 0.0
     default_velocity: float = 0.0
     kv_factor: float = 0.0
+    ee_offset: tuple[float, ...] = ()
 
     def convert_config(self, ee_link: str, ft_joint: str, **fields: Any) -> ConvertConfig:
         """Conversion settings of this arm, given its resolved ``ee_link`` and ``ft_joint``
@@ -107,6 +113,10 @@ class ArmConfig:
             raise ArmConfigError(f"collision must be one of {COLLISION_CHOICES}")
         if not 0.0 <= self.kv_factor <= 1.0:
             raise ArmConfigError(f"kv_factor must be in [0, 1] (0: derived), got {self.kv_factor}")
+        if len(self.ee_offset) not in (0, 3) or not all(map(math.isfinite, self.ee_offset)):
+            raise ArmConfigError(
+                f"ee_offset must be 3 finite numbers (m) or empty (derived), got {self.ee_offset}"
+            )
 
     @property
     def urdf_path(self) -> Path:
@@ -124,9 +134,10 @@ class ArmConfig:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> ArmConfig:
         """Inverse of :meth:`to_dict`; unknown keys are an error. A record without
-        ``kv_factor`` (written before it existed) reads 1, the gain it trained with."""
+        ``kv_factor`` or ``ee_offset`` (written before they existed) reads 1 and (0, 0, 0),
+        what it trained with."""
         if isinstance(data, dict):
-            data = {"kv_factor": 1.0, **data}
+            data = {"kv_factor": 1.0, "ee_offset": (0.0, 0.0, 0.0), **data}
         return cls(**config_fields(cls, data, "arm config", ArmConfigError))
 
 
@@ -180,7 +191,7 @@ def load_arm(source: str | Path | ArmConfig | None) -> ArmConfig:
     try:
         data = tomllib.loads(text) if path.suffix.lower() == ".toml" else json.loads(text)
         if isinstance(data, dict):
-            data = {"kv_factor": 0.0, **data}  # an arm file derives what it omits
+            data = {"kv_factor": 0.0, "ee_offset": (), **data}  # a file derives what it omits
         arm = ArmConfig.from_dict(data)
     except (tomllib.TOMLDecodeError, json.JSONDecodeError, RecursionError) as err:
         raise ArmConfigError(f"{path}: not a valid arm file: {err}") from err

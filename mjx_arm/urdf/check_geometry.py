@@ -112,7 +112,8 @@ def _check_shape(
             2,
             _link(link),
             "has a cylinder collision shape, which MJX does not collide "
-            "with boxes, spheres or meshes",
+            "with boxes, spheres or meshes: the converter makes it a capsule of the same radius "
+            "and length (its ends round off, one radius longer)",
             "use a capsule (or a box) for collision",
         )
     if box is not None:

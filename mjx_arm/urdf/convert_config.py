@@ -49,6 +49,8 @@ class ConvertConfig:
             effort limit), as an industrial arm's joint controllers do.
         ee_link: link whose frame is the end-effector point; None picks ``ee_link`` if present,
             else the deepest link of the tree.
+        ee_offset: where the end-effector point (the ``ee`` site) sits in ``ee_link``'s frame
+            (m); the site keeps the link's orientation.
         ft_joint: fixed joint where the wrist force/torque reading is taken; None picks
             ``ft_sensor_joint`` if present, else the joint above the end-effector body.
         sim_dt: physics time step (s).
@@ -86,6 +88,7 @@ class ConvertConfig:
     kv_factor: float = 1.0
     gravity_compensation: bool = True
     ee_link: str | None = None
+    ee_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
     ft_joint: str | None = None
     sim_dt: float = 1.0 / 240.0
     servo_dt: float = 0.0

@@ -50,6 +50,12 @@ def box_top_offset() -> float:
     return geom.origin.xyz[2] + geom.size[2] / 2
 
 
+def box_half_width() -> float:
+    """Half the target box's width (m) across its top face (the narrower side)."""
+    (geom,) = scene_geometry()["box"]
+    return min(geom.size[0], geom.size[1]) / 2
+
+
 def table_top_extent(margin: float = 0.0) -> tuple[tuple[float, float], tuple[float, float]]:
     """``((x_min, y_min), (x_max, y_max))`` of the table's top face (m), shrunk by ``margin``."""
     (geom,) = scene_geometry()["table"]

@@ -161,6 +161,7 @@ def _add_sites_and_sensors(spec, model: RobotModel, ee_body, ft_body, config) ->
     """
     ee = ee_body.add_site()
     ee.name = EE_SITE
+    ee.pos = list(config.ee_offset)
     ee.size = [0.008, 0, 0]
     ee.rgba = [0.1, 0.8, 0.1, 0.6]
     ee.group = 4
@@ -241,11 +242,19 @@ COLLISION_SHAPES = {
 
 def _fit_collision_primitives(spec: mujoco.MjSpec, collision: str) -> None:
     """Replace each collision mesh of the arm by a capsule or box that MuJoCo's compiler fits
-    to it (``collision="mesh"`` keeps the meshes). The mesh stays as the fit's source."""
+    to it (``collision="mesh"`` keeps the meshes). The mesh stays as the fit's source.
+
+    Collision cylinders always become capsules of the same radius and half-length (each end
+    rounds off, one radius further out): MJX does not collide cylinders with boxes, spheres or
+    meshes, so a cylinder arm would not touch the table or the box in the batch.
+    """
     if collision not in COLLISION_SHAPES:
         raise ConversionError(
             f"collision must be one of {list(COLLISION_SHAPES)}, not {collision!r}"
         )
+    for geom in spec.geoms:
+        if geom.type == mujoco.mjtGeom.mjGEOM_CYLINDER and (geom.contype or geom.conaffinity):
+            geom.type = mujoco.mjtGeom.mjGEOM_CAPSULE
     shape = COLLISION_SHAPES[collision]
     if shape is None:
         return

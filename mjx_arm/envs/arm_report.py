@@ -1,0 +1,159 @@
+"""What ``mjx-arm arm`` prints and draws: an arm's facts, its setup per task, whether it can do
+each task, and a picture of its home pose over the task area."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from mjx_arm.envs.arm import ArmInfo, tool_down_solver
+from mjx_arm.envs.setup import ArmSetup, arm_setup, gripper_problem, task_verdict
+from mjx_arm.task.config import TaskConfig
+from mjx_arm.urdf.scene_shapes import table_top_extent
+
+
+def describe(arm: ArmInfo) -> str:
+    """Human-readable lines of an arm's facts (no task: fast)."""
+    ft = arm.ft_joint or f"the last arm joint (tool link {arm.ft_link!r})"
+    derived = "" if arm.config.ee_offset else " (derived: where the tool meets a pressed surface)"
+    gain = "" if arm.config.kv_factor else " (derived: presses like the shipped arm)"
+    lines = [
+        f"urdf        {arm.urdf}",
+        f"ee_link     {arm.ee_link}; ee point {_vector(arm.ee_offset)} m in its frame{derived}",
+        f"joints      {arm.n_joints}: observation {16 + arm.n_joints}, action {arm.n_joints}",
+    ]
+    for name, lo, hi, v, turn in zip(
+        arm.joint_names, arm.lower, arm.upper, arm.v_max, arm.full_turn, strict=True
+    ):
+        kind = "  full turn" if turn else ""
+        lines.append(f"  {name:<24} range [{lo:+.3f}, {hi:+.3f}]  v_max {v:g}{kind}")
+    gripper = (
+        "none"
+        if arm.gripper is None
+        else (
+            f"{arm.gripper.joint} drives {len(arm.gripper.pad_links)} fingers, opens "
+            f"{arm.gripper.opening * 100:.1f} cm"
+        )
+    )
+    lines += [
+        f"F/T         {ft}; tool {arm.tool.mass:.3f} kg",
+        f"gripper     {gripper}",
+        f"servo gain  kv_factor {arm.kv_factor:.3f}{gain}",
+        f"reach scale {arm.reach_scale:.3f} (the shipped arm's reach is 1)",
+        f"collision   {arm.config.collision}",
+    ]
+    return "\n".join(lines)
+
+
+def check_lines(arm: ArmInfo, tasks: list[TaskConfig]) -> str:
+    """Per task: whether the arm can do it and why not, with the derived setup."""
+    lines = ["tasks"]
+    for task in tasks:
+        ok, why = task_verdict(arm, task)
+        lines.append(f"  {task.task:<6} {'yes' if ok else 'no '}  {why}")
+        if task.spec.gripper and gripper_problem(arm):
+            continue
+        setup = arm_setup(arm, task)
+        lines.append(
+            f"         home {_vector(setup.home_qpos)} ({setup.home_source}), "
+            f"manipulability {setup.manipulability:.3f}"
+        )
+        lines.append(
+            f"         {setup.reached} of {setup.targets} grid targets reached, slowest move "
+            f"{setup.travel_time:.1f} s, episode {setup.episode_steps} steps"
+        )
+        lines += [f"         note: {note}" for note in setup.notes]
+    return "\n".join(lines)
+
+
+def arm_file_text(arm: ArmInfo, touch: ArmSetup | None = None) -> str:
+    """The resolved arm as TOML: every default written out. A derived home (one per task) is
+    written as a comment with Touch's, to fix it for every task by removing the ``#``."""
+    values = {
+        "urdf": str(arm.urdf),
+        "ee_link": arm.ee_link,
+        "joints": list(arm.joint_names),
+        "ft_joint": arm.ft_joint,
+        "collision": arm.config.collision,
+        "kv_factor": round(float(arm.kv_factor), 6),
+        "ee_offset": [round(float(v), 6) for v in arm.ee_offset],
+    }
+    body = [f"{key} = {json.dumps(value)}" for key, value in values.items()]
+    if arm.config.home_qpos:
+        body.append(f"home_qpos = {json.dumps([round(float(q), 6) for q in arm.home_qpos])}")
+    elif touch is not None:
+        home = [round(float(q), 6) for q in touch.home_qpos]
+        body.append(f"# home_qpos = {json.dumps(home)}  # Touch's derived home")
+    text = "\n".join(body)
+    return f"# An arm file (mjx-arm train --arm THIS_FILE); every field as resolved.\n{text}\n"
+
+
+def draw_check(arm: ArmInfo, tasks: list[TaskConfig], path: Path) -> None:
+    """A PNG of the home pose of the first task the arm can do over the table and the task
+    areas, from above and from the side: the arm's links, the grid targets (reached: dots,
+    not: crosses) and the tool axis."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (top, side) = plt.subplots(1, 2, figsize=(11, 4.8))
+    (x0, y0), (x1, y1) = table_top_extent()
+    top.add_patch(plt.Rectangle((x0, y0), x1 - x0, y1 - y0, color="#c8b49a", alpha=0.5))
+    side.plot([x0, x1], [0, 0], color="#8a6d4b", linewidth=4)
+    shown = [t for t in tasks if not (t.spec.gripper and gripper_problem(arm))]
+    for task, colour in zip(
+        shown, ("tab:blue", "tab:red", "tab:green", "tab:purple"), strict=False
+    ):
+        _draw_targets(top, side, arm, task, colour)
+    if shown:
+        _draw_arm(top, side, arm, arm_setup(arm, shown[-1]))
+    for ax, (label, axes) in zip(
+        (top, side), (("from above", "xy"), ("from the side", "xz")), strict=True
+    ):
+        ax.set_title(f"{arm.urdf.name}: home over the task area, {label}")
+        ax.set_xlabel(f"{axes[0]} (m)")
+        ax.set_ylabel(f"{axes[1]} (m)")
+        ax.set_aspect("equal")
+        ax.legend(loc="upper left", fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _draw_targets(top, side, arm: ArmInfo, task: TaskConfig, colour: str) -> None:
+    from mjx_arm.envs.setup import grid_targets
+
+    setup = arm_setup(arm, task)
+    points = grid_targets(task.replace(workspace_scale=setup.workspace_scale))
+    solver = tool_down_solver(arm)
+    home = np.asarray(setup.home_qpos)
+    poses = solver.reach_from(home, points, tool_down=task.uses_contact)
+    ok = np.array([p is not None for p in poses])
+    for ax, j in ((top, 1), (side, 2)):
+        ax.scatter(points[ok, 0], points[ok, j], s=14, color=colour, label=f"{task.task} targets")
+        if (~ok).any():
+            ax.scatter(points[~ok, 0], points[~ok, j], s=30, marker="x", color="black")
+
+
+def _draw_arm(top, side, arm: ArmInfo, setup: ArmSetup) -> None:
+    """The chain's body origins from the base to the ee point, and the tool axis."""
+    solver = tool_down_solver(arm)
+    model, data = solver.ik.model, solver.ik.data
+    ee, axis = solver.ik.pose(np.asarray(setup.home_qpos))
+    body = int(model.site_bodyid[solver.ik.site_id])
+    chain = []
+    while body > 0:
+        chain.append(data.xpos[body].copy())
+        body = int(model.body_parentid[body])
+    points = np.array([*reversed(chain), ee])
+    tip = ee + 0.1 * axis
+    for ax, j in ((top, 1), (side, 2)):
+        ax.plot(points[:, 0], points[:, j], "-o", color="dimgray", markersize=3, label="arm")
+        ax.plot([ee[0], tip[0]], [ee[j], tip[j]], color="orange", label="tool axis")
+
+
+def _vector(values) -> str:
+    return "(" + ", ".join(f"{float(v):+.3f}" for v in values) + ")"
