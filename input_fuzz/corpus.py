@@ -59,7 +59,7 @@ class Corpus:
 
 def build(folder: Path) -> Corpus:
     """Write every good input into ``folder`` (created) and return their paths."""
-    from mjx_arm.envs.cli import arm_file_text
+    from mjx_arm.envs.arm_report import arm_file_text
     from mjx_arm.paths import default_arm_urdf
     from mjx_arm.policy.export import export_run
 
