@@ -328,7 +328,8 @@ def _pose_gripper_task(env: Any, obs: np.ndarray, s: dict[str, slice]) -> None:
     from mjx_arm.task.grip import quat_mul
 
     grip, data, model = env.grip, env.data, env.model
-    finger = grip.lower + float(obs[s["gripper"]][0]) * grip.stroke
+    gripper = grip.gripper
+    finger = gripper.open_q + float(obs[s["gripper"]][0]) * (gripper.closed_q - gripper.open_q)
     slides = np.flatnonzero(model.jnt_type == mujoco.mjtJoint.mjJNT_SLIDE)
     data.qpos[model.jnt_qposadr[slides]] = finger  # the driven finger and its mimic
     ee_quat = obs[s["ee_pose"]][3:]

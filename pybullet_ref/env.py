@@ -313,6 +313,9 @@ class PybulletArmEnv(BaseRobotEnv):
         c.setJointMotorControlArray(arm, ids.joints, pybullet.VELOCITY_CONTROL, forces=self._zeros)
         for j, q in zip(ids.joints, qpos, strict=True):
             c.resetJointState(arm, j, float(q), 0.0)
+        if self.gripper is not None:  # open (the driven finger and its mimic, multiplier 1)
+            for j in ids.pads:
+                c.resetJointState(arm, j, self.gripper.open_q, 0.0)
         c.enableJointForceTorqueSensor(arm, ids.ft, True)
 
     def _add_target_marker(self, position: list[float]) -> None:
@@ -403,8 +406,7 @@ class PybulletArmEnv(BaseRobotEnv):
         the cube's pose and the normal force on each pad: the sum over its ``contacts`` (the
         arm's ``getContactPoints`` rows), as MuJoCo's touch sensor sums them."""
         c = self.client
-        q = c.getJointState(self.body, self.ids.finger)[0]
-        closure = (q - self.ids.finger_lower) / self.gripper.stroke
+        closure = self.gripper.closure(c.getJointState(self.body, self.ids.finger)[0])
         pos, (x, y, z, w) = c.getBasePositionAndOrientation(self.cube)
         pads = [sum(p[9] for p in contacts if p[3] == link) for link in self.ids.pads]
         return np.array([closure, *pos, w, x, y, z, *pads])

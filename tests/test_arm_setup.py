@@ -260,3 +260,27 @@ def test_verdicts_of_published_arms() -> None:
     assert not task_verdict(ur10, task_config("lift"))[0]  # no gripper
     panda = arm_info(ArmConfig(urdf=str(PANDA)))
     assert all(task_verdict(panda, task_config(name))[0] for name in ("reach", "touch", "lift"))
+
+
+@published
+@pytest.mark.parametrize("engine", ["mujoco", "pybullet"])
+def test_a_gripper_that_closes_towards_zero_starts_open_and_closes_on_command(engine) -> None:
+    """The Panda's fingers close towards their lower limit (0): Lift on its own hand starts
+    open (closure 0) and a gripper action of +1 closes it, as on the shipped gripper arm."""
+    panda = arm_info(ArmConfig(urdf=str(PANDA)))
+    assert panda.gripper.open_q == pytest.approx(0.04) and panda.gripper.closed_q == 0.0
+    env = gym.make("mjx_arm/Lift-v0", engine=engine, arm=str(PANDA))
+    try:
+        obs, _ = env.reset(seed=0)
+        assert obs["gripper"][0] == pytest.approx(0.0, abs=1e-3)
+        action = np.zeros(8, np.float32)
+        action[-1] = 1.0
+        for _ in range(15):  # 0.5 s at 0.2 m/s closes the 4 cm stroke
+            obs, *_ = env.step(action)
+        assert obs["gripper"][0] > 0.95
+        action[-1] = -1.0
+        for _ in range(15):
+            obs, *_ = env.step(action)
+        assert obs["gripper"][0] < 0.05
+    finally:
+        env.close()

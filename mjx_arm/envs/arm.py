@@ -40,12 +40,26 @@ class Gripper:
         pad_links: every finger link (each gets a touch sensor in the task model).
         v_max: the driven finger's speed limit (m/s).
         stroke: the driven finger's travel (m): its upper limit minus its lower.
+        open_q, closed_q: the driven finger's position (m) with the gripper open and closed:
+            its lower and upper limit, or the other way round (the Panda's fingers close
+            towards 0), whichever puts the pads farther apart open.
     """
 
     joint: str
     pad_links: tuple[str, ...]
     v_max: float
     stroke: float
+    open_q: float = 0.0
+    closed_q: float = 0.0
+
+    @property
+    def closing_sign(self) -> float:
+        """+1 where the finger closes towards its upper limit, -1 towards its lower."""
+        return 1.0 if self.closed_q >= self.open_q else -1.0
+
+    def closure(self, q):
+        """How closed the gripper is at finger position ``q`` (m): 0 open, 1 closed."""
+        return (q - self.open_q) / (self.closed_q - self.open_q)
 
     @property
     def opening(self) -> float:
@@ -68,7 +82,23 @@ def find_gripper(resolved: ResolvedArm) -> Gripper | None:
         return None
     lim = driven[0].limit
     speed = lim.velocity or resolved.config.default_velocity
-    return Gripper(driven[0].name, tuple(j.child for j in fingers), speed, lim.upper - lim.lower)
+    pads = tuple(j.child for j in fingers)
+    gap = functools.partial(_pad_gap, model, pads[:2], driven[0].name)
+    open_q, closed_q = (
+        (lim.upper, lim.lower) if gap(lim.upper) > gap(lim.lower) else (lim.lower, lim.upper)
+    )
+    return Gripper(driven[0].name, pads, speed, lim.upper - lim.lower, open_q, closed_q)
+
+
+def _pad_gap(model, pads: tuple[str, str], finger: str, q: float) -> float:
+    """Distance (m) between two pad links' frames with the driven ``finger`` at ``q`` (its
+    ``<mimic>`` fingers following), every other joint at 0."""
+    from mjx_arm.urdf.kinematics import link_frames
+
+    positions = {j.name: 0.0 for j in model.actuated_joints if j.mimic is None}
+    positions[finger] = q
+    frames = link_frames(model, positions)
+    return float(np.linalg.norm(frames[pads[0]][:3, 3] - frames[pads[1]][:3, 3]))
 
 
 @dataclass(frozen=True, eq=False)

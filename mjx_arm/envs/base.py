@@ -384,8 +384,11 @@ def action_size(arm: ArmInfo, task: TaskConfig) -> int:
 
 
 def gripper_speed(arm: ArmInfo, task: TaskConfig) -> float:
-    """The driven finger's speed (m/s) at a gripper action of 1; 0 for tasks without one."""
-    return arm.gripper.v_max if task.spec.gripper and arm.gripper else 0.0
+    """The driven finger's velocity (m/s) at a gripper action of 1, which closes it (negative
+    where the finger closes towards its lower limit); 0 for tasks without one."""
+    if not (task.spec.gripper and arm.gripper):
+        return 0.0
+    return arm.gripper.v_max * arm.gripper.closing_sign
 
 
 def check_action(action, bounds: tuple[np.ndarray, np.ndarray] = _SHIPPED_BOUNDS) -> np.ndarray:

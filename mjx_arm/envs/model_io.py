@@ -36,8 +36,14 @@ def task_convert_config(task: TaskConfig, arm: ArmInfo | None = None) -> Convert
 
 
 def arm_model(arm: ArmInfo, task: TaskConfig) -> mujoco.MjModel:
-    """The task's MuJoCo model: ``arm`` converted from its URDF with the task scene."""
-    return load_model(arm.urdf, task_convert_config(task, arm))
+    """The task's MuJoCo model: ``arm`` converted from its URDF with the task scene; a gripper
+    task's fingers start open (``qpos0``, where a reset puts them)."""
+    model = load_model(arm.urdf, task_convert_config(task, arm))
+    if task.spec.gripper and arm.gripper is not None:
+        for link in arm.gripper.pad_links:  # the driven finger and its mimics (multiplier 1)
+            joint = model.joint(int(model.body(link).jntadr[0]))
+            model.qpos0[joint.qposadr[0]] = arm.gripper.open_q
+    return model
 
 
 # The model's sensor of each entry of the wrench sensor block (``SENSOR_BLOCK`` order).
@@ -121,6 +127,7 @@ class GripReader:
     Attributes:
         finger_qpos: qpos address of the driven finger; finger_act: its actuator id.
         lower, stroke: the finger's lower limit and travel (m).
+        gripper: the arm's :class:`~mjx_arm.envs.arm.Gripper` (open and closed positions).
         cube_qpos: qpos address of the cube's free joint (position, then quaternion).
         cube_dof: its dof address (6 velocities).
         pad_index: ``sensordata`` positions of the pads' touch sensors, ``(2,)``.
@@ -136,6 +143,7 @@ class GripReader:
         self.finger_qpos = int(joint.qposadr[0])
         self.finger_act = int(model.actuator(gripper.joint).id)
         self.lower, self.stroke = float(joint.range[0]), gripper.stroke
+        self.gripper = gripper
         cube = model.joint(CUBE_BODY)
         self.cube_qpos, self.cube_dof = int(cube.qposadr[0]), int(cube.dofadr[0])
         self.pad_index = np.array(
@@ -186,7 +194,7 @@ class GripReader:
 
     def read(self, xp: Any, qpos, sensordata):
         """The ``grip`` vector ``(10,)`` of one state's ``qpos`` and ``sensordata``."""
-        closure = (qpos[self.finger_qpos : self.finger_qpos + 1] - self.lower) / self.stroke
+        closure = self.gripper.closure(qpos[self.finger_qpos : self.finger_qpos + 1])
         cube = qpos[self.cube_qpos : self.cube_qpos + 7]
         return xp.concatenate([closure, cube, sensordata[self.pad_index]])
 
