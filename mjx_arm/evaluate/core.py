@@ -104,9 +104,10 @@ def make_eval_env(
 
 
 def eval_arm(policy: Any, source: str | Path | None = None) -> Any:
-    """The arm to evaluate on: ``source`` (a URDF or an arm file), else the arm the policy
-    records (files from before arm records: the shipped arm). A recorded arm of ``assets/``
-    (trained where this package lived elsewhere) is this install's copy; the model hash check
+    """The arm to evaluate on: ``source`` (an arm file; a URDF: the arm the policy records,
+    with its URDF found there instead), else the arm the policy records (files from before arm
+    records: the shipped arm). A recorded arm of ``assets/`` (trained where this package lived
+    elsewhere) is this install's copy; the model hash check
     (:func:`mjx_arm.envs.arm.check_same_arm`) still compares the two.
 
     Raises:
@@ -114,12 +115,15 @@ def eval_arm(policy: Any, source: str | Path | None = None) -> Any:
             :class:`~mjx_arm.inputs.MissingInputError`).
     """
     from mjx_arm.paths import asset
-    from mjx_arm.urdf.arm_config import SHIPPED_ARMS, ArmConfig, load_arm
+    from mjx_arm.urdf.arm_config import ARM_FILE_SUFFIXES, SHIPPED_ARMS, ArmConfig, load_arm
 
-    if source is not None:
-        return load_arm(source)
     record = getattr(policy, "metadata", {}).get("arm") or {}
     arm = ArmConfig.from_dict(record.get("config", {}))
+    if source is not None:
+        given = load_arm(source)
+        if Path(source).suffix.lower() in ARM_FILE_SUFFIXES or not record:
+            return given
+        return arm.replace(urdf=given.urdf)  # the recorded arm, its URDF found elsewhere
     recorded = Path(arm.urdf)
     if arm.urdf and recorded.parent.name == "assets" and recorded.name in SHIPPED_ARMS:
         arm = arm.replace(urdf=str(asset(recorded.name)))
