@@ -578,6 +578,20 @@ def test_repair_inertia_turns_the_error_into_a_warning_for_mujoco(tmp_path: Path
     assert main(["convert", str(path), "-o", str(tmp_path / "arm.xml"), "--repair-inertia"]) == 0
 
 
+def test_a_zero_effort_with_a_default_effort_passes_every_layer(tmp_path: Path):
+    """ROS-Industrial URDFs (ABB, Fanuc) write effort="0": with --default-effort the static
+    check warns, and the native MuJoCo load (layer 3) converts with the same default."""
+    root = ET.parse(default_arm_urdf()).getroot()
+    for limit in root.iter("limit"):
+        limit.set("effort", "0")
+    path = tmp_path / "zero_effort.urdf"
+    ET.ElementTree(root).write(path)
+    assert not validate(path, engine="mujoco").ok
+    report = validate(path, engine="mujoco", default_limits={"effort": 50.0})
+    assert report.ok, report.format()
+    assert any("the converter uses 50" in w.problem for w in report.warnings)
+
+
 def test_require_valid(tmp_path: Path):
     assert require_valid(default_arm_urdf(), "mujoco").ok
     case = next(c for c in CASES if c.id == "missing_limit")

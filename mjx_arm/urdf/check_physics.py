@@ -165,9 +165,14 @@ def _link_of_mesh(tree: _Tree, stem: str) -> str | None:
 
 
 def _load_mujoco(
-    tree: _Tree, package_dirs: Mapping[str, str], repair: bool, out: _Findings
+    tree: _Tree,
+    package_dirs: Mapping[str, str],
+    repair: bool,
+    out: _Findings,
+    limits: Mapping[str, float] | None = None,
 ) -> None:
-    """Convert with :func:`mjx_arm.urdf.convert.build_checked_spec`, compile and write the MJCF
+    """Convert with :func:`mjx_arm.urdf.convert.build_checked_spec` (with the default effort and
+    velocity ``limits`` the converter will use), compile and write the MJCF
     (:func:`~mjx_arm.urdf.convert.mjcf_text`); report any failure.
 
     MuJoCo's own warnings (e.g. an OBJ's texture coordinates discarded) are dropped: they concern
@@ -177,7 +182,13 @@ def _load_mujoco(
     from mjx_arm.urdf.convert_config import ConvertConfig
     from mjx_arm.urdf.mjcf import build_checked_spec, mjcf_text
 
-    config = ConvertConfig(package_dirs=dict(package_dirs), repair_inertia=repair)
+    limits = limits or {}
+    config = ConvertConfig(
+        package_dirs=dict(package_dirs),
+        repair_inertia=repair,
+        default_effort=limits.get("effort", 0.0),
+        default_velocity=limits.get("velocity", 0.0),
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         try:

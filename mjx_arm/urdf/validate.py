@@ -71,7 +71,7 @@ def validate(
         _guarded(out, 2, lambda: _check_geometry(tree, engines, dirs, out))
         _guarded(out, 3, lambda: _check_inertials(tree, engines, repair_inertia, out))
         if native and not out.has_errors:
-            _native(tree, engines, dirs, repair_inertia, out)
+            _native(tree, engines, dirs, repair_inertia, out, default_limits or {})
     return ValidationReport(str(path), engine, tuple(out.items))
 
 
@@ -82,10 +82,15 @@ def _layer1(path: Path, out: _Findings) -> _Tree | None:
 
 
 def _native(
-    tree: _Tree, engines: tuple[str, ...], dirs: Mapping[str, str], repair: bool, out: _Findings
+    tree: _Tree,
+    engines: tuple[str, ...],
+    dirs: Mapping[str, str],
+    repair: bool,
+    out: _Findings,
+    limits: Mapping[str, float],
 ) -> None:
     if "mujoco" in engines:
-        _guarded(out, 3, lambda: _load_mujoco(tree, dirs, repair, out))
+        _guarded(out, 3, lambda: _load_mujoco(tree, dirs, repair, out, limits))
     if "pybullet" in engines:
         _guarded(out, 3, lambda: _load_pybullet(tree, dirs, out))
 
