@@ -237,13 +237,25 @@ class ToolDownSolver:
         return np.where(inside, shifted, q)
 
     def collides(self, q: np.ndarray) -> bool:
-        """Whether the arm at ``q (n,)`` penetrates itself or the table by over 1 mm."""
+        """Whether the arm at ``q (n,)`` penetrates itself or the table by over 1 mm.
+
+        Contacts between two static bodies, between a body and its parent, or between the
+        first moving link and anything static do not count: a base welded to the world becomes
+        part of it (MuJoCo does not filter a link against the world body), and the first link
+        overlaps the base by design in some URDFs.
+        """
         model, data = self.ik.model, self.ik.data
         data.qpos[self.ik.qadr] = q
         mujoco.mj_fwdPosition(model, data)
+        parent = model.body_parentid
         for contact in data.contact[: data.ncon]:
-            bodies = model.geom_bodyid[contact.geom]
-            if contact.dist < -PENETRATION and not self._static[bodies].all():
+            one, two = model.geom_bodyid[contact.geom]
+            if contact.dist >= -PENETRATION or (self._static[one] and self._static[two]):
+                continue
+            first = (self._static[one] and self._static[parent[two]]) or (
+                self._static[two] and self._static[parent[one]]
+            )
+            if not first and parent[one] != two and parent[two] != one:
                 return True
         return False
 

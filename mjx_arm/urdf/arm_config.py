@@ -4,13 +4,16 @@ Every field may be left empty; :func:`resolve_arm` fills it from the URDF:
 
 - ``ee_link``: a link named ``ee_link`` if there is one, else the tip of the longest chain of
   arm joints (revolute or continuous); a leaf reached through a prismatic joint is a finger,
-  not a tip.
+  not a tip; a hand's TCP frame, or the link a single jaw hangs from (:func:`jaw_joint`).
 - ``joints``: the revolute and continuous joints from the base down to ``ee_link``. Gripper
-  joints (prismatic fingers, and anything off the chain) are left out.
-- ``home_qpos``: the middle of each joint's limits (a full-turn joint: 0). The shipped arm's
-  home is its tool-down pose.
+  joints (prismatic fingers, a jaw, and anything off the chain) are left out.
+- ``home_qpos``: here, the middle of each joint's limits (a full-turn joint: 0; the shipped
+  arms: their tool-down pose). The home a task starts from is derived per task from the model
+  (:mod:`mjx_arm.envs.setup`) unless the config names one.
 - ``ft_joint``: a fixed joint named ``ft_sensor_joint`` if there is one; else the wrist
   force/torque reading is taken where the last arm joint meets its child link.
+
+``ee_offset`` and ``kv_factor`` are derived from the arm's model (:mod:`mjx_arm.envs.arm`).
 
 An arm file is TOML or JSON with the same fields; a relative ``urdf`` path is read from the
 file's folder, and ``package://NAME/...`` from the ROS package NAME (found through the
