@@ -260,6 +260,9 @@ def test_verdicts_of_published_arms() -> None:
     assert not task_verdict(ur10, task_config("lift"))[0]  # no gripper
     panda = arm_info(ArmConfig(urdf=str(PANDA)))
     assert all(task_verdict(panda, task_config(name))[0] for name in ("reach", "touch", "lift"))
+    # its link 1 overlaps the base (merged into the world body) by design: not a collision
+    spheres = arm_info(ArmConfig(urdf=str(PANDA.with_name("panda_collision.urdf"))))
+    assert task_verdict(spheres, task_config("touch"))[0]
 
 
 @published
