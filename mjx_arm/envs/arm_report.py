@@ -3,6 +3,7 @@ each task, and a picture of its home pose over the task area."""
 
 from __future__ import annotations
 
+import io
 import json
 from pathlib import Path
 
@@ -10,6 +11,7 @@ import numpy as np
 
 from mjx_arm.envs.arm import ArmInfo, tool_down_solver
 from mjx_arm.envs.setup import ArmSetup, arm_setup, gripper_problem, task_verdict
+from mjx_arm.inputs import write_atomic
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.urdf.scene_shapes import table_top_extent
 
@@ -119,8 +121,10 @@ def draw_check(arm: ArmInfo, tasks: list[TaskConfig], path: Path) -> None:
         ax.set_aspect("equal")
         ax.legend(loc="upper left", fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    image = io.BytesIO()
+    fig.savefig(image, format="png", dpi=110)
     plt.close(fig)
+    write_atomic(image.getvalue(), Path(path))  # its folder is made where missing
 
 
 def _draw_targets(top, side, arm: ArmInfo, task: TaskConfig, colour: str) -> None:
