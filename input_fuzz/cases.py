@@ -224,7 +224,18 @@ CASES: dict[str, Callable[[], st.SearchStrategy[Case]]] = {
     "convert": lambda: _case(
         "convert", ["convert"], [infile("urdf"), st.just("-o"), outfile(".xml")], _convert()
     ),
-    "arm": lambda: _case("arm", ["arm"], [ARMS], {"--ee-link": LINKS, "-o": outfile(".toml")}, 2),
+    "arm": lambda: _case(
+        "arm",
+        ["arm"],
+        [ARMS],
+        {
+            "--ee-link": LINKS,
+            "-o": outfile(".toml"),
+            "--check": None,
+            "--picture": outfile(".png", ".jpg"),
+        },
+        2,
+    ),
     "train": _train_case,
     "export": lambda: _case(
         "export",
