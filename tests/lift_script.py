@@ -7,10 +7,10 @@ import mujoco
 import numpy as np
 
 from mjx_arm.envs.model_io import arm_model
+from mjx_arm.task.observation import decode_joints
 
 GAIN = 4.0  # 1/s: Cartesian speed per metre (and rad/s per rad) of error
 SPEED = 0.15  # m/s at most
-TOOL_DOWN = np.array([0.0, -0.7071067811865476, 0.7071067811865476, 0.0])  # ee (w, x, y, z)
 
 
 class ScriptedLift:
@@ -24,6 +24,14 @@ class ScriptedLift:
         self.dofs = [self.model.joint(n).dofadr[0] for n in self.arm.joint_names]
         self.site = self.model.site("ee").id
         self.phase, self.count, self.cube0 = "above", 0, None
+        self.coding = self.arm.joint_coding(self.task)
+        self.tool_down = self._home_quat()  # the home pose holds the tool down
+
+    def _home_quat(self) -> np.ndarray:
+        """The ee orientation (w, x, y, z) at the task's home pose."""
+        self.data.qpos[self.adr] = self.task.home_qpos
+        mujoco.mj_kinematics(self.model, self.data)
+        return self.data.xquat[self.model.site_bodyid[self.site]].copy()
 
     def _qdot(self, qpos: np.ndarray, ee: np.ndarray, goal: np.ndarray, quat) -> np.ndarray:
         self.data.qpos[self.adr] = qpos
@@ -35,7 +43,7 @@ class ScriptedLift:
         v = GAIN * (goal - ee)
         v *= min(1.0, SPEED / max(np.linalg.norm(v), 1e-9))
         error = np.zeros(3)  # rotation from the ee's orientation to tool-down (ee frame)
-        mujoco.mju_subQuat(error, TOOL_DOWN, np.asarray(quat, float))
+        mujoco.mju_subQuat(error, self.tool_down, np.asarray(quat, float))
         world = np.zeros(3)
         mujoco.mju_rotVecQuat(world, error, np.asarray(quat, float))
         twist = np.concatenate([v, GAIN * world])
@@ -59,8 +67,9 @@ class ScriptedLift:
                 self.phase = "lift"
         if self.phase == "lift":
             goal, grip = np.add(self.cube0, [0.0, 0.0, 0.17]), 1.0
-        qdot = self._qdot(obs["joint_angles"].astype(float), ee, goal, obs["ee_pose"][3:])
-        arm = qdot / (self.task.action_scale * self.arm.v_max)
+        q = decode_joints(obs["joint_angles"].astype(float), self.coding)
+        qdot = self._qdot(q, ee, goal, obs["ee_pose"][3:])
+        arm = qdot / self.task.joint_speeds(self.arm.v_max)
         return np.clip(np.append(arm, grip), -1.0, 1.0).astype(np.float32)
 
 

@@ -197,13 +197,14 @@ class MjxPhysics:
         return self._place_object(data, target_body, obj)
 
     def _place_object(self, data: Any, pos: jax.Array, obj: Any) -> Any:
-        """A gripper task's cube at ``pos (3,)`` with ``obj``'s orientation, at rest."""
+        """A gripper task's cube at ``pos (3,)`` with ``obj``'s orientation, at rest, and the
+        fingers open."""
         if self.grip is None or obj is None:
             return data
         quat = obj.quat
         start, dof = self.grip.cube_qpos, self.grip.cube_dof
         qpos = data.qpos.at[start : start + 3].set(pos).at[start + 3 : start + 7].set(quat)
-        return data.replace(qpos=qpos, qvel=data.qvel.at[dof : dof + 6].set(0.0))
+        return data.replace(qpos=self.grip.open(qpos), qvel=data.qvel.at[dof : dof + 6].set(0.0))
 
     def step(
         self, data: Any, ctrl: jax.Array, dynamics: Dynamics | None = None, object_params=None

@@ -36,14 +36,8 @@ def task_convert_config(task: TaskConfig, arm: ArmInfo | None = None) -> Convert
 
 
 def arm_model(arm: ArmInfo, task: TaskConfig) -> mujoco.MjModel:
-    """The task's MuJoCo model: ``arm`` converted from its URDF with the task scene; a gripper
-    task's fingers start open (``qpos0``, where a reset puts them)."""
-    model = load_model(arm.urdf, task_convert_config(task, arm))
-    if task.spec.gripper and arm.gripper is not None:
-        for link in arm.gripper.pad_links:  # the driven finger and its mimics (multiplier 1)
-            joint = model.joint(int(model.body(link).jntadr[0]))
-            model.qpos0[joint.qposadr[0]] = arm.gripper.open_q
-    return model
+    """The task's MuJoCo model: ``arm`` converted from its URDF with the task scene."""
+    return load_model(arm.urdf, task_convert_config(task, arm))
 
 
 # The model's sensor of each entry of the wrench sensor block (``SENSOR_BLOCK`` order).
@@ -126,6 +120,7 @@ class GripReader:
 
     Attributes:
         finger_qpos: qpos address of the driven finger; finger_act: its actuator id.
+        fingers_qpos: qpos addresses of every finger (the driven one and its mimics).
         lower, stroke: the finger's lower limit and travel (m).
         gripper: the arm's :class:`~mjx_arm.envs.arm.Gripper` (open and closed positions).
         cube_qpos: qpos address of the cube's free joint (position, then quaternion).
@@ -144,6 +139,11 @@ class GripReader:
         self.finger_act = int(model.actuator(gripper.joint).id)
         self.lower, self.stroke = float(joint.range[0]), gripper.stroke
         self.gripper = gripper
+        # every finger's qpos (the driven one and its mimics, multiplier 1): where opening puts
+        # them (a reset's qpos0 has them at the URDF's 0, closed on some grippers)
+        self.fingers_qpos = np.array(
+            [int(model.jnt_qposadr[model.body(link).jntadr[0]]) for link in gripper.pad_links]
+        )
         cube = model.joint(CUBE_BODY)
         self.cube_qpos, self.cube_dof = int(cube.qposadr[0]), int(cube.dofadr[0])
         self.pad_index = np.array(
@@ -197,6 +197,14 @@ class GripReader:
         closure = self.gripper.closure(qpos[self.finger_qpos : self.finger_qpos + 1])
         cube = qpos[self.cube_qpos : self.cube_qpos + 7]
         return xp.concatenate([closure, cube, sensordata[self.pad_index]])
+
+    def open(self, qpos):
+        """``qpos`` with the fingers open: a numpy array in place (returned), or a JAX array's
+        updated copy."""
+        if isinstance(qpos, np.ndarray):
+            qpos[self.fingers_qpos] = self.gripper.open_q
+            return qpos
+        return qpos.at[self.fingers_qpos].set(self.gripper.open_q)
 
     def place(self, qpos, pos, quat) -> None:
         """Write the cube's pose into a numpy ``qpos`` (in place)."""

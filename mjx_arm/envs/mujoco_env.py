@@ -64,8 +64,9 @@ class MujocoArmEnv(BaseRobotEnv):
         mujoco.mj_resetData(self.model, self.data)
         self.data.qpos[self.ids.qpos_adr] = qpos
         self.data.mocap_pos[self._mocap] = target_body_pos
-        if self.grip is not None:  # the cube at the target (its marker is not drawn)
+        if self.grip is not None:  # the cube at the target (its marker is not drawn), open
             self.grip.place(self.data.qpos, target_body_pos, obj.quat)
+            self.grip.open(self.data.qpos)
             self.grip.dress(self.model, float(obj.mass), float(obj.friction))
         mujoco.mj_forward(self.model, self.data)
         mujoco.mj_rnePostConstraint(self.model, self.data)

@@ -201,24 +201,40 @@ def pad_sensor(link: str) -> str:
 
 def _add_pad_sensors(spec: mujoco.MjSpec, config: ConvertConfig, path: Path) -> None:
     """A touch sensor on each of ``config.pad_links``: a box site :data:`PAD_MARGIN` larger
-    than the link's collision box, so every contact on the pad counts (MuJoCo's touch sensor
-    sums the normal forces of the body's contacts inside its site)."""
+    than the link's collision boxes (one box around them all, in the link's frame), so every
+    contact on the pad counts (MuJoCo's touch sensor sums the normal forces of the body's
+    contacts inside its site)."""
     for link in config.pad_links:
         body = spec.body(link)
         geoms = body.geoms if body is not None else []
         boxes = [g for g in geoms if g.type == mujoco.mjtGeom.mjGEOM_BOX and g.contype]
         if not boxes:
             raise ConversionError(f"{path}: pad link {link!r} needs a collision box")
+        low, high = _boxes_extent(boxes)
         site = body.add_site()
         site.name = f"{link}_pad"
         site.type = mujoco.mjtGeom.mjGEOM_BOX
-        site.pos, site.quat = list(boxes[0].pos), list(boxes[0].quat)
-        site.size = [s + PAD_MARGIN for s in boxes[0].size]
+        site.pos = list(0.5 * (low + high))
+        site.size = list(0.5 * (high - low) + PAD_MARGIN)
         site.group = 4
         sensor = spec.add_sensor()
         sensor.name = pad_sensor(link)
         sensor.type = mujoco.mjtSensor.mjSENS_TOUCH
         sensor.objtype, sensor.objname = mujoco.mjtObj.mjOBJ_SITE, site.name
+
+
+def _boxes_extent(boxes) -> tuple[np.ndarray, np.ndarray]:
+    """Corners ``(3,)`` low and high of the axis-aligned box (in the body's frame) around
+    spec box geoms, each placed by its ``pos`` and ``quat``."""
+    signs = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
+    corners = []
+    for box in boxes:
+        rot = np.zeros(9)
+        mujoco.mju_quat2Mat(rot, np.asarray(box.quat, float))
+        local = signs * np.asarray(box.size, float)
+        corners.append(np.asarray(box.pos, float) + local @ rot.reshape(3, 3).T)
+    points = np.concatenate(corners)
+    return points.min(axis=0), points.max(axis=0)
 
 
 def _subtree_com_in_body(spec: mujoco.MjSpec, body_name: str) -> list[float]:
