@@ -25,6 +25,7 @@ LIMIT_MARGIN = 0.10  # rad, or 5% of a narrower range: poses stay this far insid
 HOME_STARTS = 24  # seeded IK starts for a home pose
 HOME_CANDIDATES = 6  # distinct home poses kept, best-conditioned first
 PENETRATION = 1e-3  # m: a contact deeper than this is a collision
+TARGET_TILT = np.radians(15.0)  # a task target counts as reached tool-down within this tilt
 COLLISION_GROUP = 3  # the converter's group of collision shapes
 RAY_START = 0.5  # m: rays for the tool's surface start this far out along the tool axis
 # Converged: within 1 mm of the point, the tool within 1 degree of vertical.
@@ -326,11 +327,20 @@ class ToolDownSolver:
     def reach_from(
         self, home: np.ndarray, points: np.ndarray, tool_down: bool = True
     ) -> list[np.ndarray | None]:
-        """Poses at each of ``points (m, 3)`` (tool down, or any orientation), each solved
-        from ``home``; None where the IK does not converge inside the limits."""
+        """Poses at each of ``points (m, 3)``, each solved from ``home``; None where the IK
+        does not converge inside the limits.
+
+        ``tool_down``: the tool pointing down, within :data:`TARGET_TILT` (what a contact
+        task presses with): where the exact pose is out of the limits, the point alone is
+        solved from the nearest try and kept if the tool tilts no more than that.
+        """
         out = []
         for point in points:
             result = self.ik.solve(point, home, prefer=home, tool_down=tool_down)
+            if tool_down and not result.converged:
+                result = self.ik.solve(point, result.q, tool_down=False)
+                if result.tilt > TARGET_TILT:
+                    result = result._replace(converged=False)
             out.append(result.q if result.converged else None)
         return out
 

@@ -6,9 +6,10 @@ of it is derived here, for a task config and an arm:
 
 - **task area**: the task's target box (:meth:`TaskConfig.target_box`) scaled about the base
   by ``workspace_scale``. It starts at the arm's reach scale (its horizontal reach over the
-  shipped arm's) and shrinks in steps of 10% until every target of a 3 x 3 x 3 grid over the
-  box (as the task places it: Touch's box on the table, Lift's cube) is reachable with the tool
-  pointing down from the home pose, within the joint limits less a margin.
+  shipped arm's) and changes in steps of 10% (:data:`SCALE_STEPS`, smaller first) until every
+  target of a 3 x 3 x 3 grid over the box (as the task places it: Touch's box on the table,
+  Lift's cube) is reachable with the tool pointing down from the home pose, within the joint
+  limits less a margin.
 - **home pose**: the tool pointing down, :data:`HOME_HEIGHT` above the table (lower where no
   pose holds the tool down that high: :data:`HOME_HEIGHTS`) over the middle of the task area,
   found by tool-down inverse kinematics (:mod:`mjx_arm.envs.ik`) from seeded starts; among the
@@ -38,7 +39,9 @@ from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.urdf.scene_shapes import box_half_width, box_top_offset
 
-SCALE_STEPS = (1.0, 0.9, 0.8, 0.7, 0.6, 0.5)  # fractions of the reach scale tried
+# Fractions of the reach scale tried, nearest 1 first: smaller areas for arms that cannot hold
+# the tool down far out, larger ones for arms that cannot reach down near their base.
+SCALE_STEPS = (1.0, 0.9, 1.1, 0.8, 1.2, 0.7, 0.6, 0.5)
 HOME_HEIGHTS = (HOME_HEIGHT, 0.15, 0.10)  # m: the home heights tried, highest first
 EPISODE_TIME_FACTOR = 2.0  # an episode lasts at least this many times the slowest motion
 
@@ -184,10 +187,11 @@ def _finish(arm, task, solver, q_home, source, scale, reached, targets, poses) -
     needed = math.ceil(EPISODE_TIME_FACTOR * travel / task.ctrl_dt)
     steps = max(task.episode_steps, needed)
     notes = []
-    if scale < arm.reach_scale - 1e-9:
+    if abs(scale - arm.reach_scale) > 1e-9:
+        change = "shrunk" if scale < arm.reach_scale else "grown"
         notes.append(
-            f"task area shrunk to {scale / arm.reach_scale:.0%} of the reach scale: "
-            "targets farther out are not reachable with the tool down"
+            f"task area {change} to {scale / arm.reach_scale:.0%} of the reach scale: at the "
+            "reach scale some targets are not reachable from home"
         )
     height = float(solver.ik.pose(np.asarray(q_home, float))[0][2])
     if height < HOME_HEIGHT - 0.01:
