@@ -29,6 +29,7 @@ from mjx_arm.task import reward as reward_lib
 from mjx_arm.task import rules, sampling
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.grip import ObjectStart
+from mjx_arm.task.scalar_xp import SCALAR_XP
 from mjx_arm.task.touch import touch_config
 from mjx_arm.urdf.arm_config import ArmConfig
 
@@ -118,10 +119,12 @@ class BaseRobotEnv(gym.Env):
         self._speed_limits = reward_lib.speed_limits(self.arm.v_max, self.task)
         self._bounds = obs_lib.state_bounds(self.task.force_clip, n, self._extra, self._coding)
         self._force_slice = obs_lib.force_slice(n)
+        self._obs_slices = tuple(obs_lib.obs_slices(n, self._extra).items())
         self._reading: PhysicsReading | None = None
         self._last_obs: dict[str, np.ndarray] | None = None
-        # what the success rule and the motion terms remember within an episode
-        self._progress = reward_lib.start_progress(np)
+        # what the success rule and the motion terms remember within an episode (Python
+        # scalars: the rules score one env's step through SCALAR_XP)
+        self._progress = reward_lib.start_progress(SCALAR_XP)
         self._action = np.zeros(na, np.float32)
         self._action_bounds = (np.full(na, -1.0, np.float32), np.full(na, 1.0, np.float32))
         self._distance = 0.0
@@ -180,8 +183,8 @@ class BaseRobotEnv(gym.Env):
         self._physics_reset(qpos, body, obj)
         self._reading = reading = self._physics_read()
         _, state, d, force = self._measure(reading)
-        self._last_obs = obs = obs_lib.unflatten_obs(state.astype(np.float32), self._extra)
-        self._progress = reward_lib.start_progress(np)
+        self._last_obs = obs = self._observation(state)
+        self._progress = reward_lib.start_progress(SCALAR_XP)
         self._action = np.zeros(self.action_space.shape, np.float32)
         self._distance = d
         info = {"is_success": False, "distance": d, "contact_force_norm": force, "reward_terms": {}}
@@ -254,7 +257,7 @@ class BaseRobotEnv(gym.Env):
         ee_pos, ee_quat, qpos, _, target_pos, wrench, grip = reading
         extra = None
         if self._extra:
-            extra = self.task_spec.grip_observation(np, ee_pos, ee_quat, grip, self.task)
+            extra = self.task_spec.grip_observation(SCALAR_XP, ee_pos, ee_quat, grip, self.task)
         raw = obs_lib.raw_state(np, ee_pos, ee_quat, qpos, target_pos, wrench, extra, self._coding)
         state = obs_lib.clip_state(np, raw, self._bounds)
         d = float(reward_lib.target_distance(np, ee_pos, target_pos))
@@ -266,7 +269,7 @@ class BaseRobotEnv(gym.Env):
         if not self.task_spec.gripper:
             return None
         spec, r = self.task_spec, reading
-        values = spec.measures(np, r.ee_pos, r.ee_quat, r.grip, self.task)
+        values = spec.measures(SCALAR_XP, r.ee_pos, r.ee_quat, r.grip, self.task)
         return {key: float(value) for key, value in values.items()}
 
     def _evaluate(
@@ -301,29 +304,34 @@ class BaseRobotEnv(gym.Env):
             return None
         measures = self._measures(reading)
         score = rules.score_step(
-            np, task, self._progress, self._distance, change, d, force, qpos, qvel,
+            SCALAR_XP, task, self._progress, self._distance, change, d, force, qpos, qvel,
             self._band, diverged, measures,
         )  # fmt: skip
         self._progress, self._distance = score.progress, d
-        terms = {name: float(value) for name, value in score.terms.items()}
         info = {
             "is_success": bool(score.success),
             "distance": d,
             "contact_force_norm": force,
-            "reward_terms": terms,
+            "reward_terms": score.terms,  # Python floats: the rules ran on Python scalars
             "diverged": diverged,
             "nonfinite": diverged,  # the older name of ``diverged``
             "overforce": bool(score.over),
         }
         if measures is not None:
             info.update(measures)
-        obs = obs_lib.unflatten_obs(state.astype(np.float32), self._extra)
-        return obs, float(score.reward), bool(score.done), info
+        return self._observation(state), float(score.reward), bool(score.done), info
+
+    def _observation(self, state: np.ndarray) -> dict[str, np.ndarray]:
+        """The observation dict of a clipped flat ``state (16 + n + k,)``: views of one new
+        float32 array (the caller may keep it; the next step does not write into it)."""
+        flat = state.astype(np.float32)
+        return {key: flat[part] for key, part in self._obs_slices}
 
     def _runaway(self, qvel: np.ndarray) -> bool:
-        """Non-finite or runaway joint velocities ``qvel (n,)`` (NaN fails the finite test;
-        the speed test compares each joint with its divergence limit)."""
-        return not np.isfinite(qvel).all() or bool(reward_lib.runaway(np, qvel, self._speed_limits))
+        """Non-finite or runaway joint velocities ``qvel (n,)``: not every joint within its
+        divergence limit (:func:`mjx_arm.task.reward.runaway` and the finite test in one
+        comparison: NaN compares False)."""
+        return not (abs(qvel) <= self._speed_limits).all()
 
     def _show(self, frame: np.ndarray) -> None:
         """Draw a frame in a window (needs a display and matplotlib)."""

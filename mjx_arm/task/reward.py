@@ -48,9 +48,11 @@ _ONES6 = _ones(6)
 
 
 def _sum_last(x):
-    """Sum over the last axis, ``(..., n) -> (...)``, float (booleans count as 0/1)."""
+    """Sum over the last axis, ``(..., n) -> (...)``, float (booleans count as 0/1); one env's
+    sum (a numpy scalar) as a Python float."""
     n = x.shape[-1]
-    return x.dot(_ONES6 if n == 6 else _ones(n))
+    total = x.dot(_ONES6 if n == 6 else _ones(n))
+    return float(total) if isinstance(total, np.generic) else total
 
 
 def target_distance(xp: Any, ee_pos, target_pos):
@@ -127,7 +129,7 @@ def advance(xp: Any, progress: Progress, distance, force_norm, cfg: TaskConfig, 
     over = progress.over | over_now
     success = hold >= cfg.success_hold_steps
     if cfg.fail_on_overforce:
-        success = success & ~over
+        success = xp.logical_and(success, xp.logical_not(over))
     return Progress(hold, over), success, over_now
 
 

@@ -78,6 +78,17 @@ def score_step(
     terms = reward_lib.band_reward_terms(
         xp, distance, force_norm, qpos, qvel, band, success, diverged, cfg, motion, extra
     )
-    terms = {k: v if k == "nonfinite" else xp.where(sane, v, 0.0) for k, v in terms.items()}
+    terms = _masked(xp, sane, terms)
     done = reward_lib.ends_episode(success, xp.where(sane, force_norm, 0.0), diverged, cfg, xp)
     return StepScore(progress, success, over, terms, reward_lib.total_reward(terms, cfg), done)
+
+
+def _masked(xp: Any, sane, terms: dict[str, Any]) -> dict[str, Any]:
+    """``terms`` with every term but ``nonfinite`` zero where the step is not ``sane``.
+
+    One env's sane step (``sane`` the Python ``True``, :mod:`mjx_arm.task.scalar_xp`) keeps
+    its terms as they are, without a ``where`` per term.
+    """
+    if sane is True:
+        return terms
+    return {k: v if k == "nonfinite" else xp.where(sane, v, 0.0) for k, v in terms.items()}
