@@ -120,6 +120,11 @@ class BaseRobotEnv(gym.Env):
         self._bounds = obs_lib.state_bounds(self.task.force_clip, n, self._extra, self._coding)
         self._force_slice = obs_lib.force_slice(n)
         self._obs_slices = tuple(obs_lib.obs_slices(n, self._extra).items())
+        # the flat state of the last reading, before and after clipping (:meth:`_measure`)
+        self._raw = np.zeros(obs_lib.obs_size(n, self._extra))
+        self._state = np.zeros_like(self._raw)
+        # the joint encoding with its centres as an array (converted once, not at every step)
+        self._coding_np = self._coding._replace(centre=np.asarray(self._coding.centre))
         self._reading: PhysicsReading | None = None
         self._last_obs: dict[str, np.ndarray] | None = None
         # what the success rule and the motion terms remember within an episode (Python
@@ -198,7 +203,7 @@ class BaseRobotEnv(gym.Env):
         self._command(clipped)
         self._physics_step(self._n_substeps)
         reading = self._physics_read()
-        change = float(reward_lib.action_change(np, clipped, self._action))
+        change = float(reward_lib.action_change(SCALAR_XP, clipped, self._action))
         self._action = clipped
         result = self._evaluate(reading, change=change)
         if result is None:  # diverged: keep the last sane reading and observation, and stop
@@ -253,15 +258,26 @@ class BaseRobotEnv(gym.Env):
 
     def _measure(self, reading: PhysicsReading) -> tuple[np.ndarray, np.ndarray, float, float]:
         """The flat state before and after clipping (float64, ``(16 + n + k,)``), distance d (m)
-        and contact force norm (N) of a reading, each computed once."""
+        and contact force norm (N) of a reading, each computed once.
+
+        The two states are this env's buffers, rewritten by the next call: the values of
+        :func:`~mjx_arm.task.observation.raw_state` and
+        :func:`~mjx_arm.task.observation.clip_state` for one env, in fewer numpy calls.
+        """
         ee_pos, ee_quat, qpos, _, target_pos, wrench, grip = reading
-        extra = None
+        # canonical_quat of one quaternion: divided by its norm carrying the sign of w
+        norm = math.copysign(math.sqrt(ee_quat.dot(ee_quat)), ee_quat[0] + 0.0)
+        parts = [ee_pos, ee_quat / norm, obs_lib.encode_joints(np, qpos, self._coding_np)]
+        parts += [target_pos, wrench]
         if self._extra:
-            extra = self.task_spec.grip_observation(SCALAR_XP, ee_pos, ee_quat, grip, self.task)
-        raw = obs_lib.raw_state(np, ee_pos, ee_quat, qpos, target_pos, wrench, extra, self._coding)
-        state = obs_lib.clip_state(np, raw, self._bounds)
-        d = float(reward_lib.target_distance(np, ee_pos, target_pos))
-        force = float(reward_lib.contact_force_norm(np, state[self._force_slice]))
+            parts.append(
+                self.task_spec.grip_observation(SCALAR_XP, ee_pos, ee_quat, grip, self.task)
+            )
+        raw, state = self._raw, self._state
+        np.concatenate(parts, out=raw)
+        np.minimum(np.maximum(raw, self._bounds[0], out=state), self._bounds[1], out=state)
+        d = float(reward_lib.target_distance(SCALAR_XP, ee_pos, target_pos))
+        force = float(reward_lib.contact_force_norm(SCALAR_XP, state[self._force_slice]))
         return raw, state, d, force
 
     def _measures(self, reading: PhysicsReading) -> dict[str, float] | None:
