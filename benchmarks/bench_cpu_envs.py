@@ -194,12 +194,8 @@ class CaseBench:
         env = self.env
         client, body, dofs, joints = env.client, env.body, env.ids.dofs, env.ids.joints
         get_states, gravity = client.getJointStates, client.calculateInverseDynamics
-        motors, step, zeros = (
-            client.setJointMotorControlArray,
-            client.stepSimulation,
-            env._dof_zeros,
-        )
-        torque = pybullet.TORQUE_CONTROL
+        motors, step = client.setJointMotorControlArray, client.stepSimulation
+        zeros, torque = env._dof_zeros, pybullet.TORQUE_CONTROL
         for substeps in self.commands:
             for forces in substeps:
                 states = get_states(body, dofs)
@@ -249,11 +245,12 @@ class PusherBench:
         self.env.close()
 
 
-HOOKS = ("apply_action", "_physics_step", "_physics_read")
+HOOKS = ("_command", "_physics_step", "_physics_read")
 
 
 def step_breakdown(bench: CaseBench, episodes: int = 4) -> dict[str, float]:
-    """Microseconds per control step spent in each part of ``BaseRobotEnv.step``.
+    """Microseconds per control step spent in each part of ``BaseRobotEnv.step``: sending the
+    action (``_command``), stepping the physics, reading it, and the rest.
 
     Runs real episodes (same actions as the timed units) with the engine hooks wrapped in timers;
     ``rest`` = the whole step minus the hooks: observation, reward, success and info (the
