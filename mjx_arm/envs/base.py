@@ -15,6 +15,7 @@ clean physics state.
 from __future__ import annotations
 
 import math
+import operator
 from abc import abstractmethod
 from pathlib import Path
 from typing import Any, ClassVar, NamedTuple
@@ -22,7 +23,9 @@ from typing import Any, ClassVar, NamedTuple
 import gymnasium as gym
 import numpy as np
 
+from mjx_arm.envs import scalar_state
 from mjx_arm.envs.arm import ArmInfo, validated_arm_info
+from mjx_arm.envs.scalar_state import ScalarState
 from mjx_arm.envs.setup import arm_setup
 from mjx_arm.task import observation as obs_lib
 from mjx_arm.task import reward as reward_lib
@@ -116,15 +119,10 @@ class BaseRobotEnv(gym.Env):
         # bit-identical to (a * action_scale) * v_max for power-of-two scales
         self._qdot_scale = self.task.joint_speeds(self.arm.v_max)
         self._band = reward_lib.joint_band((self.arm.lower, self.arm.upper), self.task)
+        self._band_lists = reward_lib.JointBand(*(part.tolist() for part in self._band))
         self._speed_limits = reward_lib.speed_limits(self.arm.v_max, self.task)
-        self._bounds = obs_lib.state_bounds(self.task.force_clip, n, self._extra, self._coding)
-        self._force_slice = obs_lib.force_slice(n)
-        self._obs_slices = tuple(obs_lib.obs_slices(n, self._extra).items())
-        # the flat state of the last reading, before and after clipping (:meth:`_measure`)
-        self._raw = np.zeros(obs_lib.obs_size(n, self._extra))
-        self._state = np.zeros_like(self._raw)
-        # the joint encoding with its centres as an array (converted once, not at every step)
-        self._coding_np = self._coding._replace(centre=np.asarray(self._coding.centre))
+        self._speed_list = self._speed_limits.tolist()
+        self._flat = ScalarState(self.task.force_clip, self._coding, self._extra)
         self._reading: PhysicsReading | None = None
         self._last_obs: dict[str, np.ndarray] | None = None
         # what the success rule and the motion terms remember within an episode (Python
@@ -256,29 +254,18 @@ class BaseRobotEnv(gym.Env):
 
     # ------------------------------------------------------------------ helpers
 
-    def _measure(self, reading: PhysicsReading) -> tuple[np.ndarray, np.ndarray, float, float]:
-        """The flat state before and after clipping (float64, ``(16 + n + k,)``), distance d (m)
-        and contact force norm (N) of a reading, each computed once.
-
-        The two states are this env's buffers, rewritten by the next call: the values of
-        :func:`~mjx_arm.task.observation.raw_state` and
-        :func:`~mjx_arm.task.observation.clip_state` for one env, in fewer numpy calls.
-        """
+    def _measure(self, reading: PhysicsReading) -> tuple[list, list, float, float]:
+        """The flat state before and after clipping (``16 + n + k`` floats), distance d (m)
+        and contact force norm (N) of a reading, each computed once, in Python floats
+        (:mod:`mjx_arm.envs.scalar_state`)."""
         ee_pos, ee_quat, qpos, _, target_pos, wrench, grip = reading
-        # canonical_quat of one quaternion: divided by its norm carrying the sign of w
-        norm = math.copysign(math.sqrt(ee_quat.dot(ee_quat)), ee_quat[0] + 0.0)
-        parts = [ee_pos, ee_quat / norm, obs_lib.encode_joints(np, qpos, self._coding_np)]
-        parts += [target_pos, wrench]
+        extra = None
         if self._extra:
-            parts.append(
-                self.task_spec.grip_observation(SCALAR_XP, ee_pos, ee_quat, grip, self.task)
-            )
-        raw, state = self._raw, self._state
-        np.concatenate(parts, out=raw)
-        np.minimum(np.maximum(raw, self._bounds[0], out=state), self._bounds[1], out=state)
-        d = float(reward_lib.target_distance(SCALAR_XP, ee_pos, target_pos))
-        force = float(reward_lib.contact_force_norm(SCALAR_XP, state[self._force_slice]))
-        return raw, state, d, force
+            extra = self.task_spec.grip_observation(SCALAR_XP, ee_pos, ee_quat, grip, self.task)
+        flat = self._flat
+        raw = flat.raw(ee_pos, ee_quat, qpos, target_pos, wrench, extra)
+        state = flat.clip(raw)
+        return raw, state, scalar_state.distance(ee_pos, target_pos), flat.force_norm(state)
 
     def _measures(self, reading: PhysicsReading) -> dict[str, float] | None:
         """The task's measures of a reading (gripper tasks), else None."""
@@ -311,17 +298,15 @@ class BaseRobotEnv(gym.Env):
         """
         task = self.task
         raw, state, d, force = self._measure(reading)
-        # a sum of squares is finite exactly when every entry is, barring overflow (>1e154),
-        # which the exact test then rules out
-        if not (diverged or math.isfinite(raw.dot(raw)) or np.isfinite(raw).all()):
+        if not (diverged or scalar_state.finite(raw)):
             return None
-        qpos, qvel = reading.qpos, reading.qvel
+        qpos, qvel = reading.qpos.tolist(), reading.qvel.tolist()  # the rules take lists
         if not diverged and self._runaway(qvel):
             return None
         measures = self._measures(reading)
         score = rules.score_step(
             SCALAR_XP, task, self._progress, self._distance, change, d, force, qpos, qvel,
-            self._band, diverged, measures,
+            self._band_lists, diverged, measures,
         )  # fmt: skip
         self._progress, self._distance = score.progress, d
         info = {
@@ -337,17 +322,17 @@ class BaseRobotEnv(gym.Env):
             info.update(measures)
         return self._observation(state), float(score.reward), bool(score.done), info
 
-    def _observation(self, state: np.ndarray) -> dict[str, np.ndarray]:
-        """The observation dict of a clipped flat ``state (16 + n + k,)``: views of one new
-        float32 array (the caller may keep it; the next step does not write into it)."""
-        flat = state.astype(np.float32)
-        return {key: flat[part] for key, part in self._obs_slices}
+    def _observation(self, state: list[float]) -> dict[str, np.ndarray]:
+        """The observation dict of a clipped flat state: views of one new float32 array (the
+        caller may keep it; the next step does not write into it)."""
+        return self._flat.observation(state)
 
-    def _runaway(self, qvel: np.ndarray) -> bool:
-        """Non-finite or runaway joint velocities ``qvel (n,)``: not every joint within its
-        divergence limit (:func:`mjx_arm.task.reward.runaway` and the finite test in one
-        comparison: NaN compares False)."""
-        return not (abs(qvel) <= self._speed_limits).all()
+    def _runaway(self, qvel: list[float]) -> bool:
+        """Non-finite or runaway joint velocities ``qvel`` (n floats): not every joint within
+        its divergence limit (:func:`mjx_arm.task.reward.runaway` and the finite test in one
+        comparison, NaN compares False; on six floats Python's comparisons cost a third of
+        numpy's calls)."""
+        return not all(map(operator.le, map(abs, qvel), self._speed_list))
 
     def _show(self, frame: np.ndarray) -> None:
         """Draw a frame in a window (needs a display and matplotlib)."""

@@ -96,8 +96,8 @@ class MujocoArmEnv(BaseRobotEnv):
         return PhysicsReading(  # fields in order: ee_pos, ee_quat, qpos, qvel, target_pos, wrench
             s[_EE_POS],
             s[_EE_QUAT],
-            self._qpos[self._qpos_adr],
-            self._qvel[self._dof_adr],
+            self._qpos.take(self._qpos_adr),
+            self._qvel.take(self._dof_adr),
             target,
             wrench,
             grip,

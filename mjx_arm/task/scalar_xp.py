@@ -7,8 +7,10 @@ floats, 0.2 us for ``np.exp`` against 0.06 us for ``math.exp``) was most of a st
 
 :data:`SCALAR_XP` has numpy's names. A function whose arguments are all scalars (Python's
 ``float``, ``int`` and ``bool``, and numpy's ``float64``, a ``float``) answers with plain
-Python (operators, :mod:`math`) and returns Python scalars; any other argument (arrays, other
-numpy scalars) goes to numpy unchanged, as does every name not defined here. The values are
+Python (operators, :mod:`math`) and returns Python scalars; the elementwise functions the
+rules apply to joint vectors (``abs``, ``subtract``, ``greater``, ``matmul``) also take one
+env's vector as a Python list and answer with lists (or a float). Any other argument (arrays,
+other numpy scalars) goes to numpy unchanged, as does every name not defined here. The values are
 numpy's: IEEE arithmetic in the same order (``math.sqrt`` is exact as ``np.sqrt`` is;
 ``math.exp`` matched ``np.exp`` bit for bit on float64 in the tests, and is within an ulp of it
 wherever numpy takes its own SIMD ``exp``); NaN propagates as in numpy, and an overflowing
@@ -19,6 +21,7 @@ wherever numpy takes its own SIMD ``exp``); NaN propagates as in numpy, and an o
 from __future__ import annotations
 
 import math
+import operator
 from typing import Any
 
 import numpy as np
@@ -96,6 +99,34 @@ class ScalarNamespace:
         if a.ndim == 1 and b.ndim == 1 and a.dtype == b.dtype:
             return a.dot(b)
         return np.vecdot(a, b)
+
+    @staticmethod
+    def abs(x):
+        """``|x|``; a list entry by entry."""
+        return list(map(abs, x)) if isinstance(x, list) else abs(x)
+
+    @staticmethod
+    def subtract(a, b):
+        """``a - b``; a list entry by entry."""
+        if isinstance(a, list):
+            return list(map(operator.sub, a, b))
+        return np.subtract(a, b)
+
+    @staticmethod
+    def greater(a, b):
+        """``a > b``; a list entry by entry."""
+        if isinstance(a, list):
+            return list(map(operator.gt, a, b))
+        return np.greater(a, b)
+
+    @staticmethod
+    def matmul(a, b):
+        """``a @ b``; a list ``a`` with a vector ``b``: their inner product as a float, summed
+        left to right (as numpy's dot sums a short vector)."""
+        if isinstance(a, list):
+            b = b.tolist() if isinstance(b, np.ndarray) else b
+            return float(sum(map(operator.mul, a, b)))
+        return np.matmul(a, b)
 
     @staticmethod
     def zeros(shape=(), dtype=float):
