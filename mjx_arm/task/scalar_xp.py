@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 _SCALAR = (float, int)  # Python's float, int, bool; numpy's float64 (a float subclass)
+_ZERO_D = (float, int, np.generic)  # every scalar, numpy's included
 
 
 class ScalarNamespace:
@@ -146,7 +147,7 @@ class ScalarNamespace:
     def stack(arrays, axis=0):
         """``np.stack``; scalars into a 1-D array with one ``np.array`` call (``np.stack``
         costs several microseconds on four scalars)."""
-        if axis in (0, -1) and all(np.ndim(a) == 0 for a in arrays):
+        if axis in (0, -1) and all(isinstance(a, _ZERO_D) for a in arrays):
             return np.array(arrays)
         return np.stack(arrays, axis=axis)
 
