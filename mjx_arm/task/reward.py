@@ -1,10 +1,11 @@
 """Reward terms, success and termination, written once against an array namespace ``xp``.
 
 Every function works on one env (scalars and ``(6,)`` vectors) and on batches (a leading shape
-``(...)``), in ``numpy`` and under ``jax.numpy`` / ``jax.jit``. Norms are ``sqrt(vecdot)``, sums
-over the joints are dot products with ones and 0/1 flags are ``flag * 1.0``: the values of
-``linalg.norm``, ``sum`` and ``where(flag, 1.0, 0.0)`` at a fraction of numpy's per-call cost on
-tiny arrays (a single env steps in tens of microseconds), and plain XLA ops under ``jit``.
+``(...)``), in ``numpy``, under ``jax.numpy`` / ``jax.jit`` and, for one env on the CPU, in
+:data:`~mjx_arm.task.scalar_xp.SCALAR_XP` (Python floats, bools and lists of them). Norms are
+``sqrt(vecdot)``, sums over the joints are matrix products with ones and 0/1 flags are
+``flag * 1.0``: the values of ``linalg.norm``, ``sum`` and ``where(flag, 1.0, 0.0)``, plain XLA
+ops under ``jit``, and a few operations of Python floats for one env.
 """
 
 from __future__ import annotations
@@ -250,8 +251,8 @@ def band_reward_terms(
         xp: ``numpy`` or ``jax.numpy``.
         distance: d (m), shape ``(...)``.
         force_norm: tared contact force norm (N), shape ``(...)``.
-        qpos: joint angles (rad), shape ``(..., 6)``.
-        qvel: joint velocities (rad/s), shape ``(..., 6)``.
+        qpos: joint angles (rad), shape ``(..., 6)`` (lists with ``SCALAR_XP``).
+        qvel: joint velocities (rad/s), shape ``(..., 6)`` (lists with ``SCALAR_XP``).
         band: :func:`joint_band` of the joint limits.
         success: success flag (bool), shape ``(...)``.
         nonfinite: flag (bool) of a non-finite physics state, shape ``(...)``.
