@@ -74,6 +74,9 @@ class ScalarNamespace:
 
     def clip(self, x, low, high):
         """``minimum(maximum(x, low), high)`` (``np.clip``'s values)."""
+        if isinstance(x, _SCALAR) and isinstance(low, _SCALAR) and isinstance(high, _SCALAR):
+            x = x if (x >= low or x != x) else low
+            return x if (x <= high or x != x) else high
         return self.minimum(self.maximum(x, low), high)
 
     @staticmethod
