@@ -1,24 +1,37 @@
-"""Single-env speed of the CPU envs beside the raw physics rate of the same model.
+"""Single-env speed of the CPU envs beside the raw physics of the same model, Gymnasium's own
+``Pusher-v5`` beside its raw physics, and ``gymnasium.make_vec`` sync against async.
 
-For each engine (MuJoCo, PyBullet) on the Touch task this measures, side by side and repeated:
+For each case (Reach, Touch and Lift on CPU MuJoCo; Touch on PyBullet) this measures, side by
+side and repeated (every repeat times every unit once, so a busy phase of the machine hits all
+of them alike):
 
-* ``env``: control steps/s of the env itself (``env.unwrapped.step``), one 150-step episode per
-  repeat, reset untimed;
+* ``env``: control steps/s of the env itself (``env.unwrapped.step``), one 150-step episode of
+  seeded random actions per repeat, reset untimed;
 * ``gym.make``: the same through ``gymnasium.make``'s wrappers (TimeLimit, order enforcing,
   passive checker);
-* ``raw``: physics steps/s of the same model on the same trajectory (same reset, same actions):
-  ``mujoco.mj_step(model, data, nstep=8)`` per control step, or 8 ``stepSimulation()`` calls after
-  one ``setJointMotorControlArray``. ``env x substeps / raw`` is the share of time spent in
-  physics; the rest is Python overhead;
+* ``raw``: the physics alone on the same trajectory (same reset, same commands). MuJoCo: the
+  env's ``ctrl`` of each action (recorded through ``apply_action``), then
+  ``mujoco.mj_step(model, data, nstep=substeps)``. PyBullet: the same Bullet calls per substep
+  as the env's servo (``getJointStates``, ``calculateInverseDynamics``,
+  ``setJointMotorControlArray`` with the torques the env applied, recorded, and
+  ``stepSimulation``), without the servo law's Python or any read-out. ``ratio`` = env
+  steps/s / raw control steps/s, the median of the per-repeat ratios: the share of an env step
+  spent in physics;
 * where each env's time goes: apply_action, ``_physics_step``, ``_physics_read`` and the
   engine-neutral rest (observation, reward, success, info), in microseconds per control step;
-* reset time, and the resident memory of one env (RSS after building it, resetting it and
-  running an episode, minus RSS after the imports), each engine in a fresh subprocess.
+* reset time, and for Touch the resident memory of one env (fresh subprocesses).
 
-Goals: MuJoCo env steps/s x substeps >= 0.7 x raw mj_step/s; PyBullet env >= 2000 steps/s.
+Beside them: Gymnasium's ``Pusher-v5`` (its own MuJoCo env) against ``mj_step`` of its model
+with its frame skip, and ``gymnasium.make_vec(id, num_envs=2, vectorization_mode="sync" |
+"async")`` per case, in env steps/s.
+
+Goals: env / raw >= 0.6 (Reach, Touch on MuJoCo; Touch on PyBullet), >= 0.5 (Lift); async
+with 2 workers >= 1.6 x sync.
 
 Run from the repository root: ``python -m benchmarks.bench_cpu_envs`` (``--repeats``,
-``--quick`` for a smoke run). Results: ``benchmarks/results/cpu_envs.{json,md}``.
+``--quick`` for a smoke run, ``--label`` to name the code measured). Results:
+``benchmarks/results/cpu_envs.{json,md}``; the JSON keeps the summaries of the earlier runs
+under ``history``.
 """
 
 from __future__ import annotations
@@ -29,7 +42,6 @@ import statistics
 import subprocess
 import sys
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -38,6 +50,7 @@ import numpy as np
 
 try:
     from benchmarks.common import (
+        RESULTS_DIR,
         environment_metadata,
         markdown_table,
         rss_mb,
@@ -47,6 +60,7 @@ try:
     )
 except ImportError:  # run as a file: benchmarks/ is on sys.path, the repository root is not
     from common import (  # type: ignore[no-redef]
+        RESULTS_DIR,
         environment_metadata,
         markdown_table,
         rss_mb,
@@ -57,44 +71,62 @@ except ImportError:  # run as a file: benchmarks/ is on sys.path, the repository
 
 import mjx_arm  # noqa: F401  (registers the ids)
 
-ENV_ID = "mjx_arm/Touch-v0"
-ENGINES = ("mujoco", "pybullet")
-EPISODE = 150  # control steps per timed unit: one full episode
-MUJOCO_MIN_RATIO = 0.7  # env steps/s x substeps >= 0.7 x raw mj_step/s
-PYBULLET_MIN_RATE = 2000.0  # env steps/s
+# (task, engine) and the least env / raw ratio it should reach
+GOALS = {
+    ("reach", "mujoco"): 0.6,
+    ("touch", "mujoco"): 0.6,
+    ("lift", "mujoco"): 0.5,
+    ("touch", "pybullet"): 0.6,
+}
+ASYNC_GOAL = 1.6  # make_vec async / sync, 2 workers
+VEC_ENVS = 2
+VEC_STEPS = 200  # vector steps per timed unit
+EPISODE = 150  # control steps per timed unit: one episode
 RSS_REPEATS = 3
 NAME = "cpu_envs"
+PUSHER = "Pusher-v5"
+
+
+def case_name(task: str, engine: str) -> str:
+    """``"touch/mujoco"``."""
+    return f"{task}/{engine}"
+
+
+def env_id(task: str) -> str:
+    """The Gymnasium id of a task, ``mjx_arm/Touch-v0``."""
+    return f"mjx_arm/{task.capitalize()}-v0"
+
+
+def episode_actions(seed: int, size: int, n: int = EPISODE) -> np.ndarray:
+    """Random actions of one episode, uniform in [-1, 1], float32 ``(n, size)``."""
+    return np.random.default_rng(seed).uniform(-1.0, 1.0, (n, size)).astype(np.float32)
 
 
 # --------------------------------------------------------------------------- workloads
 
 
-def episode_actions(seed: int, n: int = EPISODE) -> np.ndarray:
-    """Random actions of one episode, uniform in [-1, 1], float32 ``(n, 6)``."""
-    return np.random.default_rng(seed).uniform(-1.0, 1.0, (n, 6)).astype(np.float32)
-
-
-class EngineBench:
-    """The timed units of one engine: env episode, wrapped episode, raw physics episode.
+class CaseBench:
+    """The timed units of one case: env episode, wrapped episode, raw physics episode.
 
     Every unit replays the same actions from the same seeded reset, so env and raw physics
     simulate the same trajectory.
 
     Args:
+        task: "reach", "touch" or "lift".
         engine: "mujoco" or "pybullet".
         seed: seed of the resets and actions.
     """
 
-    def __init__(self, engine: str, seed: int = 0) -> None:
-        self.engine = engine
-        self.seed = seed
-        self.wrapped = gym.make(ENV_ID, engine=engine)
+    def __init__(self, task: str, engine: str, seed: int = 0) -> None:
+        self.task, self.engine, self.seed = task, engine, seed
+        self.wrapped = gym.make(env_id(task), engine=engine)
         self.env = self.wrapped.unwrapped
-        self.actions = episode_actions(seed)
+        self.actions = episode_actions(seed, self.env.action_space.shape[0])
         self.substeps = self.env.task.n_substeps
-        qdot = self.actions.astype(np.float64) * self.env.task.action_scale * self.env.arm.v_max
-        self.qdot = qdot
-        self.raw_episode = self._raw_mujoco if engine == "mujoco" else self._raw_pybullet
+        if engine == "mujoco":
+            self.commands, self.raw_episode = self._mujoco_ctrl(), self._raw_mujoco
+        else:
+            self.commands, self.raw_episode = self._bullet_torques(), self._raw_pybullet
 
     def reset(self) -> None:
         """Seeded reset of the env (untimed setup of every unit)."""
@@ -116,40 +148,109 @@ class EngineBench:
         for action in self.actions:
             step(action)
 
+    def _mujoco_ctrl(self) -> np.ndarray:
+        """The ``ctrl`` the env writes for each action, ``(EPISODE, nu)``."""
+        self.reset()
+        rows = []
+        for action in self.actions:
+            self.env.apply_action(action)
+            rows.append(self.env.data.ctrl.copy())
+        return np.array(rows)
+
     def _raw_mujoco(self) -> None:
         import mujoco
 
-        model, data, actuators = self.env.model, self.env.data, self.env.ids.actuators
-        for qdot in self.qdot:
-            data.ctrl[actuators] = qdot
-            mujoco.mj_step(model, data, nstep=self.substeps)
+        model, data, nstep = self.env.model, self.env.data, self.substeps
+        ctrl = data.ctrl
+        for row in self.commands:
+            ctrl[:] = row
+            mujoco.mj_step(model, data, nstep=nstep)
+
+    def _bullet_torques(self) -> list[list[list[float]]]:
+        """The joint torques the env applies at each substep of one episode (recorded)."""
+        env, torques = self.env, []
+        calls = env._calls
+
+        def record(body: int, joints: Any, mode: int, forces: list[float]) -> None:
+            torques.append(list(forces))
+            calls.set_motors(body, joints, mode, forces=forces)
+
+        env._calls = calls._replace(set_motors=record)
+        try:
+            self.env_episode_from_reset()
+        finally:
+            env._calls = calls
+        n = self.substeps
+        return [torques[i : i + n] for i in range(0, len(torques), n)]
+
+    def env_episode_from_reset(self) -> None:
+        """A seeded reset, then one env episode."""
+        self.reset()
+        self.env_episode()
 
     def _raw_pybullet(self) -> None:
         import pybullet
 
-        client, body, joints = self.env.client, self.env.body, list(self.env.ids.joints)
-        forces = [float(e) for e in self.env.arm.effort]
-        for qdot in self.qdot:
-            client.setJointMotorControlArray(
-                body,
-                joints,
-                pybullet.VELOCITY_CONTROL,
-                targetVelocities=qdot.tolist(),
-                forces=forces,
-            )
-            for _ in range(self.substeps):
-                client.stepSimulation()
+        env = self.env
+        client, body, dofs, joints = env.client, env.body, env.ids.dofs, env.ids.joints
+        get_states, gravity = client.getJointStates, client.calculateInverseDynamics
+        motors, step = client.setJointMotorControlArray, client.stepSimulation
+        zeros, torque = env._dof_zeros, pybullet.TORQUE_CONTROL
+        for substeps in self.commands:
+            for forces in substeps:
+                states = get_states(body, dofs)
+                gravity(body, [s[0] for s in states], zeros, zeros)
+                motors(body, joints, torque, forces=forces)
+                step()
 
     def close(self) -> None:
         """Close the env."""
         self.wrapped.close()
 
 
-HOOKS = ("apply_action", "_physics_step", "_physics_read")
+class PusherBench:
+    """Gymnasium's ``Pusher-v5`` and ``mj_step`` of its model with its frame skip, on the same
+    seeded actions (its ``do_simulation`` also runs ``mj_rnePostConstraint``: part of the
+    env here)."""
+
+    def __init__(self, seed: int = 0) -> None:
+        self.seed = seed
+        self.env = gym.make(PUSHER).unwrapped
+        low, high = self.env.action_space.low, self.env.action_space.high
+        rng = np.random.default_rng(seed)
+        self.actions = rng.uniform(low, high, (EPISODE, len(low))).astype(np.float32)
+
+    def reset(self) -> None:
+        """Seeded reset."""
+        self.env.reset(seed=self.seed)
+
+    def env_episode(self) -> None:
+        """One episode of ``env.unwrapped.step``."""
+        step = self.env.step
+        for action in self.actions:
+            step(action)
+
+    def raw_episode(self) -> None:
+        """The physics of one episode."""
+        import mujoco
+
+        model, data, nstep = self.env.model, self.env.data, self.env.frame_skip
+        ctrl = data.ctrl
+        for action in self.actions:
+            ctrl[:] = action
+            mujoco.mj_step(model, data, nstep=nstep)
+
+    def close(self) -> None:
+        """Close the env."""
+        self.env.close()
 
 
-def step_breakdown(bench: EngineBench, episodes: int = 4) -> dict[str, float]:
-    """Microseconds per control step spent in each part of ``BaseRobotEnv.step``.
+HOOKS = ("_command", "_physics_step", "_physics_read")
+
+
+def step_breakdown(bench: CaseBench, episodes: int = 4) -> dict[str, float]:
+    """Microseconds per control step spent in each part of ``BaseRobotEnv.step``: sending the
+    action (``_command``), stepping the physics, reading it, and the rest.
 
     Runs real episodes (same actions as the timed units) with the engine hooks wrapped in timers;
     ``rest`` = the whole step minus the hooks: observation, reward, success and info (the
@@ -158,7 +259,7 @@ def step_breakdown(bench: EngineBench, episodes: int = 4) -> dict[str, float]:
     env = bench.env
     spent = dict.fromkeys([*HOOKS, "step"], 0.0)
 
-    def timed(name: str, fn: Callable[..., Any]) -> Callable[..., Any]:
+    def timed(name: str, fn: Any) -> Any:
         def wrapper(*args: Any, **kwargs: Any) -> Any:
             start = time.perf_counter()
             try:
@@ -186,6 +287,47 @@ def step_breakdown(bench: EngineBench, episodes: int = 4) -> dict[str, float]:
     return parts
 
 
+# --------------------------------------------------------------------------- make_vec
+
+
+def vector_rates(task: str, engine: str, repeats: int) -> dict[str, Any]:
+    """Env steps/s of ``gymnasium.make_vec(..., num_envs=2)`` in sync and async mode, side by
+    side, :data:`VEC_STEPS` vector steps of seeded random actions per repeat (the workers
+    started and reset untimed; episodes end and restart inside the timed steps)."""
+    envs = {
+        mode: gym.make_vec(env_id(task), num_envs=VEC_ENVS, vectorization_mode=mode, engine=engine)
+        for mode in ("sync", "async")
+    }
+    try:
+        size = envs["sync"].single_action_space.shape[0]
+        rng = np.random.default_rng(0)
+        actions = rng.uniform(-1.0, 1.0, (VEC_STEPS, VEC_ENVS, size)).astype(np.float32)
+        for vec in envs.values():
+            vec.reset(seed=0)
+
+        def unit(vec: Any) -> Any:
+            def run() -> None:
+                for action in actions:
+                    vec.step(action)
+
+            return run
+
+        seconds = time_interleaved({m: unit(v) for m, v in envs.items()}, repeats, warmup=1)
+    finally:
+        for vec in envs.values():
+            vec.close()
+    rates = {m: summarize([VEC_ENVS * VEC_STEPS / t for t in s]) for m, s in seconds.items()}
+    speedup = statistics.median(
+        b / a for a, b in zip(seconds["async"], seconds["sync"], strict=True)
+    )
+    return {
+        "sync_env_steps_per_s": rates["sync"],
+        "async_env_steps_per_s": rates["async"],
+        "async_over_sync": speedup,
+        "passed": speedup >= ASYNC_GOAL,
+    }
+
+
 # --------------------------------------------------------------------------- memory
 
 
@@ -207,7 +349,7 @@ def measure_rss(engine: str) -> dict[str, float]:
     for _ in range(2):
         env = make_env("touch", engine=engine)
         env.reset(seed=0)
-        for action in episode_actions(0):
+        for action in episode_actions(0, 6):
             env.step(action)
         envs.append(env)
         levels.append(rss_mb())
@@ -236,114 +378,242 @@ def rss_in_subprocess(engine: str) -> dict[str, float]:
     return json.loads(line)
 
 
+def median_rss(engine: str) -> dict[str, Any]:
+    """:func:`rss_in_subprocess`, :data:`RSS_REPEATS` times: medians and every repeat."""
+    rss = [rss_in_subprocess(engine) for _ in range(RSS_REPEATS)]
+    out: dict[str, Any] = {k: statistics.median(r[k] for r in rss) for k in rss[0]}
+    out["repeats"] = rss
+    return out
+
+
+# --------------------------------------------------------------------------- run
+
+
+def time_cases(
+    benches: dict[str, CaseBench], pusher: PusherBench, repeats: int
+) -> dict[str, list[float]]:
+    """Seconds per unit, every case's env, wrapped env, raw physics and reset, and Pusher's
+    env and raw physics, side by side."""
+    fns: dict[str, Any] = {}
+    setups: dict[str, Any] = {}
+    for name, b in benches.items():
+        fns[f"{name}/env"], setups[f"{name}/env"] = b.env_episode, b.reset
+        fns[f"{name}/gym.make"], setups[f"{name}/gym.make"] = b.wrapped_episode, b.reset_wrapped
+        fns[f"{name}/raw"], setups[f"{name}/raw"] = b.raw_episode, b.reset
+        fns[f"{name}/reset"] = b.reset
+    fns["pusher/env"], setups["pusher/env"] = pusher.env_episode, pusher.reset
+    fns["pusher/raw"], setups["pusher/raw"] = pusher.raw_episode, pusher.reset
+    return time_interleaved(fns, repeats, warmup=1, setups=setups)
+
+
+def env_and_raw(seconds: dict[str, list[float]], name: str) -> dict[str, Any]:
+    """Env and raw control steps/s of ``name`` and the median of their per-repeat ratio."""
+    env, raw = seconds[f"{name}/env"], seconds[f"{name}/raw"]
+    return {
+        "env_steps_per_s": summarize([EPISODE / s for s in env]),
+        "raw_steps_per_s": summarize([EPISODE / s for s in raw]),
+        # env steps/s / raw steps/s of the same repeat: the share of a step spent in physics
+        "ratio": statistics.median(r / e for e, r in zip(env, raw, strict=True)),
+    }
+
+
+def case_result(name: str, b: CaseBench, seconds: dict[str, list[float]]) -> dict[str, Any]:
+    """The JSON entry of one case."""
+    goal = GOALS[(b.task, b.engine)]
+    result = env_and_raw(seconds, name)
+    result.update(
+        gym_make_steps_per_s=summarize([EPISODE / s for s in seconds[f"{name}/gym.make"]]),
+        substeps=b.substeps,
+        raw_physics_steps_per_s=result["raw_steps_per_s"]["median"] * b.substeps,
+        reset_ms=summarize([s * 1e3 for s in seconds[f"{name}/reset"]]),
+        goal=f"env / raw >= {goal}",
+        passed=result["ratio"] >= goal,
+        step_breakdown_us=step_breakdown(b),
+    )
+    return result
+
+
+def run(repeats: int, vec_repeats: int, label: str | None = None) -> dict[str, Any]:
+    """Measure every case, Pusher and make_vec; return the JSON payload."""
+    meta = environment_metadata(packages=("mujoco", "pybullet", "gymnasium", "numpy"))
+    benches = {case_name(*case): CaseBench(*case) for case in GOALS}
+    pusher = PusherBench()
+    seconds = time_cases(benches, pusher, repeats)
+    cases = {name: case_result(name, b, seconds) for name, b in benches.items()}
+    for b in benches.values():
+        b.close()
+    pusher.close()
+    vectors = {case_name(*case): vector_rates(*case, vec_repeats) for case in GOALS}
+    memory = {engine: median_rss(engine) for engine in ("mujoco", "pybullet")}
+    meta["load_average_1min_end"] = _load_average()
+    return {
+        "benchmark": NAME,
+        "label": label,
+        "episode_steps_per_repeat": EPISODE,
+        "repeats": repeats,
+        "meta": meta,
+        "cases": cases,
+        "pusher_v5": env_and_raw(seconds, "pusher"),
+        "make_vec": {"num_envs": VEC_ENVS, "vector_steps_per_repeat": VEC_STEPS, **vectors},
+        "rss_mb_touch": memory,
+    }
+
+
+def _load_average() -> float | None:
+    import os
+
+    return os.getloadavg()[0] if hasattr(os, "getloadavg") else None
+
+
+# --------------------------------------------------------------------------- history
+
+
+def summary(payload: dict[str, Any]) -> dict[str, Any]:
+    """The key figures of a payload (this script's or the earlier Touch-only one's)."""
+    meta = payload.get("meta", {})
+    out = {
+        "date": meta.get("date"),
+        "git_commit": meta.get("git_commit"),
+        "label": payload.get("label"),
+        "load_average_1min": meta.get("load_average_1min"),
+    }
+    if "cases" in payload:
+        out["cases"] = {
+            name: {
+                "env_steps_per_s": r["env_steps_per_s"]["median"],
+                "raw_steps_per_s": r["raw_steps_per_s"]["median"],
+                "ratio": r["ratio"],
+            }
+            for name, r in payload["cases"].items()
+        }
+        out["pusher_v5_ratio"] = payload["pusher_v5"]["ratio"]
+        out["async_over_sync"] = {
+            name: r["async_over_sync"]
+            for name, r in payload["make_vec"].items()
+            if isinstance(r, dict)
+        }
+    else:  # the earlier layout: Touch on each engine, raw in physics steps/s
+        out["cases"] = {
+            f"touch/{engine}": {
+                "env_steps_per_s": r["env_steps_per_s"]["median"],
+                "raw_steps_per_s": r["raw_physics_steps_per_s"]["median"] / r["substeps"],
+                "ratio": r["ratio"],
+                "raw": "mj_step / stepSimulation after one velocity-motor call per control step",
+            }
+            for engine, r in payload["engines"].items()
+        }
+    return out
+
+
+def with_history(payload: dict[str, Any], path: Path) -> dict[str, Any]:
+    """``payload`` with ``history``: the earlier runs' summaries, oldest first, the run saved
+    at ``path`` (if any) last."""
+    history: list[dict[str, Any]] = []
+    if path.exists():
+        previous = json.loads(path.read_text())
+        history = [*previous.get("history", []), summary(previous)]
+    return {**payload, "history": history}
+
+
 # --------------------------------------------------------------------------- report
 
 
-def run(repeats: int) -> dict[str, Any]:
-    """Measure both engines; return the JSON payload."""
-    benches = {engine: EngineBench(engine) for engine in ENGINES}
-    fns, setups = {}, {}
-    for engine, b in benches.items():
-        fns[f"{engine}/env"], setups[f"{engine}/env"] = b.env_episode, b.reset
-        fns[f"{engine}/gym.make"], setups[f"{engine}/gym.make"] = b.wrapped_episode, b.reset_wrapped
-        fns[f"{engine}/raw"], setups[f"{engine}/raw"] = b.raw_episode, b.reset
-        fns[f"{engine}/reset"] = b.reset
-    seconds = time_interleaved(fns, repeats, warmup=1, setups=setups)
+def _rate(r: dict[str, Any]) -> str:
+    return f"{r['median']:,.0f} ({r['min']:,.0f}-{r['max']:,.0f})"
 
-    engines: dict[str, Any] = {}
-    for engine, b in benches.items():
-        env_rate = summarize([EPISODE / s for s in seconds[f"{engine}/env"]])
-        wrapped_rate = summarize([EPISODE / s for s in seconds[f"{engine}/gym.make"]])
-        raw_rate = summarize([EPISODE * b.substeps / s for s in seconds[f"{engine}/raw"]])
-        ratios = [
-            e * b.substeps / r
-            for e, r in zip(env_rate["repeats"], raw_rate["repeats"], strict=True)
+
+def case_table(payload: dict[str, Any]) -> str:
+    """Env against raw physics per case, and Pusher-v5."""
+    rows = []
+    for name, r in payload["cases"].items():
+        rows.append(
+            [
+                name,
+                _rate(r["env_steps_per_s"]),
+                f"{r['gym_make_steps_per_s']['median']:,.0f}",
+                _rate(r["raw_steps_per_s"]),
+                f"{r['ratio']:.2f}",
+                f"{r['reset_ms']['median']:.2f}",
+                r["goal"],
+                "PASS" if r["passed"] else "FAIL",
+            ]
+        )
+    p = payload["pusher_v5"]
+    rows.append(
+        [
+            f"{PUSHER} (Gymnasium)",
+            _rate(p["env_steps_per_s"]),
+            "",
+            _rate(p["raw_steps_per_s"]),
+            f"{p['ratio']:.2f}",
+            "",
+            "",
+            "",
         ]
-        rss = [rss_in_subprocess(engine) for _ in range(RSS_REPEATS)]
-        result = {
-            "env_steps_per_s": env_rate,
-            "gym_make_steps_per_s": wrapped_rate,
-            "raw_physics_steps_per_s": raw_rate,
-            "substeps": b.substeps,
-            # env steps/s x substeps / raw physics steps/s: the share of time in physics;
-            # median of the per-repeat ratios (each repeat times env and raw side by side)
-            "ratio": statistics.median(ratios),
-            "ratio_repeats": ratios,
-            "reset_ms": summarize([s * 1e3 for s in seconds[f"{engine}/reset"]]),
-            "rss_mb": {
-                "env": statistics.median(r["env"] for r in rss),
-                "extra_env": statistics.median(r["extra_env"] for r in rss),
-                "imports": statistics.median(r["imports"] for r in rss),
-                "interpreter": statistics.median(r["interpreter"] for r in rss),
-                "repeats": rss,
-            },
-        }
-        if engine == "mujoco":
-            result["goal"] = f"env steps/s x substeps >= {MUJOCO_MIN_RATIO} x raw mj_step/s"
-            result["passed"] = result["ratio"] >= MUJOCO_MIN_RATIO
-        else:
-            result["goal"] = f"env steps/s >= {PYBULLET_MIN_RATE:.0f}"
-            result["passed"] = env_rate["median"] >= PYBULLET_MIN_RATE
-        result["step_breakdown_us"] = step_breakdown(b)
-        engines[engine] = result
-    for b in benches.values():
-        b.close()
-    return {
-        "benchmark": NAME,
-        "task": ENV_ID,
-        "episode_steps_per_repeat": EPISODE,
-        "repeats": repeats,
-        "meta": environment_metadata(packages=("mujoco", "pybullet", "gymnasium", "numpy")),
-        "engines": engines,
-    }
+    )
+    headers = [
+        "case",
+        "env steps/s (min-max)",
+        "via gym.make",
+        "raw physics, control steps/s (min-max)",
+        "env / raw",
+        "reset ms",
+        "goal",
+        "",
+    ]
+    return markdown_table(headers, rows)
+
+
+def vector_table(payload: dict[str, Any]) -> str:
+    """make_vec sync and async per case."""
+    rows = []
+    for name, r in payload["make_vec"].items():
+        if not isinstance(r, dict):
+            continue
+        rows.append(
+            [
+                name,
+                _rate(r["sync_env_steps_per_s"]),
+                _rate(r["async_env_steps_per_s"]),
+                f"{r['async_over_sync']:.2f}",
+                f">= {ASYNC_GOAL}",
+                "PASS" if r["passed"] else "FAIL",
+            ]
+        )
+    headers = ["case", "sync env steps/s", "async env steps/s", "async / sync", "goal", ""]
+    return markdown_table(headers, rows)
 
 
 def table(payload: dict[str, Any]) -> str:
     """The markdown summary of a payload."""
     meta = payload["meta"]
-    rows = []
-    for engine, r in payload["engines"].items():
-        env, raw = r["env_steps_per_s"], r["raw_physics_steps_per_s"]
-        rows.append(
-            [
-                engine,
-                f"{env['median']:,.0f} ({env['min']:,.0f}-{env['max']:,.0f})",
-                f"{r['gym_make_steps_per_s']['median']:,.0f}",
-                f"{env['median'] * r['substeps']:,.0f}",
-                f"{raw['median']:,.0f} ({raw['min']:,.0f}-{raw['max']:,.0f})",
-                f"{r['ratio']:.2f}",
-                f"{r['reset_ms']['median']:.2f}",
-                f"{r['rss_mb']['env']:.1f} / {r['rss_mb']['extra_env']:.1f}",
-                r["goal"],
-                "PASS" if r["passed"] else "FAIL",
-            ]
-        )
-    headers = [
-        "engine",
-        "env steps/s (min-max)",
-        "via gym.make",
-        "env physics steps/s",
-        "raw physics steps/s (min-max)",
-        "env x substeps / raw",
-        "reset ms",
-        "RSS MiB: first env / one more",
-        "goal",
-        "",
-    ]
     versions = ", ".join(f"{k} {v}" for k, v in meta["packages"].items())
-    head = (
-        f"CPU envs, {payload['task']}, medians of {payload['repeats']} side-by-side repeats of "
-        f"one {payload['episode_steps_per_repeat']}-step episode (random actions).\n"
+    label = f" Code: {payload['label']}." if payload.get("label") else ""
+    text = (
+        f"CPU envs: medians of {payload['repeats']} side-by-side repeats of one "
+        f"{payload['episode_steps_per_repeat']}-step episode (random actions).{label}\n"
         f"{meta['device']['cpu_model']}, {meta['device']['cores']} cores, Python "
         f"{meta['python']}, {versions}; {meta['date']}, load average "
-        f"{meta['load_average_1min']:.2f} at the start.\n\n"
+        f"{meta['load_average_1min']:.2f} at the start, {meta['load_average_1min_end']:.2f} "
+        "at the end.\n\n"
     )
-    text = head + markdown_table(headers, rows)
-    parts = {name: r["step_breakdown_us"] for name, r in payload["engines"].items()}
+    text += case_table(payload)
+    text += (
+        f"\n`gymnasium.make_vec(id, num_envs={VEC_ENVS}, vectorization_mode=...)`, env steps/s "
+        f"({payload['make_vec']['vector_steps_per_repeat']} vector steps per repeat):\n\n"
+    )
+    text += vector_table(payload)
+    parts = {name: r["step_breakdown_us"] for name, r in payload["cases"].items()}
     names = list(next(iter(parts.values())))
     text += "\nWhere a control step's time goes (microseconds per step, over real episodes):\n\n"
     text += markdown_table(
         ["part", *parts], [[n, *(f"{p[n]:.1f}" for p in parts.values())] for n in names]
+    )
+    rss = payload["rss_mb_touch"]
+    text += "\nResident memory of Touch envs (MiB, fresh processes):\n\n"
+    text += markdown_table(
+        ["engine", "first env", "one more"],
+        [[e, f"{r['env']:.1f}", f"{r['extra_env']:.1f}"] for e, r in rss.items()],
     )
     return text
 
@@ -352,16 +622,20 @@ def main(argv: list[str] | None = None) -> None:
     """Command line entry point."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
     parser.add_argument("--repeats", type=int, default=15, help="side-by-side repeats")
+    parser.add_argument("--vec-repeats", type=int, default=5, help="make_vec repeats")
     parser.add_argument("--quick", action="store_true", help="3 repeats, results not saved")
-    parser.add_argument("--rss-child", choices=ENGINES, help=argparse.SUPPRESS)
+    parser.add_argument("--label", help="what code the run measures (kept in the history)")
+    parser.add_argument("--rss-child", choices=("mujoco", "pybullet"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.rss_child:
         print(json.dumps(measure_rss(args.rss_child)))
         return
-    payload = run(3 if args.quick else args.repeats)
+    quick = args.quick
+    payload = run(3 if quick else args.repeats, 2 if quick else args.vec_repeats, args.label)
     text = table(payload)
     print(text)
-    if not args.quick:
+    if not quick:
+        payload = with_history(payload, RESULTS_DIR / f"{NAME}.json")
         json_path, md_path = save_results(NAME, payload, text)
         print(f"saved {json_path} and {md_path}")
 

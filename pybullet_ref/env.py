@@ -81,9 +81,11 @@ from pybullet_ref.arm_model import (
 from pybullet_ref.contact import SOFT, SceneContact, scene_contact
 from pybullet_ref.hulls import bullet_urdf
 from pybullet_ref.mimic import add_mimic_constraints
+from pybullet_ref.vec3 import add, cross, rate, rotate, rotate_back
 
 GRAVITY = (0.0, 0.0, -9.81)
-_GRAVITY = np.array(GRAVITY)
+_UP = tuple(-g for g in GRAVITY)  # minus gravity
+_NO_GRIP = np.zeros(0)  # the reading's grip without a gripper
 # MuJoCo's sliding friction (every geom 1.0, a contact takes the larger); Bullet multiplies the
 # two bodies' coefficients, so 1.0 on every body gives the same 1.0 per contact.
 FRICTION = 1.0
@@ -200,6 +202,9 @@ class PybulletArmEnv(BaseRobotEnv):
         self._u = list(self._zeros)
         self._target_body = sampling.target_body_pos(np, np.full(3, 0.5), self.task)
         self._tool_before = (np.zeros(3), np.zeros(3))
+        self._tool_com = tuple(self.ids.tool_com.tolist())  # floats for the tare (_wrench)
+        self._com_offset = tuple((self.arm.tool.com - self.ids.tool_com).tolist())
+        self._target_of: tuple[np.ndarray, np.ndarray] | None = None  # body -> target point
         self._camera = self._camera_matrices()
         self._object = ObjectStart(np.array([1.0, 0.0, 0.0, 0.0]), CUBE_MASS, FRICTION)
         self.gripper = self.arm.gripper if self.task.spec.gripper else None
@@ -358,13 +363,13 @@ class PybulletArmEnv(BaseRobotEnv):
 
     def _physics_step(self, n_substeps: int) -> None:
         calls, body, joints, zeros = self._calls, self.body, self.ids.joints, self._dof_zeros
-        dofs, pick = self.ids.dofs, self._pick
+        dofs, pick, torque, u = self.ids.dofs, self._pick, self.servo.torque, self._u
         for i in range(n_substeps):
             states = calls.get_joint_states(body, dofs)
             gravity = calls.inverse_dynamics(body, [s[0] for s in states], zeros, zeros)
             qdot = [s[1] for s in pick(states)]  # the arm's joints (5 or more: a tuple)
-            torque = self.servo.torque(self._u, qdot, pick(gravity))
-            calls.set_motors(body, joints, pybullet.TORQUE_CONTROL, forces=torque)
+            forces = torque(u, qdot, pick(gravity))
+            calls.set_motors(body, joints, pybullet.TORQUE_CONTROL, forces=forces)
             if i == n_substeps - 1:
                 self._tool_before = self._tool_velocity()
             calls.step()
@@ -387,7 +392,7 @@ class PybulletArmEnv(BaseRobotEnv):
             wrench = self._contact_wrench(ee_pos, ee[5], contacts)
         else:
             wrench = self._wrench(states[-1][2], tool)
-        target, grip = sampling.target_point(np, self._target_body, self.task), np.zeros(0)
+        target, grip = self._target_point(), _NO_GRIP
         if self.gripper is not None:  # the target is the cube, wherever it is now
             grip = self._grip(contacts)
             target = grip[1:4]
@@ -445,16 +450,25 @@ class PybulletArmEnv(BaseRobotEnv):
             f = contact[9] * np.array(contact[7])  # normal force along the normal on B (to A)
             f += contact[10] * np.array(contact[11]) + contact[12] * np.array(contact[13])
             force += f
-            torque += _cross(np.array(contact[5]) - ee_pos, f)
+            torque += cross(np.array(contact[5]) - ee_pos, f)
         rot = np.array(pybullet.getMatrixFromQuaternion(ee_xyzw)).reshape(3, 3)
         return np.concatenate([rot.T @ force, rot.T @ torque])
 
-    def _tool_velocity(self) -> tuple[np.ndarray, np.ndarray]:
-        """World velocity of the tool link's centre of mass and its angular velocity, ``(3,)``."""
+    def _tool_velocity(self) -> tuple[Sequence[float], Sequence[float]]:
+        """World velocity of the tool link's centre of mass and its angular velocity, 3 floats
+        each."""
         state = self._calls.get_link_state(
             self.body, self.ids.ft, computeLinkVelocity=1, computeForwardKinematics=1
         )
-        return np.array(state[6]), np.array(state[7])
+        return state[6], state[7]
+
+    def _target_point(self) -> np.ndarray:
+        """The target point (m), ``(3,)``: where the task puts it on the target body, computed
+        once per episode (the body is set, not moved, by each reset)."""
+        if self._target_of is None or self._target_of[0] is not self._target_body:
+            point = np.asarray(sampling.target_point(np, self._target_body, self.task))
+            self._target_of = (self._target_body, point)
+        return self._target_of[1]
 
     def _wrench(self, reaction: Sequence[float], tool_state: Sequence) -> np.ndarray:
         """Tared external wrench on the tool in the ee frame, ``(6,)``, from PyBullet's F/T.
@@ -464,17 +478,17 @@ class PybulletArmEnv(BaseRobotEnv):
                 the tool link frame, and the torque about the tool link's centre of mass.
             tool_state: ``getLinkState(tool)`` with velocities, after the step.
         """
-        rot = np.array(pybullet.getMatrixFromQuaternion(tool_state[5])).reshape(3, 3)
-        force = np.array(reaction[:3])
-        torque = np.array(reaction[3:]) + _cross(self.ids.tool_com, force)  # about the origin
-        v0, w0 = self._tool_before
-        v1, w1 = np.array(tool_state[6]), np.array(tool_state[7])
-        alpha = (w1 - w0) / self.task.sim_dt
-        offset = rot @ (self.arm.tool.com - self.ids.tool_com)  # link com -> subtree com
-        a_com = (v1 - v0) / self.task.sim_dt + _cross(alpha, offset)
-        a_com += _cross(w1, _cross(w1, offset))
-        acc = rot.T @ (a_com - _GRAVITY)
-        return external_wrench(np, force, torque, acc, rot.T @ w1, rot.T @ alpha, self.arm.tool)
+        # in Python floats (:mod:`pybullet_ref.vec3`), one array at the end
+        rot, dt = pybullet.getMatrixFromQuaternion(tool_state[5]), self.task.sim_dt
+        force = reaction[:3]
+        torque = add(reaction[3:], cross(self._tool_com, force))  # about the origin
+        (v0, w0), v1, w1 = self._tool_before, tool_state[6], tool_state[7]
+        alpha = rate(w0, w1, dt)
+        offset = rotate(rot, self._com_offset)  # link com -> subtree com
+        a_com = add(add(rate(v0, v1, dt), cross(alpha, offset)), cross(w1, cross(w1, offset)))
+        acc = rotate_back(rot, add(a_com, _UP))  # a_com - g
+        x = np.array([force, torque, acc, rotate_back(rot, w1)])
+        return external_wrench(np, *x, np.array(rotate_back(rot, alpha)), self.arm.tool)
 
     def _camera_matrices(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
         view = self.client.computeViewMatrix(CAMERA_EYE, CAMERA_TARGET, [0.0, 0.0, 1.0])
@@ -482,10 +496,3 @@ class PybulletArmEnv(BaseRobotEnv):
             CAMERA_FOVY, self.width / self.height, NEAR, FAR
         )
         return view, projection
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross product of two ``(3,)`` vectors (``np.cross`` costs ~20 us on tiny arrays)."""
-    return np.array(
-        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-    )

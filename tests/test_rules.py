@@ -1,5 +1,6 @@
-"""The step rules run once for every engine: numpy one env at a time (the CPU envs) and
-jax.numpy on a batch under jit (the MJX env) score the same steps the same."""
+"""The step rules run once for every engine: Python scalars one env at a time (the CPU envs,
+through ``SCALAR_XP``), numpy and jax.numpy on a batch under jit (the MJX env) score the same
+steps the same."""
 
 from __future__ import annotations
 
@@ -11,7 +12,9 @@ import pytest
 from mjx_arm.task import reach_config, touch_config
 from mjx_arm.task import reward as reward_lib
 from mjx_arm.task.config import REWARD_TERMS
+from mjx_arm.task.lift import lift_config
 from mjx_arm.task.rules import score_step
+from mjx_arm.task.scalar_xp import SCALAR_XP
 
 N = 64
 LIMITS = (-np.full(6, 2.0), np.full(6, 2.0))
@@ -95,3 +98,72 @@ def test_a_diverged_step_scores_only_its_penalty() -> None:
     assert score.terms["nonfinite"] == 1.0
     assert all(float(v) == 0.0 for k, v in score.terms.items() if k != "nonfinite")
     assert float(score.reward) == pytest.approx(cfg.reward.nonfinite)
+
+
+def _extra(seed: int) -> dict[str, np.ndarray]:
+    """Lift's measures of the batch: heights below, at and above the lift, grasped or not."""
+    rng = np.random.default_rng(seed)
+    height = rng.choice([0.0, 0.05, 0.1, 0.15], N) * rng.uniform(0.9, 1.1, N)
+    return {"height": height, "grasp": (rng.random(N) < 0.5) * 1.0}
+
+
+def _one_by_one(xp, cfg, x, extra=None) -> list:
+    """Each step scored alone: numpy on 0-d arrays and ``(6,)`` arrays, or ``SCALAR_XP`` on
+    Python floats, bools and lists, as the CPU envs pass them."""
+    band = reward_lib.joint_band(LIMITS, cfg)
+    python = xp is SCALAR_XP
+    if python:
+        band = reward_lib.JointBand(band.mid.tolist(), band.reach.tolist())
+    scalar = float if python else np.asarray
+    out = []
+    for i in range(N):
+        qpos, qvel = x["qpos"][i], x["qvel"][i]
+        if python:
+            qpos, qvel = qpos.tolist(), qvel.tolist()
+        measures = None if extra is None else {k: float(v[i]) for k, v in extra.items()}
+        progress = reward_lib.Progress(scalar(x["hold"][i]), bool(x["over"][i]))
+        score = score_step(
+            xp, cfg, progress, float(x["prev_distance"][i]), float(x["change"][i]),
+            float(x["distance"][i]), float(x["force"][i]), qpos, qvel, band,
+            bool(x["diverged"][i]), measures,
+        )  # fmt: skip
+        out.append(score)
+    return out
+
+
+@pytest.mark.parametrize(
+    "make_cfg", [reach_config, touch_config, lambda: touch_config("seed"), lift_config]
+)
+def test_python_scalars_score_the_steps_numpy_scores(make_cfg) -> None:
+    """``SCALAR_XP`` gives numpy's flags and hold counts exactly and its terms and rewards to
+    1e-12 (the same IEEE operations; ``math.exp`` may differ from a SIMD ``np.exp`` by an ulp),
+    every value a Python float or bool (what the envs' info carries)."""
+    cfg = make_cfg()
+    x = _inputs(1)
+    extra = None
+    if cfg.task == "lift":  # a lift succeeds after 10 steps held: holds under way near that
+        extra, x["hold"] = _extra(1), np.random.default_rng(1).choice([0.0, 8.0, 9.0], N)
+    fast, ref = _one_by_one(SCALAR_XP, cfg, x, extra), _one_by_one(np, cfg, x, extra)
+    for a, b in zip(fast, ref, strict=True):
+        for name in ("success", "over", "done"):
+            assert type(getattr(a, name)) is bool and getattr(a, name) == bool(getattr(b, name))
+        assert type(a.progress.hold) is float and a.progress.hold == float(b.progress.hold)
+        assert type(a.progress.over) is bool and a.progress.over == bool(b.progress.over)
+        assert all(type(v) is float for v in a.terms.values()) and type(a.reward) is float
+        values = [a.terms[t] for t in REWARD_TERMS]
+        np.testing.assert_allclose(values, [float(b.terms[t]) for t in REWARD_TERMS], rtol=1e-12)
+        assert a.reward == pytest.approx(float(b.reward), rel=1e-12, abs=1e-12)
+    assert any(s.success for s in fast) or cfg.task == "touch"
+    assert any(s.done for s in fast) and not all(s.done for s in fast)
+
+
+def test_python_scalars_and_jax_score_the_same_steps() -> None:
+    """Touch's steps, one by one on Python scalars against the JAX batch: flags exactly, the
+    reward within float32 rounding."""
+    cfg = touch_config()
+    x = _inputs(2)
+    fast = _one_by_one(SCALAR_XP, cfg, x)
+    batch = jax.device_get(_jax_batch(cfg, x))
+    for name in ("success", "over", "done"):
+        np.testing.assert_array_equal([getattr(s, name) for s in fast], getattr(batch, name))
+    np.testing.assert_allclose([s.reward for s in fast], batch.reward, rtol=1e-5, atol=1e-4)

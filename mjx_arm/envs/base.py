@@ -15,6 +15,7 @@ clean physics state.
 from __future__ import annotations
 
 import math
+import operator
 from abc import abstractmethod
 from pathlib import Path
 from typing import Any, ClassVar, NamedTuple
@@ -22,13 +23,16 @@ from typing import Any, ClassVar, NamedTuple
 import gymnasium as gym
 import numpy as np
 
+from mjx_arm.envs import scalar_state
 from mjx_arm.envs.arm import ArmInfo, validated_arm_info
+from mjx_arm.envs.scalar_state import ScalarState
 from mjx_arm.envs.setup import arm_setup
 from mjx_arm.task import observation as obs_lib
 from mjx_arm.task import reward as reward_lib
 from mjx_arm.task import rules, sampling
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.grip import ObjectStart
+from mjx_arm.task.scalar_xp import SCALAR_XP
 from mjx_arm.task.touch import touch_config
 from mjx_arm.urdf.arm_config import ArmConfig
 
@@ -115,13 +119,15 @@ class BaseRobotEnv(gym.Env):
         # bit-identical to (a * action_scale) * v_max for power-of-two scales
         self._qdot_scale = self.task.joint_speeds(self.arm.v_max)
         self._band = reward_lib.joint_band((self.arm.lower, self.arm.upper), self.task)
+        self._band_lists = reward_lib.JointBand(*(part.tolist() for part in self._band))
         self._speed_limits = reward_lib.speed_limits(self.arm.v_max, self.task)
-        self._bounds = obs_lib.state_bounds(self.task.force_clip, n, self._extra, self._coding)
-        self._force_slice = obs_lib.force_slice(n)
+        self._speed_list = self._speed_limits.tolist()
+        self._flat = ScalarState(self.task.force_clip, self._coding, self._extra)
         self._reading: PhysicsReading | None = None
         self._last_obs: dict[str, np.ndarray] | None = None
-        # what the success rule and the motion terms remember within an episode
-        self._progress = reward_lib.start_progress(np)
+        # what the success rule and the motion terms remember within an episode (Python
+        # scalars: the rules score one env's step through SCALAR_XP)
+        self._progress = reward_lib.start_progress(SCALAR_XP)
         self._action = np.zeros(na, np.float32)
         self._action_bounds = (np.full(na, -1.0, np.float32), np.full(na, 1.0, np.float32))
         self._distance = 0.0
@@ -180,8 +186,8 @@ class BaseRobotEnv(gym.Env):
         self._physics_reset(qpos, body, obj)
         self._reading = reading = self._physics_read()
         _, state, d, force = self._measure(reading)
-        self._last_obs = obs = obs_lib.unflatten_obs(state.astype(np.float32), self._extra)
-        self._progress = reward_lib.start_progress(np)
+        self._last_obs = obs = self._observation(state)
+        self._progress = reward_lib.start_progress(SCALAR_XP)
         self._action = np.zeros(self.action_space.shape, np.float32)
         self._distance = d
         info = {"is_success": False, "distance": d, "contact_force_norm": force, "reward_terms": {}}
@@ -195,7 +201,7 @@ class BaseRobotEnv(gym.Env):
         self._command(clipped)
         self._physics_step(self._n_substeps)
         reading = self._physics_read()
-        change = float(reward_lib.action_change(np, clipped, self._action))
+        change = float(reward_lib.action_change(SCALAR_XP, clipped, self._action))
         self._action = clipped
         result = self._evaluate(reading, change=change)
         if result is None:  # diverged: keep the last sane reading and observation, and stop
@@ -248,25 +254,25 @@ class BaseRobotEnv(gym.Env):
 
     # ------------------------------------------------------------------ helpers
 
-    def _measure(self, reading: PhysicsReading) -> tuple[np.ndarray, np.ndarray, float, float]:
-        """The flat state before and after clipping (float64, ``(16 + n + k,)``), distance d (m)
-        and contact force norm (N) of a reading, each computed once."""
+    def _measure(self, reading: PhysicsReading) -> tuple[list, list, float, float]:
+        """The flat state before and after clipping (``16 + n + k`` floats), distance d (m)
+        and contact force norm (N) of a reading, each computed once, in Python floats
+        (:mod:`mjx_arm.envs.scalar_state`)."""
         ee_pos, ee_quat, qpos, _, target_pos, wrench, grip = reading
         extra = None
         if self._extra:
-            extra = self.task_spec.grip_observation(np, ee_pos, ee_quat, grip, self.task)
-        raw = obs_lib.raw_state(np, ee_pos, ee_quat, qpos, target_pos, wrench, extra, self._coding)
-        state = obs_lib.clip_state(np, raw, self._bounds)
-        d = float(reward_lib.target_distance(np, ee_pos, target_pos))
-        force = float(reward_lib.contact_force_norm(np, state[self._force_slice]))
-        return raw, state, d, force
+            extra = self.task_spec.grip_observation(SCALAR_XP, ee_pos, ee_quat, grip, self.task)
+        flat = self._flat
+        raw = flat.raw(ee_pos, ee_quat, qpos, target_pos, wrench, extra)
+        state = flat.clip(raw)
+        return raw, state, scalar_state.distance(ee_pos, target_pos), flat.force_norm(state)
 
     def _measures(self, reading: PhysicsReading) -> dict[str, float] | None:
         """The task's measures of a reading (gripper tasks), else None."""
         if not self.task_spec.gripper:
             return None
         spec, r = self.task_spec, reading
-        values = spec.measures(np, r.ee_pos, r.ee_quat, r.grip, self.task)
+        values = spec.measures(SCALAR_XP, r.ee_pos, r.ee_quat, r.grip, self.task)
         return {key: float(value) for key, value in values.items()}
 
     def _evaluate(
@@ -292,38 +298,41 @@ class BaseRobotEnv(gym.Env):
         """
         task = self.task
         raw, state, d, force = self._measure(reading)
-        # a sum of squares is finite exactly when every entry is, barring overflow (>1e154),
-        # which the exact test then rules out
-        if not (diverged or math.isfinite(raw.dot(raw)) or np.isfinite(raw).all()):
+        if not (diverged or scalar_state.finite(raw)):
             return None
-        qpos, qvel = reading.qpos, reading.qvel
+        qpos, qvel = reading.qpos.tolist(), reading.qvel.tolist()  # the rules take lists
         if not diverged and self._runaway(qvel):
             return None
         measures = self._measures(reading)
         score = rules.score_step(
-            np, task, self._progress, self._distance, change, d, force, qpos, qvel,
-            self._band, diverged, measures,
+            SCALAR_XP, task, self._progress, self._distance, change, d, force, qpos, qvel,
+            self._band_lists, diverged, measures,
         )  # fmt: skip
         self._progress, self._distance = score.progress, d
-        terms = {name: float(value) for name, value in score.terms.items()}
         info = {
             "is_success": bool(score.success),
             "distance": d,
             "contact_force_norm": force,
-            "reward_terms": terms,
+            "reward_terms": score.terms,  # Python floats: the rules ran on Python scalars
             "diverged": diverged,
             "nonfinite": diverged,  # the older name of ``diverged``
             "overforce": bool(score.over),
         }
         if measures is not None:
             info.update(measures)
-        obs = obs_lib.unflatten_obs(state.astype(np.float32), self._extra)
-        return obs, float(score.reward), bool(score.done), info
+        return self._observation(state), float(score.reward), bool(score.done), info
 
-    def _runaway(self, qvel: np.ndarray) -> bool:
-        """Non-finite or runaway joint velocities ``qvel (n,)`` (NaN fails the finite test;
-        the speed test compares each joint with its divergence limit)."""
-        return not np.isfinite(qvel).all() or bool(reward_lib.runaway(np, qvel, self._speed_limits))
+    def _observation(self, state: list[float]) -> dict[str, np.ndarray]:
+        """The observation dict of a clipped flat state: views of one new float32 array (the
+        caller may keep it; the next step does not write into it)."""
+        return self._flat.observation(state)
+
+    def _runaway(self, qvel: list[float]) -> bool:
+        """Non-finite or runaway joint velocities ``qvel`` (n floats): not every joint within
+        its divergence limit (:func:`mjx_arm.task.reward.runaway` and the finite test in one
+        comparison, NaN compares False; on six floats Python's comparisons cost a third of
+        numpy's calls)."""
+        return not all(map(operator.le, map(abs, qvel), self._speed_list))
 
     def _show(self, frame: np.ndarray) -> None:
         """Draw a frame in a window (needs a display and matplotlib)."""

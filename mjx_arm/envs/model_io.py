@@ -12,7 +12,12 @@ import numpy as np
 
 from mjx_arm.envs.arm import ArmInfo, arm_info
 from mjx_arm.task.config import TaskConfig
-from mjx_arm.task.wrench import SENSOR_BLOCK, SENSOR_BLOCK_SIZE, sensor_wrench
+from mjx_arm.task.wrench import (
+    SENSOR_BLOCK,
+    SENSOR_BLOCK_SIZE,
+    sensor_feature_factors,
+    sensor_wrench,
+)
 from mjx_arm.urdf.convert import EE_SITE, SENSORS, ConvertConfig, load_model
 from mjx_arm.urdf.scene import TARGET_SITE
 from mjx_arm.urdf.scene_shapes import CUBE_BODY
@@ -92,6 +97,10 @@ class SensorReader:
             [self.block_index, self._positions("ee_pos", 3), self._positions("ee_quat", 4)]
         )
         self._block = as_slice(self.block_index)
+        # one env's read (:meth:`read`): the gather, a 1.0 after it, the wrench's features
+        self._gathered = np.zeros(len(self.read_index) + 1)
+        self._gathered[-1] = 1.0
+        self._factors = sensor_feature_factors(one=len(self.read_index))
 
     def _positions(self, name: str, size: int) -> np.ndarray:
         sl = self.sensor_slices[name]
@@ -108,6 +117,19 @@ class SensorReader:
         if isinstance(self._block, slice):
             return sensordata[..., self._block]
         return sensordata.take(self._block, axis=-1)
+
+    def read(self, sensordata: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """One env's read-out of a numpy ``sensordata``, in new arrays.
+
+        Returns:
+            ``sensordata[read_index]`` (split with :data:`BLOCK`, :data:`EE_POS`,
+            :data:`EE_QUAT`) with a 1.0 after it, ``(27,)``, and the wrench
+            (:meth:`wrench`'s values), ``(6,)``.
+        """
+        s = self._gathered.copy()
+        sensordata.take(self.read_index, out=s[:-1])
+        a, b, c = self._factors
+        return s, (s.take(a) * s.take(b) * s.take(c)).dot(self.arm.tool.sensor_wrench_matrix)
 
     def wrench(self, xp: Any, sensordata):
         """Tared external wrench on the tool in the ee frame, shape ``(..., 6)``."""

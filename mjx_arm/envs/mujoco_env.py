@@ -8,16 +8,16 @@ import mujoco
 import numpy as np
 
 from mjx_arm.envs.base import DEFAULT_HEIGHT, DEFAULT_WIDTH, BaseRobotEnv, PhysicsReading
-from mjx_arm.envs.model_io import BLOCK as _BLOCK
 from mjx_arm.envs.model_io import EE_POS as _EE_POS
 from mjx_arm.envs.model_io import EE_QUAT as _EE_QUAT
 from mjx_arm.envs.model_io import GripReader, SensorReader, arm_model, as_slice
 from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.grip import ObjectStart
-from mjx_arm.task.wrench import sensor_wrench
 from mjx_arm.urdf.arm_config import ArmConfig
 from mjx_arm.urdf.scene import TARGET_BODY
+
+_NO_GRIP = PhysicsReading._field_defaults["grip"]  # the reading's grip without a gripper
 
 
 class MujocoArmEnv(BaseRobotEnv):
@@ -53,8 +53,6 @@ class MujocoArmEnv(BaseRobotEnv):
         self._act = as_slice(self.ids.actuators)
         self._qpos_adr = self.ids.qpos_adr.astype(np.intp)
         self._dof_adr = self.ids.dof_adr.astype(np.intp)
-        self._read_index = self.ids.read_index.astype(np.intp)
-        self._tool = self.arm.tool
         self._target_pos = np.zeros(3)  # the target point: fixed within an episode
         self.grip = GripReader(self.model, self.arm) if self.task.spec.gripper else None
 
@@ -91,18 +89,18 @@ class MujocoArmEnv(BaseRobotEnv):
     def _physics_read(self) -> PhysicsReading:
         # one gather of the sensors: the wrench block, the ee site's position and quaternion
         # (framepos / framequat of the ee site: the values of site_xpos and the body's xquat)
-        s = self._sensordata[self._read_index]
-        target, grip = self._target_pos, PhysicsReading._field_defaults["grip"]
+        s, wrench = self.ids.read(self._sensordata)
+        target, grip = self._target_pos, _NO_GRIP
         if self.grip is not None:  # the target is the cube, wherever it is now
             grip = self.grip.read(np, self._qpos, self._sensordata)
             target = grip[1:4]
         return PhysicsReading(  # fields in order: ee_pos, ee_quat, qpos, qvel, target_pos, wrench
             s[_EE_POS],
             s[_EE_QUAT],
-            self._qpos[self._qpos_adr],
-            self._qvel[self._dof_adr],
+            self._qpos.take(self._qpos_adr),
+            self._qvel.take(self._dof_adr),
             target,
-            sensor_wrench(np, s[_BLOCK], self._tool),
+            wrench,
             grip,
         )
 

@@ -1,10 +1,11 @@
 """Reward terms, success and termination, written once against an array namespace ``xp``.
 
 Every function works on one env (scalars and ``(6,)`` vectors) and on batches (a leading shape
-``(...)``), in ``numpy`` and under ``jax.numpy`` / ``jax.jit``. Norms are ``sqrt(vecdot)``, sums
-over the joints are dot products with ones and 0/1 flags are ``flag * 1.0``: the values of
-``linalg.norm``, ``sum`` and ``where(flag, 1.0, 0.0)`` at a fraction of numpy's per-call cost on
-tiny arrays (a single env steps in tens of microseconds), and plain XLA ops under ``jit``.
+``(...)``), in ``numpy``, under ``jax.numpy`` / ``jax.jit`` and, for one env on the CPU, in
+:data:`~mjx_arm.task.scalar_xp.SCALAR_XP` (Python floats, bools and lists of them). Norms are
+``sqrt(vecdot)``, sums over the joints are matrix products with ones and 0/1 flags are
+``flag * 1.0``: the values of ``linalg.norm``, ``sum`` and ``where(flag, 1.0, 0.0)``, plain XLA
+ops under ``jit``, and a few operations of Python floats for one env.
 """
 
 from __future__ import annotations
@@ -47,10 +48,27 @@ def _ones(n: int) -> np.ndarray:
 _ONES6 = _ones(6)
 
 
-def _sum_last(x):
-    """Sum over the last axis, ``(..., n) -> (...)``, float (booleans count as 0/1)."""
-    n = x.shape[-1]
-    return x.dot(_ONES6 if n == 6 else _ones(n))
+def _sum_last(xp: Any, x):
+    """Sum over the last axis, ``(..., n) -> (...)``, float (booleans count as 0/1): a matrix
+    product with ones (numpy's dot; one ``dot_general`` under JAX); one env's sum (a numpy
+    scalar) as a Python float."""
+    n = len(x) if isinstance(x, list) else x.shape[-1]
+    total = xp.matmul(x, _ONES6 if n == 6 else _ones(n))
+    return float(total) if isinstance(total, np.generic) else total
+
+
+def joint_terms(xp: Any, qpos, qvel, band: JointBand):
+    """The ``joint_limit`` term (how many joints are beyond the soft band) and the
+    ``joint_velocity`` term (the sum of the joint speeds), each ``(...)``.
+
+    Args:
+        xp: the array namespace (:data:`~mjx_arm.task.scalar_xp.SCALAR_XP` also takes one
+            env's joints as lists of floats, with the band's as lists).
+        qpos, qvel: joint angles (rad) and velocities (rad/s), ``(..., n)``.
+        band: the joint-limit band.
+    """
+    beyond = xp.greater(xp.abs(xp.subtract(qpos, band.mid)), band.reach)
+    return _sum_last(xp, beyond), _sum_last(xp, xp.abs(qvel))
 
 
 def target_distance(xp: Any, ee_pos, target_pos):
@@ -127,7 +145,7 @@ def advance(xp: Any, progress: Progress, distance, force_norm, cfg: TaskConfig, 
     over = progress.over | over_now
     success = hold >= cfg.success_hold_steps
     if cfg.fail_on_overforce:
-        success = success & ~over
+        success = xp.logical_and(success, xp.logical_not(over))
     return Progress(hold, over), success, over_now
 
 
@@ -233,8 +251,8 @@ def band_reward_terms(
         xp: ``numpy`` or ``jax.numpy``.
         distance: d (m), shape ``(...)``.
         force_norm: tared contact force norm (N), shape ``(...)``.
-        qpos: joint angles (rad), shape ``(..., 6)``.
-        qvel: joint velocities (rad/s), shape ``(..., 6)``.
+        qpos: joint angles (rad), shape ``(..., 6)`` (lists with ``SCALAR_XP``).
+        qvel: joint velocities (rad/s), shape ``(..., 6)`` (lists with ``SCALAR_XP``).
         band: :func:`joint_band` of the joint limits.
         success: success flag (bool), shape ``(...)``.
         nonfinite: flag (bool) of a non-finite physics state, shape ``(...)``.
@@ -247,7 +265,7 @@ def band_reward_terms(
     Returns:
         Dict term name -> float array, shape ``(...)``; keys are ``REWARD_TERMS``.
     """
-    beyond = xp.abs(qpos - band.mid) > band.reach
+    limit, speed = joint_terms(xp, qpos, qvel, band)
     near = distance < cfg.success_distance
     task = get_task(cfg.task)
     contact, excess = task.contact_terms(xp, near, force_norm, cfg)
@@ -257,8 +275,8 @@ def band_reward_terms(
     terms = {
         "distance": 1.0 - xp.exp(-distance / cfg.reward.distance_length),
         "contact": contact,
-        "joint_limit": _sum_last(beyond),
-        "joint_velocity": _sum_last(xp.abs(qvel)),
+        "joint_limit": limit,
+        "joint_velocity": speed,
         "success": success * 1.0,
         "nonfinite": nonfinite * 1.0,
         "force_excess": excess,
@@ -270,7 +288,6 @@ def band_reward_terms(
         "lift": grip["lift"],
         "grasp": grip["grasp"],
     }
-    assert tuple(terms) == REWARD_TERMS
     return terms
 
 

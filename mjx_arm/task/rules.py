@@ -2,9 +2,10 @@
 
 After each control step an engine measures the distance ``d`` and the tared contact force, and
 decides whether its physics diverged; :func:`score_step` turns that into the episode's progress,
-success, the reward terms and their total, and termination. The CPU envs (numpy, one env) and
-the batched MJX env (``jax.numpy``, traced under ``jit``/``vmap``) both call it, so the rules
-cannot drift apart between engines.
+success, the reward terms and their total, and termination. The CPU envs (one env, on Python
+floats through :data:`~mjx_arm.task.scalar_xp.SCALAR_XP`) and the batched MJX env
+(``jax.numpy``, traced under ``jit``/``vmap``) both call it, so the rules cannot drift apart
+between engines.
 
 On a diverged step the reading is not physics: every reward term except ``nonfinite`` is zero,
 success is ruled out and the episode ends.
@@ -63,7 +64,8 @@ def score_step(
         action_change: sum of the squared action change since the previous step, ``(...)``.
         distance: d after the step (m), ``(...)``.
         force_norm: tared contact force norm after the step (N), ``(...)``.
-        qpos, qvel: joint angles (rad) and velocities (rad/s), ``(..., n)``.
+        qpos, qvel: joint angles (rad) and velocities (rad/s), ``(..., n)`` (lists of n floats
+            with ``SCALAR_XP``, the band's too).
         band: the joint-limit band (:func:`mjx_arm.task.reward.joint_band`).
         diverged: the physics diverged on this step (bool, ``(...)``).
         extra: the task's measures (:meth:`mjx_arm.task.spec.Task.measures`), or None.
@@ -78,6 +80,17 @@ def score_step(
     terms = reward_lib.band_reward_terms(
         xp, distance, force_norm, qpos, qvel, band, success, diverged, cfg, motion, extra
     )
-    terms = {k: v if k == "nonfinite" else xp.where(sane, v, 0.0) for k, v in terms.items()}
+    terms = _masked(xp, sane, terms)
     done = reward_lib.ends_episode(success, xp.where(sane, force_norm, 0.0), diverged, cfg, xp)
     return StepScore(progress, success, over, terms, reward_lib.total_reward(terms, cfg), done)
+
+
+def _masked(xp: Any, sane, terms: dict[str, Any]) -> dict[str, Any]:
+    """``terms`` with every term but ``nonfinite`` zero where the step is not ``sane``.
+
+    One env's sane step (``sane`` the Python ``True``, :mod:`mjx_arm.task.scalar_xp`) keeps
+    its terms as they are, without a ``where`` per term.
+    """
+    if sane is True:
+        return terms
+    return {k: v if k == "nonfinite" else xp.where(sane, v, 0.0) for k, v in terms.items()}

@@ -235,3 +235,22 @@ def sensor_wrench(xp: Any, block, tool: ToolInertia):
     pairs = block.take(_BLK_I, axis=-1) * block.take(_BLK_J, axis=-1)
     triples = pairs.take(_BLK_K, axis=-1) * block.take(_BLK_L, axis=-1)
     return xp.concatenate([block, pairs, triples], axis=-1).dot(tool.sensor_wrench_matrix)
+
+
+def sensor_feature_factors(one: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The features of :func:`sensor_wrench` as the product of three gathers (one env).
+
+    Over a vector ``v`` that holds the sensor block at ``v[:19]`` and ``1.0`` at ``v[one]``,
+    ``v[a] * v[b] * v[c]`` (left to right) is the ``(65,)`` feature vector that
+    :func:`sensor_wrench` multiplies with :attr:`ToolInertia.sensor_wrench_matrix`, bit for
+    bit: an entry times 1 times 1, a pair times 1, and ``(q_j q_k) alpha_a`` in that order.
+    Three gathers and two products in numpy, against eight calls in :func:`sensor_wrench`.
+
+    Returns:
+        The index arrays ``(a, b, c)``, ``(65,)`` each.
+    """
+    block, ones = np.arange(SENSOR_BLOCK_SIZE), np.full(SENSOR_BLOCK_SIZE, one)
+    a = np.concatenate([block, _BLK_I, _BLK_I[_BLK_K]])
+    b = np.concatenate([ones, _BLK_J, _BLK_J[_BLK_K]])
+    c = np.concatenate([ones, np.full(len(_BLK_I), one), _BLK_L])
+    return a, b, c
