@@ -81,7 +81,7 @@ def _cpu_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
     cases = load(rel)["cases"]
     value = "; ".join(f"{case} {fmt(c['env_steps_per_s']['median'])} steps/s "
                       f"({fmt(c['ratio'], 2)} of raw)" for case, c in cases.items())  # fmt: skip
-    return "Gymnasium envs on one CPU core", value, [rel]
+    return "Gymnasium envs on the CPU, one env", value, [rel]
 
 
 def _fuzz_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:

@@ -122,7 +122,7 @@ def render_seeds(data: Json) -> list[str]:
           s.get("median_steps_to_threshold"), s.get("median_training_steps_per_s")]],
     )  # fmt: skip
     rows = [
-        [r.get("seed"), r.get("best_success"), r.get("final_success"),
+        [r.get("seed"), rate(r.get("best_success")), rate(r.get("final_success")),
          secs(r.get("time_to_threshold")), r.get("steps_to_threshold"),
          secs(r.get("compile_s")), r.get("training_steps_per_s")]
         for r in data.get("seeds", [])
@@ -152,7 +152,7 @@ def render_transfer(data: Json) -> list[str]:
         "",
     ]
     rows = [
-        [r.get("label", r.get("key")), r.get("episodes"), r.get("success_rate"),
+        [r.get("label", r.get("key")), r.get("episodes"), rate(r.get("success_rate")),
          fmt(r.get("success_ci95")), r.get("mean_peak_contact_force"),
          r.get("mean_steps_to_success"), _met(r)]
         for r in data["rows"]
@@ -279,6 +279,35 @@ def render_fuzz(data: Json) -> list[str]:
                                           for name, g in groups.items()])  # fmt: skip
 
 
+def render_grasp(data: Json) -> list[str]:
+    """``mjx-arm bench grasp``: per start and engine, the lift, the slip and the opening."""
+    cube = data.get("cube") or {}
+    lines = [
+        f"Cube {fmt(cube.get('size_m'))} m, {fmt(cube.get('mass_kg'))} kg; finger press "
+        f"{fmt(data.get('finger_press_n'))} N; phases (s): "
+        + ", ".join(f"{k} {fmt(v)}" for k, v in (data.get("phases_s") or {}).items())
+        + ".",
+        "",
+    ]
+    rows = [
+        [start, engine, e.get("lift_m"), _mm(e.get("slip_m")), _mm(e.get("opening_m")),
+         "held" if e.get("met") else "dropped", e.get("video") or ""]
+        for start, s in data["starts"].items()
+        for engine, e in s["engines"].items()
+    ]  # fmt: skip
+    header = ["start", "engine", "lift (m)", "slip (mm)", "opening (mm)", "", "video"]
+    return lines + table(header, rows)
+
+
+def _mm(value: Any) -> Any:
+    return value * 1000 if _is_num(value) else value
+
+
+def rate(value: Any) -> str:
+    """A success rate with three decimals (``1.000``, ``0.953``)."""
+    return f"{value:.3f}" if _is_num(value) else fmt(value)
+
+
 def render_eval(data: Json) -> list[str]:
     """``mjx-arm eval`` written as JSON: one engine's summary."""
     keys = ["engine", "impl", "episodes", "success_rate", "mean_peak_contact_force",
@@ -327,6 +356,7 @@ RENDERERS: tuple[Renderer, ...] = (
     Renderer("cpu_envs", lambda d: d.get("benchmark") == "cpu_envs", render_cpu_envs),
     Renderer("fuzz", lambda d: "by_kind" in d or "by_command" in d, render_fuzz),
     Renderer("eval", _has("engine", "episodes", "success_rate"), render_eval),
+    Renderer("grasp", _has("starts", "cube"), render_grasp),
     Renderer("generic", lambda d: True, render_generic),
 )
 
