@@ -44,6 +44,7 @@ autodoc_typehints = "description"
 autodoc_class_signature = "separated"
 napoleon_google_docstring = True
 napoleon_numpy_docstring = False
+napoleon_use_ivar = True  # "Attributes:" as fields: NamedTuple fields are documented once
 
 html_theme = "furo"
 html_title = "mjx_arm"
