@@ -87,7 +87,7 @@ def test_the_pick_starts_with_the_cube_resting_between_the_pads() -> None:
 
 def test_pybullet_picks_the_cube_off_the_table() -> None:
     """PyBullet lifts the cube off the table and holds it. C MuJoCo and MJX drop it at the
-    240 Hz step (README, Known gaps), so they are not asserted here."""
+    240 Hz step (docs/tasks/lift.md, Physics), so they are not asserted here."""
     from mjx_arm.bench.grasp import SLIP_GOAL, grasp_check
 
     result = grasp_check(("pybullet",), log=lambda _: None, starts=("table",))

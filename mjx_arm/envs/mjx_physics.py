@@ -54,9 +54,14 @@ class Reading:
     """What the contract reads from the physics, one env (add a leading batch axis under vmap).
 
     Attributes:
-        ee_pos ``(3,)``, ee_quat ``(4,)`` (w, x, y, z), qpos ``(n,)``, qvel ``(n,)``,
-        target_pos ``(3,)``, wrench ``(6,)`` (tared, ee frame, unclipped), grip ``(10,)`` for a
-        gripper task (:data:`mjx_arm.task.grip.GRIP_LAYOUT`), else ``(0,)``.
+        ee_pos: ``(3,)``.
+        ee_quat: ``(4,)`` (w, x, y, z).
+        qpos: ``(n,)``.
+        qvel: ``(n,)``.
+        target_pos: ``(3,)``.
+        wrench: ``(6,)`` (tared, ee frame, unclipped).
+        grip: ``(10,)`` for a gripper task (:data:`mjx_arm.task.grip.GRIP_LAYOUT`), else
+            ``(0,)``.
     """
 
     ee_pos: jax.Array

@@ -121,8 +121,8 @@ def joint_trajectory_msg(
         stamp: header time (s); 0 means "start now" to a joint trajectory controller.
 
     Returns:
-        ``{"header": {"stamp", "frame_id"}, "joint_names", "points": [{"positions",
-        "velocities", "accelerations", "effort", "time_from_start"}]}``.
+        ``{"header": {"stamp", "frame_id"}, "joint_names", "points": [...]}``, each point
+        ``{"positions", "velocities", "accelerations", "effort", "time_from_start"}``.
     """
     q = _checked_targets(targets, len(joint_names))
     qd = None if velocities is None else _checked_targets(velocities, len(joint_names))

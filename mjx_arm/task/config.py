@@ -30,11 +30,12 @@ V_LOW, V_HIGH = 2.0, 3.5
 class RewardConfig:
     """Weights of the named reward terms; the reward is ``sum(weight * term)``.
 
-    The seed preset is ``-10*(1-exp(-d/0.1)) + 500*contact - 5*(#joints beyond limits)
-    - 0.1*sum(|qdot|)``. Terms (see :mod:`mjx_arm.task.reward`):
+    The seed preset is
+    ``-10*(1-exp(-d/0.1)) + 500*contact - 5*(#joints beyond limits) - 0.1*sum(|qdot|)``.
+    Terms (see :mod:`mjx_arm.task.reward`):
     ``distance`` = 1 - exp(-d / distance_length), ``contact`` = 1 when the tool presses the target
     inside the force band, ``joint_limit`` = number of joints beyond ``soft_limit`` of their range,
-    ``joint_velocity`` = sum |qdot| (rad/s), ``success`` = 1 on the success step,
+    ``joint_velocity`` = ``sum |qdot|`` (rad/s), ``success`` = 1 on the success step,
     ``nonfinite`` = 1 when the physics diverged (a NaN or infinite state, or a runaway joint
     speed: see ``TaskConfig.divergence_speed_factor``),
     ``force_excess`` = (F - F_max) / F_max where the contact force F is above the band, else 0,

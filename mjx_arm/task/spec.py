@@ -29,7 +29,7 @@ SCENES = (
 class Task:
     """One task of the contract.
 
-    Class attributes:
+    Attributes:
         name: the registry name and ``TaskConfig.task`` value (lower case).
         scene: the scene built around the arm: ``"reach"`` (a marker the arm can pass through)
             or ``"touch"`` (the 5 cm box standing on the table).

@@ -39,7 +39,7 @@ GENTLE_REWARD = RewardConfig(
 # of about 1.2 kN per m/s of tool speed commanded into the box (the same in MuJoCo and
 # PyBullet), so at the seed's 0.5 the 1-50 N band is an action of about 0.001-0.05 along the
 # pressing direction, finer than PPO's exploration noise: policies learn to hover. At 0.15 the
-# band is 0.004-0.18 and Touch trains in both the C batch and MJX (README, "Gentle Touch").
+# band is 0.004-0.18 and Touch trains in both the C batch and MJX (docs/tasks/touch.md).
 GENTLE_ACTION_SCALE = 0.15
 
 

@@ -214,7 +214,7 @@ SEED = TrainConfig(task_overrides={"variant": "seed"})
 # sequences of 1,024 per update and 4 epochs (390 gradient steps per million): gentle Touch sat
 # at zero success for 40M+ steps on most seeds. The policy's exploration noise only shrinks
 # with gradient steps, and it must shrink until a press can stay in the 1-50 N band for three
-# steps (README, "Why Touch stalled"). Discount 0.97: these tasks end in under 2 s when solved.
+# steps (docs/tasks/touch.md). Discount 0.97: these tasks end in under 2 s when solved.
 # Runs stop once an evaluation reaches 0.97, so a run ends with a policy at that level.
 FAST = TrainConfig(
     num_timesteps=10_000_000,

@@ -1,0 +1,261 @@
+"""Results pages and the README's headline table, generated from ``benchmarks/results/``.
+
+Every figure the docs and the README quote comes from a committed JSON file, through this
+script; nothing is copied by hand. The docs build runs it (``docs/conf.py``), and
+``tests/test_docs.py`` checks that the README's headline block is what it makes.
+
+How it is organised, so that new result files need little or no work:
+
+- ``result_kinds.RENDERERS``: one renderer per kind of result file, tried in order; a kind
+  is told by the keys a file holds (a seeds run has ``seeds`` and ``summary``, a transfer run
+  ``rows`` and ``policy``, ...). The last one, ``render_generic``, takes any file: its run
+  metadata, a ``goals`` list, a ``rows`` table and a ``summary``. A file that is not a JSON
+  object, or not valid JSON, is listed as skipped; it never stops the build.
+- :data:`SECTIONS`: which page a file goes to, by its path under the results folder. A file
+  that no section names lands on the "Other results" page, so a new folder shows up at once.
+- ``headlines.HEADLINES``: the rows of the headline table (README and results index), each read
+  from named files.
+
+Usage::
+
+    python docs/gen_results.py                # write docs/results/*.md and README's block
+    python docs/gen_results.py --check        # exit 1 if README's block is out of date
+    python docs/gen_results.py --results DIR --out DIR --readme FILE
+"""
+
+from __future__ import annotations
+
+import argparse
+import fnmatch
+import json
+import os
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from headlines import BEGIN, END, headline_table, update_readme
+from result_kinds import Json, provenance, renderer_for
+
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "benchmarks" / "results"
+OUT = ROOT / "docs" / "results"
+README = ROOT / "README.md"
+
+__all__ = ["BEGIN", "END", "generate", "main", "update_readme"]
+
+# ---------------------------------------------------------------------------------------------
+# pages
+
+
+@dataclass(frozen=True)
+class Section:
+    """One results page: the files (glob patterns under the results folder) it shows."""
+
+    slug: str
+    title: str
+    intro: str
+    patterns: tuple[str, ...]
+
+
+SECTIONS: tuple[Section, ...] = (
+    Section("seeds", "Training over seeds",
+            "The presets as shipped, trained seed after seed by `mjx-arm bench seeds`.",
+            ("seeds/*",)),
+    Section("transfer", "Transfer",
+            "One exported policy in every engine, by `mjx-arm bench transfer`.",
+            ("transfer/*", "transfer_*", "contact/transfer/*", "lift/*")),
+    Section("parity", "Engine parity",
+            "The same inputs in C MuJoCo, MJX and PyBullet, by `mjx-arm bench parity`.",
+            ("parity/*", "parity_gpu/*", "arms/parity_*/*")),
+    Section("throughput", "Throughput and cold start",
+            "Env and physics steps per second, and where a cold start's seconds go.",
+            ("warp/mjx_throughput*", "warp/cold_start*", "mjx_throughput*", "cpu_backend*",
+             "sweep_*", "arms/throughput_*")),
+    Section("cpu", "CPU envs",
+            "The Gymnasium envs on the CPU beside raw physics (`bench_cpu_envs.py`).",
+            ("cpu_envs*",)),
+    Section("arms", "Other arms",
+            "Published arm URDFs through the pipeline: checks, training, transfer.",
+            ("arms/*",)),
+    Section("contact", "Contact and grasp",
+            "PyBullet's contact calibration and the gripper's pick (`bench grasp`).",
+            ("contact/*", "grasp/*")),
+    Section("robustness", "Robustness",
+            "Hostile URDFs and bad inputs: named errors, never a crash.",
+            ("urdf_fuzz*", "input_fuzz*", "robustness/*")),
+    Section("earlier", "Earlier training runs",
+            "Single runs of older presets, kept for the record; not figures of the presets as "
+            "shipped.", ("train_*", "warp/*", "solver4/*", "gentle/*", "curves*")),
+)  # fmt: skip
+OTHER = Section("other", "Other results", "Result files no section names yet.", ("*",))
+
+
+def section_of(rel: str) -> Section:
+    """The section whose first matching pattern takes ``rel`` (a path under the results)."""
+    for section in SECTIONS:
+        if any(fnmatch.fnmatch(rel, p) for p in section.patterns):
+            return section
+    return OTHER
+
+
+@dataclass(frozen=True)
+class Result:
+    """One result file: its path under the results folder and its data (None: skipped)."""
+
+    rel: str
+    data: Json | None
+    reason: str = ""
+
+
+def load_results(results: Path) -> list[Result]:
+    """Every ``*.json`` under ``results``, sorted; unreadable ones carry the reason."""
+    found = []
+    for path in sorted(results.rglob("*.json")):
+        rel = path.relative_to(results).as_posix()
+        try:
+            data = json.loads(path.read_text())
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+            found.append(Result(rel, None, f"not readable JSON ({type(err).__name__})"))
+            continue
+        if not isinstance(data, dict):
+            found.append(Result(rel, None, "not a JSON object"))
+        elif "meta" not in data and renderer_for(data).name == "generic":
+            found.append(Result(rel, None, "no run metadata and no known shape (a config?)"))
+        else:
+            found.append(Result(rel, data))
+    return found
+
+
+def render_result(result: Result, results: Path, page_dir: Path) -> list[str]:
+    """A file's part of its page: heading, provenance, its renderer's tables, its plots."""
+    assert result.data is not None
+    lines = [f"## `{result.rel}`", "", *provenance(result.data.get("meta") or {})]
+    try:
+        lines += renderer_for(result.data).render(result.data)
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError) as err:
+        lines += [f"*Not rendered ({type(err).__name__}: {err}); see its markdown twin.*", ""]
+    for plot in plots_of(result.rel, results):
+        lines += [f"![{plot.name}]({_rel_link(plot, page_dir)})", ""]
+    return lines
+
+
+def plots_of(rel: str, results: Path) -> list[Path]:
+    """PNG files beside a result whose names start with its stem."""
+    path = results / rel
+    return sorted(path.parent.glob(f"{path.stem}*.png"))
+
+
+def _rel_link(target: Path, page_dir: Path) -> str:
+    return Path(os.path.relpath(target.resolve(), page_dir.resolve())).as_posix()
+
+
+def render_section(section: Section, found: list[Result], results: Path, out: Path) -> str:
+    """The markdown of one section's page."""
+    lines = [f"# {section.title}", "", section.intro, ""]
+    lines += [
+        "Generated by `docs/gen_results.py` from the JSON files named in each heading "
+        "(under `benchmarks/results/`); each file's markdown twin (`.md`) sits beside it.",
+        "",
+    ]
+    shown = {r.rel for r in found}
+    for result in found:
+        lines += render_result(result, results, out)
+    loose = [p for p in _section_pngs(section, results) if not _claimed(p, results, shown)]
+    if loose:
+        lines += ["## Plots", ""]
+        lines += [f"![{p.name}]({_rel_link(p, out)})\n" for p in loose]
+    return "\n".join(lines).rstrip() + "\n"
+
+
+def _section_pngs(section: Section, results: Path) -> list[Path]:
+    pngs = sorted(results.rglob("*.png"))
+    return [p for p in pngs if section_of(p.relative_to(results).as_posix()) is section]
+
+
+def _claimed(png: Path, results: Path, shown: set[str]) -> bool:
+    return any(png.name.startswith(Path(rel).stem) and (results / rel).parent == png.parent
+               for rel in shown)  # fmt: skip
+
+
+def render_index(pages: dict[Section, list[Result]], skipped: list[Result], results: Path) -> str:
+    """The results index: the headline table, the pages, and the files skipped."""
+    lines = [
+        "# Results",
+        "",
+        "Every figure in these pages is generated from the JSON that the benchmarks write "
+        "under `benchmarks/results/` (`docs/gen_results.py`, run by every docs build). Each "
+        "heading names its file; each figure carries the date, device and package versions "
+        "of its run. Where a figure changed over time, the JSON keeps the earlier runs.",
+        "",
+        "## Headline figures",
+        "",
+        *headline_table(results),
+        "```{toctree}",
+        ":maxdepth: 1",
+        "",
+        *[s.slug for s in pages],
+        "```",
+        "",
+    ]
+    if skipped:
+        lines += ["## Files not rendered", ""]
+        lines += [f"- `{r.rel}`: {r.reason}" for r in skipped] + [""]
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------------------
+# command line
+
+
+def generate(results: Path, out: Path) -> list[Path]:
+    """Write the results pages into ``out``; return the files written."""
+    found = load_results(results)
+    pages: dict[Section, list[Result]] = {}
+    for result in found:
+        if result.data is not None:
+            pages.setdefault(section_of(result.rel), []).append(result)
+    order = [s for s in (*SECTIONS, OTHER) if s in pages]
+    pages = {s: pages[s] for s in order}
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    for section, results_in in pages.items():
+        path = out / f"{section.slug}.md"
+        _write(path, render_section(section, results_in, results, out))
+        written.append(path)
+    skipped = [r for r in found if r.data is None]
+    index = out / "index.md"
+    _write(index, render_index(pages, skipped, results))
+    return [index, *written]
+
+
+def _write(path: Path, text: str) -> None:
+    """Write only when the text changed (Sphinx then rebuilds only what changed)."""
+    if not path.is_file() or path.read_text() != text:
+        path.write_text(text)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Generate the pages and README's block; ``--check`` only compares the README."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--results", type=Path, default=RESULTS)
+    parser.add_argument("--out", type=Path, default=OUT)
+    parser.add_argument("--readme", type=Path, default=README)
+    parser.add_argument("--check", action="store_true", help="README's block is up to date")
+    args = parser.parse_args(argv)
+    text = args.readme.read_text()
+    fresh = update_readme(text, args.results)
+    if args.check:
+        if fresh != text:
+            print(f"{args.readme}: headline block out of date; run docs/gen_results.py")
+            return 1
+        return 0
+    written = generate(args.results, args.out)
+    _write(args.readme, fresh)
+    print(f"{len(written)} results pages in {args.out}; headline block of {args.readme}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

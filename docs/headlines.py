@@ -1,0 +1,153 @@
+"""The headline figures: the README's table and the top of the results index.
+
+Each :class:`Headline` reads named result files and gives one row (figure, value, sources);
+the device and date come from the first source's ``meta``. A row whose files are gone or
+changed shape is left out, not an error, so renaming a result file never breaks the build.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from result_kinds import Json, date, device, fmt, secs
+
+BEGIN = "<!-- headline:begin (made by docs/gen_results.py from benchmarks/results; do not edit) -->"
+END = "<!-- headline:end -->"
+
+
+@dataclass(frozen=True)
+class Headline:
+    """One headline row: ``read(load)`` gives (figure, value, source files); ``load(rel)``
+    reads a result file."""
+
+    read: Callable[[Callable[[str], Json]], tuple[str, str, list[str]]]
+
+
+def _seeds_row(task: str, rel: str, what: str, warm: bool = True) -> Headline:
+    """A seeds run: seeds solved and the median time, of the warm seeds (all but the first,
+    which paid for empty caches) or of all."""
+
+    def read(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
+        s = load(rel)["summary"]
+        key = "time_to_threshold_warm" if warm else "time_to_threshold_all"
+        when = f"{secs((s.get(key) or {}).get('median'))} {'warm' if warm else 'all seeds'}"
+        value = f"{s['solved']} of {s['seeds']} seeds at {fmt(s['threshold'])}; median {when}"
+        return f"{task}: {what}", value, [rel]
+
+    return Headline(read)
+
+
+def _transfer_row(task: str, rels: list[str], keys: tuple[str, ...]) -> Headline:
+    def read(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
+        parts = []
+        for key in keys:
+            rates = [r["success_rate"] for rel in rels for r in load(rel)["rows"]
+                     if r.get("key") == key]  # fmt: skip
+            label = next(r["label"] for r in load(rels[0])["rows"] if r.get("key") == key)
+            parts.append(f"{label} {min(rates):.3f}-{max(rates):.3f}")
+        return f"{task}: transfer of {len(rels)} policies, success", "; ".join(parts), rels
+
+    return Headline(read)
+
+
+def _throughput_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
+    rel = "warp/mjx_throughput_touch_impls.json"
+    data = load(rel)
+    best = max(data["rows"], key=lambda r: r["env_control_steps_per_s"])
+    ratio = data["warp_over_jax"][str(best["batch"])]
+    value = (f"{fmt(best['env_control_steps_per_s'])} control steps/s at "
+             f"{fmt(best['batch'])} envs ({best['impl']}, {fmt(ratio)}x JAX)")  # fmt: skip
+    return "Touch: MJX env steps per second", value, [rel]
+
+
+def _parity_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
+    rel = "parity/parity.json"
+    goals = load(rel)["goals"]
+    fk = max(g["value"] for g in goals if g["check"].startswith("forward kinematics"))
+    div = [g["value"] for g in goals if g["check"].startswith("joint divergence at 1 s")]
+    met = sum(1 for g in goals if g["met"])
+    value = (
+        f"FK within {fmt(fk)} m; joint divergence at 1 s (median) "
+        f"{fmt(min(div))}-{fmt(max(div))} rad; {met} of {len(goals)} goals met"
+    )
+    return "Engine parity (C MuJoCo, MJX, PyBullet)", value, [rel]
+
+
+def _cpu_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
+    rel = "cpu_envs.json"
+    cases = load(rel)["cases"]
+    value = "; ".join(f"{case} {fmt(c['env_steps_per_s']['median'])} steps/s "
+                      f"({fmt(c['ratio'], 2)} of raw)" for case, c in cases.items())  # fmt: skip
+    return "Gymnasium envs on the CPU, one env", value, [rel]
+
+
+def _fuzz_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
+    urdf, inputs = load("urdf_fuzz.json"), load("input_fuzz.json")
+    crashes = sum(k.get("crash", 0) for k in urdf["by_kind"].values())
+    tracebacks = sum(c.get("traceback", 0) for c in inputs["by_command"].values())
+    value = (
+        f"{fmt(urdf['mutations'])} mutated URDFs: {crashes} crashes; "
+        f"{fmt(inputs['cases'])} command lines: {tracebacks} tracebacks"
+    )
+    return "Hostile URDFs and bad inputs", value, ["urdf_fuzz.json", "input_fuzz.json"]
+
+
+TOUCH_TRANSFER = [f"contact/transfer/touch_fast_seed{i}.json" for i in range(3)]
+LIFT_TRANSFER = [f"contact/transfer/lift_seed{i}.json" for i in range(5)]
+HEADLINES: tuple[Headline, ...] = (
+    _seeds_row("Touch", "seeds/seeds_touch_fast.json", "`--preset fast`, time to threshold"),
+    _seeds_row("Reach", "seeds/seeds_reach_fast.json", "`--preset fast`, time to threshold"),
+    _seeds_row("Lift", "seeds/seeds_lift_fast.json", "`--preset fast`, time to threshold"),
+    _seeds_row("Touch", "seeds/seeds_touch_cpu_c_backend.json",
+               "`--preset cpu --backend mujoco`, time to threshold", warm=False),
+    _seeds_row("Reach", "seeds/seeds_reach_cpu_c_backend.json",
+               "`--preset cpu --backend mujoco`, time to threshold", warm=False),
+    _transfer_row("Touch", TOUCH_TRANSFER, ("mujoco", "pybullet")),
+    _transfer_row("Lift", LIFT_TRANSFER, ("mujoco", "pybullet")),
+    Headline(_throughput_row),
+    Headline(_parity_row),
+    Headline(_cpu_row),
+    Headline(_fuzz_row),
+)  # fmt: skip
+
+
+def headline_table(results: Path, link_prefix: str = "") -> list[str]:
+    """The headline table; sources are linked with ``link_prefix`` (the README) or named."""
+
+    def load(rel: str) -> Json:
+        return json.loads((results / rel).read_text())
+
+    rows = []
+    for headline in HEADLINES:
+        try:
+            figure, value, rels = headline.read(load)
+        except (OSError, KeyError, ValueError, TypeError, StopIteration):
+            continue  # a file moved or renamed: the row waits for its new name
+        meta = load(rels[0]).get("meta") or {}
+        source = ", ".join(_source(rel, link_prefix) for rel in rels[:1])
+        more = f" (+{len(rels) - 1})" if len(rels) > 1 else ""
+        rows.append([figure, value, device(meta), date(meta), source + more])
+    header = ["figure", "value", "device", "date", "source"]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    return [*lines, *("| " + " | ".join(str(c) for c in row) + " |" for row in rows), ""]
+
+
+def _source(rel: str, link_prefix: str) -> str:
+    if link_prefix:
+        return f"[{Path(rel).name}]({link_prefix}{rel})"
+    return f"`{rel}`"
+
+
+def readme_block(results: Path) -> str:
+    """The README's generated block, markers included."""
+    body = headline_table(results, link_prefix="benchmarks/results/")
+    return "\n".join([BEGIN, *body, END])
+
+
+def update_readme(text: str, results: Path) -> str:
+    """``text`` (README.md) with its headline block made again from ``results``."""
+    start, end = text.index(BEGIN), text.index(END) + len(END)
+    return text[:start] + readme_block(results) + text[end:]

@@ -1,0 +1,128 @@
+"""The docs: the README's headline block and the results pages come from the benchmark JSON
+(``docs/gen_results.py``), and the site builds with warnings as errors."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+DOCS = ROOT / "docs"
+
+
+def _load(name: str):
+    """Import ``docs/NAME.py`` (the docs folder is not a package)."""
+    spec = importlib.util.spec_from_file_location(f"docs_{name}", DOCS / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+gen = _load("gen_results")
+
+
+def _results_copy(tmp_path: Path) -> Path:
+    """A small copy of the committed results: the seeds and transfer files the headline reads,
+    and the CPU envs' file."""
+    src, dst = gen.RESULTS, tmp_path / "results"
+    for rel in ("seeds", "contact/transfer", "warp", "parity"):
+        shutil.copytree(src / rel, dst / rel, ignore=shutil.ignore_patterns("*.npz", "*.mp4"))
+    for rel in ("cpu_envs.json", "urdf_fuzz.json", "input_fuzz.json"):
+        shutil.copy(src / rel, dst / rel)
+    return dst
+
+
+def test_readme_headline_block_is_what_the_script_makes():
+    text = (ROOT / "README.md").read_text()
+    assert gen.BEGIN in text and gen.END in text
+    assert gen.update_readme(text, gen.RESULTS) == text, "run: python docs/gen_results.py"
+    assert gen.main(["--check"]) == 0
+
+
+def test_readme_is_one_page():
+    assert len((ROOT / "README.md").read_text().splitlines()) <= 250
+
+
+def test_changing_one_json_value_changes_the_page_and_the_readme(tmp_path):
+    results = _results_copy(tmp_path)
+    out = tmp_path / "pages"
+    readme = tmp_path / "README.md"
+    readme.write_text(f"intro\n{gen.BEGIN}\n{gen.END}\nrest\n")
+    assert gen.main(["--results", str(results), "--out", str(out), "--readme", str(readme)]) == 0
+    page, block = (out / "seeds.md").read_text(), readme.read_text()
+    assert "10 of 10 seeds at 0.95; median 42.7 s warm" in block
+    assert "| 10 of 10 |" in page
+
+    file = results / "seeds" / "seeds_touch_fast.json"
+    data = json.loads(file.read_text())
+    data["summary"]["solved"] = 7
+    data["summary"]["time_to_threshold_warm"]["median"] = 51.25
+    file.write_text(json.dumps(data))
+    assert gen.main(["--results", str(results), "--out", str(out), "--readme", str(readme)]) == 0
+    assert "7 of 10 seeds at 0.95; median 51.2 s warm" in readme.read_text()
+    assert "| 7 of 10 | 51.2 s (" in (out / "seeds.md").read_text()
+    assert readme.read_text().startswith("intro\n") and readme.read_text().endswith("rest\n")
+    assert gen.main(["--results", str(results), "--readme", str(readme), "--check"]) == 0
+
+
+def test_every_figure_names_its_date_device_and_versions(tmp_path):
+    results = _results_copy(tmp_path)
+    gen.generate(results, tmp_path / "pages")
+    page = (tmp_path / "pages" / "seeds.md").read_text()
+    assert "## `seeds/seeds_touch_fast.json`" in page
+    assert "Measured **2026-11-23** · NVIDIA H200" in page
+    assert "mujoco-mjx 3.17.0" in page and "jax 0.11.2" in page
+    assert "![seeds_touch_fast.png](" in page  # the plot beside the JSON
+
+
+def test_unknown_and_broken_files_are_skipped_gracefully(tmp_path):
+    results = _results_copy(tmp_path)
+    (results / "robustness").mkdir()
+    meta = json.loads((results / "cpu_envs.json").read_text())["meta"]
+    new_kind = {"meta": meta, "rows": [{"case": "a", "value": 1.5}], "summary": "one new kind"}
+    (results / "robustness" / "new_kind.json").write_text(json.dumps(new_kind))
+    (results / "brand_new").mkdir()
+    (results / "brand_new" / "x.json").write_text(json.dumps({"meta": meta, "odd": {"a": 1}}))
+    (results / "broken.json").write_text("{not json")
+    (results / "a_list.json").write_text("[1, 2]")
+    written = gen.generate(results, tmp_path / "pages")
+    names = {p.name for p in written}
+    assert {"index.md", "robustness.md", "other.md", "seeds.md"} <= names
+    assert "| a | 1.5 |" in (tmp_path / "pages" / "robustness.md").read_text()
+    assert "## `brand_new/x.json`" in (tmp_path / "pages" / "other.md").read_text()
+    index = (tmp_path / "pages" / "index.md").read_text()
+    assert "`broken.json`: not readable JSON" in index
+    assert "`a_list.json`: not a JSON object" in index
+
+
+def test_every_committed_result_file_is_rendered_or_listed(tmp_path):
+    written = gen.generate(gen.RESULTS, tmp_path / "pages")
+    text = "\n".join(p.read_text() for p in written)
+    for path in gen.RESULTS.rglob("*.json"):
+        assert f"`{path.relative_to(gen.RESULTS).as_posix()}`" in text
+
+
+@pytest.mark.slow
+def test_docs_build_with_warnings_as_errors(tmp_path):
+    """The whole site, offline, warnings as errors (a broken link or a missing page fails)."""
+    start = time.perf_counter()
+    proc = subprocess.run(
+        [sys.executable, "-m", "sphinx", "-W", "--keep-going", "-q", "-b", "html",
+         "-d", str(tmp_path / "doctrees"), str(DOCS), str(tmp_path / "html")],
+        capture_output=True, text=True, cwd=ROOT, check=False,
+    )  # fmt: skip
+    seconds = time.perf_counter() - start
+    assert proc.returncode == 0, proc.stderr[-4000:]
+    pages = list((tmp_path / "html").rglob("*.html"))
+    assert len(pages) >= 30, [p.name for p in pages]
+    assert (tmp_path / "html" / "results" / "seeds.html").is_file()
+    assert (tmp_path / "html" / "api" / "task.html").is_file()
+    print(f"docs: {len(pages)} pages in {seconds:.1f} s")
