@@ -84,7 +84,9 @@ def summarize(folder: Path) -> dict[str, Any]:
                 "seeds": per_seed,
             }
         )
-    return {"folder": folder.name, "entries": entries}
+    first = next(iter(sorted(folder.glob("seeds_*.json"))), None)
+    meta = json.loads(first.read_text()).get("meta", {}) if first else {}
+    return {"meta": meta, "folder": folder.name, "entries": entries}
 
 
 def markdown(summary: dict[str, Any]) -> str:

@@ -95,6 +95,18 @@ def _fuzz_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
     return "Hostile URDFs and bad inputs", value, ["urdf_fuzz.json", "input_fuzz.json"]
 
 
+def _any_arm_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
+    rel = ANY_ARM_SUMMARY
+    parts = []
+    for e in load(rel)["entries"]:
+        moved = [s["transfer"] for s in e["seeds"] if s["solved"] and s["transfer"]]
+        low = min((min(v[0] for v in t.values()) for t in moved), default=None)
+        worst = f", exported {fmt(low, 3)}+" if low is not None else ""
+        parts.append(f"{e['arm']} {e['task']} {e['solved']}/{len(e['seeds'])}{worst}")
+    return "Published arms, no arm file: seeds solved, transfer", "; ".join(parts), [rel]
+
+
+ANY_ARM_SUMMARY = "arms/any_arm/final_2e708e5/summary.json"
 TOUCH_TRANSFER = [f"contact/transfer/touch_fast_seed{i}.json" for i in range(3)]
 LIFT_TRANSFER = [f"contact/transfer/lift_seed{i}.json" for i in range(5)]
 HEADLINES: tuple[Headline, ...] = (
@@ -107,6 +119,7 @@ HEADLINES: tuple[Headline, ...] = (
                "`--preset cpu --backend mujoco`, time to threshold", warm=False),
     _transfer_row("Touch", TOUCH_TRANSFER, ("mujoco", "pybullet")),
     _transfer_row("Lift", LIFT_TRANSFER, ("mujoco", "pybullet")),
+    Headline(_any_arm_row),
     Headline(_throughput_row),
     Headline(_parity_row),
     Headline(_cpu_row),

@@ -160,6 +160,9 @@ def test_the_ee_point_moves_to_where_the_tool_touches() -> None:
     kinova = arm_info(ArmConfig(urdf=str(KINOVA)))
     assert -0.05 < kinova.ee_offset[0] < -0.03 and abs(kinova.ee_offset[1:]).max() < 1e-6
     assert not np.any(arm_info(ArmConfig(urdf=str(PANDA))).ee_offset)
+    # whole micrometres, so another CPU's last bits do not change the arm's model hash
+    for offset in (z1.ee_offset, kinova.ee_offset):
+        np.testing.assert_array_equal(offset, np.round(offset * 1e6) / 1e6)
     # the converted model's ee site sits there
     solver = tool_down_solver(z1)
     site = solver.ik.model.site(EE_SITE)

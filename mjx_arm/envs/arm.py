@@ -227,7 +227,9 @@ def derive_ee_offset(arm: ArmInfo) -> np.ndarray:
     the Touch box's top face), so the ee point is where the tool touches (a jaw's tips, the
     palm of an open hand). An arm with a parallel gripper keeps the link's origin (between the
     pads: what Lift grasps around); so does a tool that meets the surface within
-    :data:`MIN_EE_OFFSET` of it, or one with no shape near its axis.
+    :data:`MIN_EE_OFFSET` of it, or one with no shape near its axis. Rounded to 1 um: the
+    axis comes out of floating-point kinematics whose last bits differ between CPUs (a 1e-17
+    m component would change the model hash that policy files check).
     """
     from mjx_arm.urdf.scene_shapes import box_half_width
 
@@ -238,7 +240,7 @@ def derive_ee_offset(arm: ArmInfo) -> np.ndarray:
     reach = solver.tool_protrusion(solver.middle, box_half_width())
     if reach is None or abs(reach) < MIN_EE_OFFSET:
         return zero
-    return reach * solver.ik.tool
+    return np.round(reach * solver.ik.tool, 6) + 0.0  # + 0.0: no negative zeros
 
 
 # The working height (m) of the ee point above the table at a home pose (mjx_arm.envs.setup).
