@@ -101,7 +101,7 @@ def _any_arm_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
     for e in load(rel)["entries"]:
         moved = [s["transfer"] for s in e["seeds"] if s["solved"] and s["transfer"]]
         low = min((min(v[0] for v in t.values()) for t in moved), default=None)
-        worst = f", exported {fmt(low, 3)}+" if low is not None else ""
+        worst = f", exported >= {low:.3f}" if low is not None else ""
         parts.append(f"{e['arm']} {e['task']} {e['solved']}/{len(e['seeds'])}{worst}")
     return "Published arms, no arm file: seeds solved, transfer", "; ".join(parts), [rel]
 
