@@ -79,7 +79,8 @@ class Dynamics:
         armature: multiplier of the n joints' rotor inertia, ``(n,)``.
         gain: multiplier of the n velocity servos' gain, ``(n,)``.
         frictionloss: dry friction added to the n joints (N m), ``(n,)``.
-        payload: mass added at the flange body's centre of mass (kg), ``()``.
+        payload: mass added at the flange body's centre of mass (kg), ``()``; the gravity
+            compensation of the servos does not hold its weight.
         table: height offset of the table (m), ``()``.
         timestep: multiplier of the physics step (control-period jitter), ``()``.
     """
@@ -247,12 +248,17 @@ class MjxPhysics:
         gain = m.actuator_gainprm.at[act, 0].multiply(dyn.gain)
         bias = m.actuator_biasprm.at[act, 2].multiply(dyn.gain)  # velocity servo: -kv * qdot
         table_z = m.geom_pos.at[ids.table_geoms, 2].add(dyn.table)
+        # the payload's weight is not in the servo's gravity compensation (a payload the
+        # controller was not told of): the flange's compensated mass stays its own
+        flange = ids.flange_body
+        mass0 = m.body_mass[flange]
         return m.replace(
             geom_friction=m.geom_friction * dyn.friction,
             dof_damping=m.dof_damping.at[dofs].multiply(dyn.damping),
             dof_armature=m.dof_armature.at[dofs].multiply(dyn.armature),
             dof_frictionloss=m.dof_frictionloss.at[dofs].add(dyn.frictionloss),
-            body_mass=m.body_mass.at[ids.flange_body].add(dyn.payload),
+            body_mass=m.body_mass.at[flange].add(dyn.payload),
+            body_gravcomp=m.body_gravcomp.at[flange].multiply(mass0 / (mass0 + dyn.payload)),
             geom_pos=table_z,
             actuator_gainprm=gain,
             actuator_biasprm=bias,

@@ -102,7 +102,9 @@ class _ModelCopies:
         m.dof_frictionloss[dofs] = base.dof_frictionloss[dofs] + frictionloss
         m.actuator_gainprm[act, 0] = base.actuator_gainprm[act, 0] * gain
         m.actuator_biasprm[act, 2] = base.actuator_biasprm[act, 2] * gain
-        m.body_mass[ids.flange_body] = base.body_mass[ids.flange_body] + payload
+        flange, mass0 = ids.flange_body, base.body_mass[ids.flange_body]
+        m.body_mass[flange] = mass0 + payload
+        m.body_gravcomp[flange] = base.body_gravcomp[flange] * mass0 / (mass0 + payload)
         m.geom_pos[ids.table_geoms, 2] = base.geom_pos[ids.table_geoms, 2] + table
         m.opt.timestep = base.opt.timestep * timestep
         if self.grip is not None:

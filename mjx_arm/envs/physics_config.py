@@ -87,7 +87,9 @@ class RandomizationConfig:
             in this range, at most :data:`MAX_LATENCY`.
         frictionloss: dry friction (N m) added to each arm joint (per joint).
         payload: mass (kg) added at the flange, upstream of the wrist F/T sensor (a tool the
-            sensor's tare already holds), at the flange body's centre of mass.
+            sensor's tare already holds), at the flange body's centre of mass; the servos'
+            gravity compensation does not hold its weight (a payload the controller was not
+            told of).
         cube_mass: multiplier of a gripper task's cube mass (its own draw).
         cube_friction: multiplier of the cube's and pads' sliding friction (its own draw).
         joint_bias: per-episode offset (rad) of each observed joint angle (per joint).
