@@ -154,11 +154,6 @@ def joint_config(perturbations: tuple[Perturbation, ...]) -> RandomizationConfig
     return NOMINAL.replace(**changes)
 
 
-# The training randomisation that covers every stated range (the joint draw of all
-# perturbations, Lift's cube included; a task without a cube ignores the cube's fields).
-ROBUST = joint_config(PERTURBATIONS)
-
-
 @dataclass(frozen=True)
 class RobustnessConfig:
     """Settings of ``mjx-arm bench robustness`` (each field is a flag)."""
