@@ -106,6 +106,9 @@ ISAAC = "Isaac Lab UR10e reach recipe"
 SYSID = "what system identification typically misses"
 DATASHEET = "UR5e data sheet"
 
+SYMMETRIC_2CM = (-0.02, -0.01, -0.005, 0.0, 0.005, 0.01, 0.02)  # m, or rad of joint bias
+FT_BIAS_VALUES = (-6.0, -4.0, -2.0, -1.0, 0.0, 1.0, 2.0, 4.0, 6.0)  # N
+
 PERTURBATIONS: tuple[Perturbation, ...] = (
     Perturbation("servo_gain", "gain", "range", "x", (0.6, 0.75, 1.0, 1.25, 1.5), (0.75, 1.5),
                  f"{ISAAC}: damping x0.75-1.5, stiffness x0.9-1.1"),
@@ -113,7 +116,7 @@ PERTURBATIONS: tuple[Perturbation, ...] = (
                  f"{SYSID}: viscous damping within a factor of 2"),
     Perturbation("joint_friction", "frictionloss", "range", "N m", (0.0, 0.05, 0.1, 0.5, 1.0),
                  (0.0, 0.1), f"{ISAAC}: joint friction 0-0.1 N m"),
-    Perturbation("payload", "payload", "range", "kg", (0.0, 1.0, 2.5, 5.0), (0.0, 5.0),
+    Perturbation("payload", "payload", "range", "kg", (0.0, 0.5, 1.0, 2.5, 5.0), (0.0, 5.0),
                  f"{DATASHEET}: rated payload 5 kg"),
     Perturbation("cube_mass", "cube_mass", "range", "x", (0.5, 1.0, 1.5, 2.0, 3.0), (0.5, 2.0),
                  "mjlab: object mass; a cube of 25-400 g against the task's 50-200 g",
@@ -125,15 +128,15 @@ PERTURBATIONS: tuple[Perturbation, ...] = (
                  f"mjlab: actuator delay; {SYSID}: 0-3 control periods (0-100 ms at 30 Hz)"),
     Perturbation("joint_noise", "joint_noise", "scalar", "rad", (0.0, 0.001, 0.005, 0.01),
                  (0.0, 0.005), "mjlab: observation noise; encoders are far finer than this"),
-    Perturbation("joint_bias", "joint_bias", "range", "rad", (-0.02, -0.01, 0.0, 0.01, 0.02),
+    Perturbation("joint_bias", "joint_bias", "range", "rad", SYMMETRIC_2CM,
                  (-0.01, 0.01), f"mjlab: encoder bias; {SYSID}: an uncalibrated arm's zero"),
-    Perturbation("ft_noise", "ft_force_noise", "scalar", "N", (0.0, 1.0, 3.5, 5.0), (0.0, 3.5),
+    Perturbation("ft_noise", "ft_force_noise", "scalar", "N", (0.0, 1.0, 2.0, 3.5, 5.0), (0.0, 3.5),
                  f"{DATASHEET}: F/T force precision 3.5 N"),
-    Perturbation("ft_bias", "ft_force_bias", "range", "N", (-6.0, -4.0, 0.0, 4.0, 6.0),
+    Perturbation("ft_bias", "ft_force_bias", "range", "N", FT_BIAS_VALUES,
                  (-4.0, 4.0), f"{DATASHEET}: F/T force accuracy 4.0 N"),
     Perturbation("ctrl_jitter", "ctrl_jitter", "scalar", "fraction", (0.0, 0.05, 0.1, 0.2),
                  (0.0, 0.1), f"{SYSID}: +-3 ms on a 33 ms period"),
-    Perturbation("table_height", "table_height", "range", "m", (-0.03, -0.02, 0.0, 0.02, 0.03),
+    Perturbation("table_height", "table_height", "range", "m", SYMMETRIC_2CM,
                  (-0.02, 0.02), f"{SYSID}: a table measured by hand"),
     Perturbation("pose_error", "box_offset", "scalar", "m", (0.0, 0.005, 0.01, 0.02),
                  (0.0, 0.01), f"{SYSID}: an object pose from a camera (uniform in +-value, x/y)"),
