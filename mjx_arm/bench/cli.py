@@ -222,11 +222,27 @@ def _command(commands, func, help_text: str, config: type) -> argparse.ArgumentP
     return p
 
 
-def register(sub) -> None:
-    """Add ``bench`` with its ``parity``, ``grasp``, ``transfer`` and ``seeds`` subcommands to
-    ``sub``."""
-    from mjx_arm.bench.parity_config import ParityConfig
+def _add_robustness(commands) -> None:
+    """The ``robustness`` subcommand's parser."""
     from mjx_arm.bench.robustness import RobustnessConfig
+
+    p = _command(
+        commands, cmd_robustness, "one policy under perturbations: success, peak force",
+        RobustnessConfig,
+    )  # fmt: skip
+    p.add_argument("policy", help="policy file (.npz/.onnx) or run directory (newest checkpoint)")
+    p.add_argument("--quick", action="store_true", help="a small run (8 episodes per point)")
+    p.add_argument("--arm", default="", help="the arm file or URDF (default: the policy's)")
+    p.add_argument("--name", help="file stem (default: robustness_TASK)")
+    p.add_argument(
+        "--out", type=Path, default=ROBUSTNESS_OUT, help=f"output folder ({ROBUSTNESS_OUT})"
+    )
+
+
+def register(sub) -> None:
+    """Add ``bench`` with its ``parity``, ``grasp``, ``transfer``, ``robustness`` and ``seeds``
+    subcommands to ``sub``."""
+    from mjx_arm.bench.parity_config import ParityConfig
     from mjx_arm.bench.seeds import SeedsConfig
     from mjx_arm.bench.transfer import TransferConfig
 
@@ -264,17 +280,7 @@ def register(sub) -> None:
     p.add_argument("--plot", action="store_true", help="also write NAME.png")
     p.add_argument("--out", type=Path, default=TRANSFER_OUT, help=f"output folder ({TRANSFER_OUT})")
 
-    p = _command(
-        commands, cmd_robustness, "one policy under perturbations: success, peak force",
-        RobustnessConfig,
-    )  # fmt: skip
-    p.add_argument("policy", help="policy file (.npz/.onnx) or run directory (newest checkpoint)")
-    p.add_argument("--quick", action="store_true", help="a small run (8 episodes per point)")
-    p.add_argument("--arm", default="", help="the arm file or URDF (default: the policy's)")
-    p.add_argument("--name", help="file stem (default: robustness_TASK)")
-    p.add_argument(
-        "--out", type=Path, default=ROBUSTNESS_OUT, help=f"output folder ({ROBUSTNESS_OUT})"
-    )
+    _add_robustness(commands)
 
     p = _command(commands, cmd_seeds, "a preset over seeds: fraction solved, times", SeedsConfig)
     add_set_argument(
