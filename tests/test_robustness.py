@@ -83,6 +83,7 @@ def test_point_result_and_summary():
     summary = summarize(rows, (p,))
     assert summary["per_perturbation"]["latency"]["below_goal_at"] == [2.0, 3.0]
     assert not summary["all_points_goal_met"] and summary["joint_goal_met"]
+    assert summary["nominal_pooled"]["episodes"] == 10  # latency 0 is the nominal point
 
 
 # --------------------------------------------------------------------------- sweep structure

@@ -83,7 +83,11 @@ class Perturbation:
         """``base`` with this perturbation fixed at ``value``."""
         if self.kind == "latency":
             k = round(value)
-            return base.replace(latency_prob=1.0 if k else 0.0, latency_steps=(k, k))
+            return (
+                base.replace(latency_prob=0.0)
+                if k == 0
+                else base.replace(latency_prob=1.0, latency_steps=(k, k))
+            )
         if self.kind == "range":
             return base.replace(**{self.field: (float(value), float(value))})
         return base.replace(**{self.field: float(value)})
@@ -352,12 +356,34 @@ def summarize(rows: list[dict[str, Any]], perturbations: tuple[Perturbation, ...
         }
     joint = next(r for r in rows if r["perturbation"] == JOINT)
     return {
+        "nominal_pooled": nominal_pool(rows, perturbations),
         "per_perturbation": per,
         "joint_success": joint["success_rate"],
         "joint_goal_met": joint["success_rate"] >= GOAL_JOINT,
         "all_points_goal_met": all(v["goal_met"] for v in per.values()),
         "goal_point": GOAL_POINT,
         "goal_joint": GOAL_JOINT,
+    }
+
+
+def nominal_pool(rows: list[dict[str, Any]], perturbations: tuple[Perturbation, ...]) -> dict:
+    """Every point at the model's own values (each perturbation's nominal point: the same
+    config), pooled: the policy's unperturbed success, with a tighter interval than one
+    point's."""
+    by_name = {p.name: p for p in perturbations}
+    mine = [
+        r
+        for r in rows
+        if r["perturbation"] in by_name and by_name[r["perturbation"]].config(r["value"]) == NOMINAL
+    ]
+    n, k = sum(r["episodes"] for r in mine), sum(r["successes"] for r in mine)
+    low, high = wilson_interval(k, n)
+    return {
+        "points": len(mine),
+        "episodes": n,
+        "successes": k,
+        "success_rate": k / n if n else None,
+        "success_ci95": [low, high],
     }
 
 
@@ -397,6 +423,7 @@ def markdown(result: dict[str, Any], source: str) -> str:
         f"({result['physics'].get('impl')}), {result['episodes_total']} episodes in "
         f"{result['run_seconds']:.0f} s.\n",
         markdown_table(headers, rows),
+        _nominal_line(summary["nominal_pooled"]),
         f"\nGoals: success >= {GOAL_POINT} at every point of each stated range, "
         f">= {GOAL_JOINT} under the joint draw.\n",
         markdown_table(
@@ -412,6 +439,14 @@ def markdown(result: dict[str, Any], source: str) -> str:
         "F/T sensor; joint bias and F/T bias apply the value to every joint / force axis.\n",
     ]
     return "\n".join(text)
+
+
+def _nominal_line(pool: dict[str, Any]) -> str:
+    low, high = pool["success_ci95"]
+    return (
+        f"\nNominal (the {pool['points']} points at the model's own values, pooled): success "
+        f"{pool['success_rate']:.3f} [{low:.2f}, {high:.2f}] over {pool['episodes']} episodes.\n"
+    )
 
 
 def plot(result: dict[str, Any], path: Path) -> Path:
@@ -430,8 +465,8 @@ def plot(result: dict[str, Any], path: Path) -> Path:
         rows = [r for r in result["rows"] if r["perturbation"] == p["name"]]
         x = [r["value"] for r in rows]
         y = [r["success_rate"] for r in rows]
-        err = [[r["success_rate"] - r["success_ci95"][0] for r in rows],
-               [r["success_ci95"][1] - r["success_rate"] for r in rows]]  # fmt: skip
+        err = [[max(r["success_rate"] - r["success_ci95"][0], 0.0) for r in rows],
+               [max(r["success_ci95"][1] - r["success_rate"], 0.0) for r in rows]]  # fmt: skip
         ax.axvspan(*p["stated"], color="C2", alpha=0.12)
         ax.errorbar(x, y, yerr=err, marker="o", capsize=3)
         ax.axhline(GOAL_POINT, color="grey", ls=":")
@@ -440,7 +475,8 @@ def plot(result: dict[str, Any], path: Path) -> Path:
     ax = axes.flat[len(perts)]
     low, high = joint["success_ci95"]
     rate = joint["success_rate"]
-    ax.bar([JOINT], [rate], yerr=[[rate - low], [high - rate]], capsize=4, color="C1")
+    yerr = [[max(rate - low, 0.0)], [max(high - rate, 0.0)]]
+    ax.bar([JOINT], [rate], yerr=yerr, capsize=4, color="C1")
     ax.axhline(GOAL_JOINT, color="grey", ls=":")
     ax.set(ylim=(0, 1.05), title="all at once", ylabel="success")
     for ax in list(axes.flat)[len(perts) + 1 :]:
