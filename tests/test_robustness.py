@@ -274,3 +274,22 @@ def test_cli_rejects_bad_input(tmp_path: Path, capsys):
     assert "episodes" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["bench", "robustness", str(policy), "--engine", "bullet"])
+
+
+@pytest.mark.slow
+def test_quick_run_writes_the_report(tmp_path: Path):
+    """End to end on the C batch: one episode per point, the three files."""
+    policy = Path(__file__).parents[1] / "benchmarks/results/seeds/policies/touch_fast_seed0.npz"
+    argv = [
+        "bench",
+        "robustness",
+        str(policy),
+        "--quick",
+        "--episodes",
+        "1",
+        "--out",
+        str(tmp_path),
+    ]
+    assert main([*argv, "--joint-episodes", "2", "--name", "r"]) == 0
+    for suffix in ("md", "json", "png"):
+        assert (tmp_path / f"r.{suffix}").stat().st_size > 0
