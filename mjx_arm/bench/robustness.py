@@ -16,7 +16,8 @@ Where the ranges come from (the ``source`` of each :class:`Perturbation`):
 - UR5e data sheet (Universal Robots, "UR5e technical specifications"): rated payload 5 kg,
   pose repeatability +-0.03 mm (ISO 9283), joint speeds 180 deg/s, built-in F/T sensor force
   precision 3.5 N and accuracy 4.0 N. Repeatability is far below anything a policy notices;
-  the calibration of a arm that is not calibrated is not (joint bias below).
+  the zero offsets of an arm whose kinematics were never calibrated are not (joint bias
+  below).
 - Isaac Lab's UR10e reach sim-to-real recipe: actuator stiffness x0.9-1.1 and damping x0.75-1.5
   (our velocity servo's gain acts as the damping of a PD servo on velocity), joint friction
   0-0.1 N m, initial joints +-0.125 rad, at 60 Hz.
