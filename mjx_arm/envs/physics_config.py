@@ -178,7 +178,7 @@ NOMINAL = RandomizationConfig(
 # step of latency (0.89; 0.09 at three), an unannounced payload of 1 kg (0.83; 0.00 at 2.5 kg), a
 # joint bias of 10 mrad (0.77) and servo gain x1.5 (0.83); all together: 0.02. Lift policies
 # add the cube's friction (x0.7: 0.00-0.25 over five seeds) and break on the same latency, F/T
-# bias and table height; all together 0.13-0.25. What breaks is what the policy must learn to
+# bias and table height; all together 0.15-0.25. What breaks is what the policy must learn to
 # sense through its F/T reading and its own action history; what holds costs little to keep in
 # the draw, and a draw that left it out would leave that difference of the next engine untested.
 # So each perturbation is on over its whole stated range. Its cost in time to solve is measured
