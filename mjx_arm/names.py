@@ -28,7 +28,7 @@ PARITY_ENGINES = ("mujoco", "mjx", "pybullet")
 
 BACKENDS = ("auto", "mjx", "mujoco")
 IMPLS = ("auto", "jax", "warp")
-PRESET_NAMES = ("seed", "fast", "cpu")
+PRESET_NAMES = ("seed", "fast", "cpu", "robust")
 
 # Exit codes of every command: success, and an invalid input or setting (a named error).
 EXIT_OK, EXIT_INVALID = 0, 2

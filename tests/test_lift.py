@@ -189,15 +189,33 @@ def test_presets_train_the_gripper_arm():
     assert preset_config("fast", "touch").arm.urdf == ""
 
 
-def test_c_batch_names_mjx_for_lift():
-    """The C batch does not step the gripper: a named error says to train on MJX."""
-    from mjx_arm.envs.arm import arm_info
+def test_c_batch_steps_lift():
+    """The C batch steps the gripper: the cube starts where the episode puts it, at rest, the
+    fingers open, and the episode's cube mass and friction reach the row's model."""
+    import jax
+    import jax.numpy as jnp
+
+    from mjx_arm.envs.mjx_env import MjxArmEnv
     from mjx_arm.envs.mujoco_batch import MujocoCallbackPhysics
 
-    arm = arm_info(GRIPPER)
-    task = lift_config().for_arm(tuple(arm.home_qpos), arm.reach_scale)
-    with pytest.raises(ValueError, match="backend mjx"):
-        MujocoCallbackPhysics(arm_model(arm, task), arm, task)
+    env = MjxArmEnv(lift_config(), GRIPPER, physics_factory=MujocoCallbackPhysics)
+    state = jax.jit(env.reset)(jax.random.PRNGKey(0))
+    physics = env.physics
+    reading = physics.read(state.pipeline_state)
+    assert reading.grip.shape == (10,)
+    assert float(reading.grip[0]) < 0.05  # open
+    params = state.info["task"].object_params
+    state = jax.jit(env.step)(state, jnp.zeros(env.action_size))
+    after = physics.read(state.pipeline_state)
+    np.testing.assert_allclose(
+        np.asarray(after.target_pos), np.asarray(reading.target_pos), atol=2e-3
+    )
+    model = physics.stepper.copies.models[0]
+    grip = physics.grip
+    assert model.body_mass[grip.cube_body] == pytest.approx(float(params[0]), rel=1e-5)
+    assert model.geom_friction[grip.friction_geoms[0], 0] == pytest.approx(
+        float(params[1]), rel=1e-5
+    )
 
 
 @pytest.mark.slow

@@ -1,5 +1,5 @@
-"""``mjx-arm bench``: its parser (:func:`register`) and the ``parity``, ``transfer`` and ``seeds``
-commands.
+"""``mjx-arm bench``: its parser (:func:`register`) and the ``parity``, ``transfer``, ``seeds`` and
+``robustness`` commands.
 
 The flags of each command come from its settings dataclass (:class:`~mjx_arm.bench.parity.
 ParityConfig`, :class:`~mjx_arm.bench.transfer.TransferConfig`).
@@ -20,6 +20,7 @@ PARITY_OUT = Path("benchmarks/results/parity")
 TRANSFER_OUT = Path("benchmarks/results/transfer")
 SEEDS_OUT = Path("benchmarks/results/seeds")
 GRASP_OUT = Path("benchmarks/results/grasp")
+ROBUSTNESS_OUT = Path("benchmarks/results/robustness")
 
 
 def _enable_jax_cache() -> None:
@@ -175,6 +176,42 @@ def cmd_seeds(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_robustness(args: argparse.Namespace) -> int:
+    """Robustness benchmark: one policy's success under perturbations, each alone and all
+    together.
+
+    Sweeps servo gain, joint damping and friction, a payload at the flange, the cube's mass and
+    friction (Lift), action latency of 0-3 control steps, noise and bias on the joint-angle
+    and F/T readings, control-period jitter, the table's height and the box or cube pose,
+    each over several values of its stated range (and a little beyond), then draws all of
+    them at once. Per point: success with its 95% Wilson interval and the mean and median peak
+    wrist force. Runs in the C MuJoCo batch (CPU) or the MJX batch (GPU). Writes NAME.md,
+    NAME.json and NAME.png into --out.
+    """
+    from mjx_arm.bench.results import environment_metadata
+    from mjx_arm.bench.robustness import RobustnessConfig, run_robustness, write_report
+    from mjx_arm.evaluate import eval_task, resolve_policy
+    from mjx_arm.evaluate.core import check_policy_fits, eval_arm
+
+    base = RobustnessConfig.quick() if args.quick else RobustnessConfig()
+    config = from_arguments(base, args)
+    check_folder(args.out, "--out")
+    policy, source = resolve_policy(args.policy)
+    arm = eval_arm(policy, args.arm or None)
+    _enable_jax_cache()
+    task, _ = eval_task(policy)
+    from mjx_arm.envs.arm import arm_info
+
+    check_policy_fits(policy, task, arm_info(arm))
+    meta = environment_metadata(accelerator=config.engine == "mjx")
+    result = run_robustness(policy, task, config, arm, log=lambda t: print(t, flush=True))
+    name = args.name or f"robustness_{task.task}"
+    paths = write_report(result, meta, args.out, name, source)
+    print(paths[1].read_text())
+    _print_paths(paths)
+    return EXIT_OK
+
+
 def _command(commands, func, help_text: str, config: type) -> argparse.ArgumentParser:
     """The parser of ``func`` (named after it), with the flags of its settings ``config``."""
     p = commands.add_parser(
@@ -185,9 +222,26 @@ def _command(commands, func, help_text: str, config: type) -> argparse.ArgumentP
     return p
 
 
+def _add_robustness(commands) -> None:
+    """The ``robustness`` subcommand's parser."""
+    from mjx_arm.bench.robustness import RobustnessConfig
+
+    p = _command(
+        commands, cmd_robustness, "one policy under perturbations: success, peak force",
+        RobustnessConfig,
+    )  # fmt: skip
+    p.add_argument("policy", help="policy file (.npz/.onnx) or run directory (newest checkpoint)")
+    p.add_argument("--quick", action="store_true", help="a small run (8 episodes per point)")
+    p.add_argument("--arm", default="", help="the arm file or URDF (default: the policy's)")
+    p.add_argument("--name", help="file stem (default: robustness_TASK)")
+    p.add_argument(
+        "--out", type=Path, default=ROBUSTNESS_OUT, help=f"output folder ({ROBUSTNESS_OUT})"
+    )
+
+
 def register(sub) -> None:
-    """Add ``bench`` with its ``parity``, ``grasp``, ``transfer`` and ``seeds`` subcommands to
-    ``sub``."""
+    """Add ``bench`` with its ``parity``, ``grasp``, ``transfer``, ``robustness`` and ``seeds``
+    subcommands to ``sub``."""
     from mjx_arm.bench.parity_config import ParityConfig
     from mjx_arm.bench.seeds import SeedsConfig
     from mjx_arm.bench.transfer import TransferConfig
@@ -225,6 +279,8 @@ def register(sub) -> None:
     p.add_argument("--name", help="file stem (default: transfer_TASK)")
     p.add_argument("--plot", action="store_true", help="also write NAME.png")
     p.add_argument("--out", type=Path, default=TRANSFER_OUT, help=f"output folder ({TRANSFER_OUT})")
+
+    _add_robustness(commands)
 
     p = _command(commands, cmd_seeds, "a preset over seeds: fraction solved, times", SeedsConfig)
     add_set_argument(

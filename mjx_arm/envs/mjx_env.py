@@ -35,10 +35,15 @@ from mjx_arm.envs.mjx_physics import MjxPhysics, Reading
 from mjx_arm.envs.model_io import arm_model
 from mjx_arm.envs.physics_config import PhysicsConfig
 from mjx_arm.envs.randomization import (
+    MAX_LATENCY,
     Episode,
     RandomizationConfig,
+    delayed_action,
     ft_noise,
+    joint_noise,
+    push_action,
     sample_episode,
+    step_dynamics,
 )
 from mjx_arm.task import observation as obs_lib
 from mjx_arm.task import reward as reward_lib
@@ -56,23 +61,34 @@ class TaskMemory:
 
     Attributes:
         progress: the success rule's progress (consecutive holds, strike seen).
-        prev_action: the previous action, ``(n,)`` (also the delayed action under latency).
+        prev_action: the previous action, ``(n,)``.
         prev_distance: d at the previous step (m), ``()``.
         object_params: a gripper task's object mass (kg) and friction this episode, ``(2,)``;
             ``(0,)`` for other tasks.
+        past_actions: the last :data:`~mjx_arm.envs.randomization.MAX_LATENCY` actions,
+            newest first, ``(MAX_LATENCY, n)`` (what a delayed episode applies).
     """
 
     progress: reward_lib.Progress
     prev_action: jax.Array
     prev_distance: jax.Array
     object_params: jax.Array
+    past_actions: jax.Array
 
     @staticmethod
-    def start(distance: jax.Array, n_actions: int, obj: Any = None) -> TaskMemory:
+    def start(
+        distance: jax.Array, n_actions: int, obj: Any = None, scale: jax.Array | None = None
+    ) -> TaskMemory:
         """The memory at the start of an episode at distance ``d`` (``n_actions`` entries),
-        with the episode's object (:class:`mjx_arm.task.grip.ObjectStart`, or None)."""
+        with the episode's object (:class:`mjx_arm.task.grip.ObjectStart`, or None) and the
+        multipliers of its mass and friction ``scale (2,)`` (randomisation; default 1)."""
         params = jnp.zeros(0) if obj is None else jnp.stack([obj.mass, obj.friction])
-        return TaskMemory(reward_lib.start_progress(jnp), jnp.zeros(n_actions), distance, params)
+        if obj is not None and scale is not None:
+            params = params * scale
+        past = jnp.zeros((MAX_LATENCY, n_actions))
+        return TaskMemory(
+            reward_lib.start_progress(jnp), jnp.zeros(n_actions), distance, params, past
+        )
 
 
 class MjxArmEnv(Env):
@@ -151,8 +167,16 @@ class MjxArmEnv(Env):
     def reset(self, rng: jax.Array) -> State:
         """A new episode from ``rng`` (a single PRNG key)."""
         rng, key, key_rand = jax.random.split(rng, 3)
-        qpos, target_body, obj = self.sample_episode(key)
         episode = sample_episode(key_rand, self.randomization, self.arm.n_joints)
+        return self._start(rng, key, episode)
+
+    def start(self, rng: jax.Array, episode: Episode) -> State:
+        """A new episode from ``rng`` under a given randomisation draw ``episode`` (one batch
+        can hold episodes of different settings; the per-step draws need ``enabled``)."""
+        return self._start(*jax.random.split(rng), episode)
+
+    def _start(self, rng: jax.Array, key: jax.Array, episode: Episode) -> State:
+        qpos, target_body, obj = self.sample_episode(key)
         data = self.physics.init(qpos, target_body + episode.box_offset, obj)
         reading = self.physics.read(data)
         d, force = self._distance_and_force(reading)
@@ -170,7 +194,7 @@ class MjxArmEnv(Env):
             metrics=metrics,
             info={
                 "rng": rng,
-                "task": TaskMemory.start(d, self.action_size, obj),
+                "task": TaskMemory.start(d, self.action_size, obj, episode.object_scale),
                 "episode": episode,
             },
         )
@@ -180,8 +204,12 @@ class MjxArmEnv(Env):
         memory: TaskMemory = state.info["task"]
         episode: Episode = state.info["episode"]
         action = jnp.clip(action, -1.0, 1.0)
-        applied = jnp.where(episode.latency > 0, memory.prev_action, action)
-        dynamics = episode.dynamics if self.randomization.enabled else None
+        applied = delayed_action(action, memory.past_actions, episode.latency)
+        info = dict(state.info)
+        dynamics = None
+        if self.randomization.enabled:
+            info["rng"], key_jitter, key_ft, key_joint = jax.random.split(state.info["rng"], 4)
+            dynamics = step_dynamics(key_jitter, episode)
         data = self.physics.step(
             state.pipeline_state, applied * self._v_scale, dynamics, memory.object_params
         )
@@ -189,12 +217,11 @@ class MjxArmEnv(Env):
         # sane: finite, and no joint running away (else the physics diverged)
         sane = _all_finite(reading) & ~reward_lib.runaway(jnp, reading.qvel, self._speeds)
         reading = jax.tree.map(lambda x: jnp.where(sane, x, jnp.zeros_like(x)), reading)
-        info = dict(state.info)
-        noise = jnp.zeros(6)
+        noise, q_noise = None, None
         if self.randomization.enabled:
-            info["rng"], key = jax.random.split(state.info["rng"])
-            noise = ft_noise(key, self.randomization)
-        obs = jnp.where(sane, self.observe(reading, episode, noise), state.obs)
+            noise = ft_noise(key_ft, episode)
+            q_noise = joint_noise(key_joint, episode)
+        obs = jnp.where(sane, self.observe(reading, episode, noise, q_noise), state.obs)
         d, force = self._distance_and_force(reading)
         change = reward_lib.action_change(jnp, action, memory.prev_action)
         measures = self._task_measures(reading)
@@ -208,7 +235,8 @@ class MjxArmEnv(Env):
         reward = score.reward.astype(jnp.float32)
         done = score.done
         prev_distance = jnp.where(sane, d, memory.prev_distance)
-        info["task"] = TaskMemory(progress, action, prev_distance, memory.object_params)
+        past = push_action(action, memory.past_actions)
+        info["task"] = TaskMemory(progress, action, prev_distance, memory.object_params, past)
         metrics = dict(state.metrics)  # keep keys wrappers added (EvalWrapper's "reward")
         metrics.update({f"reward/{name}": value for name, value in terms.items()})
         overflow = self.physics.overflow(data)
@@ -241,21 +269,32 @@ class MjxArmEnv(Env):
         reading = self.physics.read(data)
         d, _ = self._distance_and_force(reading)
         obs = self.observe(reading, episode)
-        memory = TaskMemory.start(d, self.action_size, obj)
+        memory = TaskMemory.start(d, self.action_size, obj, episode.object_scale)
         return data, obs, {"task": memory, "episode": episode}
 
     def observe(
-        self, reading: Reading, episode: Episode | None = None, noise: jax.Array | None = None
+        self,
+        reading: Reading,
+        episode: Episode | None = None,
+        noise: jax.Array | None = None,
+        joint_noise: jax.Array | None = None,
     ) -> jax.Array:
         """The flat observation ``state (16 + n + k,)`` of a reading.
 
         Args:
             reading: the physics read-out.
-            episode: the episode's randomisation: the observed target omits its box offset.
+            episode: the episode's randomisation: the observed target omits its box offset,
+                the observed joint angles and wrench carry its biases.
             noise: added to the observed wrench, ``(6,)``.
+            joint_noise: added to the observed joint angles, ``(n,)``.
         """
-        target = reading.target_pos if episode is None else reading.target_pos - episode.box_offset
-        wrench = reading.wrench if noise is None else reading.wrench + noise
+        target, wrench, qpos = reading.target_pos, reading.wrench, reading.qpos
+        if episode is not None:
+            target = target - episode.box_offset
+            wrench = wrench + episode.ft_bias
+            qpos = qpos + episode.joint_bias
+        wrench = wrench if noise is None else wrench + noise
+        qpos = qpos if joint_noise is None else qpos + joint_noise
         extra = None
         if self.task_spec.extra_obs:
             values = self.task_spec.grip_observation(
@@ -263,7 +302,7 @@ class MjxArmEnv(Env):
             )
             extra = (self.task_spec.extra_obs, values)
         return obs_lib.flat_obs(
-            jnp, reading.ee_pos, reading.ee_quat, reading.qpos, target, wrench,
+            jnp, reading.ee_pos, reading.ee_quat, qpos, target, wrench,
             self.task.force_clip, extra, self.joint_coding,
         )  # fmt: skip
 

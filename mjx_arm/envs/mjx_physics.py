@@ -75,25 +75,35 @@ class Reading:
 
 @struct.dataclass
 class Dynamics:
-    """Per-env multipliers of the model's dynamics (domain randomisation); 1 is the model.
+    """Per-env changes of the model's dynamics (domain randomisation); :meth:`nominal` is the
+    model.
 
     Attributes:
-        friction: of every geom's friction coefficients, ``()``.
-        damping: of the n arm joints' damping, ``(n,)``.
-        armature: of the n joints' rotor inertia, ``(n,)``.
-        gain: of the n velocity servos' gain, ``(n,)``.
+        friction: multiplier of every geom's friction coefficients, ``()``.
+        damping: multiplier of the n arm joints' damping, ``(n,)``.
+        armature: multiplier of the n joints' rotor inertia, ``(n,)``.
+        gain: multiplier of the n velocity servos' gain, ``(n,)``.
+        frictionloss: dry friction added to the n joints (N m), ``(n,)``.
+        payload: mass added at the flange body's centre of mass (kg), ``()``; the gravity
+            compensation of the servos does not hold its weight.
+        table: height offset of the table (m), ``()``.
+        timestep: multiplier of the physics step (control-period jitter), ``()``.
     """
 
     friction: jax.Array
     damping: jax.Array
     armature: jax.Array
     gain: jax.Array
+    frictionloss: jax.Array
+    payload: jax.Array
+    table: jax.Array
+    timestep: jax.Array
 
     @staticmethod
     def nominal(n_joints: int = 6) -> Dynamics:
-        """All multipliers 1, for an arm of ``n_joints``."""
-        n = n_joints
-        return Dynamics(jnp.ones(()), jnp.ones(n), jnp.ones(n), jnp.ones(n))
+        """The model as built, for an arm of ``n_joints``."""
+        one, zero, n = jnp.ones(()), jnp.zeros(()), n_joints
+        return Dynamics(one, jnp.ones(n), jnp.ones(n), jnp.ones(n), jnp.zeros(n), zero, zero, one)
 
 
 def warp_compatible(mj_model: mujoco.MjModel) -> mujoco.MjModel:
@@ -238,16 +248,26 @@ class MjxPhysics:
         return data
 
     def randomized(self, dyn: Dynamics) -> Any:
-        """The model with ``dyn``'s multipliers applied (one env; batched under vmap)."""
-        m, dofs, act = self.model, self._joint_dofs, self._arm_actuators
+        """The model with ``dyn``'s changes applied (one env; batched under vmap)."""
+        m, dofs, act, ids = self.model, self._joint_dofs, self._arm_actuators, self.ids
         gain = m.actuator_gainprm.at[act, 0].multiply(dyn.gain)
         bias = m.actuator_biasprm.at[act, 2].multiply(dyn.gain)  # velocity servo: -kv * qdot
+        table_z = m.geom_pos.at[ids.table_geoms, 2].add(dyn.table)
+        # the payload's weight is not in the servo's gravity compensation (a payload the
+        # controller was not told of): the flange's compensated mass stays its own
+        flange = ids.flange_body
+        mass0 = m.body_mass[flange]
         return m.replace(
             geom_friction=m.geom_friction * dyn.friction,
             dof_damping=m.dof_damping.at[dofs].multiply(dyn.damping),
             dof_armature=m.dof_armature.at[dofs].multiply(dyn.armature),
+            dof_frictionloss=m.dof_frictionloss.at[dofs].add(dyn.frictionloss),
+            body_mass=m.body_mass.at[flange].add(dyn.payload),
+            body_gravcomp=m.body_gravcomp.at[flange].multiply(mass0 / (mass0 + dyn.payload)),
+            geom_pos=table_z,
             actuator_gainprm=gain,
             actuator_biasprm=bias,
+            opt=m.opt.replace(timestep=m.opt.timestep * dyn.timestep),
         )
 
     def read(self, data: Any) -> Reading:

@@ -18,7 +18,7 @@ from mjx_arm.task.wrench import (
     sensor_feature_factors,
     sensor_wrench,
 )
-from mjx_arm.urdf.convert import EE_SITE, SENSORS, ConvertConfig, load_model
+from mjx_arm.urdf.convert import EE_SITE, FT_SITE, SENSORS, ConvertConfig, load_model
 from mjx_arm.urdf.scene import TARGET_SITE
 from mjx_arm.urdf.scene_shapes import CUBE_BODY
 from mjx_arm.urdf.spec_edits import pad_sensor
@@ -68,6 +68,9 @@ class SensorReader:
         qpos_adr, dof_adr: qpos and dof addresses of the arm's n joints, ``(n,)`` each.
         actuators: actuator ids of the n joints, ``(n,)``.
         ee_site, ee_body, target_site: ids of the ee site, its body and the target site.
+        flange_body: the body the wrist F/T sensor's body hangs from (where a payload goes:
+            upstream of the sensor, so the tared reading does not carry its weight).
+        table_geoms: ids of the table's geoms, ``(k,)``.
         sensor_slices: where each named sensor sits in ``sensordata``.
         block_index: ``sensordata`` positions of the wrench block
             (:data:`mjx_arm.task.wrench.SENSOR_BLOCK` order), ``(19,)``.
@@ -84,6 +87,9 @@ class SensorReader:
         self.ee_site = model.site(EE_SITE).id
         self.ee_body = int(model.site_bodyid[self.ee_site])
         self.target_site = model.site(TARGET_SITE).id
+        self.flange_body = int(model.body_parentid[model.site_bodyid[model.site(FT_SITE).id]])
+        names = [model.geom(i).name for i in range(model.ngeom)]
+        self.table_geoms = np.array([i for i, name in enumerate(names) if name.startswith("table")])
         self.sensor_slices = {
             name: slice(
                 int(model.sensor(name).adr[0]),

@@ -11,6 +11,9 @@ position live in JAX arrays of the default dtype, float32 unless ``jax_enable_x6
 rollout itself runs in float64. Joint angles therefore carry a rounding of about 1e-7 rad per
 control step compared with a float64 CPU env. The solver's warm start is not carried between
 control steps (each control step starts it cold).
+
+Gripper tasks (Lift) step here too: the state carries the cube's free joint and the fingers, and
+each episode's cube mass and friction are a per-row model change like the randomised dynamics.
 """
 
 from __future__ import annotations
@@ -28,7 +31,7 @@ from mujoco import rollout as mj_rollout
 
 from mjx_arm.envs.arm import ArmInfo
 from mjx_arm.envs.mjx_physics import Dynamics, Reading, batched_where
-from mjx_arm.envs.model_io import SensorReader
+from mjx_arm.envs.model_io import GripReader, SensorReader
 from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.urdf.scene import TARGET_BODY
@@ -52,18 +55,29 @@ class CState:
     sensordata: jax.Array
 
 
-def dynamics_row(dyn: Dynamics) -> jax.Array:
-    """The multipliers as one row ``(1 + 3n,)``: friction, damping (n), armature (n), gain (n)."""
-    return jnp.concatenate([jnp.reshape(dyn.friction, (1,)), dyn.damping, dyn.armature, dyn.gain])
+def dynamics_row(dyn: Dynamics, object_params: jax.Array | None = None) -> jax.Array:
+    """The changes as one row ``(5 + 4n [+ 2],)``: friction, damping (n), armature (n), gain
+    (n), frictionloss (n), payload, table, timestep, then a gripper task's cube mass and
+    friction."""
+    scalars = [jnp.reshape(x, (1,)) for x in (dyn.payload, dyn.table, dyn.timestep)]
+    parts = [jnp.reshape(dyn.friction, (1,)), dyn.damping, dyn.armature, dyn.gain]
+    parts += [dyn.frictionloss, *scalars]
+    if object_params is not None and object_params.shape[-1] > 0:
+        parts.append(object_params)
+    return jnp.concatenate(parts)
 
 
 class _ModelCopies:
-    """One model per batch row, with the dynamics multipliers of :func:`dynamics_row` applied."""
+    """One model per batch row, with the changes of :func:`dynamics_row` applied."""
 
-    def __init__(self, model: mujoco.MjModel, dofs: np.ndarray, actuators: np.ndarray) -> None:
-        self.base, self.dofs, self.act = model, dofs, actuators
+    def __init__(
+        self, model: mujoco.MjModel, ids: SensorReader, grip: GripReader | None = None
+    ) -> None:
+        self.base, self.dofs, self.act, self.ids, self.grip = (
+            model, ids.dof_adr, ids.actuators, ids, grip
+        )  # fmt: skip
         self.models: list[mujoco.MjModel] = []
-        self.width = 1 + 3 * len(dofs)
+        self.width = 4 + 4 * len(self.dofs) + (2 if grip else 0)
         self.applied = np.zeros((0, self.width))
 
     def __call__(self, rows: np.ndarray) -> list[mujoco.MjModel]:
@@ -79,13 +93,22 @@ class _ModelCopies:
 
     def _apply(self, m: mujoco.MjModel, row: np.ndarray) -> None:
         base, dofs, act = self.base, self.dofs, self.act
-        n = len(dofs)
-        damping, armature, gain = row[1 : 1 + n], row[1 + n : 1 + 2 * n], row[1 + 2 * n :]
+        n, ids = len(dofs), self.ids
+        damping, armature, gain, frictionloss = (row[1 + k * n : 1 + (k + 1) * n] for k in range(4))
+        payload, table, timestep = row[1 + 4 * n : 4 + 4 * n]
         m.geom_friction[:] = base.geom_friction * row[0]
         m.dof_damping[dofs] = base.dof_damping[dofs] * damping
         m.dof_armature[dofs] = base.dof_armature[dofs] * armature
+        m.dof_frictionloss[dofs] = base.dof_frictionloss[dofs] + frictionloss
         m.actuator_gainprm[act, 0] = base.actuator_gainprm[act, 0] * gain
         m.actuator_biasprm[act, 2] = base.actuator_biasprm[act, 2] * gain
+        flange, mass0 = ids.flange_body, base.body_mass[ids.flange_body]
+        m.body_mass[flange] = mass0 + payload
+        m.body_gravcomp[flange] = base.body_gravcomp[flange] * mass0 / (mass0 + payload)
+        m.geom_pos[ids.table_geoms, 2] = base.geom_pos[ids.table_geoms, 2] + table
+        m.opt.timestep = base.opt.timestep * timestep
+        if self.grip is not None:
+            self.grip.dress(m, row[4 + 4 * n], row[5 + 4 * n])
 
 
 class _Stepper:
@@ -156,15 +179,13 @@ class MujocoCallbackPhysics:
     ) -> None:
         self.mj_model = mj_model
         self.ids = SensorReader(mj_model, arm)
-        if task.spec.gripper:
-            raise ValueError(
-                f"task {task.task!r} drives a gripper, which the C batch does not step; "
-                "train it on MJX (--backend mjx)"
-            )
+        self.grip = GripReader(mj_model, arm) if task.spec.gripper else None
+        acts = list(self.ids.actuators) + ([self.grip.finger_act] if self.grip else [])
+        self._actuators = np.asarray(acts)  # the arm's, then the gripper's
         self.task = task
         self.n_substeps = task.n_substeps
         self.mocap = int(mj_model.body_mocapid[mj_model.body(TARGET_BODY).id])
-        copies = _ModelCopies(mj_model, self.ids.dof_adr, self.ids.actuators)
+        copies = _ModelCopies(mj_model, self.ids, self.grip)
         self.stepper = _Stepper(mj_model, nthread or os.cpu_count() or 1, copies)
         self.impl = "c"
         data = mujoco.MjData(mj_model)
@@ -189,27 +210,46 @@ class MujocoCallbackPhysics:
         return jax.pure_callback(host, shapes, *args, vmap_method="broadcast_all")
 
     def init(self, qpos: jax.Array, target_body: jax.Array, obj=None) -> CState:
-        """State at rest at ``qpos (n,)`` with the target body at ``(3,)``; sensors filled."""
+        """State at rest at ``qpos (n,)`` with the target body at ``(3,)`` (and a gripper task's
+        cube there, oriented as ``obj`` says, fingers open); sensors filled."""
         state = jnp.asarray(self._template, jnp.float32)
         state = state.at[self._qpos_slice.start + self.ids.qpos_adr].set(qpos)
+        state = self._place_object(state, target_body, obj)
         ctrl = jnp.zeros(self.mj_model.nu, jnp.float32)
         _, sensors = self._call(state, ctrl, target_body.astype(jnp.float32), 0)
         return CState(state=state, mocap_pos=target_body.astype(jnp.float32), sensordata=sensors)
 
     def set_target(self, data: CState, target_body: jax.Array, obj=None) -> CState:
-        """Move the target body (sensors unaffected: the target carries none)."""
-        return data.replace(mocap_pos=target_body.astype(jnp.float32))
+        """Move the target body (and a gripper task's cube, at rest; its sensors update at the
+        next step)."""
+        state = self._place_object(data.state, target_body, obj)
+        return data.replace(state=state, mocap_pos=target_body.astype(jnp.float32))
+
+    def _place_object(self, state: jax.Array, pos: jax.Array, obj) -> jax.Array:
+        """``state`` with a gripper task's cube at ``pos (3,)`` in ``obj``'s orientation, at
+        rest, and the fingers open."""
+        if self.grip is None or obj is None:
+            return state
+        grip, q0, v0 = self.grip, self._qpos_slice.start, self._qvel_slice.start
+        start, dof = q0 + grip.cube_qpos, v0 + grip.cube_dof
+        state = state.at[start : start + 3].set(pos).at[start + 3 : start + 7].set(obj.quat)
+        state = state.at[q0 + grip.fingers_qpos].set(grip.gripper.open_q)
+        return state.at[dof : dof + 6].set(0.0)
 
     def step(
         self, data: CState, ctrl: jax.Array, dynamics: Dynamics | None = None, object_params=None
     ) -> CState:
         """One control step of ``n_substeps`` physics steps with ``ctrl (n,)``.
 
-        ``dynamics``: per-env multipliers (domain randomisation), or None for the model.
-        ``object_params``: a gripper task's object (never here: the C batch has no gripper).
+        ``dynamics``: per-env changes (domain randomisation), or None for the model.
+        ``object_params``: a gripper task's cube mass (kg) and friction, ``(2,)``, else None.
         """
-        full = jnp.zeros(self.mj_model.nu, jnp.float32).at[self.ids.actuators].set(ctrl)
-        dyn = None if dynamics is None else dynamics_row(dynamics).astype(jnp.float32)
+        full = jnp.zeros(self.mj_model.nu, jnp.float32).at[self._actuators].set(ctrl)
+        gripper = self.grip is not None and object_params is not None
+        dyn = None
+        if dynamics is not None or gripper:
+            dynamics = dynamics if dynamics is not None else Dynamics.nominal(len(self.ids.dof_adr))
+            dyn = dynamics_row(dynamics, object_params if gripper else None).astype(jnp.float32)
         state, sensors = self._call(data.state, full, data.mocap_pos, self.n_substeps, dyn)
         return data.replace(state=state, sensordata=sensors)
 
@@ -235,12 +275,18 @@ class MujocoCallbackPhysics:
     def read(self, data: CState) -> Reading:
         """The contract's read-out (see :class:`mjx_arm.envs.mjx_physics.Reading`)."""
         ids, s = self.ids, data.sensordata
+        qpos_all = data.state[self._qpos_slice]
+        target = sampling.target_point(jnp, data.mocap_pos, self.task)
+        grip = jnp.zeros(0)
+        if self.grip is not None:  # the target is the cube, wherever it is now
+            grip = self.grip.read(jnp, qpos_all, s)
+            target = grip[1:4]
         return Reading(
             ee_pos=s[ids.sensor_slices["ee_pos"]],
             ee_quat=s[ids.sensor_slices["ee_quat"]],
-            qpos=data.state[self._qpos_slice][ids.qpos_adr],
+            qpos=qpos_all[ids.qpos_adr],
             qvel=data.state[self._qvel_slice][ids.dof_adr],
-            target_pos=sampling.target_point(jnp, data.mocap_pos, self.task),
+            target_pos=target,
             wrench=ids.wrench(jnp, s),
-            grip=jnp.zeros(0),
+            grip=grip,
         )

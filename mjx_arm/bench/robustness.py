@@ -1,0 +1,499 @@
+"""Robustness benchmark: one exported policy's success under perturbations of the model, its
+sensors and its timing, each alone and all together.
+
+``mjx-arm bench robustness POLICY`` runs the policy in the batched env (C MuJoCo on a CPU, MJX on
+a GPU: the same code) with the env's own domain randomisation
+(:class:`~mjx_arm.envs.physics_config.RandomizationConfig`) set to fixed values: each sweep
+point is a config whose ranges are single values, so the benchmark measures exactly what the
+training randomisation draws from. All points run as one batch (each env carries its own draw,
+:class:`~mjx_arm.envs.randomization.Episode`), each env's first episode counts. For every point:
+success rate with its 95 % Wilson interval, and the mean and median of each episode's peak
+wrist force (the tared F/T reading's norm, N). The joint draw samples every perturbation at
+once, uniform over its stated range, per episode.
+
+Where the ranges come from (the ``source`` of each :class:`Perturbation`):
+
+- UR5e data sheet (Universal Robots, "UR5e technical specifications"): rated payload 5 kg,
+  pose repeatability +-0.03 mm (ISO 9283), joint speeds 180 deg/s, built-in F/T sensor force
+  precision 3.5 N and accuracy 4.0 N. Repeatability is far below anything a policy notices;
+  the zero offsets of an arm whose kinematics were never calibrated are not (joint bias
+  below).
+- Isaac Lab's UR10e reach sim-to-real recipe: actuator stiffness x0.9-1.1 and damping x0.75-1.5
+  (our velocity servo's gain acts as the damping of a PD servo on velocity), joint friction
+  0-0.1 N m, initial joints +-0.125 rad, at 60 Hz.
+- mjlab's domain randomisation (mujocolab.github.io/mjlab, "Domain Randomization"): geom
+  friction, body mass and inertia, geom size, joint parameters, PD gains, encoder bias,
+  actuator delay and observation noise, drawn per environment at reset.
+- What system identification of a velocity-servoed arm typically misses: viscous joint damping
+  (a factor of 2 either way), the control loop's timing (a real RTDE loop at 30 Hz jitters by a
+  few ms and delays commands by 1-3 periods under load), the table's height measured by hand
+  (+-2 cm) and an object pose from a camera (+-1-2 cm).
+
+Each perturbation has a ``stated`` range (the goal: success >= 0.9 at every point in it) and
+may sweep a little beyond it (marked in the report) to show where the policy breaks.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mjx_arm.bench.results import fmt, markdown_table, save_results
+from mjx_arm.bench.settings import setting
+from mjx_arm.envs.physics_config import NOMINAL, RandomizationConfig
+from mjx_arm.evaluate.stats import wilson_interval
+from mjx_arm.settings import check_range
+
+ENGINES = ("mujoco-batch", "mjx")
+GOAL_POINT = 0.9  # success at every point of each stated range
+GOAL_JOINT = 0.85  # success under the joint draw
+JOINT = "joint draw"
+
+
+@dataclass(frozen=True)
+class Perturbation:
+    """One perturbation and its sweep.
+
+    Attributes:
+        name: identifier (JSON key, plot label).
+        field: the :class:`RandomizationConfig` field it sets.
+        kind: how a value becomes the field: "range" (``(v, v)``), "scalar" (``v``) or
+            "latency" (``latency_prob = 1`` and ``latency_steps = (v, v)``; 0 is no delay).
+        unit: unit of the values.
+        values: the sweep points (the nominal value among them).
+        stated: the range the goals apply to, ``(low, high)``.
+        source: where the stated range comes from.
+        gripper_only: only for a gripper task (the cube).
+    """
+
+    name: str
+    field: str
+    kind: str
+    unit: str
+    values: tuple[float, ...]
+    stated: tuple[float, float]
+    source: str
+    gripper_only: bool = False
+
+    def config(self, value: float, base: RandomizationConfig = NOMINAL) -> RandomizationConfig:
+        """``base`` with this perturbation fixed at ``value``."""
+        if self.kind == "latency":
+            k = round(value)
+            return (
+                base.replace(latency_prob=0.0)
+                if k == 0
+                else base.replace(latency_prob=1.0, latency_steps=(k, k))
+            )
+        if self.kind == "range":
+            return base.replace(**{self.field: (float(value), float(value))})
+        return base.replace(**{self.field: float(value)})
+
+    def joint_changes(self) -> dict[str, Any]:
+        """This perturbation's part of the joint draw: uniform over its stated range."""
+        low, high = self.stated
+        if self.kind == "latency":
+            return {"latency_prob": 1.0, "latency_steps": (int(low), int(high))}
+        if self.kind == "range":
+            return {self.field: (float(low), float(high))}
+        return {self.field: float(high)}  # a noise scale or half-width: its largest value
+
+    def inside(self, value: float) -> bool:
+        """Whether ``value`` lies in the stated range."""
+        return self.stated[0] - 1e-12 <= value <= self.stated[1] + 1e-12
+
+
+ISAAC = "Isaac Lab UR10e reach recipe"
+SYSID = "what system identification typically misses"
+DATASHEET = "UR5e data sheet"
+
+SYMMETRIC_2CM = (-0.02, -0.01, -0.005, 0.0, 0.005, 0.01, 0.02)  # m, or rad of joint bias
+FT_BIAS_VALUES = (-6.0, -4.0, -2.0, -1.0, 0.0, 1.0, 2.0, 4.0, 6.0)  # N
+
+PERTURBATIONS: tuple[Perturbation, ...] = (
+    Perturbation("servo_gain", "gain", "range", "x", (0.6, 0.75, 1.0, 1.25, 1.5), (0.75, 1.5),
+                 f"{ISAAC}: damping x0.75-1.5, stiffness x0.9-1.1"),
+    Perturbation("joint_damping", "damping", "range", "x", (0.5, 1.0, 1.5, 2.0, 3.0), (0.5, 2.0),
+                 f"{SYSID}: viscous damping within a factor of 2"),
+    Perturbation("joint_friction", "frictionloss", "range", "N m", (0.0, 0.05, 0.1, 0.5, 1.0),
+                 (0.0, 0.1), f"{ISAAC}: joint friction 0-0.1 N m"),
+    Perturbation("payload", "payload", "range", "kg", (0.0, 0.5, 1.0, 2.5, 5.0), (0.0, 5.0),
+                 f"{DATASHEET}: rated payload 5 kg"),
+    Perturbation("cube_mass", "cube_mass", "range", "x", (0.5, 1.0, 1.5, 2.0, 3.0), (0.5, 2.0),
+                 "mjlab: object mass; a cube of 25-400 g against the task's 50-200 g",
+                 gripper_only=True),
+    Perturbation("cube_friction", "cube_friction", "range", "x", (0.5, 0.7, 0.85, 1.0, 1.2),
+                 (0.7, 1.2), "mjlab: geom friction; a real cube's friction is known to +-30 %",
+                 gripper_only=True),
+    Perturbation("latency", "latency_steps", "latency", "steps", (0, 1, 2, 3), (0, 3),
+                 f"mjlab: actuator delay; {SYSID}: 0-3 control periods (0-100 ms at 30 Hz)"),
+    Perturbation("joint_noise", "joint_noise", "scalar", "rad", (0.0, 0.001, 0.005, 0.01),
+                 (0.0, 0.005), "mjlab: observation noise; encoders are far finer than this"),
+    Perturbation("joint_bias", "joint_bias", "range", "rad", SYMMETRIC_2CM,
+                 (-0.01, 0.01), f"mjlab: encoder bias; {SYSID}: an uncalibrated arm's zero"),
+    Perturbation("ft_noise", "ft_force_noise", "scalar", "N", (0.0, 1.0, 2.0, 3.5, 5.0), (0.0, 3.5),
+                 f"{DATASHEET}: F/T force precision 3.5 N"),
+    Perturbation("ft_bias", "ft_force_bias", "range", "N", FT_BIAS_VALUES,
+                 (-4.0, 4.0), f"{DATASHEET}: F/T force accuracy 4.0 N"),
+    Perturbation("ctrl_jitter", "ctrl_jitter", "scalar", "fraction", (0.0, 0.05, 0.1, 0.2),
+                 (0.0, 0.1), f"{SYSID}: +-3 ms on a 33 ms period"),
+    Perturbation("table_height", "table_height", "range", "m", SYMMETRIC_2CM,
+                 (-0.02, 0.02), f"{SYSID}: a table measured by hand"),
+    Perturbation("pose_error", "box_offset", "scalar", "m", (0.0, 0.005, 0.01, 0.02),
+                 (0.0, 0.01), f"{SYSID}: an object pose from a camera (uniform in +-value, x/y)"),
+)  # fmt: skip
+
+
+def perturbations_for(gripper: bool) -> tuple[Perturbation, ...]:
+    """The perturbations of a task with (or without) a gripper."""
+    return tuple(p for p in PERTURBATIONS if gripper or not p.gripper_only)
+
+
+def joint_config(perturbations: tuple[Perturbation, ...]) -> RandomizationConfig:
+    """Every perturbation drawn at once, uniform over its stated range (the joint draw; also
+    the training randomisation the measurements chose, :data:`ROBUST`)."""
+    changes: dict[str, Any] = {}
+    for p in perturbations:
+        changes.update(p.joint_changes())
+    return NOMINAL.replace(**changes)
+
+
+@dataclass(frozen=True)
+class RobustnessConfig:
+    """Settings of ``mjx-arm bench robustness`` (each field is a flag)."""
+
+    engine: str = setting("mujoco-batch", "batched engine: C MuJoCo (CPU) or MJX (GPU)", ENGINES)
+    episodes: int = setting(64, "episodes per sweep point")
+    joint_episodes: int = setting(0, "episodes of the joint draw (0: 4x --episodes)")
+    seed: int = setting(0, "seed of the batch's PRNG key")
+    impl: str = setting("auto", "MJX implementation (mjx engine)", ("auto", "jax", "warp"))
+    max_batch: int = setting(4096, "envs stepped at once (points are split into chunks)")
+
+    def __post_init__(self) -> None:
+        check_range(self, ("episodes", "max_batch"), low=1, high=2**16)
+        check_range(self, "joint_episodes", low=0, high=2**16)
+        check_range(self, "seed", low=0, high=2**31 - 1)
+
+    @staticmethod
+    def quick() -> RobustnessConfig:
+        """A small run: 8 episodes per point."""
+        return RobustnessConfig(episodes=8, joint_episodes=16)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict."""
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True)
+class Point:
+    """One sweep point: a perturbation (or the joint draw) at a value, and its config."""
+
+    perturbation: str
+    value: float | None
+    config: RandomizationConfig
+    inside: bool
+
+
+def sweep_points(perturbations: tuple[Perturbation, ...]) -> list[Point]:
+    """Every perturbation at each of its values, then the joint draw."""
+    points = [
+        Point(p.name, float(v), p.config(v), p.inside(v)) for p in perturbations for v in p.values
+    ]
+    return [*points, Point(JOINT, None, joint_config(perturbations), True)]
+
+
+# --------------------------------------------------------------------------- running
+
+
+def _episodes(env: Any, points: list[Point], counts: list[int], seed: int) -> Any:
+    """Each point's draws, ``counts[i]`` envs each, stacked into one batched Episode."""
+    import jax
+
+    from mjx_arm.envs.randomization import sample_episode
+
+    keys = jax.random.split(jax.random.PRNGKey(seed + 1), len(points))
+    n = env.arm.n_joints
+    parts = [
+        jax.vmap(lambda k, cfg=point.config: sample_episode(k, cfg, n))(jax.random.split(key, c))
+        for point, key, c in zip(points, keys, counts, strict=True)
+    ]
+    return jax.tree.map(lambda *xs: jax.numpy.concatenate(xs), *parts)
+
+
+def rollout(env: Any, policy: Any, episode: Any, seed: int) -> dict[str, np.ndarray]:
+    """Run each env's first episode under its draw ``episode`` (batched, ``B`` envs).
+
+    Returns:
+        ``success (B,)`` bool and ``peak_force (B,)`` (N, the largest wrist force norm before
+        the episode ended).
+    """
+    import jax
+    import jax.numpy as jnp
+
+    from mjx_arm.task import observation as obs_lib
+
+    size = int(np.asarray(episode.latency).shape[0])
+    start = jax.jit(jax.vmap(env.start))
+    step = jax.jit(jax.vmap(env.step))
+    state = start(jax.random.split(jax.random.PRNGKey(seed), size), episode)
+    active = np.ones(size, bool)
+    success = np.zeros(size, bool)
+    peak = np.zeros(size)
+    for _ in range(env.task.episode_steps):
+        obs = obs_lib.unflatten_obs(np.asarray(state.obs, np.float32), env.task_spec.extra_obs)
+        actions = np.asarray(policy(obs), np.float32).reshape(size, env.action_size)
+        state = step(state, jnp.asarray(actions))
+        env.physics.check_overflow(state.metrics["physics_overflow"])
+        force = np.asarray(state.metrics["contact_force"])
+        success |= active & (np.asarray(state.metrics["success"]) > 0)
+        peak = np.where(active, np.maximum(peak, force), peak)
+        active &= ~(np.asarray(state.done) > 0)
+        if not active.any():
+            break
+    return {"success": success, "peak_force": peak}
+
+
+def point_result(point: Point, success: np.ndarray, peak: np.ndarray) -> dict[str, Any]:
+    """One point's numbers: success rate, Wilson 95 % interval, mean and median peak force."""
+    n, k = len(success), int(success.sum())
+    low, high = wilson_interval(k, n)
+    return {
+        "perturbation": point.perturbation,
+        "value": point.value,
+        "inside_stated": point.inside,
+        "episodes": n,
+        "successes": k,
+        "success_rate": k / n if n else None,
+        "success_ci95": [low, high],
+        "mean_peak_force": float(np.mean(peak)) if n else None,
+        "median_peak_force": float(np.median(peak)) if n else None,
+    }
+
+
+def make_env(task: Any, engine: str, impl: str, arm: Any, batch: int) -> Any:
+    """The batched env of ``engine`` with randomisation on (the draws come from the points)."""
+    from mjx_arm.envs.backend import make_batched_env
+    from mjx_arm.envs.physics_config import PhysicsConfig
+
+    backend = "mujoco" if engine == "mujoco-batch" else "mjx"
+    return make_batched_env(task, backend, PhysicsConfig(impl=impl), batch, NOMINAL, arm)
+
+
+def run_robustness(
+    policy: Any, task: Any, config: RobustnessConfig, arm: Any = None, log=print
+) -> dict[str, Any]:
+    """The sweep of ``policy`` on ``task``: every point of :func:`sweep_points`.
+
+    Returns:
+        JSON-ready: ``rows`` (one per point, :func:`point_result`), ``perturbations`` (their
+        values, stated ranges and sources), ``joint_config``, ``summary`` (goals), times.
+    """
+    perturbations = perturbations_for(bool(task.spec.gripper))
+    points = sweep_points(perturbations)
+    joint_n = config.joint_episodes or 4 * config.episodes
+    counts = [config.episodes] * (len(points) - 1) + [joint_n]
+    env = make_env(task, config.engine, config.impl, arm, min(sum(counts), config.max_batch))
+    episode = _episodes(env, points, counts, config.seed)
+    bounds = np.cumsum([0, *counts])
+    success, peak = np.zeros(bounds[-1], bool), np.zeros(bounds[-1])
+    t0 = time.monotonic()
+    for lo in range(0, bounds[-1], config.max_batch):
+        hi = min(lo + config.max_batch, bounds[-1])
+        chunk = _pad(episode, lo, hi, config.max_batch if bounds[-1] > config.max_batch else 0)
+        out = rollout(env, policy, chunk, config.seed + lo)
+        success[lo:hi], peak[lo:hi] = out["success"][: hi - lo], out["peak_force"][: hi - lo]
+        log(f"  envs {lo}-{hi} of {bounds[-1]}: {time.monotonic() - t0:.0f} s")
+    rows = [
+        point_result(p, success[a:b], peak[a:b])
+        for p, a, b in zip(points, bounds[:-1], bounds[1:], strict=True)
+    ]
+    return {
+        "task": task.task,
+        "engine": config.engine,
+        "physics": env.physics.describe(),
+        "config": config.to_dict(),
+        "perturbations": [dataclasses.asdict(p) for p in perturbations],
+        "joint_config": points[-1].config.to_dict(),
+        "rows": rows,
+        "summary": summarize(rows, perturbations),
+        "episodes_total": int(bounds[-1]),
+        "run_seconds": time.monotonic() - t0,
+    }
+
+
+def _pad(episode: Any, lo: int, hi: int, size: int) -> Any:
+    """Rows ``lo:hi`` of a batched Episode, padded to ``size`` rows by repeating the last
+    one (0: no padding), so that every chunk has one shape (one compilation)."""
+    import jax
+    import jax.numpy as jnp
+
+    def cut(x):
+        part = x[lo:hi]
+        if size and hi - lo < size:
+            part = jnp.concatenate([part, jnp.repeat(part[-1:], size - (hi - lo), axis=0)])
+        return part
+
+    return jax.tree.map(cut, episode)
+
+
+def summarize(rows: list[dict[str, Any]], perturbations: tuple[Perturbation, ...]) -> dict:
+    """Per perturbation: the lowest success inside the stated range, and the first value
+    (going out from nominal) where success falls below :data:`GOAL_POINT`; the goals."""
+    per: dict[str, Any] = {}
+    for p in perturbations:
+        mine = [r for r in rows if r["perturbation"] == p.name]
+        inside = [r for r in mine if r["inside_stated"]]
+        worst = min(inside, key=lambda r: r["success_rate"])
+        breaks = [r["value"] for r in mine if r["success_rate"] < GOAL_POINT]
+        per[p.name] = {
+            "worst_inside": worst["success_rate"],
+            "worst_value": worst["value"],
+            "below_goal_at": breaks,
+            "goal_met": worst["success_rate"] >= GOAL_POINT,
+        }
+    joint = next(r for r in rows if r["perturbation"] == JOINT)
+    return {
+        "nominal_pooled": nominal_pool(rows, perturbations),
+        "per_perturbation": per,
+        "joint_success": joint["success_rate"],
+        "joint_goal_met": joint["success_rate"] >= GOAL_JOINT,
+        "all_points_goal_met": all(v["goal_met"] for v in per.values()),
+        "goal_point": GOAL_POINT,
+        "goal_joint": GOAL_JOINT,
+    }
+
+
+def nominal_pool(rows: list[dict[str, Any]], perturbations: tuple[Perturbation, ...]) -> dict:
+    """Every point at the model's own values (each perturbation's nominal point: the same
+    config), pooled: the policy's unperturbed success, with a tighter interval than one
+    point's."""
+    by_name = {p.name: p for p in perturbations}
+    mine = [
+        r
+        for r in rows
+        if r["perturbation"] in by_name and by_name[r["perturbation"]].config(r["value"]) == NOMINAL
+    ]
+    n, k = sum(r["episodes"] for r in mine), sum(r["successes"] for r in mine)
+    low, high = wilson_interval(k, n)
+    return {
+        "points": len(mine),
+        "episodes": n,
+        "successes": k,
+        "success_rate": k / n if n else None,
+        "success_ci95": [low, high],
+    }
+
+
+# --------------------------------------------------------------------------- report
+
+
+def markdown(result: dict[str, Any], source: str) -> str:
+    """The report: one row per point, the goals, and where each range comes from."""
+    rows = []
+    for r in result["rows"]:
+        low, high = r["success_ci95"]
+        value = "all, uniform over stated ranges" if r["value"] is None else f"{r['value']:g}"
+        rows.append([
+            r["perturbation"], value, "yes" if r["inside_stated"] else "beyond",
+            f"{r['success_rate']:.3f}", f"[{low:.2f}, {high:.2f}]", r["episodes"],
+            fmt(r["mean_peak_force"]), fmt(r["median_peak_force"]),
+        ])  # fmt: skip
+    headers = ["perturbation", "value", "in stated range", "success", "95% Wilson CI",
+               "episodes", "mean peak wrist force (N)", "median peak (N)"]  # fmt: skip
+    summary = result["summary"]
+    goal_rows = [
+        [name, f"{v['worst_inside']:.3f} at {v['worst_value']:g}",
+         ", ".join(f"{x:g}" for x in v["below_goal_at"]) or "none",
+         "pass" if v["goal_met"] else "MISS"]
+        for name, v in summary["per_perturbation"].items()
+    ]  # fmt: skip
+    goal_rows.append(
+        [JOINT, f"{summary['joint_success']:.3f}", "",
+         "pass" if summary["joint_goal_met"] else "MISS"]
+    )  # fmt: skip
+    sources = [
+        [p["name"], p["unit"], f"{p['stated'][0]:g} to {p['stated'][1]:g}", p["source"]]
+        for p in result["perturbations"]
+    ]
+    text = [
+        f"Robustness of {source} on {result['task']}, engine {result['engine']} "
+        f"({result['physics'].get('impl')}), {result['episodes_total']} episodes in "
+        f"{result['run_seconds']:.0f} s.\n",
+        markdown_table(headers, rows),
+        _nominal_line(summary["nominal_pooled"]),
+        f"\nGoals: success >= {GOAL_POINT} at every point of each stated range, "
+        f">= {GOAL_JOINT} under the joint draw.\n",
+        markdown_table(
+            ["perturbation", "worst success in stated range", f"values below {GOAL_POINT}", "goal"],
+            goal_rows,
+        ),
+        "\nRanges and their sources:\n",
+        markdown_table(["perturbation", "unit", "stated range", "source"], sources),
+        "\nSources: UR5e technical specifications (Universal Robots); Isaac Lab's UR10e reach "
+        "sim-to-real recipe; mjlab's domain randomisation guide "
+        "(mujocolab.github.io/mjlab). A sweep point fixes one perturbation (ranges low = high; "
+        "noise and pose error as a scale); payload sits at the flange, upstream of the wrist "
+        "F/T sensor; joint bias and F/T bias apply the value to every joint / force axis.\n",
+    ]
+    return "\n".join(text)
+
+
+def _nominal_line(pool: dict[str, Any]) -> str:
+    low, high = pool["success_ci95"]
+    return (
+        f"\nNominal (the {pool['points']} points at the model's own values, pooled): success "
+        f"{pool['success_rate']:.3f} [{low:.2f}, {high:.2f}] over {pool['episodes']} episodes.\n"
+    )
+
+
+def plot(result: dict[str, Any], path: Path) -> Path:
+    """One panel per perturbation: success (Wilson 95 % interval) against its value, the
+    stated range shaded; the joint draw as its own panel."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    perts = result["perturbations"]
+    cols = 4
+    rows_n = -(-(len(perts) + 1) // cols)
+    fig, axes = plt.subplots(rows_n, cols, figsize=(4 * cols, 3 * rows_n), squeeze=False)
+    for ax, p in zip(axes.flat, perts, strict=False):
+        rows = [r for r in result["rows"] if r["perturbation"] == p["name"]]
+        x = [r["value"] for r in rows]
+        y = [r["success_rate"] for r in rows]
+        err = [[max(r["success_rate"] - r["success_ci95"][0], 0.0) for r in rows],
+               [max(r["success_ci95"][1] - r["success_rate"], 0.0) for r in rows]]  # fmt: skip
+        ax.axvspan(*p["stated"], color="C2", alpha=0.12)
+        ax.errorbar(x, y, yerr=err, marker="o", capsize=3)
+        ax.axhline(GOAL_POINT, color="grey", ls=":")
+        ax.set(ylim=(0, 1.05), title=p["name"], xlabel=p["unit"], ylabel="success")
+    joint = next(r for r in result["rows"] if r["perturbation"] == JOINT)
+    ax = axes.flat[len(perts)]
+    low, high = joint["success_ci95"]
+    rate = joint["success_rate"]
+    yerr = [[max(rate - low, 0.0)], [max(high - rate, 0.0)]]
+    ax.bar([JOINT], [rate], yerr=yerr, capsize=4, color="C1")
+    ax.axhline(GOAL_JOINT, color="grey", ls=":")
+    ax.set(ylim=(0, 1.05), title="all at once", ylabel="success")
+    for ax in list(axes.flat)[len(perts) + 1 :]:
+        ax.axis("off")
+    fig.suptitle(f"{result['task']}: success under perturbations ({result['engine']})")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+def write_report(
+    result: dict[str, Any], meta: dict[str, Any], folder: str | Path, name: str, source: str
+) -> list[Path]:
+    """Write ``<name>.md``, ``<name>.json`` and ``<name>.png`` into ``folder``."""
+    payload = {"meta": meta, "policy": source, **result}
+    paths = list(save_results(name, payload, markdown(result, source), folder))
+    paths.append(plot(result, Path(folder) / f"{name}.png"))
+    return paths
