@@ -88,7 +88,8 @@ def use_position_servos(
     """Turn the velocity actuators ``actuators (6,)`` of ``model`` into position servos.
 
     In place: gain ``kp``, bias ``(0, -kp, -kv)`` (MuJoCo's ``position`` actuator with ``kv``),
-    control range = the URDF joint range. The force range (the URDF effort) is kept.
+    control range = the URDF joint range (widened by ``v_max / K`` for the feed-forward servo,
+    whose control carries ``v_ff / K``). The force range (the URDF effort) is kept.
 
     Raises:
         ValueError: an actuator is not the converter's velocity actuator.
@@ -101,7 +102,9 @@ def use_position_servos(
     model.actuator_gainprm[actuators, 0] = gains.kp
     model.actuator_biasprm[actuators, 1] = -gains.kp
     model.actuator_biasprm[actuators, 2] = -gains.kv
-    model.actuator_ctrlrange[actuators] = np.stack([arm.lower, arm.upper], axis=1)
+    # the feed-forward servo's control is the reference plus at most v_max / K
+    reach = arm.v_max / config.position_gain if config.feedforward else 0.0
+    model.actuator_ctrlrange[actuators] = np.stack([arm.lower - reach, arm.upper + reach], axis=1)
     return gains
 
 
@@ -167,13 +170,22 @@ class _ChainActuation:
 
     def _physics_set_velocity_targets(self, qdot_target: np.ndarray) -> None:
         if not self._holding:
+            self._previous_command = self.limiter.command
             self._physics_set_position_targets(self.limiter(self.adapter.step(qdot_target)))
+
+    def _servo_reference(self, fraction: float) -> tuple[np.ndarray, np.ndarray]:
+        """The servo's reference ``fraction`` (0 to 1) of the way through the control period:
+        the position ``(6,)`` (rad) on the line from the previous command to the current one,
+        and the feed-forward velocity ``(6,)`` (rad/s), the current command's velocity."""
+        q0, q1 = self._previous_command, self.limiter.command
+        return q0 + fraction * (q1 - q0), self.limiter.velocity
 
     def _start_chain(self) -> None:
         """Start adapter and limiter at the measured joint angles; the servo holds them."""
         q = self.measured_qpos()
         self.adapter.reset(q)
         self.limiter.reset(q)
+        self._previous_command = q.copy()
         self._physics_set_position_targets(q)
         if self.gripper_chain is not None:
             self.gripper_chain.reset(self.finger_position())
@@ -237,6 +249,17 @@ class MujocoPositionArmEnv(_ChainActuation, MujocoArmEnv):
     def _physics_set_position_targets(self, q_target: np.ndarray) -> None:
         self._ctrl[self._act] = q_target
 
+    def _physics_step(self, n_substeps: int) -> None:
+        if not self.chain_config.servo.feedforward or self._holding:
+            super()._physics_step(n_substeps)
+            return
+        # kp * (ctrl - q) = kv * (v_ff + K * (q_ref - q)) with ctrl = q_ref + v_ff / K
+        gain = self.chain_config.servo.position_gain
+        for i in range(n_substeps):
+            q_ref, v_ff = self._servo_reference((i + 1) / n_substeps)
+            self._ctrl[self._act] = q_ref + v_ff / gain
+            mujoco.mj_step(self.model, self.data)
+
     def gripper_lower(self) -> float:
         """The driven finger's open position (m)."""
         return self.grip.lower
@@ -270,6 +293,7 @@ class PybulletPositionArmEnv(_ChainActuation, PybulletArmEnv):
         # the parent's constructor resets the world, which steps the servo: set it up first
         config = config or ChainConfig()
         self._gain = config.servo.position_gain
+        self._feedforward = config.servo.feedforward
         self._q_target: list[float] = []
         self._holding = True
         super().__init__(task, arm, render_mode, width, height)
@@ -308,7 +332,11 @@ class PybulletPositionArmEnv(_ChainActuation, PybulletArmEnv):
             gravity = calls.inverse_dynamics(body, [s[0] for s in states], zeros, zeros)
             arm = pick(states)  # the arm's joints (5 or more: a tuple)
             q = [s[0] for s in arm]
-            u = [gain * (t - x) for t, x in zip(self._q_target, q, strict=True)]
+            if self._feedforward and not self._holding:
+                ref, v_ff = self._servo_reference((i + 1) / n_substeps)
+                u = [f + gain * (t - x) for t, f, x in zip(ref, v_ff, q, strict=True)]
+            else:
+                u = [gain * (t - x) for t, x in zip(self._q_target, q, strict=True)]
             torque = self.servo.torque(u, [s[1] for s in arm], pick(gravity))
             calls.set_motors(body, joints, pybullet.TORQUE_CONTROL, forces=torque)
             if i == n_substeps - 1:
