@@ -244,7 +244,9 @@ class TaskConfig:
         return self.spec.uses_contact
 
     def replace(self, **changes: Any) -> TaskConfig:
-        """Return a copy with some fields changed (``reward`` takes a dict or a RewardConfig)."""
+        """Return a copy with some fields changed (``reward`` takes a dict or a RewardConfig;
+        a list, as ``--set task.force_band=[1,30]`` gives, becomes the field's tuple)."""
+        changes = {k: tuple(v) if isinstance(v, list) else v for k, v in changes.items()}
         if isinstance(changes.get("reward"), dict):
             changes["reward"] = dataclasses.replace(self.reward, **changes["reward"])
         return dataclasses.replace(self, **changes)
