@@ -39,3 +39,332 @@ Stability: around one joint of inertia ``I`` the loop is ``I s^2 + kv s + kv K``
 ``b = kv / I`` (the velocity loop's bandwidth: 240 /s at the smallest inertia, about 100 /s for
 the shoulder lift at the home pose) the damping ratio is ``0.5 * sqrt(b / K)``: above 1 for
 every joint at ``K = 10`` (0.79 at the shoulder lift for ``K = 40``), so no joint rings.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+
+from mjx_arm.envs.arm import ArmInfo
+from mjx_arm.envs.base import DEFAULT_HEIGHT, DEFAULT_WIDTH
+from mjx_arm.envs.mujoco_env import MujocoArmEnv
+from mjx_arm.names import CPU_ENGINES as ENGINES
+from mjx_arm.sim2real.adapter import VelocityToPositionAdapter
+from mjx_arm.sim2real.gripper import GripperPassthrough
+from mjx_arm.sim2real.limiter import JointLimits, SafetyLimiter
+from mjx_arm.sim2real.settings import ChainConfig, ServoConfig
+from mjx_arm.task.config import TaskConfig
+from mjx_arm.urdf.arm_config import ArmConfig
+from pybullet_ref.env import PybulletArmEnv, pybullet  # pybullet imported quietly there
+
+
+@dataclass(frozen=True)
+class ServoGains:
+    """Per-joint gains of the position servo, contract joint order.
+
+    Attributes:
+        kp: position gain (N m/rad), ``(6,)``.
+        kv: velocity gain (N m s/rad), ``(6,)``.
+        effort: torque cap (N m), ``(6,)``.
+    """
+
+    kp: np.ndarray
+    kv: np.ndarray
+    effort: np.ndarray
+
+    def to_dict(self, names: tuple[str, ...]) -> dict[str, dict[str, float]]:
+        """``{joint: {kp, kv, effort}}``, JSON-ready."""
+        return {
+            name: {"kp": float(p), "kv": float(v), "effort": float(e)}
+            for name, p, v, e in zip(names, self.kp, self.kv, self.effort, strict=True)
+        }
+
+
+def servo_gains(kv: np.ndarray, effort: np.ndarray, config: ServoConfig) -> ServoGains:
+    """The position servo around velocity servos of gains ``kv (6,)`` and caps ``effort (6,)``."""
+    kv = np.asarray(kv, dtype=np.float64)
+    return ServoGains(kp=config.position_gain * kv, kv=kv, effort=np.asarray(effort, np.float64))
+
+
+def use_position_servos(
+    model: mujoco.MjModel, actuators: np.ndarray, arm: ArmInfo, config: ServoConfig
+) -> ServoGains:
+    """Turn the velocity actuators ``actuators (6,)`` of ``model`` into position servos.
+
+    In place: gain ``kp``, bias ``(0, -kp, -kv)`` (MuJoCo's ``position`` actuator with ``kv``),
+    control range = the URDF joint range (widened by ``v_max / K`` for the feed-forward servo,
+    whose control carries ``v_ff / K``). The force range (the URDF effort) is kept.
+
+    Raises:
+        ValueError: an actuator is not the converter's velocity actuator.
+    """
+    kv = model.actuator_gainprm[actuators, 0].copy()
+    bias = model.actuator_biasprm[actuators, :3]
+    if not np.allclose(bias, np.stack([np.zeros_like(kv), np.zeros_like(kv), -kv], axis=1)):
+        raise ValueError(f"expected velocity actuators (bias 0, 0, -kv), got biasprm {bias}")
+    gains = servo_gains(kv, model.actuator_forcerange[actuators, 1], config)
+    model.actuator_gainprm[actuators, 0] = gains.kp
+    model.actuator_biasprm[actuators, 1] = -gains.kp
+    model.actuator_biasprm[actuators, 2] = -gains.kv
+    # the feed-forward servo's control is the reference plus at most v_max / K
+    reach = arm.v_max / config.position_gain if config.feedforward else 0.0
+    model.actuator_ctrlrange[actuators] = np.stack([arm.lower - reach, arm.upper + reach], axis=1)
+    return gains
+
+
+@dataclass
+class EpisodeCommands:
+    """What the chain sent in one episode and what the arm did.
+
+    Attributes:
+        commands: the limiter's position commands (rad), one ``(n,)`` per step.
+        velocities: their velocities (rad/s), one ``(n,)`` per step.
+        measured: joint angles (rad) one control period after each command.
+        gripper: a gripper task's finger position targets (m), one per step (empty otherwise).
+    """
+
+    commands: list[np.ndarray] = field(default_factory=list)
+    velocities: list[np.ndarray] = field(default_factory=list)
+    measured: list[np.ndarray] = field(default_factory=list)
+    gripper: list[float] = field(default_factory=list)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The three lists as ``(T, n)`` arrays (``(0, 0)`` for an episode without steps)."""
+        out = {}
+        for key in asdict(self):
+            rows = getattr(self, key)
+            out[key] = np.array(rows, np.float64) if rows else np.zeros((0, 0))
+        return out
+
+
+class _ChainActuation:
+    """Velocity targets -> adapter -> limiter -> position servo targets.
+
+    Mixed in before the engine's env class; the engine supplies
+    ``_physics_set_position_targets``. The velocity hook is ignored while ``_holding`` (an
+    engine's reset may command zero velocity while it rebuilds the world).
+    """
+
+    arm: ArmInfo
+    task: TaskConfig
+
+    def _setup_chain(self, config: ChainConfig) -> None:
+        self.chain_config = config
+        self.limits = JointLimits.from_urdf(self.arm.config, config.limiter)
+        home = np.asarray(self.task.home_qpos, dtype=np.float64)
+        dt, lim = self.task.ctrl_dt, self.limits
+        self.adapter = VelocityToPositionAdapter(dt, config.tau, home, lim.lower, lim.upper)
+        self.limiter = SafetyLimiter(lim, dt, home)
+        self.gripper_chain = None
+        gripper = self.arm.gripper
+        if gripper is not None and self.task.spec.gripper:
+            lower = float(self.gripper_lower())
+            upper = lower + gripper.stroke
+            self.gripper_chain = GripperPassthrough(lower, upper, gripper.v_max, dt, config.gripper)
+        self.episodes: list[EpisodeCommands] = []
+        self._holding = False
+
+    def _physics_set_gripper(self, speed: float) -> None:
+        """The gripper's command through its passthrough: a position target, then the
+        stand-in's position loop around the finger's velocity servo."""
+        if self._holding or self.gripper_chain is None:
+            return
+        self.gripper_chain.step(speed)
+        self._finger_velocity(self.gripper_chain.servo_speed(self.finger_position()))
+
+    def _physics_set_velocity_targets(self, qdot_target: np.ndarray) -> None:
+        if not self._holding:
+            self._previous_command = self.limiter.command
+            self._physics_set_position_targets(self.limiter(self.adapter.step(qdot_target)))
+
+    def _servo_reference(self, fraction: float) -> tuple[np.ndarray, np.ndarray]:
+        """The servo's reference ``fraction`` (0 to 1) of the way through the control period:
+        the position ``(6,)`` (rad) on the line from the previous command to the current one,
+        and the feed-forward velocity ``(6,)`` (rad/s), the current command's velocity."""
+        q0, q1 = self._previous_command, self.limiter.command
+        return q0 + fraction * (q1 - q0), self.limiter.velocity
+
+    def _start_chain(self) -> None:
+        """Start adapter and limiter at the measured joint angles; the servo holds them."""
+        q = self.measured_qpos()
+        self.adapter.reset(q)
+        self.limiter.reset(q)
+        self._previous_command = q.copy()
+        self._physics_set_position_targets(q)
+        if self.gripper_chain is not None:
+            self.gripper_chain.reset(self.finger_position())
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """Reset the episode (see :meth:`BaseRobotEnv.reset`) and start a new command log."""
+        result = super().reset(seed=seed, options=options)
+        self.episodes.append(EpisodeCommands())
+        return result
+
+    def step(self, action):
+        """One contract action through the chain (see :meth:`BaseRobotEnv.step`), logged."""
+        result = super().step(action)
+        if self.episodes:
+            log = self.episodes[-1]
+            log.commands.append(self.limiter.command)
+            log.velocities.append(self.limiter.velocity)
+            log.measured.append(self.measured_qpos())
+            if self.gripper_chain is not None:
+                log.gripper.append(self.gripper_chain.target)
+        return result
+
+    def measured_qpos(self) -> np.ndarray:
+        """Joint angles (rad, not wrapped) as the joint encoders read them now, ``(6,)``."""
+        return self._physics_read().qpos
+
+
+class MujocoPositionArmEnv(_ChainActuation, MujocoArmEnv):
+    """:class:`MujocoArmEnv` driven through the chain into position servos.
+
+    Args:
+        task: the task configuration (default: Touch).
+        arm: the arm (a URDF, an arm file or an ArmConfig; default: the shipped arm).
+        config: the chain and the servo (default: :class:`ChainConfig()`).
+        render_mode, width, height: as for :class:`MujocoArmEnv`.
+    """
+
+    def __init__(
+        self,
+        task: TaskConfig | None = None,
+        arm: str | Path | ArmConfig | None = None,
+        config: ChainConfig | None = None,
+        render_mode: str | None = None,
+        width: int = DEFAULT_WIDTH,
+        height: int = DEFAULT_HEIGHT,
+    ) -> None:
+        super().__init__(task, arm, render_mode, width, height)
+        config = config or ChainConfig()
+        self._setup_chain(config)
+        self.gains = use_position_servos(self.model, self.ids.actuators, self.arm, config.servo)
+
+    def _physics_reset(self, qpos, target_body_pos, obj=None) -> None:
+        super()._physics_reset(qpos, target_body_pos, obj)
+        self._start_chain()
+        # the parent's forward pass saw ctrl = 0, a pull towards q = 0 that moves the
+        # accelerations (and so the F/T reading): redo it with the servo holding the start
+        mujoco.mj_forward(self.model, self.data)
+        mujoco.mj_rnePostConstraint(self.model, self.data)
+        mujoco.mj_sensorAcc(self.model, self.data)
+
+    def _physics_set_position_targets(self, q_target: np.ndarray) -> None:
+        self._ctrl[self._act] = q_target
+
+    def _physics_step(self, n_substeps: int) -> None:
+        if not self.chain_config.servo.feedforward or self._holding:
+            super()._physics_step(n_substeps)
+            return
+        # kp * (ctrl - q) = kv * (v_ff + K * (q_ref - q)) with ctrl = q_ref + v_ff / K
+        gain = self.chain_config.servo.position_gain
+        for i in range(n_substeps):
+            q_ref, v_ff = self._servo_reference((i + 1) / n_substeps)
+            self._ctrl[self._act] = q_ref + v_ff / gain
+            mujoco.mj_step(self.model, self.data)
+
+    def gripper_lower(self) -> float:
+        """The driven finger's open position (m)."""
+        return self.grip.lower
+
+    def finger_position(self) -> float:
+        """The driven finger's position (m)."""
+        return float(self.data.qpos[self.grip.finger_qpos])
+
+    def _finger_velocity(self, speed: float) -> None:
+        MujocoArmEnv._physics_set_gripper(self, speed)
+
+
+class PybulletPositionArmEnv(_ChainActuation, PybulletArmEnv):
+    """:class:`PybulletArmEnv` driven through the chain into position servos.
+
+    The torque law at every substep is the velocity servo's with the velocity target
+    ``K * (q_target - q)``: ``clip(kv * (K * (q_target - q) - qdot), +-effort) - d * qdot
+    + g(q)``, the same law as MuJoCo's position actuator with its joint damping and gravity
+    compensation. Arguments as for :class:`MujocoPositionArmEnv`.
+    """
+
+    def __init__(
+        self,
+        task: TaskConfig | None = None,
+        arm: str | Path | ArmConfig | None = None,
+        config: ChainConfig | None = None,
+        render_mode: str | None = None,
+        width: int = DEFAULT_WIDTH,
+        height: int = DEFAULT_HEIGHT,
+    ) -> None:
+        # the parent's constructor resets the world, which steps the servo: set it up first
+        config = config or ChainConfig()
+        self._gain = config.servo.position_gain
+        self._feedforward = config.servo.feedforward
+        self._q_target: list[float] = []
+        self._holding = True
+        super().__init__(task, arm, render_mode, width, height)
+        self._setup_chain(config)
+        self._start_chain()
+        self.gains = servo_gains(self.servo.kv, self.servo.effort, config.servo)
+
+    def _physics_reset(self, qpos, target_body_pos, obj=None) -> None:
+        self._physics_set_position_targets(qpos)  # hold the start pose while the world settles
+        holding, self._holding = self._holding, True
+        super()._physics_reset(qpos, target_body_pos, obj)
+        self._holding = holding
+        if hasattr(self, "limiter"):  # not during the parent's constructor
+            self._start_chain()
+
+    def _physics_set_position_targets(self, q_target: np.ndarray) -> None:
+        self._q_target = [float(v) for v in q_target]
+
+    def gripper_lower(self) -> float:
+        """The driven finger's open position (m)."""
+        return self.ids.finger_lower
+
+    def finger_position(self) -> float:
+        """The driven finger's position (m)."""
+        return float(self.client.getJointState(self.body, self.ids.finger)[0])
+
+    def _finger_velocity(self, speed: float) -> None:
+        PybulletArmEnv._physics_set_gripper(self, speed)
+
+    def _physics_step(self, n_substeps: int) -> None:
+        # PybulletArmEnv._physics_step with the position loop in front of the velocity servo
+        calls, body, joints, zeros = self._calls, self.body, self.ids.joints, self._dof_zeros
+        dofs, pick, gain = self.ids.dofs, self._pick, self._gain
+        for i in range(n_substeps):
+            states = calls.get_joint_states(body, dofs)
+            gravity = calls.inverse_dynamics(body, [s[0] for s in states], zeros, zeros)
+            arm = pick(states)  # the arm's joints (5 or more: a tuple)
+            q = [s[0] for s in arm]
+            if self._feedforward and not self._holding:
+                ref, v_ff = self._servo_reference((i + 1) / n_substeps)
+                u = [f + gain * (t - x) for t, f, x in zip(ref, v_ff, q, strict=True)]
+            else:
+                u = [gain * (t - x) for t, x in zip(self._q_target, q, strict=True)]
+            torque = self.servo.torque(u, [s[1] for s in arm], pick(gravity))
+            calls.set_motors(body, joints, pybullet.TORQUE_CONTROL, forces=torque)
+            if i == n_substeps - 1:
+                self._tool_before = self._tool_velocity()
+            calls.step()
+
+
+def make_position_env(task: TaskConfig, engine: str, config: ChainConfig | None = None, **kwargs):
+    """A position-controlled env of ``task`` on ``engine`` ("mujoco" or "pybullet"), truncated
+    at its task's ``episode_steps`` (as the arm's setup fills them in) like the registered envs.
+
+    Args:
+        task: the task configuration.
+        engine: "mujoco" or "pybullet".
+        config: the chain and the servo.
+        kwargs: ``arm``, ``render_mode``, ``width``, ``height``.
+    """
+    classes = {"mujoco": MujocoPositionArmEnv, "pybullet": PybulletPositionArmEnv}
+    if engine not in classes:
+        raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
+    env = classes[engine](task, config=config, **kwargs)
+    return gym.wrappers.TimeLimit(env, env.task.episode_steps)
