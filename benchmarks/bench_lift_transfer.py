@@ -10,8 +10,8 @@ the cube reached (m).
 
 Solver variants (MuJoCo only; ``--solvers``): ``as_trained`` (the task model's options, the
 same as MJX trains on: Newton, 2 iterations, 4 line-search iterations, pyramidal cone);
-``iter10`` (10 and 10); ``elliptic`` (elliptic cone, impratio 10, 10 and 10); ``noslip``
-(as trained plus 5 noslip iterations).
+``iter4`` (4 and 8); ``iter10`` (10 and 10); ``elliptic`` (elliptic cone, impratio 10, 10
+and 10); ``noslip`` (as trained plus 5 noslip iterations).
 
 Run from the repository root::
 
@@ -37,6 +37,7 @@ from benchmarks.common import RESULTS_DIR, environment_metadata, markdown_table,
 
 SOLVERS = {
     "as_trained": {},
+    "iter4": {"iterations": 4, "ls_iterations": 8},
     "iter10": {"iterations": 10, "ls_iterations": 10},
     "elliptic": {"cone": 1, "impratio": 10.0, "iterations": 10, "ls_iterations": 10},
     "noslip": {"noslip_iterations": 5},
