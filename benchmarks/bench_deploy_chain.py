@@ -10,8 +10,11 @@ Variants (``--variants``, comma separated):
   filter, with the limiter's acceleration limit out of reach (1e6 rad/s^2), with the gripper's
   stand-in loop at 1000 /s (ablations, not settings to run a robot with);
 - ``held10``: held commands at ``K = 10 /s``;
-- ``ff40``: feed-forward stream at ``K = 40 /s``;
-- ``chain``: the chain's defaults (feed-forward stream, ``K = 10 /s``).
+- ``ff40``, ``ff10``: feed-forward stream at ``K = 40`` or ``10 /s``, the correction uncapped
+  (10 rad/s);
+- ``ff_K_C``: feed-forward stream at ``K`` (1/s), the correction capped at ``C`` (rad/s);
+- ``chain``: the chain's defaults (feed-forward stream, ``K = 10 /s``, correction cap
+  0.1 rad/s).
 
 Run from the repository root::
 
@@ -40,6 +43,7 @@ VARIANTS = (
     "held40_grip",
     "held10",
     "ff40",
+    "ff10",
     "chain",
 )
 
@@ -50,6 +54,9 @@ def chain_config(variant: str):
     from mjx_arm.sim2real.limiter import LimiterConfig
     from mjx_arm.sim2real.settings import ChainConfig, ServoConfig
 
+    if variant.startswith("ff_"):
+        gain, cap = (float(x) for x in variant.split("_")[1:])
+        return ChainConfig(servo=ServoConfig(gain, feedforward=True, correction_limit=cap))
     held = ServoConfig(position_gain=40.0, feedforward=False)
     configs = {
         "held40": ChainConfig(servo=held),
@@ -57,7 +64,8 @@ def chain_config(variant: str):
         "held40_noacc": ChainConfig(servo=held, limiter=LimiterConfig(acceleration=1e6)),
         "held40_grip": ChainConfig(servo=held, gripper=GripperConfig(position_gain=1000.0)),
         "held10": ChainConfig(servo=ServoConfig(position_gain=10.0, feedforward=False)),
-        "ff40": ChainConfig(servo=ServoConfig(position_gain=40.0, feedforward=True)),
+        "ff40": ChainConfig(servo=ServoConfig(40.0, feedforward=True, correction_limit=10.0)),
+        "ff10": ChainConfig(servo=ServoConfig(10.0, feedforward=True, correction_limit=10.0)),
         "chain": ChainConfig(),
     }
     return configs[variant]
@@ -123,7 +131,7 @@ def main() -> None:
     parser.add_argument("--name", default=None, help="results name (default: task and engine)")
     args = parser.parse_args()
     variants = args.variants.split(",")
-    unknown = set(variants) - set(VARIANTS)
+    unknown = {v for v in variants if not v.startswith("ff_")} - set(VARIANTS)
     if unknown:
         parser.error(f"unknown variants {sorted(unknown)}; choose from {VARIANTS}")
     rows = []

@@ -26,10 +26,11 @@ env); in PyBullet it is applied as torques at every substep, like the velocity s
 How the commands reach the servo (:class:`ServoConfig`). By default they are streamed at the
 servo rate with velocity feed-forward, as a drive's trajectory interface does: within a control
 period the reference runs on the line from the previous command to the current one, and the
-velocity target is ``v_cmd + K * (q_ref - q)`` with ``v_cmd`` the limiter's command velocity
-(in MuJoCo: the position actuator's control ``q_ref + v_cmd / K``). The feed-forward does the
-moving, so ``K`` (10 /s) only pulls drift back onto the command path and the arm stays as
-compliant to contact as the velocity servo the policy was trained on. With ``feedforward``
+velocity target is ``v_cmd + clip(K * (q_ref - q), +-cap)`` with ``v_cmd`` the limiter's command
+velocity (in MuJoCo: the position actuator's control is ``q`` plus that target over ``K``). The
+feed-forward does the moving, so ``K`` (3 /s, capped at 0.1 rad/s) only takes drift back onto
+the command path and the arm stays about as compliant to contact as the velocity servo the
+policy was trained on. With ``feedforward``
 off, each command is held for the whole control period and the loop is ``K * (q_cmd - q)``
 alone: to move at ``v`` the command must lead the arm by ``v / K`` and a period of motion, and a
 joint blocked by the table or the cube pushes that much harder (Lift lost up to half its
@@ -38,7 +39,7 @@ episodes that way in C MuJoCo: benchmarks/results/sim2real/).
 Stability: around one joint of inertia ``I`` the loop is ``I s^2 + kv s + kv K``. With
 ``b = kv / I`` (the velocity loop's bandwidth: 240 /s at the smallest inertia, about 100 /s for
 the shoulder lift at the home pose) the damping ratio is ``0.5 * sqrt(b / K)``: above 1 for
-every joint at ``K = 10`` (0.79 at the shoulder lift for ``K = 40``), so no joint rings.
+every joint at ``K = 3`` or 10 (0.79 at the shoulder lift for ``K = 40``), so no joint rings.
 """
 
 from __future__ import annotations
@@ -97,8 +98,9 @@ def use_position_servos(
     """Turn the velocity actuators ``actuators (6,)`` of ``model`` into position servos.
 
     In place: gain ``kp``, bias ``(0, -kp, -kv)`` (MuJoCo's ``position`` actuator with ``kv``),
-    control range = the URDF joint range (widened by ``v_max / K`` for the feed-forward servo,
-    whose control carries ``v_ff / K``). The force range (the URDF effort) is kept.
+    control range = the URDF joint range (widened by ``(v_max + cap) / K`` for the feed-forward
+    stream, whose control is the measured angle plus its velocity target over ``K``). The
+    force range (the URDF effort) is kept.
 
     Raises:
         ValueError: an actuator is not the converter's velocity actuator.
@@ -112,7 +114,8 @@ def use_position_servos(
     model.actuator_biasprm[actuators, 1] = -gains.kp
     model.actuator_biasprm[actuators, 2] = -gains.kv
     # the feed-forward servo's control is the reference plus at most v_max / K
-    reach = arm.v_max / config.position_gain if config.feedforward else 0.0
+    reach = (arm.v_max + config.correction_limit) / config.position_gain
+    reach = reach if config.feedforward else 0.0
     model.actuator_ctrlrange[actuators] = np.stack([arm.lower - reach, arm.upper + reach], axis=1)
     return gains
 
@@ -182,12 +185,16 @@ class _ChainActuation:
             self._previous_command = self.limiter.command
             self._physics_set_position_targets(self.limiter(self.adapter.step(qdot_target)))
 
-    def _servo_reference(self, fraction: float) -> tuple[np.ndarray, np.ndarray]:
-        """The servo's reference ``fraction`` (0 to 1) of the way through the control period:
-        the position ``(6,)`` (rad) on the line from the previous command to the current one,
-        and the feed-forward velocity ``(6,)`` (rad/s), the current command's velocity."""
+    def _servo_velocity(self, fraction: float, q: np.ndarray) -> np.ndarray:
+        """The feed-forward stream's joint velocity target ``(6,)`` (rad/s) ``fraction`` (0 to
+        1) of the way through the control period, at the measured angles ``q (6,)`` (rad):
+        the command's velocity plus ``K`` times the gap to the line from the previous command
+        to the current one, that correction capped at the servo's ``correction_limit``."""
+        servo = self.chain_config.servo
         q0, q1 = self._previous_command, self.limiter.command
-        return q0 + fraction * (q1 - q0), self.limiter.velocity
+        gap = q0 + fraction * (q1 - q0) - q
+        cap = servo.correction_limit
+        return self.limiter.velocity + np.clip(servo.position_gain * gap, -cap, cap)
 
     def _start_chain(self) -> None:
         """Start adapter and limiter at the measured joint angles; the servo holds them."""
@@ -262,11 +269,11 @@ class MujocoPositionArmEnv(_ChainActuation, MujocoArmEnv):
         if not self.chain_config.servo.feedforward or self._holding:
             super()._physics_step(n_substeps)
             return
-        # kp * (ctrl - q) = kv * (v_ff + K * (q_ref - q)) with ctrl = q_ref + v_ff / K
+        # kp * (ctrl - q) = kv * v with ctrl = q + v / K: the velocity servo's law
         gain = self.chain_config.servo.position_gain
         for i in range(n_substeps):
-            q_ref, v_ff = self._servo_reference((i + 1) / n_substeps)
-            self._ctrl[self._act] = q_ref + v_ff / gain
+            q = self._qpos[self._qpos_adr]
+            self._ctrl[self._act] = q + self._servo_velocity((i + 1) / n_substeps, q) / gain
             mujoco.mj_step(self.model, self.data)
 
     def gripper_lower(self) -> float:
@@ -342,8 +349,7 @@ class PybulletPositionArmEnv(_ChainActuation, PybulletArmEnv):
             arm = pick(states)  # the arm's joints (5 or more: a tuple)
             q = [s[0] for s in arm]
             if self._feedforward and not self._holding:
-                ref, v_ff = self._servo_reference((i + 1) / n_substeps)
-                u = [f + gain * (t - x) for t, f, x in zip(ref, v_ff, q, strict=True)]
+                u = self._servo_velocity((i + 1) / n_substeps, np.asarray(q)).tolist()
             else:
                 u = [gain * (t - x) for t, x in zip(self._q_target, q, strict=True)]
             torque = self.servo.torque(u, [s[1] for s in arm], pick(gravity))
