@@ -82,7 +82,9 @@ def test_position_env_keeps_the_contract(engine: str):
 @pytest.mark.parametrize("engine", ENGINES)
 def test_position_servo_holds_and_follows_the_commands(engine: str):
     """Still actions hold the start pose (drift < 1e-6 rad). After 10 steps at half speed
-    the arm settles within 1e-3 rad of the last command in 15 still steps (0.5 s)."""
+    the arm settles within 5e-3 rad of the last command in 15 still steps (0.5 s): the
+    feed-forward stream's K = 3 /s takes the last of the gap back with a 0.33 s time constant
+    (measured: 0.0017 rad in MuJoCo, 0.0025 rad in PyBullet)."""
     env = make_position_env(REACH, engine)
     try:
         env.reset(seed=0)
@@ -97,7 +99,7 @@ def test_position_servo_holds_and_follows_the_commands(engine: str):
             env.step(STILL)
         command = base.limiter.command
         assert np.abs(command - q0).min() > 0.2  # it moved: about 0.26 rad per joint
-        np.testing.assert_allclose(base.measured_qpos(), command, atol=1e-3)
+        np.testing.assert_allclose(base.measured_qpos(), command, atol=5e-3)
         log = base.episodes[-1].arrays()
         assert log["commands"].shape == log["measured"].shape == (35, 6)
     finally:
@@ -105,9 +107,10 @@ def test_position_servo_holds_and_follows_the_commands(engine: str):
 
 
 def test_servo_gains_wrap_the_velocity_servo():
-    """kp = K * kv with the velocity actuator's kv; force capped at the URDF effort."""
+    """kp = K * kv with the velocity actuator's kv; force capped at the URDF effort; the held
+    command's control range is the joint range."""
     velocity = MujocoArmEnv(REACH)
-    config = ChainConfig(servo=ServoConfig(position_gain=25.0))
+    config = ChainConfig(servo=ServoConfig(position_gain=25.0, feedforward=False))
     position = make_position_env(REACH, "mujoco", config).unwrapped
     act = velocity.ids.actuators
     kv = velocity.model.actuator_gainprm[act, 0]
@@ -116,6 +119,26 @@ def test_servo_gains_wrap_the_velocity_servo():
     np.testing.assert_allclose(position.model.actuator_biasprm[act, 1:3], -np.c_[25.0 * kv, kv])
     np.testing.assert_allclose(position.model.actuator_forcerange[act, 1], position.arm.effort)
     np.testing.assert_allclose(position.model.actuator_ctrlrange[act, 0], position.arm.lower)
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_feedforward_servo_tracks_without_the_held_commands_lag(engine: str):
+    """Mid-ramp at half speed the feed-forward stream keeps the arm within 0.01 rad of the
+    last command; holding each command with the same K = 10 /s lags by over 0.03 rad (about
+    v / K). Measured in MuJoCo: 0.0032 and 0.064 rad."""
+    lags = {}
+    for feedforward in (True, False):
+        config = ChainConfig(servo=ServoConfig(position_gain=10.0, feedforward=feedforward))
+        env = make_position_env(REACH, engine, config)
+        try:
+            env.reset(seed=0)
+            for _ in range(10):
+                env.step(np.full(6, 0.5, np.float32))
+            base = env.unwrapped
+            lags[feedforward] = np.abs(base.measured_qpos() - base.limiter.command).max()
+        finally:
+            env.close()
+    assert lags[True] < 0.01 < 0.03 < lags[False], lags
 
 
 def test_observation_builder_matches_the_env():

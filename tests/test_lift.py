@@ -159,6 +159,33 @@ def test_grasp_needs_the_cube_between_the_pads():
     assert measures["grasp"].tolist() == [1.0, 0.0]
 
 
+def test_soft_variant_charges_from_25_n_and_the_touchdown_speed():
+    """``variant="soft"``: a 40 N wrist reading costs 0.6 of the band's top (gentle: nothing,
+    its band ends at 50 N), ``approach_speed`` weighs -20; every other field is the preset's."""
+    from mjx_arm.task import reward as reward_lib
+
+    gentle, soft = lift_config(), lift_config(variant="soft")
+    assert reward_lib.force_excess(np, 40.0, gentle) == 0.0
+    assert reward_lib.force_excess(np, 40.0, soft) == pytest.approx(15.0 / 25.0)
+    assert soft.reward.approach_speed == -20.0 and gentle.reward.approach_speed == 0.0
+    same = soft.replace(variant="gentle", force_band=gentle.force_band, reward=gentle.reward)
+    assert same == gentle
+    with pytest.raises(ValueError, match="unknown lift variant"):
+        lift_config(variant="seed")
+
+
+def test_task_solver_iterations_reach_the_model():
+    """``solver_iterations`` / ``ls_iterations`` set the task model's solver; 0 keeps the
+    converter's 2 and 4."""
+    from mjx_arm.envs.arm import arm_info
+
+    arm = arm_info(GRIPPER)
+    model = arm_model(arm, lift_config(solver_iterations=6, ls_iterations=12))
+    assert (model.opt.iterations, model.opt.ls_iterations) == (6, 12)
+    model = arm_model(arm, lift_config())
+    assert (model.opt.iterations, model.opt.ls_iterations) == (2, 4)
+
+
 def test_lift_needs_a_gripper_arm():
     """Lift on the arm without a gripper is a named error that points at the gripper arm;
     without an arm it runs on the gripper arm."""

@@ -126,6 +126,12 @@ def test_task_and_reward_overrides_reach_the_task_config() -> None:
         load_config("cpu", None, ["task.nope=1"])
 
 
+def test_a_list_override_sets_a_tuple_task_field() -> None:
+    """``task.force_band=[1,30]`` (a list on the command line) becomes the field's tuple."""
+    config = load_config("cpu", None, ["task=lift", "task.force_band=[1,30]"])
+    assert config.task_config().force_band == (1, 30)
+
+
 def test_presets_take_the_task_changes() -> None:
     """Touch gets its own budget in the fast and cpu presets; Reach keeps the preset's base;
     a later ``task=`` override decides which task's preset applies, and --set wins over both."""

@@ -26,17 +26,26 @@ from mjx_arm.urdf.spec_edits import pad_sensor
 
 def task_convert_config(task: TaskConfig, arm: ArmInfo | None = None) -> ConvertConfig:
     """Conversion settings of a task model: the arm's ee and F/T point (default: the shipped
-    arm's), the task's scene, time step and servo step, no self-collision; a gripper task's
-    finger pads get touch sensors."""
+    arm's), the task's scene, time step, servo step and solver iterations (where the task sets
+    them), no self-collision; a gripper task's finger pads get touch sensors."""
     arm = arm or arm_info()
     spec = task.spec
     pads = arm.gripper.pad_links if spec.gripper and arm.gripper else ()
+    solver = {
+        key: value
+        for key, value in (
+            ("solver_iterations", task.solver_iterations),
+            ("ls_iterations", task.ls_iterations),
+        )
+        if value > 0
+    }
     return arm.convert_config(
         scene=spec.scene,
         sim_dt=task.sim_dt,
         servo_dt=spec.servo_dt,
         pad_links=pads,
         self_collision=False,
+        **solver,
     )
 
 

@@ -74,7 +74,8 @@ def format_report(report: dict[str, Any]) -> str:
         f"deploy-sim {report['task']} on {report['engine']}: {report['episodes']} episodes "
         f"(seed {report['seed']}); tau {s['tau']:g} s, acceleration limit "
         f"{s['limiter']['acceleration']:g} rad/s^2, "
-        f"position gain {s['servo']['position_gain']:g} /s",
+        f"position gain {s['servo']['position_gain']:g} /s, "
+        + ("feed-forward stream" if s["servo"].get("feedforward") else "held commands"),
         f"  {'':<24}{'velocity control':<22}position control (adapter + limiter)",
         f"  {'success rate (95% CI)':<24}{rate(vel):<22}{rate(pos)}",
         row("mean steps to success", "mean_steps_to_success", ".1f"),

@@ -23,13 +23,23 @@ model's. In MuJoCo the loop is a ``position`` actuator (``kp``, ``kv``), made by
 compiled task model's actuators in place (the model's ids and sensors are those of the velocity
 env); in PyBullet it is applied as torques at every substep, like the velocity servo there.
 
-Why ``K = 40 /s``: around one joint of inertia ``I`` the loop is ``I s^2 + kv s + kv K``. With
+How the commands reach the servo (:class:`ServoConfig`). By default they are streamed at the
+servo rate with velocity feed-forward, as a drive's trajectory interface does: within a control
+period the reference runs on the line from the previous command to the current one, and the
+velocity target is ``v_cmd + clip(K * (q_ref - q), +-cap)`` with ``v_cmd`` the limiter's command
+velocity (in MuJoCo: the position actuator's control is ``q`` plus that target over ``K``). The
+feed-forward does the moving, so ``K`` (3 /s, capped at 0.1 rad/s) only takes drift back onto
+the command path and the arm stays about as compliant to contact as the velocity servo the
+policy was trained on. With ``feedforward``
+off, each command is held for the whole control period and the loop is ``K * (q_cmd - q)``
+alone: to move at ``v`` the command must lead the arm by ``v / K`` and a period of motion, and a
+joint blocked by the table or the cube pushes that much harder (Lift lost up to half its
+episodes that way in C MuJoCo: benchmarks/results/sim2real/).
+
+Stability: around one joint of inertia ``I`` the loop is ``I s^2 + kv s + kv K``. With
 ``b = kv / I`` (the velocity loop's bandwidth: 240 /s at the smallest inertia, about 100 /s for
-the shoulder lift at the home pose, where its inertia is 2.4 times the smallest), the damping
-ratio is ``0.5 * sqrt(b / K)``: 0.79 for the shoulder lift at home and 1.2 at the wrists, so no
-joint rings. The steady lag behind a ramp is ``v / K``: 0.04 rad at the policies' top speed of
-1.57 rad/s. A higher ``K`` cuts the lag but leaves the heavy joints under-damped when the arm
-is stretched out; the explicit ``kp`` term stays stable (``sqrt(K * sim_dt) = 0.41 < 1``).
+the shoulder lift at the home pose) the damping ratio is ``0.5 * sqrt(b / K)``: above 1 for
+every joint at ``K = 3`` or 10 (0.79 at the shoulder lift for ``K = 40``), so no joint rings.
 """
 
 from __future__ import annotations
@@ -88,7 +98,9 @@ def use_position_servos(
     """Turn the velocity actuators ``actuators (6,)`` of ``model`` into position servos.
 
     In place: gain ``kp``, bias ``(0, -kp, -kv)`` (MuJoCo's ``position`` actuator with ``kv``),
-    control range = the URDF joint range. The force range (the URDF effort) is kept.
+    control range = the URDF joint range (widened by ``(v_max + cap) / K`` for the feed-forward
+    stream, whose control is the measured angle plus its velocity target over ``K``). The
+    force range (the URDF effort) is kept.
 
     Raises:
         ValueError: an actuator is not the converter's velocity actuator.
@@ -101,7 +113,10 @@ def use_position_servos(
     model.actuator_gainprm[actuators, 0] = gains.kp
     model.actuator_biasprm[actuators, 1] = -gains.kp
     model.actuator_biasprm[actuators, 2] = -gains.kv
-    model.actuator_ctrlrange[actuators] = np.stack([arm.lower, arm.upper], axis=1)
+    # the feed-forward servo's control is the reference plus at most v_max / K
+    reach = (arm.v_max + config.correction_limit) / config.position_gain
+    reach = reach if config.feedforward else 0.0
+    model.actuator_ctrlrange[actuators] = np.stack([arm.lower - reach, arm.upper + reach], axis=1)
     return gains
 
 
@@ -167,13 +182,26 @@ class _ChainActuation:
 
     def _physics_set_velocity_targets(self, qdot_target: np.ndarray) -> None:
         if not self._holding:
+            self._previous_command = self.limiter.command
             self._physics_set_position_targets(self.limiter(self.adapter.step(qdot_target)))
+
+    def _servo_velocity(self, fraction: float, q: np.ndarray) -> np.ndarray:
+        """The feed-forward stream's joint velocity target ``(6,)`` (rad/s) ``fraction`` (0 to
+        1) of the way through the control period, at the measured angles ``q (6,)`` (rad):
+        the command's velocity plus ``K`` times the gap to the line from the previous command
+        to the current one, that correction capped at the servo's ``correction_limit``."""
+        servo = self.chain_config.servo
+        q0, q1 = self._previous_command, self.limiter.command
+        gap = q0 + fraction * (q1 - q0) - q
+        cap = servo.correction_limit
+        return self.limiter.velocity + np.clip(servo.position_gain * gap, -cap, cap)
 
     def _start_chain(self) -> None:
         """Start adapter and limiter at the measured joint angles; the servo holds them."""
         q = self.measured_qpos()
         self.adapter.reset(q)
         self.limiter.reset(q)
+        self._previous_command = q.copy()
         self._physics_set_position_targets(q)
         if self.gripper_chain is not None:
             self.gripper_chain.reset(self.finger_position())
@@ -237,6 +265,17 @@ class MujocoPositionArmEnv(_ChainActuation, MujocoArmEnv):
     def _physics_set_position_targets(self, q_target: np.ndarray) -> None:
         self._ctrl[self._act] = q_target
 
+    def _physics_step(self, n_substeps: int) -> None:
+        if not self.chain_config.servo.feedforward or self._holding:
+            super()._physics_step(n_substeps)
+            return
+        # kp * (ctrl - q) = kv * v with ctrl = q + v / K: the velocity servo's law
+        gain = self.chain_config.servo.position_gain
+        for i in range(n_substeps):
+            q = self._qpos[self._qpos_adr]
+            self._ctrl[self._act] = q + self._servo_velocity((i + 1) / n_substeps, q) / gain
+            mujoco.mj_step(self.model, self.data)
+
     def gripper_lower(self) -> float:
         """The driven finger's open position (m)."""
         return self.grip.lower
@@ -270,6 +309,7 @@ class PybulletPositionArmEnv(_ChainActuation, PybulletArmEnv):
         # the parent's constructor resets the world, which steps the servo: set it up first
         config = config or ChainConfig()
         self._gain = config.servo.position_gain
+        self._feedforward = config.servo.feedforward
         self._q_target: list[float] = []
         self._holding = True
         super().__init__(task, arm, render_mode, width, height)
@@ -308,7 +348,10 @@ class PybulletPositionArmEnv(_ChainActuation, PybulletArmEnv):
             gravity = calls.inverse_dynamics(body, [s[0] for s in states], zeros, zeros)
             arm = pick(states)  # the arm's joints (5 or more: a tuple)
             q = [s[0] for s in arm]
-            u = [gain * (t - x) for t, x in zip(self._q_target, q, strict=True)]
+            if self._feedforward and not self._holding:
+                u = self._servo_velocity((i + 1) / n_substeps, np.asarray(q)).tolist()
+            else:
+                u = [gain * (t - x) for t, x in zip(self._q_target, q, strict=True)]
             torque = self.servo.torque(u, [s[1] for s in arm], pick(gravity))
             calls.set_motors(body, joints, pybullet.TORQUE_CONTROL, forces=torque)
             if i == n_substeps - 1:

@@ -139,6 +139,10 @@ class TaskConfig:
             integration ran away: the episode ends with ``info["diverged"]`` and the
             ``nonfinite`` reward term (PyBullet caps joint speeds at 100 rad/s, so its runaway
             shows as speed, not as NaN).
+        solver_iterations, ls_iterations: the MuJoCo models' constraint solver iterations and
+            Newton line-search iterations, in MJX and C MuJoCo alike; 0 takes the converter's
+            (2 and 4: :class:`mjx_arm.urdf.convert_config.ConvertConfig`). PyBullet ignores
+            them.
         reward: weights of the reward terms.
     """
 
@@ -163,6 +167,8 @@ class TaskConfig:
     force_clip: float = 100.0
     joint_encoding: str = "centred"
     divergence_speed_factor: float = 10.0
+    solver_iterations: int = 0
+    ls_iterations: int = 0
     reward: RewardConfig = field(default_factory=RewardConfig)
 
     def __post_init__(self) -> None:
@@ -174,6 +180,7 @@ class TaskConfig:
         check_range(self, ("force_clip", "divergence_speed_factor"), above=0)
         check_range(self, ("init_noise", "strike_force"), low=0)
         check_range(self, "episode_steps", low=1, high=100_000)  # up to about an hour
+        check_range(self, ("solver_iterations", "ls_iterations"), low=0, high=1000)
         ratio = self.ctrl_dt / self.sim_dt
         if abs(ratio - round(ratio)) > 1e-6 or not 1 <= round(ratio) <= 1000:
             raise ConfigError(
@@ -245,7 +252,9 @@ class TaskConfig:
         return self.spec.uses_contact
 
     def replace(self, **changes: Any) -> TaskConfig:
-        """Return a copy with some fields changed (``reward`` takes a dict or a RewardConfig)."""
+        """Return a copy with some fields changed (``reward`` takes a dict or a RewardConfig;
+        a list, as ``--set task.force_band=[1,30]`` gives, becomes the field's tuple)."""
+        changes = {k: tuple(v) if isinstance(v, list) else v for k, v in changes.items()}
         if isinstance(changes.get("reward"), dict):
             changes["reward"] = dataclasses.replace(self.reward, **changes["reward"])
         return dataclasses.replace(self, **changes)

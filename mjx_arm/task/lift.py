@@ -9,6 +9,7 @@ wrist reading: one above 100 N (the tool struck the table) ends the episode.
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 from mjx_arm.task import grip as grip_lib
@@ -48,6 +49,17 @@ LIFT_REWARD = RewardConfig(
     joint_velocity=-0.05,
 )
 
+# The "soft" variant (``task.variant=soft``): Lift's reward with a touchdown charge and a lower
+# force band. The wrist peak of the shipped policies is mostly their touchdown on the cube or
+# the table (benchmarks/results/sim2real/summary.md): one of five touches down at 41-42 N, over
+# a 40 N goal, because the force charge only starts at the band's top, 50 N. The band's top at
+# 25 N makes the wrist reading pay from 25 N, and ``approach_speed`` charges the squared speed
+# at which the ee closes on the cube in its last 10 cm (1 at 1 m/s), so a policy learns to set
+# the fingers down slowly around the cube rather than land on it. Not the shipped default: it
+# needs the seeds benchmark on a GPU to show that it trains as fast and transfers better.
+SOFT_FORCE_BAND = (1.0, 25.0)
+SOFT_REWARD = dataclasses.replace(LIFT_REWARD, approach_speed=-20.0)
+
 # The arm moves at most this fraction of each joint's URDF speed (about 0.45 rad/s on the
 # UR5e class): fast enough to reach the cube in a second, slow enough that touching the table
 # stays under the strike limit more often than not.
@@ -75,9 +87,11 @@ class Lift(Task):
     object_uniforms = 2
 
     def config(self, **overrides: Any) -> TaskConfig:
-        """The Lift preset with ``overrides``; ``variant`` may only be ``"gentle"``."""
-        if overrides.pop("variant", "gentle") != "gentle":
-            raise ValueError("lift has a single variant, 'gentle'")
+        """The Lift preset with ``overrides``; ``variant``: ``"gentle"`` (the default) or
+        ``"soft"`` (:data:`SOFT_FORCE_BAND` and :data:`SOFT_REWARD`)."""
+        variant = overrides.pop("variant", "gentle")
+        if variant not in ("gentle", "soft"):
+            raise ValueError(f"unknown lift variant {variant!r}; choose 'gentle' or 'soft'")
         base = TaskConfig(
             task="lift",
             variant="gentle",
@@ -91,6 +105,8 @@ class Lift(Task):
             strike_force=100.0,
             reward=LIFT_REWARD,
         )
+        if variant == "soft":
+            base = base.replace(variant="soft", force_band=SOFT_FORCE_BAND, reward=SOFT_REWARD)
         return base.replace(**overrides)
 
     def target_body_pos(self, xp: Any, u3, cfg: TaskConfig):
