@@ -17,6 +17,7 @@ Warp is skipped.
 from __future__ import annotations
 
 import time
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any
 
 PACKAGE = "mujoco.mjx.third_party.mujoco_warp._src"
@@ -68,6 +69,21 @@ def precompile(threads: int, names: tuple[str, ...] = STEP_MODULES) -> float:
     start = time.perf_counter()
     wp.force_load(device=devices, modules=modules, max_workers=threads)
     return time.perf_counter() - start
+
+
+def start_precompile(threads: int, names: tuple[str, ...] = STEP_MODULES) -> Future | None:
+    """:func:`precompile` on a background thread, so that the XLA programs trace and compile
+    meanwhile; None where there is nothing to compile (no threads, no GPU).
+
+    The future's result is the seconds the compiles took. Call ``result()`` before the first
+    physics step runs (:meth:`mjx_arm.envs.mjx_physics.MjxPhysics.wait_precompiled`).
+    """
+    if threads <= 0 or not _cuda_devices():
+        return None
+    pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="warp-precompile")
+    future = pool.submit(precompile, threads, names)
+    pool.shutdown(wait=False)
+    return future
 
 
 def loaded_modules() -> dict[str, list[int]]:

@@ -137,16 +137,23 @@ class Learner:
     # ------------------------------------------------------------------ state
 
     def init(self, key_policy: jax.Array, key_value: jax.Array) -> TrainingState:
-        """Fresh network params, optimiser and normaliser state, replicated on the mesh."""
+        """Fresh network params, optimiser and normaliser state, replicated on the mesh.
+
+        One jitted program: built op by op, the initialisers compile some fifty small
+        programs one after another.
+        """
+        return jax.jit(self._fresh_state, out_shardings=self.replicated)(key_policy, key_value)
+
+    def _fresh_state(self, key_policy: jax.Array, key_value: jax.Array) -> TrainingState:
         params = init_params(self.network, key_policy, key_value)
         obs_spec = specs.Array((self.observation_size,), jnp.dtype("float32"))
-        state = TrainingState(
+        zero = jnp.zeros((), jnp.int32)  # the type jnp.asarray(0) has once made strong
+        return TrainingState(
             optimizer_state=self.optimizer.init(params),
             params=params,
             normalizer_params=running_statistics.init_state(obs_spec),
-            env_steps=brax_types.UInt64(hi=0, lo=0),
+            env_steps=brax_types.UInt64(hi=zero, lo=zero),
         )
-        return self.place(state)
 
     def restore(self, state: TrainingState, params: Params) -> TrainingState:
         """``state`` with the (normaliser, policy, value) of a checkpoint."""
