@@ -104,10 +104,11 @@ def prepare_ppo(
     step_offset: int = 0,
     report: CompileReport | None = None,
 ) -> Prepared:
-    """Build the learner, compile the run's three XLA programs and reset the training envs.
+    """Build the learner, compile the run's XLA programs and reset the training envs.
 
-    The reset, the training epoch and the evaluation are traced and lowered one after the
-    other (Python), then compiled by XLA at the same time on a thread pool; MuJoCo Warp's
+    The reset, the training step's rollout and update (:meth:`Learner.epoch_programs`) and
+    the evaluation are traced and lowered one after the other (Python), then compiled by XLA
+    at the same time on a thread pool; MuJoCo Warp's
     kernels, started when the env was built, compile meanwhile
     (:meth:`mjx_arm.envs.mjx_physics.MjxPhysics.wait_precompiled` is called before anything
     runs). Every stage is timed into ``report``.
@@ -138,20 +139,21 @@ def prepare_ppo(
         keys = jax.random.split(key_env, config.num_envs)
         reset, shardings = _reset_fn(train_env, mesh, keys)
         env_shapes = jax.tree.map(_strong_shape, jax.eval_shape(reset, keys), shardings)
-        epoch = learner.epoch_fn(train_env, sizes, shardings)
+        epoch = learner.epoch_programs(train_env, sizes, shardings)
         lowered = {
             "reset": reset.lower(keys),
-            "training epoch": epoch.lower(state, env_shapes, local_key),
+            **epoch.lower(state, env_shapes, local_key),
             "evaluation": evaluate.lower(learner.params(state)),
         }
     with report.stage("XLA compile (in parallel)"):
         compiled = compile_all(lowered)
     evaluate.use(compiled["evaluation"])
+    epoch = epoch.with_programs(compiled["rollout"], compiled["update"])
     _wait_for_kernels((env, eval_env), report)
     with report.stage("first reset run"):
         env_state = jax.block_until_ready(strong(compiled["reset"](keys)))
     return Prepared(
-        learner, state, env_state, compiled["training epoch"], evaluate, sizes, local_key,
+        learner, state, env_state, epoch, evaluate, sizes, local_key,
         devices, partition,
     )  # fmt: skip
 
@@ -209,8 +211,7 @@ def run_ppo(
     while step < config.num_timesteps:
         epoch_key, local_key = jax.random.split(local_key)
         start = time.monotonic()
-        state, env_state, metrics = run.epoch(state, env_state, epoch_key)
-        metrics = jax.device_get(metrics)
+        state, env_state, metrics = run.epoch(state, strong(env_state), epoch_key)
         seconds = time.monotonic() - start
         if walltime == 0.0:
             report.add("first epoch run", seconds)
