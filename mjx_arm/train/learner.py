@@ -328,17 +328,3 @@ class EpochPrograms:
             metrics.append(step_metrics)
         mean = jax.tree.map(lambda *xs: np.mean(np.stack(xs)), *jax.device_get(metrics))
         return state, env_state, mean
-
-
-def evaluator(
-    learner: Learner, eval_env: Any, config: TrainConfig, episode_length: int, key: jax.Array
-) -> acting.Evaluator:
-    """Brax's evaluator (deterministic policy, one episode per env) on the default device."""
-    return acting.Evaluator(
-        eval_env,
-        functools.partial(learner.make_policy, deterministic=True),
-        num_eval_envs=config.num_eval_envs,
-        episode_length=episode_length,
-        action_repeat=1,
-        key=key,
-    )

@@ -108,10 +108,9 @@ def prepare_ppo(
 
     The reset, the training step's rollout and update (:meth:`Learner.epoch_programs`) and
     the evaluation are traced and lowered one after the other (Python), then compiled by XLA
-    at the same time on a thread pool; MuJoCo Warp's
-    kernels, started when the env was built, compile meanwhile
-    (:meth:`mjx_arm.envs.mjx_physics.MjxPhysics.wait_precompiled` is called before anything
-    runs). Every stage is timed into ``report``.
+    at the same time on a thread pool; MuJoCo Warp's kernels, started when the env was built,
+    compile meanwhile (:meth:`mjx_arm.envs.mjx_physics.MjxPhysics.wait_precompiled` is
+    called before anything runs). Every stage is timed into ``report``.
     """
     report = report or CompileReport()
     devices = local_devices(config.devices)
@@ -123,10 +122,7 @@ def prepare_ppo(
     split_mesh = mesh if partition == "per_device" else None
     train_env = wrap_for_training(env, episode_length, mesh=split_mesh, axis=ENV_AXIS)
     with report.stage("learner init"):
-        learner = Learner(config, env.observation_size, env.action_size, mesh)
-        state = learner.init(key_policy, key_value)
-        if restore is not None:
-            state = learner.restore(state, restore)
+        learner, state = _learner(config, env, mesh, (key_policy, key_value), restore)
     evaluate = Evaluator(
         wrap_for_training(eval_env, episode_length),
         functools.partial(learner.make_policy, deterministic=True),
@@ -153,9 +149,17 @@ def prepare_ppo(
     with report.stage("first reset run"):
         env_state = jax.block_until_ready(strong(compiled["reset"](keys)))
     return Prepared(
-        learner, state, env_state, epoch, evaluate, sizes, local_key,
-        devices, partition,
-    )  # fmt: skip
+        learner, state, env_state, epoch, evaluate, sizes, local_key, devices, partition
+    )
+
+
+def _learner(
+    config: TrainConfig, env: Any, mesh: Any, keys: tuple[jax.Array, jax.Array], restore: Any
+) -> tuple[Learner, Any]:
+    """The learner and its first state: fresh from ``keys`` (policy, value), or restored."""
+    learner = Learner(config, env.observation_size, env.action_size, mesh)
+    state = learner.init(*keys)
+    return learner, state if restore is None else learner.restore(state, restore)
 
 
 def _wait_for_kernels(envs: tuple[Any, ...], report: CompileReport) -> None:

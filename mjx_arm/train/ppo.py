@@ -186,6 +186,8 @@ def _train(
     task = env.task  # with the arm's home pose and reach scale
     progress = _Progress(run, config, task, step_offset, quiet, stop_after)
     progress.physics = env.physics.describe()
+    if not quiet:
+        progress.start_up_summary = report.summary
     if restore is None:
         run.save_config(full_config(config, task, env.physics.describe(), env.arm))
     progress.times.append((start, step_offset))

@@ -60,6 +60,7 @@ class _Progress:
         )
         self.evals = 0
         self.stop_after = stop_after
+        self.start_up_summary: Any = None  # () -> the start-up line, shown after epoch one
         self.latest: tuple | None = None
         # (success, step, params on the host) of the best evaluation after training started
         self.best: tuple[float, int, Any] | None = None
@@ -89,6 +90,8 @@ class _Progress:
         if not any("training/" in k for k in row):  # the evaluation before training
             return
         self.evals += 1
+        if self.evals == 1 and self.start_up_summary is not None:
+            self.bar.write(self.start_up_summary())
         success = row.get("eval/episode_success", 0.0)
         self._remember_best(step, success)
         due = self.evals % self.config.checkpoint_every == 0
