@@ -97,7 +97,7 @@ def _child(args: argparse.Namespace) -> dict:
     if physics.get("impl") == "warp":
         from mjx_arm.envs import warp_compile
 
-        row["warp_modules_loaded"] = len(warp_compile.loaded_modules())
+        row["warp_modules_loaded"] = sorted(warp_compile.loaded_modules())
     return row
 
 

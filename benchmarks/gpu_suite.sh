@@ -6,7 +6,6 @@
 #   bash benchmarks/gpu_suite.sh solve        # time to 95% from a cold start, Reach and Touch
 #   bash benchmarks/gpu_suite.sh gentle       # Touch (gentle) at a few action scales, long runs
 #   bash benchmarks/gpu_suite.sh scaling      # Touch training steps/s on 1 GPU and on 2
-#   bash benchmarks/gpu_suite.sh coldstart    # where a cold start's seconds go (Warp kernels)
 #   bash benchmarks/gpu_suite.sh cold-touch   # Touch cold and warm to 0.95, warmup then a start
 #   bash benchmarks/gpu_suite.sh cold-lift    # Lift (gripper arm) cold and warm to 0.9
 #   bash benchmarks/gpu_suite.sh cold-arm     # a mesh-collision arm: cold, a second task, warm
@@ -78,12 +77,6 @@ scaling)
     python3 benchmarks/bench_train.py --tasks touch --preset fast --devices "$devices" \
       --set "physics.impl=${IMPL:-warp}" "${sets[@]}" --out "$OUT/runs" --results-dir "$OUT" \
       --name "scaling_touch_${IMPL:-warp}_${devices}gpu"
-  done
-  ;;
-coldstart)
-  for task in ${TASKS:-reach touch}; do
-    one_gpu python3 benchmarks/bench_cold_start.py --task "$task" --threads ${THREADS:-0 8 16} \
-      --results-dir "$OUT" --name "cold_start_$task"
   done
   ;;
 cold-touch)

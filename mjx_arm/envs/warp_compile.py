@@ -5,13 +5,15 @@ its kernels launches, one module after another. Under MJX that happens inside th
 the step, so a cold start compiles some twenty modules in a row. :func:`precompile` compiles the
 modules that stepping the task model launches on a thread pool first; the step then finds them
 in Warp's kernel cache. Kernels that MuJoCo Warp generates for a given model while it steps
-(modules with a hashed name) are still compiled on first use.
+(modules with a hashed name) are still compiled on first use. Training starts the compiles
+on a background thread (:func:`start_precompile`) so that they run while the XLA programs
+trace and compile.
 
 :data:`STEP_MODULES` lists the modules, found by stepping the task models with an empty kernel
 cache and reading which modules hold a loaded binary (``benchmarks/bench_cold_start.py``
-prints that list): the same eight for Reach and Touch. Collision detection runs in generated
-kernels only, so the collision files are not listed. A module missing from the installed MuJoCo
-Warp is skipped.
+records that list per start): the same eight for Reach and Touch. Collision detection runs in
+generated kernels only, so the collision files are not listed. A module missing from the
+installed MuJoCo Warp is skipped.
 """
 
 from __future__ import annotations

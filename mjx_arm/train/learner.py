@@ -213,6 +213,8 @@ class Learner:
             (state.normalizer_params, state.params.policy, state.params.value)
         )
         env_state, data = self._rollout(env, env_state, policy, key_unroll, unrolls)
+        # strong types: the compiled rollout takes back exactly the types it returns
+        env_state = jax.tree.map(lambda x: x.astype(x.dtype), env_state)
         return env_state, _update_view(data), jnp.stack([key_sgd, key_next])
 
     def _update_step(self, env_steps: int, state: TrainingState, data: Any, key_sgd: jax.Array):
