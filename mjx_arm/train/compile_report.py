@@ -4,7 +4,8 @@ A cold start spends its first seconds on model conversion, the physics build (Mu
 kernel compiles on a GPU), tracing and compiling the XLA programs (the reset, the training epoch
 and the evaluation) and the first run of each. :class:`CompileReport` times named stages and
 counts what JAX reports meanwhile through :mod:`jax.monitoring`: seconds of tracing, of lowering
-to MLIR and of XLA backend compiles (per program), and the persistent cache's hits and misses.
+to MLIR and of XLA backend compiles (per program; a program found in the persistent cache counts
+its loading time), and the persistent cache's requests, hits and writes.
 Training prints :meth:`CompileReport.summary` and saves :meth:`CompileReport.to_dict` in the
 run directory (``compile.json``).
 """
@@ -68,7 +69,8 @@ class CompileReport:
 
     def __init__(self) -> None:
         self.stages: dict[str, float] = {}
-        self.programs: dict[str, float] = defaultdict(float)  # XLA backend compile s per program
+        # XLA backend seconds per program: compiling it, or loading it from the persistent cache
+        self.programs: dict[str, float] = defaultdict(float)
         self.seconds: dict[str, float] = defaultdict(float)  # trace / lower / backend totals
         self.counts: dict[str, int] = defaultdict(int)
         self.start = time.monotonic()
@@ -103,7 +105,7 @@ class CompileReport:
             return
         self.seconds[key] += seconds
         if key == "backend_compile":
-            self.counts["programs_compiled"] += 1
+            self.counts["programs"] += 1
             self.programs[fun_name] += seconds
 
     def _count(self, event: str) -> None:
@@ -129,7 +131,7 @@ class CompileReport:
         """One line: every stage, then JAX's compile totals and cache counts."""
         stages = ", ".join(f"{name} {s:.1f}" for name, s in self.stages.items())
         jax_part = (
-            f"XLA: {self.counts.get('programs_compiled', 0)} programs compiled in "
+            f"XLA: {self.counts.get('programs', 0)} programs compiled or loaded in "
             f"{self.seconds.get('backend_compile', 0.0):.1f} s (trace "
             f"{self.seconds.get('trace', 0.0):.1f} s, lower {self.seconds.get('lower', 0.0):.1f}"
             f" s), persistent cache {self.counts.get('cache_hits', 0)} hits of "
