@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import subprocess
 import sys
@@ -76,7 +77,7 @@ def _child(args: argparse.Namespace) -> dict:
 
     config = _config(args.preset, args.task, args.backend, args.arm, args.set)
     imported = time.time() - args.t0
-    run_dir = Path(tempfile.mkdtemp(prefix="cold_start_run_")) / "run"
+    run_dir = Path(args.run_dir)
     stop_after = 0 if args.to_threshold else 1
     result = train(config, run_dir, quiet=True, stop_after=stop_after)
     curve = read_curve(run_dir, args.t0)  # (s from the command's start, step, success)
@@ -119,8 +120,10 @@ def _config(preset: str, task: str, backend: str, arm: str, sets: list[str]):
 def _start(args: argparse.Namespace, task: str, arm: str, caches: dict, label: str) -> dict:
     """One start in a new process with the cache folders ``caches``; its row."""
     env = {**os.environ, **caches, "PYTHONUNBUFFERED": "1"}
+    run_dir = Path(tempfile.mkdtemp(prefix="cold_start_run_")) / "run"
     t0 = time.time()
     cmd = [sys.executable, __file__, "--child", "--t0", repr(t0), "--task", task]
+    cmd += ["--run-dir", str(run_dir)]
     cmd += ["--preset", args.preset, "--backend", args.backend, "--arm", arm or ""]
     cmd += ["--threshold", str(args.threshold), "--set", *args.set]
     if args.to_threshold and label in ("cold", "warm"):
@@ -131,11 +134,30 @@ def _start(args: argparse.Namespace, task: str, arm: str, caches: dict, label: s
             cmd, capture_output=True, text=True, env=env, timeout=args.child_timeout
         )
     except subprocess.TimeoutExpired:
-        return {**row, "error": f"over {args.child_timeout} s", "wall_s": time.time() - t0}
+        row = {**row, "error": f"over {args.child_timeout} s", "wall_s": time.time() - t0}
+        return {**row, **_curve_times(run_dir, t0, args.threshold)}
     if proc.returncode != 0:
         print(proc.stderr[-3000:], file=sys.stderr)
         return {**row, "error": proc.stderr[-800:], "wall_s": time.time() - t0}
     return {**row, "wall_s": time.time() - t0, **json.loads(proc.stdout.strip().splitlines()[-1])}
+
+
+def _curve_times(run_dir: Path, t0: float, threshold: float) -> dict:
+    """What a stopped start's metrics.csv shows: its first trained evaluation and the time to
+    ``threshold`` (s from ``t0``), where it got that far."""
+    from mjx_arm.bench.seeds import first_at, read_curve
+
+    if not (run_dir / "metrics.csv").is_file():
+        return {}
+    curve = read_curve(run_dir, t0)
+    trained = [t for t, step, _ in curve if step > 0]
+    hit = first_at(curve, threshold)
+    best = max((v for _, _, v in curve), default=None)
+    return {
+        "first_epoch_done_s": trained[0] if trained else None,
+        "time_to_threshold_s": hit[0] if hit else None,
+        "best_success": best,
+    }
 
 
 def _warmup(args: argparse.Namespace, task: str, arm: str, caches: dict) -> dict:
@@ -192,7 +214,7 @@ def run_all(args: argparse.Namespace, save=None) -> list[dict]:
 
 
 def _s(value) -> str:
-    return "-" if value is None else f"{value:.1f}"
+    return "-" if value is None or not math.isfinite(value) else f"{value:.1f}"
 
 
 def table(rows: list[dict]) -> str:
@@ -205,8 +227,9 @@ def table(rows: list[dict]) -> str:
         stages = r.get("stages", {})
         counts = r.get("jax_counts", {})
         cells = [r["task"], r["arm"], r["start"]]
-        if "error" in r:
-            body.append([*cells, *["error"] * (len(head) - 4), _s(r.get("wall_s"))])
+        if "error" in r:  # a start that failed or ran over its time: what its metrics show
+            times = [_s(r.get("first_epoch_done_s")), "-", _s(r.get("time_to_threshold_s"))]
+            body.append([*cells, *["error"] * 9, *times, "-", _s(r.get("wall_s"))])
             continue
         if r["start"] == "warmup command":
             body.append([*cells, *["-"] * (len(head) - 4), _s(r.get("wall_s"))])
@@ -242,6 +265,7 @@ def main() -> None:
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--t0", type=float, default=0.0, help=argparse.SUPPRESS)
     parser.add_argument("--task", default="touch", help=argparse.SUPPRESS)
+    parser.add_argument("--run-dir", default="", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
         print(json.dumps(_child(args), default=float))
