@@ -165,8 +165,9 @@ def _learner(
 def _wait_for_kernels(envs: tuple[Any, ...], report: CompileReport) -> None:
     """Wait for each env's MuJoCo Warp kernel compiles; their seconds into ``report``."""
     physics = {id(env.physics): env.physics for env in envs}.values()
+    labels = {"warp_kernels": "Warp kernels", "warp_kernels_wait": "waited for Warp"}
     for times in (p.wait_precompiled() for p in physics):
-        for name, label in (("warp_kernels", "Warp kernels"), ("warp_kernels_wait", "waited")):
+        for name, label in labels.items():
             if times.get(name):
                 report.add(label, times[name])
 
