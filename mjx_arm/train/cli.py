@@ -63,6 +63,7 @@ def cmd_warmup(args: argparse.Namespace) -> int:
     live: copy those folders into a container image or point every job of a cluster at a
     shared copy with the environment variables shown.
     """
+    from mjx_arm.envs.backend import resolve_backend
     from mjx_arm.train.warmup import cache_locations, warm_up
 
     enable_compilation_cache()
@@ -73,10 +74,12 @@ def cmd_warmup(args: argparse.Namespace) -> int:
     print("caches (share these folders between machines of the same GPU and versions):")
     for what, where in cache_locations().items():
         print(f"  {what}: {where}")
-    if (result.compile_report.get("jax_counts", {}).get("cache_requests", 0)) == 0:
+    if resolve_backend(config.backend) == "mujoco":
         print(
-            "note: nothing went through JAX's cache (the C MuJoCo backend's programs hold "
-            "host callbacks, which JAX cannot store); warm-up helps MJX (--backend mjx)"
+            "note: on the C MuJoCo backend the reset, rollout and evaluation call C MuJoCo "
+            "through host callbacks, which JAX's cache cannot store (they compile again in a "
+            "new process); the learner init and the PPO update are cached. Under MJX "
+            "(--backend mjx) every program is."
         )
     return EXIT_OK
 
