@@ -25,4 +25,5 @@ SETS += ["num_timesteps=2000"]
 run = Path(tempfile.mkdtemp()) / "run"
 train(load_config("cpu", None, SETS), run, quiet=True)
 first = next(r["time"] for r in RunDir(run).read_metrics() if r["step"] > 0)
-print(json.dumps({"code": sys.argv[1], "first_epoch_done_s": first - T0, "end_s": time.time() - T0}))
+end = time.time() - T0
+print(json.dumps({"code": sys.argv[1], "first_epoch_done_s": first - T0, "end_s": end}))
