@@ -77,7 +77,7 @@ def _child(args: argparse.Namespace) -> dict:
 
     config = _config(args.preset, args.task, args.backend, args.arm, args.set)
     imported = time.time() - args.t0
-    run_dir = Path(args.run_dir)
+    run_dir = Path(args.run_dir or tempfile.mkdtemp(prefix="cold_start_run_")) / "run"
     stop_after = 0 if args.to_threshold else 1
     result = train(config, run_dir, quiet=True, stop_after=stop_after)
     curve = read_curve(run_dir, args.t0)  # (s from the command's start, step, success)
@@ -120,7 +120,7 @@ def _config(preset: str, task: str, backend: str, arm: str, sets: list[str]):
 def _start(args: argparse.Namespace, task: str, arm: str, caches: dict, label: str) -> dict:
     """One start in a new process with the cache folders ``caches``; its row."""
     env = {**os.environ, **caches, "PYTHONUNBUFFERED": "1"}
-    run_dir = Path(tempfile.mkdtemp(prefix="cold_start_run_")) / "run"
+    run_dir = Path(tempfile.mkdtemp(prefix="cold_start_run_"))
     t0 = time.time()
     cmd = [sys.executable, __file__, "--child", "--t0", repr(t0), "--task", task]
     cmd += ["--run-dir", str(run_dir)]
@@ -135,7 +135,7 @@ def _start(args: argparse.Namespace, task: str, arm: str, caches: dict, label: s
         )
     except subprocess.TimeoutExpired:
         row = {**row, "error": f"over {args.child_timeout} s", "wall_s": time.time() - t0}
-        return {**row, **_curve_times(run_dir, t0, args.threshold)}
+        return {**row, **_curve_times(run_dir / "run", t0, args.threshold)}
     if proc.returncode != 0:
         print(proc.stderr[-3000:], file=sys.stderr)
         return {**row, "error": proc.stderr[-800:], "wall_s": time.time() - t0}
@@ -265,7 +265,7 @@ def main() -> None:
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--t0", type=float, default=0.0, help=argparse.SUPPRESS)
     parser.add_argument("--task", default="touch", help=argparse.SUPPRESS)
-    parser.add_argument("--run-dir", default="", help=argparse.SUPPRESS)
+    parser.add_argument("--run-dir", default="", help=argparse.SUPPRESS)  # RUN_DIR/run: the run
     args = parser.parse_args()
     if args.child:
         print(json.dumps(_child(args), default=float))
