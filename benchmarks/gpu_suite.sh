@@ -6,7 +6,9 @@
 #   bash benchmarks/gpu_suite.sh solve        # time to 95% from a cold start, Reach and Touch
 #   bash benchmarks/gpu_suite.sh gentle       # Touch (gentle) at a few action scales, long runs
 #   bash benchmarks/gpu_suite.sh scaling      # Touch training steps/s on 1 GPU and on 2
-#   bash benchmarks/gpu_suite.sh coldstart    # where a cold start's seconds go (Warp kernels)
+#   bash benchmarks/gpu_suite.sh cold-touch   # Touch cold and warm to 0.95, warmup then a start
+#   bash benchmarks/gpu_suite.sh cold-lift    # Lift (gripper arm) cold and warm to 0.9
+#   bash benchmarks/gpu_suite.sh cold-arm     # a mesh-collision arm: cold, a second task, warm
 #   bash benchmarks/gpu_suite.sh parity       # C MuJoCo, MJX on Warp and MJX on JAX agree
 #   bash benchmarks/gpu_suite.sh sweep        # Touch over a few seeds per candidate (CANDIDATES)
 #   bash benchmarks/gpu_suite.sh seeds        # the fast preset as shipped, seeds 0-9, both tasks
@@ -77,11 +79,29 @@ scaling)
       --name "scaling_touch_${IMPL:-warp}_${devices}gpu"
   done
   ;;
-coldstart)
-  for task in ${TASKS:-reach touch}; do
-    one_gpu python3 benchmarks/bench_cold_start.py --task "$task" --threads ${THREADS:-0 8 16} \
-      --results-dir "$OUT" --name "cold_start_$task"
-  done
+cold-touch)
+  # Touch on the shipped arm, every cache empty, then warm, each trained to 0.95 in a new
+  # process (times from the command's start); then mjx-arm warmup with empty caches and a new
+  # process's start after it. About 4-5 minutes.
+  one_gpu python3 benchmarks/bench_cold_start.py --preset fast --tasks touch --to-threshold \
+    --threshold 0.95 --warmup-task touch --child-timeout 200 --results-dir "$OUT" \
+    --name cold_start_fast_touch 2>&1 | tee "$OUT/log_cold_touch.txt"
+  ;;
+cold-lift)
+  # Lift on the shipped gripper arm (the preset's), cold then warm, each to 0.9. At most 8 min.
+  one_gpu python3 benchmarks/bench_cold_start.py --preset fast --tasks lift --to-threshold \
+    --threshold 0.9 --child-timeout 230 --results-dir "$OUT" --name cold_start_fast_lift \
+    2>&1 | tee "$OUT/log_cold_lift.txt"
+  ;;
+cold-arm)
+  # A published arm with mesh collisions (ARM, a URDF under ROBOTS): its first task with every
+  # cache empty, a second task in a new process on those caches, the first again (warm); each
+  # start stops after its first epoch (compile figures). About 3 minutes.
+  export ROS_PACKAGE_PATH="${ROBOTS:?folder that holds example-robot-data}"
+  one_gpu python3 benchmarks/bench_cold_start.py --preset fast --tasks \
+    --arm "$ROBOTS/${ARM:-ur_description/urdf/ur5_robot.urdf}" --arm-tasks reach touch \
+    --child-timeout 170 --results-dir "$OUT" --name cold_start_fast_arm \
+    2>&1 | tee "$OUT/log_cold_arm.txt"
   ;;
 sweep)
   # Candidate changes to the fast preset, each trained on SWEEP_SEEDS (exploration: the

@@ -94,6 +94,8 @@ class SeedRun:
     compile_s: float
     training_steps_per_s: float
     curve: list[tuple[float, int, float]]  # (seconds, step, success) at each evaluation
+    # where the start-up's seconds went (mjx_arm.train.compile_report: stages, JAX counts)
+    compile_report: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     @property
     def solved(self) -> bool:
@@ -166,8 +168,17 @@ def train_seed(
         compile_s=result.compile_seconds,
         training_steps_per_s=result.steps_per_second,
         curve=curve,
+        compile_report=result.compile_report,
     )
     return run, RunDir(run_dir).load_config()
+
+
+def start_up_line(report: dict[str, Any]) -> str:
+    """A seed's start-up stages and JAX cache hits, one line (from its compile report)."""
+    stages = ", ".join(f"{k} {v:.1f}" for k, v in report.get("stages", {}).items())
+    counts = report.get("jax_counts", {})
+    hits = f"{counts.get('cache_hits', 0)} of {counts.get('cache_requests', 0)}"
+    return f"start-up (s): {stages}; JAX cache hits {hits}"
 
 
 def quartiles(times: list[float | None]) -> dict[str, float | None]:
@@ -324,8 +335,10 @@ def run_seeds(
         reached = fmt(run.time_to_threshold) + " s" if run.solved else "not reached"
         log(
             f"seed {seed}: final {run.final_success:.3f}, best {run.best_success:.3f}, "
-            f"{config.threshold:.2f} at {reached}, wall {run.wall_s:.1f} s"
+            f"{config.threshold:.2f} at {reached}, wall {run.wall_s:.1f} s, "
+            f"compile {fmt(run.compile_s)} s"
         )
+        log(f"seed {seed} {start_up_line(run.compile_report)}")
     return runs, configs
 
 

@@ -25,6 +25,7 @@ def make_batched_env(
     batch_size: int = 1,
     randomization=None,
     arm=None,
+    background_compile: bool = False,
 ):
     """The single-env JAX env (``MjxArmEnv``) with the physics of ``backend``.
 
@@ -36,6 +37,8 @@ def make_batched_env(
         randomization: domain randomisation
             (:class:`mjx_arm.envs.randomization.RandomizationConfig`; default off).
         arm: the arm (a URDF, an arm file or an ArmConfig; default: the shipped arm).
+        background_compile: compile MuJoCo Warp's kernels on a background thread; the caller
+            waits with ``env.physics.wait_precompiled()`` before the first step runs.
     """
     from mjx_arm.envs.mjx_env import MjxArmEnv
 
@@ -45,4 +48,11 @@ def make_batched_env(
         return MjxArmEnv(
             task, arm, physics_factory=MujocoCallbackPhysics, randomization=randomization
         )
-    return MjxArmEnv(task, arm, physics=physics, batch_size=batch_size, randomization=randomization)
+    return MjxArmEnv(
+        task,
+        arm,
+        physics=physics,
+        batch_size=batch_size,
+        randomization=randomization,
+        background_compile=background_compile,
+    )

@@ -20,6 +20,7 @@ physics state; the other envs of the batch step on unaffected.
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 from typing import Any
 
@@ -106,6 +107,8 @@ class MjxArmEnv(Env):
         physics: MJX implementation and buffers (default: ``impl="auto"``).
         batch_size: the largest batch stepped at once (sizes Warp's contact pool).
         randomization: domain randomisation (default: off).
+        background_compile: MJX only; compile MuJoCo Warp's kernels on a background thread
+            (:class:`~mjx_arm.envs.mjx_physics.MjxPhysics`).
     """
 
     def __init__(
@@ -117,15 +120,25 @@ class MjxArmEnv(Env):
         physics: PhysicsConfig | None = None,
         batch_size: int = 1,
         randomization: RandomizationConfig | None = None,
+        background_compile: bool = False,
     ) -> None:
+        start = time.monotonic()
         task = task or touch_config()
         self.arm = validated_arm_info(default_arm(task, arm), "mujoco")
         self.task = task_for_arm(task, self.arm)
         self.mj_model = mj_model if mj_model is not None else arm_model(self.arm, self.task)
+        converted = time.monotonic()
         if physics_factory is None:
-            self.physics = MjxPhysics(self.mj_model, self.arm, self.task, physics, batch_size)
+            self.physics = MjxPhysics(
+                self.mj_model, self.arm, self.task, physics, batch_size, background_compile
+            )
         else:
             self.physics = physics_factory(self.mj_model, self.arm, self.task)
+        # seconds of the build: URDF -> MuJoCo model, then the physics (MJX model, buffers)
+        self.build_seconds = {
+            "model conversion": converted - start,
+            "physics build": time.monotonic() - converted,
+        }
         self.randomization = randomization or RandomizationConfig()
         self.task_spec = self.task.spec
         self.joint_coding = self.arm.joint_coding(self.task)

@@ -22,6 +22,7 @@ What differs under Warp, and how this layer handles it:
 from __future__ import annotations
 
 import copy
+import time
 from typing import Any
 
 import jax
@@ -137,6 +138,9 @@ class MjxPhysics:
         task: the task configuration (substeps, target geometry).
         config: implementation and buffer sizes (default: ``impl="auto"``).
         batch_size: the largest batch stepped at once (sizes Warp's shared contact pool).
+        background_compile: compile MuJoCo Warp's kernels on a background thread (the caller
+            calls :meth:`wait_precompiled` before the first step runs); default: before the
+            constructor returns.
     """
 
     def __init__(
@@ -146,6 +150,7 @@ class MjxPhysics:
         task: TaskConfig,
         config: PhysicsConfig | None = None,
         batch_size: int = 1,
+        background_compile: bool = False,
     ) -> None:
         self.mj_model = mj_model
         self.config = config or PhysicsConfig()
@@ -157,6 +162,8 @@ class MjxPhysics:
         self.batch_size = max(int(batch_size), 1)
         self.buffers: dict[str, int] = {}
         self.precompile_seconds = 0.0
+        self._precompile: Any = None  # MuJoCo Warp's kernels compiling in the background
+        self._background = background_compile
         if self.impl == "warp":
             self.model, self._template = self._warp_model_and_data()
         else:
@@ -185,8 +192,26 @@ class MjxPhysics:
         opt_impl = model.opt._impl.replace(warn_overflow=0)
         model = model.replace(opt=model.opt.replace(_impl=opt_impl))
         data = mjx.make_data(mj_model, impl="warp", naconmax=per_env * self.batch_size, njmax=njmax)
-        self.precompile_seconds = warp_compile.precompile(self.config.compile_threads)
+        if self._background:
+            self._precompile = warp_compile.start_precompile(self.config.compile_threads)
+        else:
+            self.precompile_seconds = warp_compile.precompile(self.config.compile_threads)
         return model, data
+
+    def wait_precompiled(self) -> dict[str, float]:
+        """Wait for MuJoCo Warp's kernel compiles started in the background (if any).
+
+        Returns:
+            ``warp_kernels``: seconds the compiles took, ``warp_kernels_wait``: seconds this
+            call waited for them; only ``warp_kernels`` where they ran in the constructor.
+        """
+        if self._precompile is None:
+            return {"warp_kernels": self.precompile_seconds} if self.precompile_seconds else {}
+        start = time.monotonic()
+        self.precompile_seconds = self._precompile.result()
+        self._precompile = None
+        waited = time.monotonic() - start
+        return {"warp_kernels": self.precompile_seconds, "warp_kernels_wait": waited}
 
     def describe(self) -> dict[str, Any]:
         """Implementation and buffer sizes, for run configs and benchmark JSON."""

@@ -268,6 +268,10 @@ class MujocoCallbackPhysics:
         """Per env: ``new`` where ``done (B,)`` else ``old``."""
         return batched_where(done, new, old)
 
+    def wait_precompiled(self) -> dict[str, float]:
+        """Nothing compiles ahead here (the physics is C MuJoCo): ``{}``."""
+        return {}
+
     def describe(self) -> dict:
         """Implementation facts, for run configs and benchmark JSON."""
         return {"impl": self.impl, "nthread": self.stepper.nthread}

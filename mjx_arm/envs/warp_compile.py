@@ -5,18 +5,21 @@ its kernels launches, one module after another. Under MJX that happens inside th
 the step, so a cold start compiles some twenty modules in a row. :func:`precompile` compiles the
 modules that stepping the task model launches on a thread pool first; the step then finds them
 in Warp's kernel cache. Kernels that MuJoCo Warp generates for a given model while it steps
-(modules with a hashed name) are still compiled on first use.
+(modules with a hashed name) are still compiled on first use. Training starts the compiles
+on a background thread (:func:`start_precompile`) so that they run while the XLA programs
+trace and compile.
 
 :data:`STEP_MODULES` lists the modules, found by stepping the task models with an empty kernel
 cache and reading which modules hold a loaded binary (``benchmarks/bench_cold_start.py``
-prints that list): the same eight for Reach and Touch. Collision detection runs in generated
-kernels only, so the collision files are not listed. A module missing from the installed MuJoCo
-Warp is skipped.
+records that list per start): the same eight for Reach and Touch. Collision detection runs in
+generated kernels only, so the collision files are not listed. A module missing from the
+installed MuJoCo Warp is skipped.
 """
 
 from __future__ import annotations
 
 import time
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any
 
 PACKAGE = "mujoco.mjx.third_party.mujoco_warp._src"
@@ -68,6 +71,21 @@ def precompile(threads: int, names: tuple[str, ...] = STEP_MODULES) -> float:
     start = time.perf_counter()
     wp.force_load(device=devices, modules=modules, max_workers=threads)
     return time.perf_counter() - start
+
+
+def start_precompile(threads: int, names: tuple[str, ...] = STEP_MODULES) -> Future | None:
+    """:func:`precompile` on a background thread, so that the XLA programs trace and compile
+    meanwhile; None where there is nothing to compile (no threads, no GPU).
+
+    The future's result is the seconds the compiles took. Call ``result()`` before the first
+    physics step runs (:meth:`mjx_arm.envs.mjx_physics.MjxPhysics.wait_precompiled`).
+    """
+    if threads <= 0 or not _cuda_devices():
+        return None
+    pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="warp-precompile")
+    future = pool.submit(precompile, threads, names)
+    pool.shutdown(wait=False)
+    return future
 
 
 def loaded_modules() -> dict[str, list[int]]:

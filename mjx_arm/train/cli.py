@@ -18,7 +18,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     """Train a PPO policy with Brax on the batched env and write a run directory."""
     import time
 
-    from mjx_arm.train.config import load_config, saved_config
+    from mjx_arm.train.config import saved_config
     from mjx_arm.train.ppo import train
 
     enable_compilation_cache()
@@ -28,20 +28,59 @@ def cmd_train(args: argparse.Namespace) -> int:
         if args.devices is not None:  # a run resumes on any number of devices
             config = config.replace(devices=args.devices)
     else:
-        overrides = list(args.set or [])
-        if args.devices is not None:
-            overrides.insert(0, f"devices={args.devices}")
-        if args.task:
-            overrides.insert(0, f"task={args.task.lower()}")
-        if args.backend:
-            overrides.insert(0, f"backend={args.backend}")
-        config = load_config(args.preset, args.config, overrides)
-        config = _with_arm(config, args.arm, args.ee_link)
+        config = config_from_args(args)
         stamp = time.strftime("%Y%m%d-%H%M%S")
         run_dir = Path(args.run_dir or Path("runs") / f"{config.task}-{stamp}")
     print(f"run directory: {run_dir}")
     result = train(config, run_dir, resume=bool(args.resume), quiet=args.quiet)
     print(done_line(result))
+    print(result.compile_summary)
+    return EXIT_OK
+
+
+def config_from_args(args: argparse.Namespace):
+    """The training config of ``train``'s (or ``warmup``'s) flags: the preset for the task,
+    then ``--config``, ``--set``, ``--devices``, ``--backend``, ``--arm`` and ``--ee-link``."""
+    from mjx_arm.train.config import load_config
+
+    overrides = list(args.set or [])
+    if args.devices is not None:
+        overrides.insert(0, f"devices={args.devices}")
+    if args.task:
+        overrides.insert(0, f"task={args.task.lower()}")
+    if args.backend:
+        overrides.insert(0, f"backend={args.backend}")
+    config = load_config(args.preset, args.config, overrides)
+    return _with_arm(config, args.arm, args.ee_link)
+
+
+def cmd_warmup(args: argparse.Namespace) -> int:
+    """Fill the compilation caches for a task, arm and preset ahead of time.
+
+    Runs one epoch of the training (same config, same programs) in a temporary folder, so that
+    a later `mjx-arm train` or `mjx-arm bench seeds` of that task, arm and preset (any seed)
+    loads its compiled programs and kernels instead of compiling them. Prints where the caches
+    live: copy those folders into a container image or point every job of a cluster at a
+    shared copy with the environment variables shown.
+    """
+    from mjx_arm.envs.backend import resolve_backend
+    from mjx_arm.train.warmup import cache_locations, warm_up
+
+    enable_compilation_cache()
+    config = config_from_args(args)
+    print(f"warming up {config.task} on {config.arm.urdf or 'the shipped arm'} ({args.preset})")
+    result = warm_up(config, quiet=args.quiet)
+    print(result.compile_summary)
+    print("caches (share these folders between machines of the same GPU and versions):")
+    for what, where in cache_locations().items():
+        print(f"  {what}: {where}")
+    if resolve_backend(config.backend) == "mujoco":
+        print(
+            "note: on the C MuJoCo backend the reset, rollout and evaluation call C MuJoCo "
+            "through host callbacks, which JAX's cache cannot store (they compile again in a "
+            "new process); the learner init and the PPO update are cached. Under MJX "
+            "(--backend mjx) every program is."
+        )
     return EXIT_OK
 
 
@@ -68,13 +107,8 @@ def done_line(result) -> str:
     )
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    """Add ``train`` to ``sub``."""
-    p = sub.add_parser(
-        "train",
-        help="train a PPO policy (Brax) and write a run directory",
-        description=cmd_train.__doc__,
-    )
+def _add_config_arguments(p: argparse.ArgumentParser) -> None:
+    """The flags that choose a training config (``train`` and ``warmup``)."""
     p.add_argument(
         "--task",
         type=str.lower,
@@ -115,7 +149,25 @@ def register(sub: argparse._SubParsersAction) -> None:
         "override config fields (KEY=VALUE ...; repeatable); task.FIELD=... and "
         "task.reward.TERM=... for the task, physics.FIELD=..., randomization.FIELD=...",
     )
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``train`` and ``warmup`` to ``sub``."""
+    p = sub.add_parser(
+        "train",
+        help="train a PPO policy (Brax) and write a run directory",
+        description=cmd_train.__doc__,
+    )
+    _add_config_arguments(p)
     p.add_argument("--run-dir", help="run directory (default: runs/TASK-TIMESTAMP)")
     p.add_argument("--resume", metavar="RUN_DIR", help="continue the run in RUN_DIR")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_train)
+    w = sub.add_parser(
+        "warmup",
+        help="fill the compilation caches for a task and arm ahead of time",
+        description=cmd_warmup.__doc__,
+    )
+    _add_config_arguments(w)
+    w.add_argument("--quiet", action="store_true", help="no progress bar")
+    w.set_defaults(func=cmd_warmup)

@@ -137,16 +137,23 @@ class Learner:
     # ------------------------------------------------------------------ state
 
     def init(self, key_policy: jax.Array, key_value: jax.Array) -> TrainingState:
-        """Fresh network params, optimiser and normaliser state, replicated on the mesh."""
+        """Fresh network params, optimiser and normaliser state, replicated on the mesh.
+
+        One jitted program: built op by op, the initialisers compile some fifty small
+        programs one after another.
+        """
+        return jax.jit(self._fresh_state, out_shardings=self.replicated)(key_policy, key_value)
+
+    def _fresh_state(self, key_policy: jax.Array, key_value: jax.Array) -> TrainingState:
         params = init_params(self.network, key_policy, key_value)
         obs_spec = specs.Array((self.observation_size,), jnp.dtype("float32"))
-        state = TrainingState(
+        zero = jnp.zeros((), jnp.int32)  # the type jnp.asarray(0) has once made strong
+        return TrainingState(
             optimizer_state=self.optimizer.init(params),
             params=params,
             normalizer_params=running_statistics.init_state(obs_spec),
-            env_steps=brax_types.UInt64(hi=0, lo=0),
+            env_steps=brax_types.UInt64(hi=zero, lo=zero),
         )
-        return self.place(state)
 
     def restore(self, state: TrainingState, params: Params) -> TrainingState:
         """``state`` with the (normaliser, policy, value) of a checkpoint."""
@@ -169,38 +176,49 @@ class Learner:
 
     # ------------------------------------------------------------------ training
 
-    def epoch_fn(self, env: Any, sizes: EpochSizes, env_shardings: Any) -> Callable:
-        """The jitted epoch ``(state, env_state, key) -> (state, env_state, metrics)``.
+    def epoch_programs(self, env: Any, sizes: EpochSizes, env_shardings: Any) -> EpochPrograms:
+        """The training step as two jitted programs: the rollout (the env's) and the update
+        (the env's only through the sizes of its observation and action).
+
+        The update does not depend on the arm or the task, so JAX's persistent cache serves it
+        to every arm and task of the same observation and action sizes and config, and on the
+        C MuJoCo backend (whose rollout holds host callbacks JAX cannot store) it is the part
+        a new process finds compiled.
 
         Args:
             env: the batched training env (Brax wrappers), its batch axis first.
             sizes: the epoch's cut.
             env_shardings: shardings of the env state (see :func:`batch_sharding`).
         """
-        step = functools.partial(self._training_step, env, sizes)
-
-        def epoch(state: TrainingState, env_state: Any, key: jax.Array):
-            (state, env_state, _), metrics = jax.lax.scan(
-                step, (state, env_state, key), (), length=sizes.steps_per_epoch
-            )
-            return state, env_state, jax.tree.map(jnp.mean, metrics)
-
-        rep = self.replicated
-        return jax.jit(
-            epoch,
+        rep, split = self.replicated, NamedSharding(self.mesh, P(ENV_AXIS))
+        rollout = jax.jit(
+            functools.partial(self._rollout_step, env, sizes.unrolls),
             in_shardings=(rep, env_shardings, rep),
-            out_shardings=(rep, env_shardings, rep),
-            donate_argnums=(0, 1),
+            out_shardings=(env_shardings, split, rep),
+            donate_argnums=(1,),
         )
+        update = jax.jit(
+            functools.partial(self._update_step, sizes.env_steps_per_step),
+            in_shardings=(rep, split, rep),
+            out_shardings=(rep, rep),
+            donate_argnums=(0,),
+        )
+        return EpochPrograms(rollout, update, sizes.steps_per_epoch)
 
-    def _training_step(self, env: Any, sizes: EpochSizes, carry: tuple, _: Any):
-        """One rollout of ``unrolls x unroll_length`` steps, then the PPO update on it."""
-        state, env_state, key = carry
+    def _rollout_step(self, env: Any, unrolls: int, state: TrainingState, env_state: Any, key):
+        """The rollout of one training step: ``(env_state, data, (key_sgd, key_next))``; data
+        holds what the update reads, ``(num_envs * unrolls, T, ...)``."""
         key_sgd, key_unroll, key_next = jax.random.split(key, 3)
         policy = self.make_policy(
             (state.normalizer_params, state.params.policy, state.params.value)
         )
-        env_state, data = self._rollout(env, env_state, policy, key_unroll, sizes.unrolls)
+        env_state, data = self._rollout(env, env_state, policy, key_unroll, unrolls)
+        # strong types: the compiled rollout takes back exactly the types it returns
+        env_state = jax.tree.map(lambda x: x.astype(x.dtype), env_state)
+        return env_state, _update_view(data), jnp.stack([key_sgd, key_next])
+
+    def _update_step(self, env_steps: int, state: TrainingState, data: Any, key_sgd: jax.Array):
+        """The PPO update of one training step on ``data``: ``(state, mean metrics)``."""
         normalizer = running_statistics.update(state.normalizer_params, data.observation)
         (optimizer_state, params, _), metrics = jax.lax.scan(
             functools.partial(self._sgd_epoch, data=data, normalizer=normalizer),
@@ -212,9 +230,9 @@ class Learner:
             optimizer_state=optimizer_state,
             params=params,
             normalizer_params=normalizer,
-            env_steps=state.env_steps + sizes.env_steps_per_step,
+            env_steps=state.env_steps + env_steps,
         )
-        return (state, env_state, key_next), metrics
+        return state, jax.tree.map(jnp.mean, metrics)
 
     def _rollout(self, env: Any, env_state: Any, policy: Any, key: jax.Array, unrolls: int):
         """``unrolls`` unrolls of every env; transitions as ``(num_envs * unrolls, T, ...)``."""
@@ -266,15 +284,49 @@ class Learner:
         return (optimizer_state, params, key), metrics
 
 
-def evaluator(
-    learner: Learner, eval_env: Any, config: TrainConfig, episode_length: int, key: jax.Array
-) -> acting.Evaluator:
-    """Brax's evaluator (deterministic policy, one episode per env) on the default device."""
-    return acting.Evaluator(
-        eval_env,
-        functools.partial(learner.make_policy, deterministic=True),
-        num_eval_envs=config.num_eval_envs,
-        episode_length=episode_length,
-        action_repeat=1,
-        key=key,
-    )
+def _update_view(data: Any) -> Any:
+    """The transitions as the update reads them: the task's episode metrics dropped (they are
+    the env's, and would make the update's program differ from task to task)."""
+    extras = dict(data.extras)
+    extras["state_extras"] = {
+        k: v for k, v in extras["state_extras"].items() if k != "episode_metrics"
+    }
+    return data._replace(extras=extras)
+
+
+@dataclass(frozen=True)
+class EpochPrograms:
+    """A training epoch as ``steps`` rounds of two jitted programs.
+
+    Attributes:
+        rollout: ``(state, env_state, key) -> (env_state, data, keys (2, ...))``.
+        update: ``(state, data, key_sgd) -> (state, mean metrics)``.
+        steps: training steps per epoch.
+    """
+
+    rollout: Callable
+    update: Callable
+    steps: int
+
+    def lower(self, state: Any, env_state: Any, key: jax.Array) -> dict[str, Any]:
+        """Both programs lowered for these arguments (shapes suffice): name -> Lowered."""
+        rollout = self.rollout.lower(state, env_state, key)
+        _, data, keys = jax.eval_shape(self.rollout, state, env_state, key)
+        key_sgd = jax.ShapeDtypeStruct(keys.shape[1:], keys.dtype)
+        return {"rollout": rollout, "update": self.update.lower(state, data, key_sgd)}
+
+    def with_programs(self, rollout: Callable, update: Callable) -> EpochPrograms:
+        """The same epoch on other (e.g. compiled) programs."""
+        return EpochPrograms(rollout, update, self.steps)
+
+    def __call__(self, state: Any, env_state: Any, key: jax.Array):
+        """One epoch: ``(state, env_state, metrics)``, the metrics (host numpy) averaged over
+        the epoch's training steps."""
+        metrics = []
+        for _ in range(self.steps):
+            env_state, data, keys = self.rollout(state, env_state, key)
+            state, step_metrics = self.update(state, data, keys[0])
+            key = keys[1]
+            metrics.append(step_metrics)
+        mean = jax.tree.map(lambda *xs: np.mean(np.stack(xs)), *jax.device_get(metrics))
+        return state, env_state, mean

@@ -8,8 +8,10 @@ are Brax's (``eval/...``, ``training/...``), so run directories read the same as
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
@@ -19,14 +21,15 @@ from jax.sharding import NamedSharding
 from jax.sharding import PartitionSpec as P
 
 from mjx_arm.envs.wrappers import wrap_for_training
+from mjx_arm.train.compile_report import CompileReport
 from mjx_arm.train.config import TrainConfig
+from mjx_arm.train.evaluation import Evaluator
 from mjx_arm.train.learner import (
     ENV_AXIS,
     EpochSizes,
     Learner,
     Params,
     batch_sharding,
-    evaluator,
     local_devices,
     make_mesh,
 )
@@ -66,6 +69,116 @@ def _training_metrics(metrics: dict[str, Any], sps: float, walltime: float) -> d
     return {"training/sps": sps, "training/walltime": walltime, **named}
 
 
+@dataclass
+class Prepared:
+    """A run ready to train: its programs compiled, the first env state reset.
+
+    Attributes:
+        learner: networks, loss and optimiser.
+        state: the training state (params, optimiser, normaliser), replicated.
+        env_state: the first state of the training envs, split over the devices.
+        epoch: the compiled epoch ``(state, env_state, key) -> (state, env_state, metrics)``.
+        evaluate: the evaluator (its program compiled).
+        sizes: the epoch's cut.
+        local_key: the key the epochs' keys are split from.
+        devices, partition: where the run trains and how the physics is split.
+    """
+
+    learner: Learner
+    state: Any
+    env_state: Any
+    epoch: Callable
+    evaluate: Evaluator
+    sizes: EpochSizes
+    local_key: jax.Array
+    devices: list
+    partition: str
+
+
+def prepare_ppo(
+    config: TrainConfig,
+    env: Any,
+    eval_env: Any,
+    episode_length: int,
+    restore: Params | None = None,
+    step_offset: int = 0,
+    report: CompileReport | None = None,
+) -> Prepared:
+    """Build the learner, compile the run's XLA programs and reset the training envs.
+
+    The reset, the training step's rollout and update (:meth:`Learner.epoch_programs`) and
+    the evaluation are traced and lowered one after the other (Python), then compiled by XLA
+    at the same time on a thread pool; MuJoCo Warp's kernels, started when the env was built,
+    compile meanwhile (:meth:`mjx_arm.envs.mjx_physics.MjxPhysics.wait_precompiled` is
+    called before anything runs). Every stage is timed into ``report``.
+    """
+    report = report or CompileReport()
+    devices = local_devices(config.devices)
+    config.check_devices(len(devices))
+    mesh = make_mesh(devices)
+    partition = resolve_partition(config, env.physics.impl)
+    key_policy, key_value, key_env, key_eval, local_key = _run_keys(config.seed + step_offset)
+
+    split_mesh = mesh if partition == "per_device" else None
+    train_env = wrap_for_training(env, episode_length, mesh=split_mesh, axis=ENV_AXIS)
+    with report.stage("learner init"):
+        learner, state = _learner(config, env, mesh, (key_policy, key_value), restore)
+    evaluate = Evaluator(
+        wrap_for_training(eval_env, episode_length),
+        functools.partial(learner.make_policy, deterministic=True),
+        config.num_eval_envs,
+        episode_length,
+        key_eval,
+    )
+    sizes = EpochSizes.of(config, config.num_timesteps)
+    with report.stage("trace + lower"):
+        keys = jax.random.split(key_env, config.num_envs)
+        reset, shardings = _reset_fn(train_env, mesh, keys)
+        env_shapes = jax.tree.map(_strong_shape, jax.eval_shape(reset, keys), shardings)
+        epoch = learner.epoch_programs(train_env, sizes, shardings)
+        lowered = {
+            "reset": reset.lower(keys),
+            **epoch.lower(state, env_shapes, local_key),
+            "evaluation": evaluate.lower(learner.params(state)),
+        }
+    with report.stage("XLA compile (in parallel)"):
+        compiled = compile_all(lowered)
+    evaluate.use(compiled["evaluation"])
+    epoch = epoch.with_programs(compiled["rollout"], compiled["update"])
+    _wait_for_kernels((env, eval_env), report)
+    with report.stage("first reset run"):
+        env_state = jax.block_until_ready(strong(compiled["reset"](keys)))
+    return Prepared(
+        learner, state, env_state, epoch, evaluate, sizes, local_key, devices, partition
+    )
+
+
+def _learner(
+    config: TrainConfig, env: Any, mesh: Any, keys: tuple[jax.Array, jax.Array], restore: Any
+) -> tuple[Learner, Any]:
+    """The learner and its first state: fresh from ``keys`` (policy, value), or restored."""
+    learner = Learner(config, env.observation_size, env.action_size, mesh)
+    state = learner.init(*keys)
+    return learner, state if restore is None else learner.restore(state, restore)
+
+
+def _wait_for_kernels(envs: tuple[Any, ...], report: CompileReport) -> None:
+    """Wait for each env's MuJoCo Warp kernel compiles; their seconds into ``report``."""
+    physics = {id(env.physics): env.physics for env in envs}.values()
+    labels = {"warp_kernels": "Warp kernels", "warp_kernels_wait": "waited for Warp"}
+    for times in (p.wait_precompiled() for p in physics):
+        for name, label in labels.items():
+            if times.get(name):
+                report.add(label, times[name])
+
+
+def compile_all(lowered: dict[str, Any]) -> dict[str, Any]:
+    """Compile every lowered program at once (XLA compiles outside Python's lock)."""
+    with ThreadPoolExecutor(max_workers=len(lowered)) as pool:
+        futures = {name: pool.submit(low.compile) for name, low in lowered.items()}
+        return {name: future.result() for name, future in futures.items()}
+
+
 def run_ppo(
     config: TrainConfig,
     env: Any,
@@ -74,6 +187,7 @@ def run_ppo(
     callbacks: Callbacks,
     restore: Params | None = None,
     step_offset: int = 0,
+    report: CompileReport | None = None,
 ) -> dict[str, Any]:
     """Train PPO up to ``config.num_timesteps`` env steps; return the devices and partition.
 
@@ -88,50 +202,44 @@ def run_ppo(
         callbacks: where evaluations and params go (steps are the run's global steps).
         restore: (normaliser, policy, value) to start from.
         step_offset: env steps already trained (a resumed run's checkpoint step).
+        report: where the start-up stages are timed (the first evaluation and epoch included).
     """
-    devices = local_devices(config.devices)
-    config.check_devices(len(devices))
-    mesh = make_mesh(devices)
-    partition = resolve_partition(config, env.physics.impl)
-    key_policy, key_value, key_env, key_eval, local_key = _run_keys(config.seed + step_offset)
-
-    split_mesh = mesh if partition == "per_device" else None
-    train_env = wrap_for_training(env, episode_length, mesh=split_mesh, axis=ENV_AXIS)
-    learner = Learner(config, env.observation_size, env.action_size, mesh)
-    state = learner.init(key_policy, key_value)
-    if restore is not None:
-        state = learner.restore(state, restore)
-    env_state, shardings = _reset(train_env, mesh, key_env, config.num_envs)
-    sizes = EpochSizes.of(config, config.num_timesteps)
-    epoch = learner.epoch_fn(train_env, sizes, shardings)
-    evaluate = evaluator(
-        learner, wrap_for_training(eval_env, episode_length), config, episode_length, key_eval
-    )
-
-    params = learner.params(state)
+    report = report or CompileReport()
+    run = prepare_ppo(config, env, eval_env, episode_length, restore, step_offset, report)
+    state, env_state, local_key = run.state, run.env_state, run.local_key
+    params = run.learner.params(state)
     if config.num_evals > 1 and step_offset == 0:
-        callbacks.progress(0, evaluate.run_evaluation(params, {}))
+        with report.stage("first evaluation run"):
+            metrics = run.evaluate.run_evaluation(params, {})
+        callbacks.progress(0, metrics)
     walltime, step = 0.0, step_offset
     while step < config.num_timesteps:
         epoch_key, local_key = jax.random.split(local_key)
         start = time.monotonic()
-        state, env_state, metrics = epoch(state, strong(env_state), epoch_key)
-        metrics = jax.device_get(metrics)
+        state, env_state, metrics = run.epoch(state, strong(env_state), epoch_key)
         seconds = time.monotonic() - start
+        if walltime == 0.0:
+            report.add("first epoch run", seconds)
         walltime += seconds
-        step += sizes.env_steps_per_epoch
-        params = learner.params(state)
-        callbacks.policy_params(step, learner.make_policy, params)
-        training = _training_metrics(metrics, sizes.env_steps_per_epoch / seconds, walltime)
-        callbacks.progress(step, evaluate.run_evaluation(params, training))
-    return {"devices": [str(d) for d in devices], "partition": partition}
+        step += run.sizes.env_steps_per_epoch
+        params = run.learner.params(state)
+        callbacks.policy_params(step, run.learner.make_policy, params)
+        training = _training_metrics(metrics, run.sizes.env_steps_per_epoch / seconds, walltime)
+        callbacks.progress(step, run.evaluate.run_evaluation(params, training))
+    return {"devices": [str(d) for d in run.devices], "partition": run.partition}
 
 
-def _reset(env: Any, mesh: Any, key: jax.Array, num_envs: int) -> tuple[Any, Any]:
-    """The first env state, its batch split over the mesh, and the state's shardings."""
-    keys = jax.random.split(key, num_envs)
+def _strong_shape(leaf: Any, sharding: Any) -> jax.ShapeDtypeStruct:
+    """The shape of a state leaf as the epoch receives it: strong type, its sharding."""
+    return jax.ShapeDtypeStruct(leaf.shape, leaf.dtype, sharding=sharding)
+
+
+def _reset_fn(env: Any, mesh: Any, keys: jax.Array) -> tuple[Any, Any]:
+    """The jitted reset of the training envs, its batch split over the mesh, and the state's
+    shardings."""
+    num_envs = keys.shape[0]
     shardings = batch_sharding(mesh, jax.eval_shape(env.reset, keys), num_envs)
     reset = jax.jit(
         env.reset, in_shardings=NamedSharding(mesh, P(ENV_AXIS)), out_shardings=shardings
     )
-    return strong(reset(keys)), shardings
+    return reset, shardings

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import itertools
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -23,10 +23,11 @@ from mjx_arm.envs.backend import make_batched_env, resolve_backend
 from mjx_arm.inputs import ConfigError, MissingInputError
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.train.checkpoints import CheckpointError, restore_brax_params
+from mjx_arm.train.compile_report import CompileReport
 from mjx_arm.train.config import TrainConfig
 from mjx_arm.train.learner import local_devices
 from mjx_arm.train.loop import Callbacks, resolve_partition, run_ppo
-from mjx_arm.train.progress import Solved, _Progress
+from mjx_arm.train.progress import Solved, Stopped, _Progress
 from mjx_arm.train.rundir import RunDir, RunDirError
 
 
@@ -40,6 +41,8 @@ class TrainResult:
     compile_seconds: float
     train_seconds: float
     steps_per_second: float
+    compile_report: dict[str, Any] = field(default_factory=dict)
+    compile_summary: str = ""
 
 
 def full_config(
@@ -75,7 +78,11 @@ def full_config(
 
 
 def train(
-    config: TrainConfig, run_dir: str | Path, resume: bool = False, quiet: bool = False
+    config: TrainConfig,
+    run_dir: str | Path,
+    resume: bool = False,
+    quiet: bool = False,
+    stop_after: int = 0,
 ) -> TrainResult:
     """Train a PPO policy and fill ``run_dir``.
 
@@ -88,6 +95,9 @@ def train(
         run_dir: the run directory (created if missing).
         resume: continue from the newest checkpoint in ``run_dir`` (on any device count).
         quiet: no progress bar.
+        stop_after: stop after this many trained epochs (0: train the whole run); the
+            programs are those of the whole run, so a short run fills the compilation caches
+            for it (``mjx-arm warmup``, the cold-start benchmark).
 
     Raises:
         InputError: a bad config, a run directory that cannot take the run, or (to resume) one
@@ -107,7 +117,7 @@ def train(
         step_offset, restore = _start_point(run, config, resume)
         run.check_writable()  # before any compilation
         run.truncate_metrics(step_offset)  # rows a killed run wrote after its last checkpoint
-        return _train(run, config, task, step_offset, restore, quiet)
+        return _train(run, config, task, step_offset, restore, quiet, stop_after)
 
 
 def _check_arm(config: TrainConfig, task: TaskConfig) -> None:
@@ -164,15 +174,22 @@ def _train(
     step_offset: int,
     restore: Any,
     quiet: bool,
+    stop_after: int = 0,
 ) -> TrainResult:
     """Build the envs and run PPO from ``step_offset`` (the checks are done)."""
-    env, eval_env = make_envs(config, task)
+    report = CompileReport().open()
+    start = time.monotonic()
+    with report.stage("build env"):
+        env, eval_env = make_envs(config, task, background_compile=True)
+    for name, seconds in env.build_seconds.items():
+        report.add(f"of it {name}", seconds)
     task = env.task  # with the arm's home pose and reach scale
-    progress = _Progress(run, config, task, step_offset, quiet)
+    progress = _Progress(run, config, task, step_offset, quiet, stop_after)
     progress.physics = env.physics.describe()
+    if not quiet:
+        progress.start_up_summary = report.summary
     if restore is None:
         run.save_config(full_config(config, task, env.physics.describe(), env.arm))
-    start = time.monotonic()
     progress.times.append((start, step_offset))
     try:
         run_ppo(
@@ -183,26 +200,42 @@ def _train(
             Callbacks(progress.progress, progress.policy_params),
             restore=restore,
             step_offset=step_offset,
+            report=report,
         )
-    except Solved:
+    except (Solved, Stopped):
         pass
     finally:
+        report.close()
         progress.close()
         run.close()
     total = time.monotonic() - start
     compile_s, sps = _timings(progress.times, config)
     steps = progress.times[-1][1]  # rounded up to whole epochs
-    return TrainResult(run.path, steps, progress.last_metrics, compile_s, total, sps)
+    record = {"compile_s": compile_s, **report.to_dict()}
+    run.save_compile_report(record)
+    return TrainResult(
+        run.path, steps, progress.last_metrics, compile_s, total, sps, record, report.summary()
+    )
 
 
-def make_envs(config: TrainConfig, task: TaskConfig) -> tuple[Any, Any]:
+def make_envs(
+    config: TrainConfig, task: TaskConfig, background_compile: bool = False
+) -> tuple[Any, Any]:
     """The training env (randomised as configured) and the evaluation env (nominal).
 
-    Warp's contact pool is sized for the larger of the training and evaluation batches.
+    Warp's contact pool is sized for the larger of the training and evaluation batches. With
+    ``background_compile``, MuJoCo Warp's kernels compile on a background thread: wait with
+    ``env.physics.wait_precompiled()`` before the first step runs.
     """
     batch = max(config.num_envs, config.num_eval_envs)
     train_env = make_batched_env(
-        task, config.backend, config.physics, batch, config.randomization, config.arm
+        task,
+        config.backend,
+        config.physics,
+        batch,
+        config.randomization,
+        config.arm,
+        background_compile=background_compile,
     )
     if not config.randomization.enabled:
         return train_env, train_env

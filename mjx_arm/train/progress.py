@@ -23,6 +23,10 @@ class Solved(Exception):
     """An evaluation reached ``stop_at_success``: training stops early."""
 
 
+class Stopped(Exception):
+    """The run trained the epochs it was asked to stop after (``train(stop_after=N)``)."""
+
+
 class _Progress:
     """Run callbacks: metrics to the run dir, a progress bar, checkpoints at an interval.
 
@@ -32,7 +36,13 @@ class _Progress:
     """
 
     def __init__(
-        self, run: RunDir, config: TrainConfig, task: TaskConfig, step_offset: int, quiet: bool
+        self,
+        run: RunDir,
+        config: TrainConfig,
+        task: TaskConfig,
+        step_offset: int,
+        quiet: bool,
+        stop_after: int = 0,
     ) -> None:
         from tqdm import tqdm
 
@@ -49,6 +59,8 @@ class _Progress:
             dynamic_ncols=True,
         )
         self.evals = 0
+        self.stop_after = stop_after
+        self.start_up_summary: Any = None  # () -> the start-up line, shown after epoch one
         self.latest: tuple | None = None
         # (success, step, params on the host) of the best evaluation after training started
         self.best: tuple[float, int, Any] | None = None
@@ -78,6 +90,8 @@ class _Progress:
         if not any("training/" in k for k in row):  # the evaluation before training
             return
         self.evals += 1
+        if self.evals == 1 and self.start_up_summary is not None:
+            self.bar.write(self.start_up_summary())
         success = row.get("eval/episode_success", 0.0)
         self._remember_best(step, success)
         due = self.evals % self.config.checkpoint_every == 0
@@ -94,6 +108,8 @@ class _Progress:
             self._save(step, make_policy, params, meta)
         if solved:
             raise Solved(step)
+        if self.stop_after and self.evals >= self.stop_after:
+            raise Stopped(step)
 
     def _remember_best(self, step: int, success: float) -> None:
         """Keep a host copy of the params of the best evaluation so far (ties: the later)."""
@@ -138,7 +154,8 @@ def rollout_transitions(
     from mjx_arm.envs.mujoco_env import MujocoArmEnv
     from mjx_arm.task.observation import flatten_obs
 
-    policy = jax.jit(make_policy(params, deterministic=True))
+    # params as an argument, not a constant: one program for every checkpoint (and cached)
+    act = jax.jit(lambda p, obs, key: make_policy(p, deterministic=True)(obs, key))
     env = MujocoArmEnv(task, arm)
     obs, _ = env.reset(seed=int(seed) % (2**31))
     key = jax.random.PRNGKey(0)
@@ -147,7 +164,7 @@ def rollout_transitions(
     }
     for _ in range(task.episode_steps):
         flat = flatten_obs(np, obs)
-        action = np.asarray(policy(flat, key)[0], dtype=np.float32)
+        action = np.asarray(act(params, flat, key)[0], dtype=np.float32)
         obs, reward, terminated, _, info = env.step(action)
         for name, value in (
             ("obs", flat),

@@ -3,6 +3,7 @@
 Layout::
 
     RUN_DIR/config.json                      every resolved setting (train, task, conversion)
+    RUN_DIR/compile.json                     where the start-up's seconds went (per start)
     RUN_DIR/metrics.csv                      one row per evaluation
     RUN_DIR/tb/                              TensorBoard event files
     RUN_DIR/checkpoints/step_000001234/      params (orbax) + meta.json + transitions.npz
@@ -62,6 +63,18 @@ class RunDir:
         """Write ``config.json`` (atomically)."""
         text = json.dumps(config, indent=2, sort_keys=True)
         write_atomic(text.encode(), self.path / "config.json")
+
+    def save_compile_report(self, report: dict[str, Any]) -> None:
+        """Add one start's compile report (:mod:`mjx_arm.train.compile_report`) to
+        ``compile.json``: a list, one entry per start of the run (a resume adds one)."""
+        path = self.path / "compile.json"
+        try:
+            starts = json.loads(path.read_text()) if path.is_file() else []
+        except (OSError, json.JSONDecodeError):
+            starts = []
+        starts = starts if isinstance(starts, list) else []
+        text = json.dumps([*starts, report], indent=2, sort_keys=True)
+        write_atomic(text.encode(), path)
 
     @contextlib.contextmanager
     def lock(self) -> Iterator[None]:
