@@ -175,14 +175,16 @@ def test_soft_variant_charges_from_25_n_and_the_touchdown_speed():
 
 
 def test_task_solver_iterations_reach_the_model():
-    """``solver_iterations`` / ``ls_iterations`` set the task model's solver; 0 keeps the
-    converter's 2 and 4."""
+    """``solver_iterations`` / ``ls_iterations`` set the task model's solver (Lift's preset:
+    4 and 8); 0 keeps the converter's 2 and 4."""
     from mjx_arm.envs.arm import arm_info
 
     arm = arm_info(GRIPPER)
     model = arm_model(arm, lift_config(solver_iterations=6, ls_iterations=12))
     assert (model.opt.iterations, model.opt.ls_iterations) == (6, 12)
     model = arm_model(arm, lift_config())
+    assert (model.opt.iterations, model.opt.ls_iterations) == (4, 8)
+    model = arm_model(arm, lift_config(solver_iterations=0, ls_iterations=0))
     assert (model.opt.iterations, model.opt.ls_iterations) == (2, 4)
 
 
