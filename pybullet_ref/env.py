@@ -41,6 +41,10 @@ motion. There the reading is instead the sum of the contact forces on the links 
 subtree (normal and friction, about the ee point): zero in free motion, as MuJoCo's tared
 sensor reads.
 
+Each control step starts from the joint states its previous read took (nothing moves between
+the two): a change made to the world through ``env.client`` between steps shows from the
+step's second substep on, and in its read.
+
 Reset: PyBullet reproduces a seeded episode exactly only after a full rebuild, so every reset
 rebuilds the world (about 5 ms without rendering, 8 ms with visual shapes), takes one substep at
 rest so the F/T sensor has a reading, and puts the joints back at the sampled angles.

@@ -280,11 +280,10 @@ class BaseRobotEnv(gym.Env):
         sane step and a diverged one (:func:`mjx_arm.task.scalar_compile.compile_score`); the
         rules through :data:`SCALAR_XP` where the task's do not trace."""
         n = self.arm.n_joints
-        zeros = np.zeros(n)
-        grip = np.zeros(10) if self.task_spec.gripper else np.zeros(0)
-        quat = np.array([1.0, 0.0, 0.0, 0.0])
-        keys = tuple(self._measures(PhysicsReading(*[np.zeros(3), quat, zeros, zeros],
-                     np.zeros(3), np.zeros(6), grip)) or ())  # fmt: skip
+        grip = np.zeros(10 if self.task_spec.gripper else 0)
+        probe = PhysicsReading(np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(n),
+                               np.zeros(n), np.zeros(3), np.zeros(6), grip)  # fmt: skip
+        keys = tuple(self._measures(probe) or ())  # the names of the task's measures
         try:
             return tuple(
                 compile_score(self.task, n, self._band_lists, diverged, keys)
