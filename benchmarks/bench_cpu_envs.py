@@ -23,7 +23,10 @@ of them alike):
 
 Beside them: Gymnasium's ``Pusher-v5`` (its own MuJoCo env) against ``mj_step`` of its model
 with its frame skip, and ``gymnasium.make_vec(id, num_envs=2, vectorization_mode="sync" |
-"async")`` per case, in env steps/s.
+"async")`` per case, in env steps/s, also with what a user can pass (``vector_kwargs``
+``copy=False, context="fork"``; a wrapper dropping ``reward_terms`` from the info); Touch on
+MuJoCo at ``num_envs`` 2, 4 and 8; and what the vector env costs by itself per vector step
+(a physics-free env with Touch's spaces, with Touch's info and with an empty one).
 
 Goals: env / raw >= 0.6 (Reach, Touch on MuJoCo; Touch on PyBullet), >= 0.5 (Lift); async
 with 2 workers >= 1.6 x sync.
@@ -43,7 +46,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
@@ -290,42 +293,139 @@ def step_breakdown(bench: CaseBench, episodes: int = 4) -> dict[str, float]:
 # --------------------------------------------------------------------------- make_vec
 
 
-def vector_rates(task: str, engine: str, repeats: int) -> dict[str, Any]:
-    """Env steps/s of ``gymnasium.make_vec(..., num_envs=2)`` in sync and async mode, side by
-    side, :data:`VEC_STEPS` vector steps of seeded random actions per repeat (the workers
-    started and reset untimed; episodes end and restart inside the timed steps)."""
+class SlimInfo(gym.Wrapper):
+    """Drops ``reward_terms`` from each step's info (the user's choice where a vector env's
+    learner reads no term): 14 fewer entries for the vector env to batch per env and step."""
+
+    def step(self, action: Any):
+        """The env's step, its info without ``reward_terms``."""
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        info.pop("reward_terms", None)
+        return obs, reward, terminated, truncated, info
+
+
+# What a user can pass to ``make_vec``: each mode's ``(vectorization_mode, vector_kwargs,
+# wrappers)``. ``shared_memory`` is already AsyncVectorEnv's default; ``copy=False`` skips the
+# copy of the batched observation (the next step overwrites it); ``context="fork"`` is Linux's
+# default start method, named; :class:`SlimInfo` leaves the vector env less info to batch.
+TUNED = "async, copy=False, fork"
+VEC_MODES = {
+    "sync": ("sync", {}, ()),
+    "async": ("async", {}, ()),
+    TUNED: ("async", {"shared_memory": True, "copy": False, "context": "fork"}, ()),
+    "sync, no reward_terms": ("sync", {}, (SlimInfo,)),
+    "async, no reward_terms": ("async", {}, (SlimInfo,)),
+}
+VEC_SIZES = (2, 4, 8)  # num_envs of the scaling rows (Touch on MuJoCo)
+
+
+def vector_rates(
+    task: str, engine: str, repeats: int, num_envs: int = VEC_ENVS, modes: Any = VEC_MODES
+) -> dict[str, Any]:
+    """Env steps/s of ``gymnasium.make_vec(..., num_envs)`` in each of ``modes`` (name ->
+    ``(vectorization_mode, vector_kwargs)``), side by side, :data:`VEC_STEPS` vector steps of
+    seeded random actions per repeat (the workers started and reset untimed; episodes end and
+    restart inside the timed steps). ``async_over_sync``: the plain async mode against sync."""
     envs = {
-        mode: gym.make_vec(env_id(task), num_envs=VEC_ENVS, vectorization_mode=mode, engine=engine)
-        for mode in ("sync", "async")
+        name: gym.make_vec(
+            env_id(task),
+            num_envs=num_envs,
+            vectorization_mode=mode,
+            vector_kwargs=kwargs,
+            wrappers=list(wrappers),
+            engine=engine,
+        )
+        for name, (mode, kwargs, wrappers) in modes.items()
     }
     try:
-        size = envs["sync"].single_action_space.shape[0]
-        rng = np.random.default_rng(0)
-        actions = rng.uniform(-1.0, 1.0, (VEC_STEPS, VEC_ENVS, size)).astype(np.float32)
-        for vec in envs.values():
-            vec.reset(seed=0)
-
-        def unit(vec: Any) -> Any:
-            def run() -> None:
-                for action in actions:
-                    vec.step(action)
-
-            return run
-
-        seconds = time_interleaved({m: unit(v) for m, v in envs.items()}, repeats, warmup=1)
+        seconds = _time_vectors(envs, repeats, num_envs)
     finally:
         for vec in envs.values():
             vec.close()
-    rates = {m: summarize([VEC_ENVS * VEC_STEPS / t for t in s]) for m, s in seconds.items()}
-    speedup = statistics.median(
-        b / a for a, b in zip(seconds["async"], seconds["sync"], strict=True)
-    )
+    rates = {m: summarize([num_envs * VEC_STEPS / t for t in s]) for m, s in seconds.items()}
+    speedup = {
+        name: statistics.median(b / a for a, b in zip(s, seconds["sync"], strict=True))
+        for name, s in seconds.items()
+        if name != "sync"
+    }
     return {
+        "num_envs": num_envs,
         "sync_env_steps_per_s": rates["sync"],
         "async_env_steps_per_s": rates["async"],
-        "async_over_sync": speedup,
-        "passed": speedup >= ASYNC_GOAL,
+        "env_steps_per_s": rates,
+        "over_sync": speedup,
+        "async_over_sync": speedup["async"],
+        "passed": speedup["async"] >= ASYNC_GOAL,
     }
+
+
+def _time_vectors(envs: dict[str, Any], repeats: int, num_envs: int) -> dict[str, list[float]]:
+    """Seconds per :data:`VEC_STEPS` vector steps of each vector env, side by side."""
+    size = next(iter(envs.values())).single_action_space.shape[0]
+    rng = np.random.default_rng(0)
+    actions = rng.uniform(-1.0, 1.0, (VEC_STEPS, num_envs, size)).astype(np.float32)
+    for vec in envs.values():
+        vec.reset(seed=0)
+
+    def unit(vec: Any) -> Any:
+        def run() -> None:
+            for action in actions:
+                vec.step(action)
+
+        return run
+
+    return time_interleaved({m: unit(v) for m, v in envs.items()}, repeats, warmup=1)
+
+
+class NullEnv(gym.Env):
+    """An env without physics: Touch's spaces, a fixed observation and either Touch's info (the
+    keys and the nested reward terms of a real step) or an empty one. Through ``make_vec`` it
+    times what a vector env costs per step beside the env's own work: the pipe round trip to
+    each worker, the batched observation and the per-key batching of the info."""
+
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
+
+    def __init__(self, info: bool = True) -> None:
+        env = gym.make(env_id("touch")).unwrapped
+        self.observation_space, self.action_space = env.observation_space, env.action_space
+        self._obs, _ = env.reset(seed=0)
+        self._info = env.step(np.zeros(6, np.float32))[4] if info else {}
+        env.close()
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        """The fixed observation."""
+        super().reset(seed=seed)
+        return self._obs, dict(self._info)
+
+    def step(self, action: Any):
+        """The fixed observation, reward 0, never done."""
+        return self._obs, 0.0, False, False, dict(self._info)
+
+
+NULL_ID = "mjx_arm_bench/Null-v0"
+if NULL_ID not in gym.registry:
+    gym.register(NULL_ID, entry_point=NullEnv)
+
+
+def vector_overhead(repeats: int) -> dict[str, Any]:
+    """Microseconds per vector step (``num_envs=2``) of :class:`NullEnv` with Touch's info and
+    with none, sync and async: what the vector env itself costs, the floor under any env."""
+    out: dict[str, Any] = {}
+    for name, info in (("touch_info", True), ("no_info", False)):
+        envs = {
+            mode: gym.make_vec(
+                NULL_ID, num_envs=VEC_ENVS, vectorization_mode=m, vector_kwargs=kw, info=info
+            )
+            for mode, (m, kw, _) in VEC_MODES.items()
+            if mode in ("sync", "async", TUNED)
+        }
+        try:
+            seconds = _time_vectors(envs, repeats, VEC_ENVS)
+        finally:
+            for vec in envs.values():
+                vec.close()
+        out[name] = {m: summarize([t / VEC_STEPS * 1e6 for t in s]) for m, s in seconds.items()}
+    return out
 
 
 # --------------------------------------------------------------------------- memory
@@ -403,7 +503,25 @@ def time_cases(
         fns[f"{name}/reset"] = b.reset
     fns["pusher/env"], setups["pusher/env"] = pusher.env_episode, pusher.reset
     fns["pusher/raw"], setups["pusher/raw"] = pusher.raw_episode, pusher.reset
-    return time_interleaved(fns, repeats, warmup=1, setups=setups)
+    cpu: dict[str, list[float]] = {name: [] for name in fns}
+    seconds = time_interleaved(
+        {name: _cpu_timed(fn, cpu[name]) for name, fn in fns.items()}, repeats, 1, setups
+    )
+    # the CPU time of this thread per unit, the warm-up's dropped: on a machine that other
+    # processes share, the work done, where wall time also counts the waits for a core
+    seconds.update({f"{name}/cpu": times[1:] for name, times in cpu.items()})
+    return seconds
+
+
+def _cpu_timed(fn: Any, out: list[float]) -> Any:
+    """``fn``, appending the thread's CPU time of each call to ``out``."""
+
+    def run() -> None:
+        start = time.thread_time()
+        fn()
+        out.append(time.thread_time() - start)
+
+    return run
 
 
 def env_and_raw(seconds: dict[str, list[float]], name: str) -> dict[str, Any]:
@@ -414,6 +532,11 @@ def env_and_raw(seconds: dict[str, list[float]], name: str) -> dict[str, Any]:
         "raw_steps_per_s": summarize([EPISODE / s for s in raw]),
         # env steps/s / raw steps/s of the same repeat: the share of a step spent in physics
         "ratio": statistics.median(r / e for e, r in zip(env, raw, strict=True)),
+        # the same in CPU time (what the wall-clock ratio is where no other process runs)
+        "ratio_cpu_time": statistics.median(
+            r / e
+            for e, r in zip(seconds[f"{name}/env/cpu"], seconds[f"{name}/raw/cpu"], strict=True)
+        ),
     }
 
 
@@ -444,6 +567,17 @@ def run(repeats: int, vec_repeats: int, label: str | None = None) -> dict[str, A
         b.close()
     pusher.close()
     vectors = {case_name(*case): vector_rates(*case, vec_repeats) for case in GOALS}
+    scaling = {
+        str(n): vector_rates(
+            "touch",
+            "mujoco",
+            vec_repeats,
+            n,
+            {"sync": VEC_MODES["sync"], "async": VEC_MODES["async"]},
+        )
+        for n in VEC_SIZES
+    }
+    overhead = vector_overhead(vec_repeats)
     memory = {engine: median_rss(engine) for engine in ("mujoco", "pybullet")}
     meta["load_average_1min_end"] = _load_average()
     return {
@@ -455,6 +589,8 @@ def run(repeats: int, vec_repeats: int, label: str | None = None) -> dict[str, A
         "cases": cases,
         "pusher_v5": env_and_raw(seconds, "pusher"),
         "make_vec": {"num_envs": VEC_ENVS, "vector_steps_per_repeat": VEC_STEPS, **vectors},
+        "make_vec_scaling_touch_mujoco": scaling,
+        "make_vec_overhead_us": overhead,
         "rss_mb_touch": memory,
     }
 
@@ -483,6 +619,7 @@ def summary(payload: dict[str, Any]) -> dict[str, Any]:
                 "env_steps_per_s": r["env_steps_per_s"]["median"],
                 "raw_steps_per_s": r["raw_steps_per_s"]["median"],
                 "ratio": r["ratio"],
+                "ratio_cpu_time": r.get("ratio_cpu_time"),
             }
             for name, r in payload["cases"].items()
         }
@@ -533,6 +670,7 @@ def case_table(payload: dict[str, Any]) -> str:
                 f"{r['gym_make_steps_per_s']['median']:,.0f}",
                 _rate(r["raw_steps_per_s"]),
                 f"{r['ratio']:.2f}",
+                f"{r['ratio_cpu_time']:.2f}",
                 f"{r['reset_ms']['median']:.2f}",
                 r["goal"],
                 "PASS" if r["passed"] else "FAIL",
@@ -546,6 +684,7 @@ def case_table(payload: dict[str, Any]) -> str:
             "",
             _rate(p["raw_steps_per_s"]),
             f"{p['ratio']:.2f}",
+            f"{p['ratio_cpu_time']:.2f}",
             "",
             "",
             "",
@@ -557,6 +696,7 @@ def case_table(payload: dict[str, Any]) -> str:
         "via gym.make",
         "raw physics, control steps/s (min-max)",
         "env / raw",
+        "env / raw, CPU time",
         "reset ms",
         "goal",
         "",
@@ -565,23 +705,52 @@ def case_table(payload: dict[str, Any]) -> str:
 
 
 def vector_table(payload: dict[str, Any]) -> str:
-    """make_vec sync and async per case."""
+    """make_vec sync and async per case, and with the options a user can pass (medians; the
+    ratios are medians of side-by-side repeats against plain sync)."""
     rows = []
     for name, r in payload["make_vec"].items():
         if not isinstance(r, dict):
             continue
+        rates, over = r.get("env_steps_per_s", {}), r.get("over_sync", {})
+        cells = [
+            f"{rates[m]['median']:,.0f}" if m in rates else "" for m in VEC_MODES if m != "sync"
+        ]
+        ratios = [f"{over[m]:.2f}" if m in over else "" for m in VEC_MODES if m != "sync"]
         rows.append(
             [
                 name,
                 _rate(r["sync_env_steps_per_s"]),
-                _rate(r["async_env_steps_per_s"]),
-                f"{r['async_over_sync']:.2f}",
+                *(f"{c} ({q})" for c, q in zip(cells, ratios, strict=True)),
                 f">= {ASYNC_GOAL}",
                 "PASS" if r["passed"] else "FAIL",
             ]
         )
-    headers = ["case", "sync env steps/s", "async env steps/s", "async / sync", "goal", ""]
+    modes = [m for m in VEC_MODES if m != "sync"]
+    headers = ["case", "sync", *(f"{m} (/ sync)" for m in modes), "goal: async / sync", ""]
     return markdown_table(headers, rows)
+
+
+def scaling_table(payload: dict[str, Any]) -> str:
+    """Touch on MuJoCo through make_vec at several num_envs."""
+    rows = [
+        [
+            n,
+            _rate(r["sync_env_steps_per_s"]),
+            _rate(r["async_env_steps_per_s"]),
+            f"{r['async_over_sync']:.2f}",
+        ]
+        for n, r in payload.get("make_vec_scaling_touch_mujoco", {}).items()
+    ]
+    return markdown_table(["num_envs", "sync env steps/s", "async env steps/s", "async / sync"],
+                          rows)  # fmt: skip
+
+
+def overhead_table(payload: dict[str, Any]) -> str:
+    """Microseconds per vector step of the physics-free env, per info and mode."""
+    over = payload.get("make_vec_overhead_us", {})
+    modes = ["sync", "async", TUNED]
+    rows = [[info, *(f"{r[m]['median']:.0f}" for m in modes)] for info, r in over.items()]
+    return markdown_table(["info", *(f"{m}, us per vector step" for m in modes)], rows)
 
 
 def table(payload: dict[str, Any]) -> str:
@@ -599,10 +768,24 @@ def table(payload: dict[str, Any]) -> str:
     )
     text += case_table(payload)
     text += (
+        "\n`env / raw, CPU time`: the same ratio in this process's CPU time, which other "
+        "processes on the machine do not stretch (a load average above the 2 cores means "
+        "the wall-clock figures also count waits for a core).\n"
+    )
+    text += (
         f"\n`gymnasium.make_vec(id, num_envs={VEC_ENVS}, vectorization_mode=...)`, env steps/s "
         f"({payload['make_vec']['vector_steps_per_repeat']} vector steps per repeat):\n\n"
     )
     text += vector_table(payload)
+    if "make_vec_scaling_touch_mujoco" in payload:
+        text += "\nTouch on MuJoCo through `make_vec` at more envs than cores (env steps/s):\n\n"
+        text += scaling_table(payload)
+        text += (
+            f"\nWhat the vector env costs itself: a physics-free env with Touch's spaces "
+            f"(`num_envs={VEC_ENVS}`), microseconds per vector step, with Touch's info and with "
+            "an empty one:\n\n"
+        )
+        text += overhead_table(payload)
     parts = {name: r["step_breakdown_us"] for name, r in payload["cases"].items()}
     names = list(next(iter(parts.values())))
     text += "\nWhere a control step's time goes (microseconds per step, over real episodes):\n\n"

@@ -59,12 +59,11 @@ class JointServo:
             qdot: joint velocities (rad/s), 6 values.
             gravity: gravity compensation torques (N m), 6 values.
         """
-        out = []
-        for (kv, d, effort), v, w, g in zip(self._gains, u, qdot, gravity, strict=True):
-            t = kv * (v - w)
-            t = effort if t > effort else -effort if t < -effort else t
-            out.append(t - d * w + g)
-        return out
+        return [
+            (effort if t > effort else -effort if t < -effort else t) - d * w + g
+            for (kv, d, effort), v, w, g in zip(self._gains, u, qdot, gravity, strict=True)
+            for t in (kv * (v - w),)
+        ]
 
     @functools.cached_property
     def _gains(self) -> tuple[tuple[float, float, float], ...]:

@@ -41,6 +41,10 @@ motion. There the reading is instead the sum of the contact forces on the links 
 subtree (normal and friction, about the ee point): zero in free motion, as MuJoCo's tared
 sensor reads.
 
+Each control step starts from the joint states its previous read took (nothing moves between
+the two): a change made to the world through ``env.client`` between steps shows from the
+step's second substep on, and in its read.
+
 Reset: PyBullet reproduces a seeded episode exactly only after a full rebuild, so every reset
 rebuilds the world (about 5 ms without rendering, 8 ms with visual shapes), takes one substep at
 rest so the F/T sensor has a reading, and puts the joints back at the sampled angles.
@@ -67,7 +71,7 @@ from mjx_arm.paths import asset
 from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.grip import ObjectStart
-from mjx_arm.task.wrench import external_wrench
+from mjx_arm.task.wrench import external_wrench_features
 from mjx_arm.urdf.arm_config import ArmConfig
 from mjx_arm.urdf.scene import CAMERA_EYE, CAMERA_FOVY, CAMERA_TARGET
 from mjx_arm.urdf.scene_shapes import CUBE_HALF, CUBE_MASS
@@ -198,7 +202,10 @@ class PybulletArmEnv(BaseRobotEnv):
         self.ids = self._lookup_ids()
         self._zeros = [0.0] * len(self.ids.joints)
         self._dof_zeros = [0.0] * len(self.ids.dofs)
-        self._pick = operator.itemgetter(*self.ids.arm_in_dofs)
+        arm_in_dofs = self.ids.arm_in_dofs
+        identity = arm_in_dofs == tuple(range(len(self.ids.dofs)))
+        self._pick = None if identity else operator.itemgetter(*arm_in_dofs)
+        self._read_states: tuple | None = None  # the joint states of the last read
         self._u = list(self._zeros)
         self._target_body = sampling.target_body_pos(np, np.full(3, 0.5), self.task)
         self._tool_before = (np.zeros(3), np.zeros(3))
@@ -336,6 +343,7 @@ class PybulletArmEnv(BaseRobotEnv):
     def _physics_reset(
         self, qpos: np.ndarray, target_body_pos: np.ndarray, obj: ObjectStart | None = None
     ) -> None:
+        self._read_states = None  # the world is rebuilt: read it afresh
         self._target_body = np.asarray(target_body_pos, dtype=np.float64).copy()
         if obj is not None:
             self._object = obj
@@ -364,19 +372,26 @@ class PybulletArmEnv(BaseRobotEnv):
     def _physics_step(self, n_substeps: int) -> None:
         calls, body, joints, zeros = self._calls, self.body, self.ids.joints, self._dof_zeros
         dofs, pick, torque, u = self.ids.dofs, self._pick, self.servo.torque, self._u
+        # the joint states of the last read, where nothing has moved since (arm-only dofs)
+        states, self._read_states = self._read_states, None
         for i in range(n_substeps):
-            states = calls.get_joint_states(body, dofs)
+            if states is None:
+                states = calls.get_joint_states(body, dofs)
             gravity = calls.inverse_dynamics(body, [s[0] for s in states], zeros, zeros)
-            qdot = [s[1] for s in pick(states)]  # the arm's joints (5 or more: a tuple)
-            forces = torque(u, qdot, pick(gravity))
+            if pick is not None:  # the arm's joints among the dofs (5 or more: a tuple)
+                states, gravity = pick(states), pick(gravity)
+            forces = torque(u, [s[1] for s in states], gravity)
             calls.set_motors(body, joints, pybullet.TORQUE_CONTROL, forces=forces)
             if i == n_substeps - 1:
                 self._tool_before = self._tool_velocity()
             calls.step()
+            states = None
 
     def _physics_read(self) -> PhysicsReading:
         calls = self._calls
         states = calls.get_joint_states(self.body, self.ids.read)
+        if self._pick is None:  # the next substep starts from these (dofs = joints)
+            self._read_states = states[:-1]
         tool, ee = calls.get_link_states(
             self.body, [self.ids.ft, self.ids.ee], computeLinkVelocity=1, computeForwardKinematics=1
         )
@@ -487,8 +502,10 @@ class PybulletArmEnv(BaseRobotEnv):
         offset = rotate(rot, self._com_offset)  # link com -> subtree com
         a_com = add(add(rate(v0, v1, dt), cross(alpha, offset)), cross(w1, cross(w1, offset)))
         acc = rotate_back(rot, add(a_com, _UP))  # a_com - g
-        x = np.array([force, torque, acc, rotate_back(rot, w1)])
-        return external_wrench(np, *x, np.array(rotate_back(rot, alpha)), self.arm.tool)
+        x = external_wrench_features(
+            force, torque, acc, rotate_back(rot, w1), rotate_back(rot, alpha)
+        )
+        return np.array(x).dot(self.arm.tool.wrench_matrix)  # external_wrench's value
 
     def _camera_matrices(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
         view = self.client.computeViewMatrix(CAMERA_EYE, CAMERA_TARGET, [0.0, 0.0, 1.0])

@@ -14,6 +14,7 @@ clean physics state.
 
 from __future__ import annotations
 
+import functools
 import math
 import operator
 from abc import abstractmethod
@@ -32,6 +33,7 @@ from mjx_arm.task import reward as reward_lib
 from mjx_arm.task import rules, sampling
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.grip import ObjectStart
+from mjx_arm.task.scalar_compile import Untraceable, compile_score
 from mjx_arm.task.scalar_xp import SCALAR_XP
 from mjx_arm.task.touch import touch_config
 from mjx_arm.urdf.arm_config import ArmConfig
@@ -131,6 +133,7 @@ class BaseRobotEnv(gym.Env):
         self._action = np.zeros(na, np.float32)
         self._action_bounds = (np.full(na, -1.0, np.float32), np.full(na, 1.0, np.float32))
         self._distance = 0.0
+        self._scores = self._scorers()
 
     # ------------------------------------------------------------------ engine hooks
 
@@ -262,10 +265,7 @@ class BaseRobotEnv(gym.Env):
         extra = None
         if self._extra:
             extra = self.task_spec.grip_observation(SCALAR_XP, ee_pos, ee_quat, grip, self.task)
-        flat = self._flat
-        raw = flat.raw(ee_pos, ee_quat, qpos, target_pos, wrench, extra)
-        state = flat.clip(raw)
-        return raw, state, scalar_state.distance(ee_pos, target_pos), flat.force_norm(state)
+        return self._flat.measure(ee_pos, ee_quat, qpos, target_pos, wrench, extra)
 
     def _measures(self, reading: PhysicsReading) -> dict[str, float] | None:
         """The task's measures of a reading (gripper tasks), else None."""
@@ -274,6 +274,35 @@ class BaseRobotEnv(gym.Env):
         spec, r = self.task_spec, reading
         values = spec.measures(SCALAR_XP, r.ee_pos, r.ee_quat, r.grip, self.task)
         return {key: float(value) for key, value in values.items()}
+
+    def _scorers(self) -> tuple[Any, Any]:
+        """The step rules of this env's task and arm as two functions of Python floats, for a
+        sane step and a diverged one (:func:`mjx_arm.task.scalar_compile.compile_score`); the
+        rules through :data:`SCALAR_XP` where the task's do not trace."""
+        n = self.arm.n_joints
+        grip = np.zeros(10 if self.task_spec.gripper else 0)
+        probe = PhysicsReading(np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(n),
+                               np.zeros(n), np.zeros(3), np.zeros(6), grip)  # fmt: skip
+        keys = tuple(self._measures(probe) or ())  # the names of the task's measures
+        try:
+            return tuple(
+                compile_score(self.task, n, self._band_lists, diverged, keys)
+                for diverged in (False, True)
+            )
+        except Untraceable:
+            return tuple(functools.partial(self._score_generic, d, keys) for d in (False, True))
+
+    def _score_generic(self, diverged: bool, keys: tuple, hold, over, *args) -> tuple:
+        """:func:`mjx_arm.task.rules.score_step` through :data:`SCALAR_XP`, with the values
+        and order of a compiled scorer's answer."""
+        args, measures = args[:6], args[6:]
+        extra = dict(zip(keys, measures, strict=True)) or None
+        progress = reward_lib.Progress(hold, over)
+        score = rules.score_step(
+            SCALAR_XP, self.task, progress, *args, self._band_lists, diverged, extra
+        )
+        return (*score.progress, bool(score.success), bool(score.over), score.terms,
+                float(score.reward), bool(score.done))  # fmt: skip
 
     def _evaluate(
         self, reading: PhysicsReading, diverged: bool = False, change: float = 0.0
@@ -296,31 +325,32 @@ class BaseRobotEnv(gym.Env):
             angles through sin/cos) except the joint velocities, which show in the joint
             velocity term (a sum of magnitudes).
         """
-        task = self.task
         raw, state, d, force = self._measure(reading)
         if not (diverged or scalar_state.finite(raw)):
             return None
-        qpos, qvel = reading.qpos.tolist(), reading.qvel.tolist()  # the rules take lists
+        qvel = reading.qvel.tolist()  # the rules take lists
         if not diverged and self._runaway(qvel):
             return None
         measures = self._measures(reading)
-        score = rules.score_step(
-            SCALAR_XP, task, self._progress, self._distance, change, d, force, qpos, qvel,
-            self._band_lists, diverged, measures,
+        values = () if measures is None else measures.values()
+        progress = self._progress
+        hold, over, success, over_now, terms, reward, done = self._scores[diverged](
+            progress.hold, progress.over, self._distance, change, d, force,
+            reading.qpos.tolist(), qvel, *values,
         )  # fmt: skip
-        self._progress, self._distance = score.progress, d
+        self._progress, self._distance = reward_lib.Progress(hold, over), d
         info = {
-            "is_success": bool(score.success),
+            "is_success": success,
             "distance": d,
             "contact_force_norm": force,
-            "reward_terms": score.terms,  # Python floats: the rules ran on Python scalars
+            "reward_terms": terms,  # Python floats: the rules ran on Python scalars
             "diverged": diverged,
             "nonfinite": diverged,  # the older name of ``diverged``
-            "overforce": bool(score.over),
+            "overforce": over_now,
         }
         if measures is not None:
             info.update(measures)
-        return self._observation(state), float(score.reward), bool(score.done), info
+        return self._flat.observation(state), reward, done, info
 
     def _observation(self, state: list[float]) -> dict[str, np.ndarray]:
         """The observation dict of a clipped flat state: views of one new float32 array (the

@@ -39,6 +39,26 @@ class ScalarState:
         self.size = obs_lib.obs_size(n, tuple(extra))
         self.force = obs_lib.force_slice(n)
         self.keys = tuple(obs_lib.obs_slices(n, tuple(extra)).items())
+        self.target = slice(7 + n, 10 + n)  # the target point in the flat state
+
+    def measure(self, ee_pos, ee_quat, qpos, target_pos, wrench, extra=None) -> tuple:
+        """The raw and clipped flat states of one reading (:meth:`raw`, :meth:`clip`), the
+        distance (m) from the ee point to the target and the contact force norm (N) of the
+        clipped state: ``(raw, state, d, force)``."""
+        raw = self.raw(ee_pos, ee_quat, qpos, target_pos, wrench, extra)
+        state = [
+            low if v < low else high if v > high else v
+            for v, low, high in zip(raw, self.low, self.high, strict=True)
+        ]
+        (ax, ay, az), (bx, by, bz) = raw[:3], raw[self.target]
+        dx, dy, dz = ax - bx, ay - by, az - bz
+        fx, fy, fz = state[self.force]
+        return (
+            raw,
+            state,
+            math.sqrt(dx * dx + dy * dy + dz * dz),
+            math.sqrt(fx * fx + fy * fy + fz * fz),
+        )
 
     def raw(self, ee_pos, ee_quat, qpos, target_pos, wrench, extra=None) -> list[float]:
         """:func:`~mjx_arm.task.observation.raw_state` of one reading (arrays ``(3,)``,
