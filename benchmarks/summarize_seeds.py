@@ -1,14 +1,15 @@
-"""Summarise the published-arm runs of one code version: seeds solved and transfer per arm and task.
+"""Summarise the seeds runs of one folder: seeds solved and transfer per arm, task and preset.
 
-Reads the seeds results (``seeds_*.json``, one or more per (arm, task), written by
-``gpu_suite.sh arms``) and the transfer results (``transfer/*.json``, written by
-``mjx-arm bench transfer``) under a folder such as
+Reads the seeds results (``seeds_*.json``, one or more per (arm, task, preset), written by
+``mjx-arm bench seeds``, e.g. through ``gpu_suite.sh arms``) and the transfer results of their
+exported policies (``transfer/*.json``, written by ``mjx-arm bench transfer``; a policy file's
+name ends in ``TASK-PRESET-seedN``) under a folder such as
 ``benchmarks/results/arms/any_arm/final_2e708e5`` and writes ``summary.json`` and
-``summary.md`` beside them: per (arm, task), each seed's best MJX success, whether it reached the
-task's threshold, and its exported policy's success and mean peak force in CPU MuJoCo and
-PyBullet.
+``summary.md`` beside them: per (arm, task, preset), each seed's best MJX success, whether it
+reached the task's threshold, and its exported policy's success and mean peak force in CPU
+MuJoCo and PyBullet. The arm is named by its URDF's file name, as each run recorded it.
 
-    python -m benchmarks.summarize_any_arm benchmarks/results/arms/any_arm/final_2e708e5
+    python -m benchmarks.summarize_seeds benchmarks/results/arms/any_arm/final_2e708e5
 """
 
 from __future__ import annotations
@@ -22,19 +23,24 @@ from typing import Any
 
 # Success a seed must reach in MJX: the issue-level goals (Lift 0.9, Reach and Touch 0.95).
 THRESHOLDS = {"reach": 0.95, "touch": 0.95, "lift": 0.9}
-SEEDS_NAME = re.compile(r"seeds_(?P<task>[a-z]+)_fast_(?P<arm>.+?)(_x\d+)?_seed[\d-]+$")
-POLICY_NAME = re.compile(r"(?P<arm>.+)-(?P<task>[a-z]+)-fast-seed(?P<seed>\d+)$")
+POLICY_NAME = re.compile(r"-(?P<task>[a-z]+)-(?P<preset>[a-z]+)-seed(?P<seed>\d+)$")
+Key = tuple[str, str, str]  # (arm, task, preset)
 
 
-def seed_rows(folder: Path) -> dict[tuple[str, str], dict[int, dict[str, Any]]]:
-    """Each (arm, task)'s seeds: ``{seed: {"best": success, "wall_s": s, "compile_s": s}}``."""
-    rows: dict[tuple[str, str], dict[int, dict[str, Any]]] = defaultdict(dict)
+def arm_name(record: dict[str, Any]) -> str:
+    """The arm a run or policy records, by its URDF's file name (``ur10_robot``)."""
+    return Path(record["config"]["urdf"]).stem
+
+
+def seed_rows(folder: Path) -> dict[Key, dict[int, dict[str, Any]]]:
+    """Each (arm, task, preset)'s seeds: ``{seed: {"best": success, "wall_s": s, ...}}``."""
+    rows: dict[Key, dict[int, dict[str, Any]]] = defaultdict(dict)
     for path in sorted(folder.glob("seeds_*.json")):
-        match = SEEDS_NAME.match(path.stem)
-        if match is None:
-            continue
-        for run in json.loads(path.read_text())["seeds"]:
-            rows[(match["arm"], match["task"])][run["seed"]] = {
+        data = json.loads(path.read_text())
+        settings = data["settings"]
+        key = (arm_name(data["configs"][0]["arm"]), settings["task"], settings["preset"])
+        for run in data["seeds"]:
+            rows[key][run["seed"]] = {
                 "best": run["best_success"],
                 "wall_s": run["wall_s"],
                 "compile_s": run["compile_s"],
@@ -42,20 +48,23 @@ def seed_rows(folder: Path) -> dict[tuple[str, str], dict[int, dict[str, Any]]]:
     return rows
 
 
-def transfer_rows(folder: Path) -> dict[tuple[str, str, int], dict[str, Any]]:
-    """Each exported policy's transfer: ``{(arm, task, seed): {engine: (success, peak N)}}``."""
-    found: dict[tuple[str, str, int], dict[str, Any]] = {}
+def transfer_rows(folder: Path) -> dict[tuple[str, str, str, int], dict[str, Any]]:
+    """Each exported policy's transfer: ``{(arm, task, preset, seed): {engine: (success, peak
+    N)}}``; the arm is the policy's own record."""
+    from mjx_arm.policy import load
+
+    found: dict[tuple[str, str, str, int], dict[str, Any]] = {}
     for path in sorted((folder / "transfer").glob("*.json")):
-        match = POLICY_NAME.match(path.stem)
-        if match is None:
+        data = json.loads(path.read_text())
+        match = POLICY_NAME.search(Path(data["policy"]).stem)
+        if match is None or not Path(data["policy"]).is_file():
             continue
-        # exported as NAME_RUN where RUN starts with NAME again: "ur5_robot_ur5_robot"
-        arm = match["arm"][(len(match["arm"]) + 1) // 2 :]
+        arm = arm_name(load(data["policy"]).metadata["arm"])
         engines = {
             row["engine"]: (row["success_rate"], row["mean_peak_contact_force"])
-            for row in json.loads(path.read_text())["rows"]
+            for row in data["rows"]
         }
-        found[(arm, match["task"], int(match["seed"]))] = engines
+        found[(arm, match["task"], match["preset"], int(match["seed"]))] = engines
     return found
 
 
@@ -63,7 +72,7 @@ def summarize(folder: Path) -> dict[str, Any]:
     """The summary of ``folder``: a list of (arm, task) entries with their seeds."""
     transfers = transfer_rows(folder)
     entries = []
-    for (arm, task), seeds in sorted(seed_rows(folder).items()):
+    for (arm, task, preset), seeds in sorted(seed_rows(folder).items()):
         threshold = THRESHOLDS[task]
         per_seed = []
         for seed, run in sorted(seeds.items()):
@@ -72,13 +81,14 @@ def summarize(folder: Path) -> dict[str, Any]:
                     "seed": seed,
                     "best_success": run["best"],
                     "solved": run["best"] >= threshold,
-                    "transfer": transfers.get((arm, task, seed), {}),
+                    "transfer": transfers.get((arm, task, preset, seed), {}),
                 }
             )
         entries.append(
             {
                 "arm": arm,
                 "task": task,
+                "preset": preset,
                 "threshold": threshold,
                 "solved": sum(s["solved"] for s in per_seed),
                 "seeds": per_seed,
@@ -100,17 +110,17 @@ def markdown(summary: dict[str, Any]) -> str:
         return " / ".join(f"{t[e][0]:.3f} ({t[e][1]:.0f} N)" for e in engines)
 
     lines = [
-        f"# Published arms, no arm file (`{summary['folder']}`)",
+        f"# Seeds and transfer (`{summary['folder']}`)",
         "",
-        "| arm | task | seeds at threshold | best MJX success per seed | exported policy per seed: "
-        "CPU MuJoCo / PyBullet (mean peak force) |",
+        "| arm | task, preset | seeds at threshold | best MJX success per seed | exported "
+        "policy per seed: CPU MuJoCo / PyBullet (mean peak force) |",
         "| --- | --- | --- | --- | --- |",
     ]
     for e in summary["entries"]:
         best = ", ".join(f"{s['best_success']:.3f}" for s in e["seeds"])
         transfer = "; ".join(f"seed {s['seed']}: {transfer_text(s)}" for s in e["seeds"])
         lines.append(
-            f"| {e['arm']} | {e['task']} (>= {e['threshold']}) | {e['solved']} of "
+            f"| {e['arm']} | {e['task']}, {e['preset']} (>= {e['threshold']}) | {e['solved']} of "
             f"{len(e['seeds'])} | {best} | {transfer} |"
         )
     return "\n".join(lines) + "\n"
