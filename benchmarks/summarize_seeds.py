@@ -23,7 +23,7 @@ from typing import Any
 
 # Success a seed must reach in MJX: the issue-level goals (Lift 0.9, Reach and Touch 0.95).
 THRESHOLDS = {"reach": 0.95, "touch": 0.95, "lift": 0.9}
-POLICY_NAME = re.compile(r"-(?P<task>[a-z]+)-(?P<preset>[a-z]+)-seed(?P<seed>\d+)$")
+POLICY_NAME = re.compile(r"(?:^|[-_])(?P<task>[a-z]+)-(?P<preset>[a-z]+)-seed(?P<seed>\d+)$")
 Key = tuple[str, str, str]  # (arm, task, preset)
 
 
