@@ -346,13 +346,15 @@ class PybulletPositionArmEnv(_ChainActuation, PybulletArmEnv):
         for i in range(n_substeps):
             states = calls.get_joint_states(body, dofs)
             gravity = calls.inverse_dynamics(body, [s[0] for s in states], zeros, zeros)
-            arm = pick(states)  # the arm's joints (5 or more: a tuple)
+            if pick is not None:  # the arm's joints among the dofs (5 or more: a tuple)
+                states, gravity = pick(states), pick(gravity)
+            arm = states
             q = [s[0] for s in arm]
             if self._feedforward and not self._holding:
                 u = self._servo_velocity((i + 1) / n_substeps, np.asarray(q)).tolist()
             else:
                 u = [gain * (t - x) for t, x in zip(self._q_target, q, strict=True)]
-            torque = self.servo.torque(u, [s[1] for s in arm], pick(gravity))
+            torque = self.servo.torque(u, [s[1] for s in arm], gravity)
             calls.set_motors(body, joints, pybullet.TORQUE_CONTROL, forces=torque)
             if i == n_substeps - 1:
                 self._tool_before = self._tool_velocity()
