@@ -96,14 +96,17 @@ def _fuzz_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
 
 
 def _any_arm_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
-    rel = ANY_ARM_SUMMARY
+    entries: dict[tuple[str, str], Json] = {}
+    for rel in ANY_ARM_SUMMARIES:  # a later run of an (arm, task) replaces an earlier one
+        entries.update({(e["arm"], e["task"]): e for e in load(rel)["entries"]})
     parts = []
-    for e in load(rel)["entries"]:
+    for e in entries.values():
         moved = [s["transfer"] for s in e["seeds"] if s["solved"] and s["transfer"]]
         low = min((min(v[0] for v in t.values()) for t in moved), default=None)
         worst = f", exported >= {low:.3f}" if low is not None else ""
         parts.append(f"{e['arm']} {e['task']} {e['solved']}/{len(e['seeds'])}{worst}")
-    return "Published arms, no arm file: seeds solved, transfer", "; ".join(parts), [rel]
+    figure = "Published arms, no arm file: seeds solved, lowest transfer of a solved seed"
+    return figure, "; ".join(parts), list(ANY_ARM_SUMMARIES)
 
 
 def _summary_row(rel: str, figure: str) -> Headline:
@@ -138,7 +141,10 @@ def _cold_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
     return "Start-up, every cache empty (cold) and after", "; ".join(parts), rels
 
 
-ANY_ARM_SUMMARY = "arms/any_arm/final_2e708e5/summary.json"
+ANY_ARM_SUMMARIES = (
+    "arms/any_arm/final_2e708e5/summary.json",
+    "arms/any_arm/z1_1192947/summary.json",
+)
 LIFT_SUMMARY = "lift/seeds_eddd3fb/summary.json"
 TOUCH_TRANSFER = [f"contact/transfer/touch_fast_seed{i}.json" for i in range(3)]
 LIFT_TRANSFER = [f"contact/transfer/lift_seed{i}.json" for i in range(5)]
