@@ -85,10 +85,10 @@ def _short_episodes(real):
 def _cpu_envs_only(real):
     """``make_envs`` for the C MuJoCo backend (built in well under a second); MJX is stopped."""
 
-    def make(config, task):
+    def make(config, task, **options):
         if config.backend != "mujoco":
             raise WorkStarted
-        return real(config, task)
+        return real(config, task, **options)
 
     return make
 
