@@ -53,13 +53,13 @@ rest so the F/T sensor has a reading, and puts the joints back at the sampled an
 from __future__ import annotations
 
 import operator
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import NamedTuple
 
 import numpy as np
 
+from pybullet_ref.hot_calls import HotCalls
 from pybullet_ref.quiet import STDERR, STDOUT, native_output_silenced
 
 with native_output_silenced((STDOUT, STDERR)):  # "pybullet build time: ..."
@@ -138,29 +138,6 @@ class ArmIds:
     pads: tuple[int, ...] = ()
 
 
-class _HotCalls(NamedTuple):
-    """The client calls of every step, bound once (``BulletClient`` rebinds them per access)."""
-
-    get_joint_states: Callable
-    get_link_state: Callable
-    get_link_states: Callable
-    inverse_dynamics: Callable
-    set_motors: Callable
-    step: Callable
-
-    @classmethod
-    def of(cls, client: BulletClient) -> _HotCalls:
-        """Bind the calls of ``client``."""
-        return cls(
-            client.getJointStates,
-            client.getLinkState,
-            client.getLinkStates,
-            client.calculateInverseDynamics,
-            client.setJointMotorControlArray,
-            client.stepSimulation,
-        )
-
-
 class PybulletArmEnv(BaseRobotEnv):
     """The arm task on PyBullet (one world, CPU), same contract as ``MujocoArmEnv``.
 
@@ -196,7 +173,7 @@ class PybulletArmEnv(BaseRobotEnv):
         self.servo = joint_servo(self.arm, self.task.spec.servo_dt or self.task.sim_dt)
         with native_output_silenced():  # "argv[0]="
             self.client = BulletClient(connection_mode=pybullet.DIRECT)
-        self._calls = _HotCalls.of(self.client)
+        self._calls = HotCalls.of(self.client)
         # without a render mode nothing is drawn: skip the visual shapes (halves the reset time)
         self._load_flags = 0 if render_mode else pybullet.URDF_IGNORE_VISUAL_SHAPES
         self.ids = self._lookup_ids()

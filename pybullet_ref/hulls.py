@@ -15,7 +15,8 @@ intersected again). Bullet's padding puts the faces back where MuJoCo has them; 
 corners come out rounded with a 1 mm radius. Visual meshes are untouched (their paths made
 absolute). A URDF without collision meshes (the shipped arms: primitives only) is loaded as it
 is. Copies live in :func:`mjx_arm.urdf.mesh_convert.default_cache_dir`, named by a hash of the
-URDF's and the meshes' bytes, so an edited file gets a fresh copy.
+URDF's and the meshes' bytes and of the URDF's folder, so an edited or moved file gets a fresh
+copy (the copy names its visual meshes by absolute path).
 """
 
 from __future__ import annotations
@@ -95,6 +96,8 @@ def bullet_urdf(urdf: Path, cache_dir: Path | None = None) -> Path:
         for mesh in link.findall("./collision/geometry/mesh")
     }
     key = hashlib.sha256(_VERSION + urdf.read_bytes())
+    # the copy names its visual meshes by absolute path: a URDF moved elsewhere gets its own
+    key.update(str(urdf.resolve().parent).encode())
     for path in sorted({str(p) for p in sources.values()}):
         key.update(Path(path).read_bytes())
     folder = (cache_dir or default_cache_dir()).expanduser().resolve()

@@ -300,12 +300,18 @@ def compile_score(
         raise
     except Exception as error:  # e.g. a traced value hashed or indexed
         raise Untraceable(f"the rules of {cfg.task!r} do not trace: {error}") from error
+    head = ", ".join([*inputs, "qpos", "qvel", *(f"m{i}" for i in range(len(extra_keys)))])
+    return _define(trace, score, head, n_joints, cfg.task)
+
+
+def _define(trace: _Trace, score: rules.StepScore, head: str, n_joints: int, task: str):
+    """The Python function ``score(head)`` of the recorded ``trace`` that returns ``score``'s
+    values (see :func:`compile_score`)."""
     text = trace.text
     terms = "".join(f"{key!r}: {text(v)}, " for key, v in score.terms.items())
     outputs = [score.progress.hold, score.progress.over, score.success, score.over]
     out = ", ".join(map(text, outputs))
     ret = f"return {out}, {{{terms}}}, {text(score.reward)}, {text(score.done)}"
-    head = ", ".join([*inputs, "qpos", "qvel", *(f"m{i}" for i in range(len(extra_keys)))])
     source = "\n    ".join(
         [
             f"def score({head}):",
@@ -316,7 +322,7 @@ def compile_score(
         ]
     )
     namespace = dict(trace.names)
-    exec(compile(source, f"<score_step of {cfg.task}>", "exec"), namespace)
+    exec(compile(source, f"<score_step of {task}>", "exec"), namespace)
     fn = namespace["score"]
     fn.source = source
     return fn
