@@ -33,6 +33,7 @@ KINOVA = ROBOTS / "kinova_description/robots/kinova.urdf"
 Z1 = ROBOTS / "z1_description/urdf/z1.urdf"
 SO100 = ROBOTS / "so_arm_description/urdf/so100.urdf"
 PANDA = ROBOTS / "panda_description/urdf/panda.urdf"
+UR3 = ROBOTS / "ur_description/urdf/ur3_robot.urdf"
 
 published = pytest.mark.skipif(not UR10.is_file(), reason="example-robot-data not installed")
 
@@ -99,6 +100,20 @@ def test_arm_file_home_is_kept_and_checked() -> None:
     arm = arm_info(ArmConfig(urdf=str(UR10), home_qpos=home))
     setup = arm_setup(arm, task_config("touch"))
     assert setup.home_qpos == home and setup.home_source == "arm file" and setup.covers_area
+
+
+@published
+def test_a_small_arm_homes_lower_where_that_keeps_its_moves_inside_the_episode() -> None:
+    """The UR3's tool-down home 0.2 m up sits a 1.5 rad wrist swing from the box (3.1 s at
+    Touch's speeds, an episode of 6.3 s); a lower home reaches every target with moves short
+    enough for Touch's 5 s, and is taken."""
+    arm = arm_info(ArmConfig(urdf=str(UR3)))
+    task = task_config("touch")
+    setup = arm_setup(arm, task)
+    assert setup.home_source == "derived" and setup.covers_area
+    assert setup.episode_steps == task.episode_steps and 2.0 * setup.travel_time <= 5.0
+    height = tool_down_solver(arm).ik.pose(np.asarray(setup.home_qpos))[0][2]
+    assert 0.09 < height < 0.16  # below the usual 0.2 m (HOME_HEIGHTS: 0.2, 0.15, 0.10)
 
 
 def _slow_arm(tmp_path: Path, velocity: float) -> Path:

@@ -15,7 +15,10 @@ of it is derived here, for a task config and an arm:
   found by tool-down inverse kinematics (:mod:`mjx_arm.envs.ik`) from seeded starts; among the
   poses free of self-collision and of the table, the one that reaches the most grid targets
   wins, then the best-conditioned (manipulability). Angles of joints with a range over a full
-  turn are taken nearest the middle of the range.
+  turn are taken nearest the middle of the range. Where the slowest home-to-target motion from
+  that height would lengthen the episode, the lower heights are tried too, and the highest home
+  whose motions fit the task's episode wins (a small or slow arm's home at 0.2 m can sit a
+  wrist swing of 1.5 rad from the box; nearer the table, its moves are shorter).
 - **episode**: the time the home-to-target motions take at the task's commanded joint speeds
   (:meth:`TaskConfig.joint_speeds`); an episode shorter than :data:`EPISODE_TIME_FACTOR` times
   the slowest motion is lengthened.
@@ -29,6 +32,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -110,7 +114,7 @@ def _setup_cached(arm: ArmInfo, task: TaskConfig) -> ArmSetup:
     scales = [task.workspace_scale] if task.workspace_scale else _scales(arm, home)
     best: tuple | None = None
     for scale in scales:
-        trial = _try_scale(solver, task.replace(workspace_scale=scale), home)
+        trial = _try_scale(arm, solver, task.replace(workspace_scale=scale), home)
         if trial is None:
             continue
         if best is None or trial[0] > best[0]:
@@ -154,12 +158,32 @@ def shipped_home(arm: ArmInfo, task: TaskConfig) -> tuple[float, ...] | None:
     return LIFT_HOME if task.spec.gripper else SHIPPED_HOME_QPOS
 
 
-def _try_scale(solver: ToolDownSolver, task: TaskConfig, home: np.ndarray | None):
+def _try_scale(arm: ArmInfo, solver: ToolDownSolver, task: TaskConfig, home: np.ndarray | None):
     """(reached, targets, home, poses, scale) of the best home at ``task``'s scale, or None
-    where no tool-down home exists over the area's middle."""
+    where no tool-down home exists over the area's middle.
+
+    At each height the home that reaches the most grid targets wins (the best-conditioned
+    among equals); a lower height's home replaces a higher one's only where it reaches more
+    targets, or as many with its slowest motion inside the task's episode
+    (:func:`_fits_episode`) where the higher one's is not.
+    """
     points = grid_targets(task)
     low, high = points[:, :2].min(axis=0), points[:, :2].max(axis=0)
-    homes = [home] if home is not None else _homes(solver, 0.5 * (low + high))
+    groups = [[home]] if home is not None else _home_groups(solver, 0.5 * (low + high))
+    best, best_rank = None, None
+    for homes in groups:
+        trial = _best_home(solver, task, points, homes)
+        rank = (trial[0], _fits_episode(task, _travel_time(arm, task, trial[2], trial[3])))
+        if best_rank is None or rank > best_rank:
+            best, best_rank = trial, rank
+        if best_rank == (len(points), True):
+            break  # a home at this height reaches every target within the episode
+    return best
+
+
+def _best_home(solver: ToolDownSolver, task: TaskConfig, points: np.ndarray, homes: list):
+    """(reached, targets, home, poses, scale) of the first of ``homes`` that reaches the most
+    of ``points (m, 3)``."""
     best = None
     for q_home in homes:
         poses = solver.reach_from(q_home, points, tool_down=task.uses_contact)
@@ -169,21 +193,33 @@ def _try_scale(solver: ToolDownSolver, task: TaskConfig, home: np.ndarray | None
     return best
 
 
-def _homes(solver: ToolDownSolver, centre: np.ndarray) -> list[np.ndarray]:
-    """Tool-down homes over ``centre (2,)`` (x, y) at the first of :data:`HOME_HEIGHTS` that
-    has any (a small arm, or a long tool, may not hold the tool down higher up)."""
+def _home_groups(solver: ToolDownSolver, centre: np.ndarray) -> Iterator[list[np.ndarray]]:
+    """Tool-down homes over ``centre (2,)`` (x, y) at each of :data:`HOME_HEIGHTS` that has
+    any, highest first (a small arm, or a long tool, may not hold the tool down higher up);
+    each height is solved only when asked for."""
     for height in HOME_HEIGHTS:
         homes = solver.homes(np.array([*centre, height]))
         if homes:
-            return homes
-    return []
+            yield homes
+
+
+def _travel_time(arm: ArmInfo, task: TaskConfig, q_home: np.ndarray, poses: list) -> float:
+    """The slowest home-to-target motion (s) at the task's joint speeds: the largest
+    ``|q - q_home| / speed`` over the reached poses and the joints (0.0 where none)."""
+    speeds = task.joint_speeds(arm.v_max)
+    moves = [np.abs(p - q_home) / speeds for p in poses if p is not None]
+    return float(max(m.max() for m in moves)) if moves else 0.0
+
+
+def _fits_episode(task: TaskConfig, travel: float) -> bool:
+    """Whether an episode of the task's length lasts :data:`EPISODE_TIME_FACTOR` times a
+    motion of ``travel`` seconds."""
+    return math.ceil(EPISODE_TIME_FACTOR * travel / task.ctrl_dt) <= task.episode_steps
 
 
 def _finish(arm, task, solver, q_home, source, scale, reached, targets, poses) -> ArmSetup:
     """The setup from the chosen home and scale: travel time, episode length and notes."""
-    speeds = task.joint_speeds(arm.v_max)
-    moves = [np.abs(p - q_home) / speeds for p in poses if p is not None]
-    travel = float(max(m.max() for m in moves)) if moves else 0.0
+    travel = _travel_time(arm, task, q_home, poses)
     needed = math.ceil(EPISODE_TIME_FACTOR * travel / task.ctrl_dt)
     steps = max(task.episode_steps, needed)
     notes = []
