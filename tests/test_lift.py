@@ -159,6 +159,23 @@ def test_grasp_needs_the_cube_between_the_pads():
     assert measures["grasp"].tolist() == [1.0, 0.0]
 
 
+def test_cradle_pays_the_closure_only_with_the_cube_between_the_pads():
+    """``cradle`` is the closure while the cube's centre is within a half edge of the ee point:
+    fingers closing around the cube are paid, fingers closed on its top face (the ee point
+    3 cm above its centre) or far from it are not; it weighs in Lift's reward."""
+    task, cfg = lift_lib.LIFT, lift_config()
+    ee, quat = np.zeros((3, 3)), np.tile([1.0, 0.0, 0.0, 0.0], (3, 1))
+    grip = np.zeros((3, 10))
+    grip[:, 0] = [0.4, 1.0, 1.0]  # closure
+    grip[:, 4] = 1.0  # cube quaternion w
+    grip[0, 1:4] = [0.01, 0.0, 0.005]  # the cube between the pads, a little off centre
+    grip[1, 1:4] = [0.0, 0.0, -0.03]  # the cube under fingers closed on its top
+    grip[2, 1:4] = [0.2, 0.0, 0.0]  # far away
+    cradle = task.measures(np, ee, quat, grip, cfg)["cradle"]
+    np.testing.assert_allclose(cradle, [0.4, 0.0, 0.0], atol=1e-12)
+    assert cfg.reward.cradle > 0
+
+
 def test_soft_variant_charges_from_25_n_and_the_touchdown_speed():
     """``variant="soft"``: a 40 N wrist reading costs 0.6 of the band's top (gentle: nothing,
     its band ends at 50 N), ``approach_speed`` weighs -20; every other field is the preset's."""

@@ -101,10 +101,12 @@ def test_a_diverged_step_scores_only_its_penalty() -> None:
 
 
 def _extra(seed: int) -> dict[str, np.ndarray]:
-    """Lift's measures of the batch: heights below, at and above the lift, grasped or not."""
+    """Lift's measures of the batch: heights below, at and above the lift, grasped or not,
+    the fingers open, half closed or closed around the cube."""
     rng = np.random.default_rng(seed)
     height = rng.choice([0.0, 0.05, 0.1, 0.15], N) * rng.uniform(0.9, 1.1, N)
-    return {"height": height, "grasp": (rng.random(N) < 0.5) * 1.0}
+    cradle = rng.choice([0.0, 0.4, 1.0], N)
+    return {"height": height, "grasp": (rng.random(N) < 0.5) * 1.0, "cradle": cradle}
 
 
 def _one_by_one(xp, cfg, x, extra=None) -> list:

@@ -49,7 +49,11 @@ def _steps(rng: np.random.Generator, n: int, lift: bool):
             "force": float(rng.choice([0.0, 0.5, 10.0, 45.0, 70.0, 130.0])),
             "qpos": rng.uniform(-2.5, 3.5, 6).tolist(),
             "qvel": rng.normal(0.0, 1.0, 6).tolist(),
-            "measures": [float(rng.choice([0.0, 0.05, 0.1, 0.2])), float(rng.random() < 0.5)]
+            "measures": [
+                float(rng.choice([0.0, 0.05, 0.1, 0.2])),
+                float(rng.random() < 0.5),
+                float(rng.choice([0.0, 0.4, 1.0])),
+            ]
             if lift
             else [],
         }
@@ -72,7 +76,7 @@ def _steps(rng: np.random.Generator, n: int, lift: bool):
 def test_traced_rules_are_the_scalar_rules_bit_for_bit(make_cfg, diverged: bool) -> None:
     cfg = make_cfg()
     lift = cfg.task == "lift"
-    keys = ("height", "grasp") if lift else ()
+    keys = ("height", "grasp", "cradle") if lift else ()
     score = compile_score(cfg, 6, BAND, diverged, keys)
     for x in _steps(np.random.default_rng(7), 400, lift):
         extra = dict(zip(keys, x["measures"], strict=True)) or None

@@ -47,8 +47,9 @@ class RewardConfig:
     ``streak`` = how far a press inside the band has held on: 0 on a one-step tap, 1 once it
     has held ``success_hold_steps`` steps running (:func:`mjx_arm.task.reward.streak`),
     ``lift`` = how far a gripper task's object is up, as a fraction of the task's lift height
-    (0 to 1), ``grasp`` = 1 while both finger pads press the object (gripper tasks; see
-    :mod:`mjx_arm.task.lift`).
+    (0 to 1), ``grasp`` = 1 while both finger pads press the object, ``cradle`` = the
+    fingers' closure (0 open, 1 closed) while the object's centre sits between them (gripper
+    tasks; see :mod:`mjx_arm.task.lift`).
     """
 
     distance: float = -10.0
@@ -65,6 +66,7 @@ class RewardConfig:
     streak: float = 0.0
     lift: float = 0.0
     grasp: float = 0.0
+    cradle: float = 0.0
     distance_length: float = 0.1
     proximity_length: float = 0.01
     soft_limit: float = 0.95
@@ -90,6 +92,7 @@ REWARD_TERMS = (
     "streak",
     "lift",
     "grasp",
+    "cradle",
 )
 
 

@@ -18,6 +18,7 @@ import numpy as np
 
 from mjx_arm.task.config import REWARD_TERMS, TaskConfig
 from mjx_arm.task.registry import get_task
+from mjx_arm.task.spec import GRIP_TERMS
 
 
 class JointBand(NamedTuple):
@@ -260,7 +261,7 @@ def band_reward_terms(
         motion: the previous step's distance, the action change and the hold count (None: their
             terms are 0).
         extra: the task's measures (:meth:`mjx_arm.task.spec.Task.measures`; None: the
-            ``lift`` and ``grasp`` terms are 0).
+            ``lift``, ``grasp`` and ``cradle`` terms are 0).
 
     Returns:
         Dict term name -> float array, shape ``(...)``; keys are ``REWARD_TERMS``.
@@ -271,7 +272,7 @@ def band_reward_terms(
     contact, excess = task.contact_terms(xp, near, force_norm, cfg)
     closing, change, held = _motion_terms(xp, distance, cfg, motion)
     zero = 0.0 * distance
-    grip = task.task_terms(xp, extra, zero) if extra else {"lift": zero, "grasp": zero}
+    grip = task.task_terms(xp, extra, zero) if extra else dict.fromkeys(GRIP_TERMS, zero)
     terms = {
         "distance": 1.0 - xp.exp(-distance / cfg.reward.distance_length),
         "contact": contact,
@@ -287,6 +288,7 @@ def band_reward_terms(
         "streak": held,
         "lift": grip["lift"],
         "grasp": grip["grasp"],
+        "cradle": grip["cradle"],
     }
     return terms
 

@@ -26,6 +26,9 @@ SCENES = (
 )  # what the converter can build around the arm (mjx_arm.urdf.scene)
 
 
+GRIP_TERMS = ("lift", "grasp", "cradle")  # the reward terms of a gripper task's measures
+
+
 class Task:
     """One task of the contract.
 
@@ -87,9 +90,9 @@ class Task:
         return {}
 
     def task_terms(self, xp: Any, extra: dict[str, Any], zero) -> dict[str, Any]:
-        """The raw ``lift`` and ``grasp`` reward terms from :meth:`measures`, each ``(...)``
-        (``zero``: a zero array of the batch shape)."""
-        return {"lift": zero, "grasp": zero}
+        """The raw ``lift``, ``grasp`` and ``cradle`` reward terms from :meth:`measures`, each
+        ``(...)`` (``zero``: a zero array of the batch shape)."""
+        return dict.fromkeys(GRIP_TERMS, zero)
 
     def holds(self, xp: Any, distance, force_norm, cfg: TaskConfig, extra=None):
         """The success condition of one step (bool ``(...)``): the ee within
