@@ -15,6 +15,7 @@
 #   bash benchmarks/gpu_suite.sh coldseed     # one Touch seed with every cache empty
 #   bash benchmarks/gpu_suite.sh transfer     # MJX rows of the transfer matrix, seeds' policies
 #   bash benchmarks/gpu_suite.sh arms         # published arms with no arm file, over seeds
+#   bash benchmarks/gpu_suite.sh jobs         # one seeds run per ARM:TASK:SEED item of JOBS
 #
 # Results go to $OUT (default: benchmarks/results/gpu); the trained policies are exported to
 # $OUT/policies as .npz. Single-GPU stages use GPU 0 only.
@@ -166,6 +167,30 @@ arms)
       while [ "$(jobs -rp | wc -l)" -ge "${PARALLEL:-1}" ]; do sleep 1; done
       arm_task "$urdf" "$task" &
     done
+  done
+  wait
+  ;;
+jobs)
+  # The fast preset as shipped, one process per item "ARM:TASK:SEED" of JOBS (ARM: a URDF path
+  # under ROBOTS, or "shipped" for the task's shipped arm), PARALLEL processes at once on the
+  # one GPU, each stopped after RUN_LIMIT s. The file names carry _xPARALLEL.
+  export ROS_PACKAGE_PATH="${ROBOTS:-/tmp/robots}"
+  tag="_x${PARALLEL:-1}"
+  export XLA_PYTHON_CLIENT_MEM_FRACTION="0.$(printf %02d $((60 / ${PARALLEL:-1})))"
+  seed_job() {
+    local arm="${1%%:*}" rest="${1#*:}" task seed name args=()
+    task="${rest%%:*}"; seed="${rest#*:}"
+    name=$(basename "$arm" .urdf)
+    [ "$arm" = shipped ] || args=(--arm "$ROBOTS/$arm")
+    one_gpu timeout "${RUN_LIMIT:-580}" python3 -m mjx_arm.cli bench seeds --task "$task" \
+      --preset fast --seeds "$seed" "${args[@]}" --name "seeds_${task}_fast_${name}${tag}_seed$seed" \
+      --runs "$OUT/runs_${name}_${task}_$seed" --out "$OUT" \
+      > "$OUT/log_${name}_${task}_seed$seed.txt" 2>&1
+    export_runs "$OUT/runs_${name}_${task}_$seed" "${name}_${task}"
+  }
+  for item in ${JOBS:?ARM:TASK:SEED items}; do
+    while [ "$(jobs -rp | wc -l)" -ge "${PARALLEL:-1}" ]; do sleep 1; done
+    seed_job "$item" &
   done
   wait
   ;;
