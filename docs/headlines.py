@@ -144,8 +144,9 @@ def _cold_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
 ANY_ARM_SUMMARIES = (
     "arms/any_arm/final_2e708e5/summary.json",
     "arms/any_arm/z1_1192947/summary.json",
+    "arms/any_arm/cradle_40576be/summary.json",
 )
-LIFT_SUMMARY = "lift/seeds_eddd3fb/summary.json"
+LIFT_SUMMARY = "lift/seeds_40576be/summary.json"
 TOUCH_TRANSFER = [f"contact/transfer/touch_fast_seed{i}.json" for i in range(3)]
 LIFT_TRANSFER = [f"contact/transfer/lift_seed{i}.json" for i in range(5)]
 HEADLINES: tuple[Headline, ...] = (
