@@ -6,9 +6,11 @@ The values of :func:`mjx_arm.task.observation.raw_state` and
 :func:`~mjx_arm.task.reward.contact_force_norm`, for one env at a time (the CPU envs).
 On vectors of 3 to 30 entries numpy's cost per call (a few microseconds once a physics step
 has filled the caches with its own data) was most of an env step; a float operation costs tens
-of nanoseconds. The operations are the same IEEE ones in the same order: a quaternion divided
-by its norm carrying the sign of ``w``, sums of squares added left to right (as numpy's dot adds
-a short vector; the tests compare the two), clipping by comparison. One array is built at the
+of nanoseconds. The operations are the same IEEE ones: a quaternion divided by its norm
+carrying the sign of ``w``, sums of squares added left to right, clipping by comparison. numpy
+adds a short vector's squares in the order of the CPU's vector unit (left to right on AVX2;
+on AVX-512 the norm can end 2 ulp away), so the quaternion agrees with numpy's within a few
+ulp and everything else exactly (the tests say how closely). One array is built at the
 end: the observation.
 """
 
