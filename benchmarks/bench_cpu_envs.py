@@ -428,6 +428,21 @@ def vector_overhead(repeats: int) -> dict[str, Any]:
     return out
 
 
+def async_break_even(overhead: dict[str, Any], goal: float = ASYNC_GOAL) -> dict[str, float]:
+    """The least env step (microseconds) at which async can be ``goal`` times sync, per info
+    row of :func:`vector_overhead`.
+
+    With ``N`` workers on ``N`` free cores, a sync vector step takes ``N s + o_sync`` and an
+    async one at best ``s + o_async`` (the workers step at once), so async / sync >= ``goal``
+    needs ``s >= (goal o_async - o_sync) / (N - goal)``.
+    """
+    out = {}
+    for info, r in overhead.items():
+        o_sync, o_async = r["sync"]["median"], r["async"]["median"]
+        out[info] = (goal * o_async - o_sync) / (VEC_ENVS - goal)
+    return out
+
+
 # --------------------------------------------------------------------------- memory
 
 
@@ -591,6 +606,7 @@ def run(repeats: int, vec_repeats: int, label: str | None = None) -> dict[str, A
         "make_vec": {"num_envs": VEC_ENVS, "vector_steps_per_repeat": VEC_STEPS, **vectors},
         "make_vec_scaling_touch_mujoco": scaling,
         "make_vec_overhead_us": overhead,
+        "async_goal_least_step_us": async_break_even(overhead),
         "rss_mb_touch": memory,
     }
 
@@ -786,6 +802,17 @@ def table(payload: dict[str, Any]) -> str:
             "an empty one:\n\n"
         )
         text += overhead_table(payload)
+        least = payload.get("async_goal_least_step_us") or async_break_even(
+            payload["make_vec_overhead_us"]
+        )
+        steps = [r["step_breakdown_us"]["step total"] for r in payload["cases"].values()]
+        text += (
+            f"\nAsync with {VEC_ENVS} workers reaches {ASYNC_GOAL} x sync only where one env "
+            f"step takes at least {least['no_info']:,.0f} us with an empty info "
+            f"({least['touch_info']:,.0f} us with Touch's), even with every worker on a core "
+            f"of its own (`async_break_even`); these envs' steps take {min(steps):.0f}-"
+            f"{max(steps):.0f} us.\n"
+        )
     parts = {name: r["step_breakdown_us"] for name, r in payload["cases"].items()}
     names = list(next(iter(parts.values())))
     text += "\nWhere a control step's time goes (microseconds per step, over real episodes):\n\n"
