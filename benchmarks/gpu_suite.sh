@@ -172,8 +172,9 @@ arms)
   ;;
 jobs)
   # The fast preset as shipped, one process per item "ARM:TASK:SEED" of JOBS (ARM: a URDF path
-  # under ROBOTS, or "shipped" for the task's shipped arm), PARALLEL processes at once on the
-  # one GPU, each stopped after RUN_LIMIT s. The file names carry _xPARALLEL.
+  # under ROBOTS, or "shipped" for the task's shipped arm; SEED one seed or several joined by
+  # "+", run one after another in the process), PARALLEL processes at once on the one GPU,
+  # each stopped after RUN_LIMIT s. The file names carry _xPARALLEL.
   export ROS_PACKAGE_PATH="${ROBOTS:-/tmp/robots}"
   tag="_x${PARALLEL:-1}"
   export XLA_PYTHON_CLIENT_MEM_FRACTION="0.$(printf %02d $((60 / ${PARALLEL:-1})))"
@@ -183,7 +184,8 @@ jobs)
     name=$(basename "$arm" .urdf)
     [ "$arm" = shipped ] || args=(--arm "$ROBOTS/$arm")
     one_gpu timeout "${RUN_LIMIT:-580}" python3 -m mjx_arm.cli bench seeds --task "$task" \
-      --preset fast --seeds "$seed" "${args[@]}" --name "seeds_${task}_fast_${name}${tag}_seed$seed" \
+      --preset fast --seeds ${seed//+/ } "${args[@]}" \
+      --name "seeds_${task}_fast_${name}${tag}_seed${seed//+/_}" \
       --runs "$OUT/runs_${name}_${task}_$seed" --out "$OUT" \
       > "$OUT/log_${name}_${task}_seed$seed.txt" 2>&1
     export_runs "$OUT/runs_${name}_${task}_$seed" "${name}_${task}"
