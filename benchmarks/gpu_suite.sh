@@ -184,7 +184,7 @@ jobs)
     name=$(basename "$arm" .urdf)
     [ "$arm" = shipped ] || args=(--arm "$ROBOTS/$arm")
     one_gpu timeout "${RUN_LIMIT:-580}" python3 -m mjx_arm.cli bench seeds --task "$task" \
-      --preset fast --seeds ${seed//+/ } "${args[@]}" \
+      --preset fast --seeds "${seed//+/,}" "${args[@]}" \
       --name "seeds_${task}_fast_${name}${tag}_seed${seed//+/_}" \
       --runs "$OUT/runs_${name}_${task}_$seed" --out "$OUT" \
       > "$OUT/log_${name}_${task}_seed$seed.txt" 2>&1
