@@ -145,6 +145,7 @@ ANY_ARM_SUMMARIES = (
     "arms/any_arm/final_2e708e5/summary.json",
     "arms/any_arm/z1_1192947/summary.json",
     "arms/any_arm/cradle_40576be/summary.json",
+    "arms/any_arm/variants_8b146b9/summary.json",
 )
 LIFT_SUMMARY = "lift/seeds_40576be/summary.json"
 TOUCH_TRANSFER = [f"contact/transfer/touch_fast_seed{i}.json" for i in range(3)]
