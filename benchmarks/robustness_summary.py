@@ -17,13 +17,22 @@ from mjx_arm.bench.results import markdown_table, save_results
 FOLDER = Path("benchmarks/results/robustness")
 
 
+def policy_label(path: Path) -> str:
+    """A policy file's name, with the folder of its run where it sits in a ``policies/``
+    folder (``seeds_40576be/shipped_lift_lift-fast-seed0.npz``): runs of several code versions
+    export files of the same name."""
+    if path.parent.name == "policies":
+        return f"{path.parent.parent.name}/{path.name}"
+    return path.name
+
+
 def policy_row(result: dict) -> dict:
     """One policy's figures from its saved result."""
     summary = result["summary"]
     pool = summary["nominal_pooled"]
     joint = next(r for r in result["rows"] if r["perturbation"] == "joint draw")
     return {
-        "policy": Path(result["policy"]).name,
+        "policy": policy_label(Path(result["policy"])),
         "task": result["task"],
         "episodes_per_point": result["config"]["episodes"],
         "nominal_pooled": pool["success_rate"],

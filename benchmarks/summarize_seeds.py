@@ -56,10 +56,14 @@ def transfer_rows(folder: Path) -> dict[tuple[str, str, str, int], dict[str, Any
     found: dict[tuple[str, str, str, int], dict[str, Any]] = {}
     for path in sorted((folder / "transfer").glob("*.json")):
         data = json.loads(path.read_text())
-        match = POLICY_NAME.search(Path(data["policy"]).stem)
-        if match is None or not Path(data["policy"]).is_file():
+        policy = Path(data["policy"])
+        match = POLICY_NAME.search(policy.stem)
+        # the folder's own copy first: the recorded path is where the policy was when its
+        # transfer ran (a folder renamed since leaves it dangling)
+        policy = next((p for p in (folder / "policies" / policy.name, policy) if p.is_file()), None)
+        if match is None or policy is None:
             continue
-        arm = arm_name(load(data["policy"]).metadata["arm"])
+        arm = arm_name(load(policy).metadata["arm"])
         engines = {
             row["engine"]: (row["success_rate"], row["mean_peak_contact_force"])
             for row in data["rows"]
