@@ -284,6 +284,25 @@ def test_verdicts_of_published_arms() -> None:
 
 
 @published
+def test_a_tool_that_straddles_the_box_cannot_touch() -> None:
+    """The UR3 gripper URDF's finger blocks (6 cm apart) straddle the 5 cm box at one turn and
+    land on it at another: where the tool meets the box moves 4.75 cm along its axis (more than
+    the 1 cm the check allows), so Touch is refused with that reason and Reach stays open. A
+    tool with a face moves its contact by 3 mm or less (UR10, Panda, Z1)."""
+    gripper = arm_info(ArmConfig(urdf=str(UR3.with_name("ur3_gripper.urdf"))))
+    setup = arm_setup(gripper, task_config("touch"))
+    assert setup.contact_spread == pytest.approx(0.0475, abs=0.002)
+    ok, reason = task_verdict(gripper, task_config("touch"))
+    assert not ok and "straddle the box" in reason and "4.8 cm" in reason
+    assert task_verdict(gripper, task_config("reach"))[0]
+    for urdf in (UR10, PANDA, Z1):
+        assert (
+            arm_setup(arm_info(ArmConfig(urdf=str(urdf))), task_config("touch")).contact_spread
+            < 0.003
+        )
+
+
+@published
 @pytest.mark.parametrize("engine", ["mujoco", "pybullet"])
 def test_a_gripper_that_closes_towards_zero_starts_open_and_closes_on_command(engine) -> None:
     """The Panda's fingers close towards their lower limit (0): Lift on its own hand starts

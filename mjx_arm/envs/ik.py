@@ -28,6 +28,7 @@ PENETRATION = 1e-3  # m: a contact deeper than this is a collision
 TARGET_TILT = np.radians(15.0)  # a task target counts as reached tool-down within this tilt
 COLLISION_GROUP = 3  # the converter's group of collision shapes
 RAY_START = 0.5  # m: rays for the tool's surface start this far out along the tool axis
+PROTRUSION_TURNS = 6  # turns of the pressed square about the tool axis (over a quarter turn)
 # Converged: within 1 mm of the point, the tool within 1 degree of vertical.
 POSITION_TOL = 1e-3
 TILT_TOL = np.radians(1.0)
@@ -280,7 +281,7 @@ class ToolDownSolver:
             reach = max(reach, float(((corners - ee) @ axis).max()))
         return reach
 
-    def tool_protrusion(self, q: np.ndarray, half_width: float) -> float | None:
+    def tool_protrusion(self, q: np.ndarray, half_width: float, turn: float = 0.0) -> float | None:
         """Where the tool meets a flat surface pressed square against it: how far (m) its
         collision shapes within ``half_width`` of the tool axis (a square across it) reach
         past the ee point along the tool axis, at ``q (n,)``. Negative where they stay behind
@@ -288,10 +289,13 @@ class ToolDownSolver:
 
         Rays (5 x 5 over the square) come back along the tool axis from half a metre out and
         stop at the first collision shape of the arm (MuJoCo's ``mj_ray`` over group 3).
+        ``turn`` (rad) turns the square about the axis.
         """
         model, data = self.ik.model, self.ik.data
         ee, axis = self.ik.pose(q)
         across = np.linalg.svd(axis[None, :])[2][1:]  # two unit vectors across the axis
+        c, s = math.cos(turn), math.sin(turn)
+        across = np.array([c * across[0] + s * across[1], c * across[1] - s * across[0]])
         wrist = int(model.jnt_bodyid[model.joint(self.last_joint).id])
         groups = np.zeros(6, np.uint8)
         groups[COLLISION_GROUP] = 1
@@ -306,6 +310,17 @@ class ToolDownSolver:
                 reach = RAY_START - dist
                 best = reach if best is None else max(best, reach)
         return best
+
+    def protrusion_spread(self, q: np.ndarray, half_width: float) -> float:
+        """How much (m) :meth:`tool_protrusion` changes as the square turns about the tool axis
+        (:data:`PROTRUSION_TURNS` turns over a quarter turn, the square's symmetry), at
+        ``q (n,)``: near zero for a tool whose face meets the box alike at any turn, several
+        centimetres for shapes beside the axis that straddle the box at one turn and land on
+        it at another. 0 where no turn finds a shape."""
+        turns = np.linspace(0.0, math.pi / 2, PROTRUSION_TURNS, endpoint=False)
+        found = [self.tool_protrusion(q, half_width, float(t)) for t in turns]
+        found = [reach for reach in found if reach is not None]
+        return max(found) - min(found) if found else 0.0
 
     def homes(self, point: np.ndarray) -> list[np.ndarray]:
         """Distinct collision-free tool-down poses at ``point (3,)`` from seeded starts (the

@@ -69,6 +69,8 @@ class ArmSetup:
             tool axis (m), anywhere.
         contact_offset: how far past the ee point the tool meets the Touch box's top face
             pressed square against it (m; negative: behind it; None: no shape on the axis).
+        contact_spread: how much that changes as the box turns about the tool axis (m):
+            shapes beside the axis that straddle the box at one turn and land on it at another.
         notes: what the derivation had to do or could not do, one line each.
     """
 
@@ -84,6 +86,7 @@ class ArmSetup:
     manipulability: float
     tool_reach: float = 0.0
     contact_offset: float | None = 0.0
+    contact_spread: float = 0.0
     notes: tuple[str, ...] = field(default=())
 
     @property
@@ -252,6 +255,7 @@ def _finish(arm, task, solver, q_home, source, scale, reached, targets, poses) -
         manipulability=solver.ik.manipulability(q_home),
         tool_reach=solver.tool_reach(q_home),
         contact_offset=solver.tool_protrusion(q_home, box_half_width()),
+        contact_spread=solver.protrusion_spread(q_home, box_half_width()),
         notes=tuple(notes),
     )
 
@@ -274,11 +278,16 @@ def _unreachable(arm, task, solver, scale, home, source) -> ArmSetup:
         manipulability=solver.ik.manipulability(q),
         tool_reach=solver.tool_reach(q),
         contact_offset=solver.tool_protrusion(q, box_half_width()),
+        contact_spread=solver.protrusion_spread(q, box_half_width()),
         notes=("no tool-down pose over the task area: the arm cannot reach it tool-down",),
     )
 
 
 MAX_EPISODE_SECONDS = 15.0  # an arm that needs a longer episode is too slow for the task
+# m: the most the tool's contact with the box top may move along its axis as the box turns
+# about it (the published arms with a tool face: 3 mm or less; the finger blocks of the UR
+# gripper URDFs, which straddle the box: 4.75 cm)
+CONTACT_SPREAD = 0.01
 CUBE_CLEARANCE = 0.01  # m: the gripper opens at least this much wider than the cube
 
 
@@ -320,6 +329,12 @@ def press_problem(setup: ArmSetup, task: TaskConfig) -> str:
         return (
             f"the tool meets the box {abs(contact) * 100:.1f} cm from the ee point, beyond the "
             f"{task.success_distance * 100:.0f} cm success radius: set ee_offset in an arm file"
+        )
+    if setup.contact_spread > CONTACT_SPREAD:
+        return (
+            f"where the tool meets the box moves {setup.contact_spread * 100:.1f} cm along its "
+            "axis as the box turns about it (shapes beside the axis straddle the box at one "
+            "turn and land on it at another): a press's depth depends on the turn"
         )
     depth = setup.tool_reach - contact
     if depth >= box_top_offset():
