@@ -311,16 +311,17 @@ class ToolDownSolver:
                 best = reach if best is None else max(best, reach)
         return best
 
-    def protrusion_spread(self, q: np.ndarray, half_width: float) -> float:
-        """How much (m) :meth:`tool_protrusion` changes as the square turns about the tool axis
-        (:data:`PROTRUSION_TURNS` turns over a quarter turn, the square's symmetry), at
-        ``q (n,)``: near zero for a tool whose face meets the box alike at any turn, several
-        centimetres for shapes beside the axis that straddle the box at one turn and land on
-        it at another. 0 where no turn finds a shape."""
+    def tool_contact(self, q: np.ndarray, half_width: float) -> tuple[float | None, float]:
+        """:meth:`tool_protrusion` of the unturned square at ``q (n,)``, and its spread (m):
+        how much it changes as the square turns about the tool axis (:data:`PROTRUSION_TURNS`
+        turns over a quarter turn, the square's symmetry). The spread is near zero for a tool
+        whose face meets the box alike at any turn, several centimetres for shapes beside the
+        axis that straddle the box at one turn and land on it at another; 0 where no turn
+        finds a shape."""
         turns = np.linspace(0.0, math.pi / 2, PROTRUSION_TURNS, endpoint=False)
-        found = [self.tool_protrusion(q, half_width, float(t)) for t in turns]
-        found = [reach for reach in found if reach is not None]
-        return max(found) - min(found) if found else 0.0
+        reaches = [self.tool_protrusion(q, half_width, float(t)) for t in turns]
+        found = [reach for reach in reaches if reach is not None]
+        return reaches[0], (max(found) - min(found) if found else 0.0)
 
     def homes(self, point: np.ndarray) -> list[np.ndarray]:
         """Distinct collision-free tool-down poses at ``point (3,)`` from seeded starts (the

@@ -254,8 +254,7 @@ def _finish(arm, task, solver, q_home, source, scale, reached, targets, poses) -
         episode_steps=steps,
         manipulability=solver.ik.manipulability(q_home),
         tool_reach=solver.tool_reach(q_home),
-        contact_offset=solver.tool_protrusion(q_home, box_half_width()),
-        contact_spread=solver.protrusion_spread(q_home, box_half_width()),
+        **_contact(solver, q_home),
         notes=tuple(notes),
     )
 
@@ -277,10 +276,15 @@ def _unreachable(arm, task, solver, scale, home, source) -> ArmSetup:
         episode_steps=task.episode_steps,
         manipulability=solver.ik.manipulability(q),
         tool_reach=solver.tool_reach(q),
-        contact_offset=solver.tool_protrusion(q, box_half_width()),
-        contact_spread=solver.protrusion_spread(q, box_half_width()),
+        **_contact(solver, q),
         notes=("no tool-down pose over the task area: the arm cannot reach it tool-down",),
     )
+
+
+def _contact(solver, q: np.ndarray) -> dict[str, float | None]:
+    """The ``contact_offset`` and ``contact_spread`` of an :class:`ArmSetup` at ``q (n,)``."""
+    offset, spread = solver.tool_contact(q, box_half_width())
+    return {"contact_offset": offset, "contact_spread": spread}
 
 
 MAX_EPISODE_SECONDS = 15.0  # an arm that needs a longer episode is too slow for the task
