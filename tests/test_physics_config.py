@@ -30,21 +30,12 @@ def test_round_trip_and_unknown_keys():
         PhysicsConfig.from_dict({"threads": 4})
 
 
-def test_precompile_does_nothing_without_threads_or_gpu():
-    """0 threads never compiles; on a machine without a GPU nothing is compiled either."""
-    assert warp_compile.precompile(0) == 0.0
+def test_precompile_does_nothing_without_threads_devices_or_loads():
+    """0 threads never compiles, nor do empty loads; on a machine without a GPU the default
+    devices are none, so nothing is compiled either."""
+    assert warp_compile.precompile(0, {1: ["a module"]}, ["cpu"]) == 0.0
+    assert warp_compile.precompile(8, {}, ["cpu"]) == 0.0
+    assert warp_compile.start_precompile(0, {1: ["a module"]}) is None
     if jax.default_backend() == "cpu":
-        assert warp_compile.precompile(8) == 0.0
-
-
-def test_step_modules_are_files_of_mujoco_warp():
-    """Every listed module is one of MuJoCo Warp's source files in the installed mujoco-mjx
-    (found on disk: importing them needs warp-lang)."""
-    from pathlib import Path
-
-    from mujoco import mjx
-
-    root = Path(mjx.__file__).parent.parent.parent  # site-packages
-    folder = root.joinpath(*warp_compile.PACKAGE.split("."))
-    for name in warp_compile.STEP_MODULES:
-        assert (folder / f"{name}.py").is_file(), name
+        assert warp_compile.precompile(8, {1: ["a module"]}) == 0.0
+        assert warp_compile.start_precompile(8, {1: ["a module"]}) is None

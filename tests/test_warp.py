@@ -107,17 +107,31 @@ def test_overflow_is_an_error_not_a_silent_drop():
             env.step(down)
 
 
-def test_precompile_list_is_what_a_step_loads():
-    """Each module :data:`STEP_MODULES` names is loaded once the Touch env has stepped, so the
-    precompile compiles nothing the step does not use; on a GPU it ran before the first step."""
+def test_the_step_compiles_nothing_the_precompile_missed():
+    """:func:`step_loads` finds every module the Touch env's reset and step load, without
+    compiling any: after the precompile, stepping loads no new module and no new block size.
+    On a GPU the env ran the precompile itself before the first step."""
     from mjx_arm.envs import warp_compile
     from mjx_arm.envs.backend import make_batched_env
+    from mjx_arm.envs.mjx_physics import warp_compatible
     from mjx_arm.task import touch_config
 
     env = make_batched_env(touch_config(), "mjx", WARP, 2)
+    physics = env.physics
+    device = (warp_compile.cuda_devices() or ["cpu"])[0]
+    before = warp_compile.loaded_modules()
+    model = warp_compatible(physics.mj_model)
+    buffers = physics.buffers
+    loads = warp_compile.step_loads(model, buffers["naconmax"], buffers["njmax"], device)
+    assert warp_compile.loaded_modules() == before  # noting loads compiled nothing
+    generated = [m.name for ms in loads.values() for m in ms if "__locals__" in m.name]
+    assert len(generated) >= 20, generated  # MuJoCo Warp's per-model kernels (27 measured)
+    warp_compile.precompile(2, loads, [device])
+    precompiled = warp_compile.loaded_modules()
     state = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(0), 2))
     jax.block_until_ready(jax.jit(jax.vmap(env.step))(state, jnp.zeros((2, 6))))
-    loaded = warp_compile.loaded_modules()
-    assert set(warp_compile.STEP_MODULES) <= set(loaded), sorted(loaded)
+    after = warp_compile.loaded_modules()
+    new = {name: dims for name, dims in after.items() if precompiled.get(name) != dims}
+    assert set(new) <= {"mujoco.mjx.warp.ffi"}, new  # the FFI shim holds no kernel
     if jax.default_backend() != "cpu":
-        assert env.physics.precompile_seconds > 0.0
+        assert physics.precompile_seconds > 0.0

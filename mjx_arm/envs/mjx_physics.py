@@ -192,10 +192,14 @@ class MjxPhysics:
         opt_impl = model.opt._impl.replace(warn_overflow=0)
         model = model.replace(opt=model.opt.replace(_impl=opt_impl))
         data = mjx.make_data(mj_model, impl="warp", naconmax=per_env * self.batch_size, njmax=njmax)
-        if self._background:
-            self._precompile = warp_compile.start_precompile(self.config.compile_threads)
-        else:
-            self.precompile_seconds = warp_compile.precompile(self.config.compile_threads)
+        threads = self.config.compile_threads
+        devices = warp_compile.cuda_devices() if threads else []
+        if devices:
+            loads = warp_compile.step_loads(mj_model, per_env * self.batch_size, njmax, devices[0])
+            if self._background:
+                self._precompile = warp_compile.start_precompile(threads, loads)
+            else:
+                self.precompile_seconds = warp_compile.precompile(threads, loads, devices)
         return model, data
 
     def wait_precompiled(self) -> dict[str, float]:

@@ -1,42 +1,39 @@
-"""Compile MuJoCo Warp's kernels in parallel before the first physics step.
+"""Compile the MuJoCo Warp kernels a task model steps with, all at once, before its first step.
 
-Warp compiles a module (a Python file's kernels, or one generated kernel) the first time one of
-its kernels launches, one module after another. Under MJX that happens inside the first call of
-the step, so a cold start compiles some twenty modules in a row. :func:`precompile` compiles the
-modules that stepping the task model launches on a thread pool first; the step then finds them
-in Warp's kernel cache. Kernels that MuJoCo Warp generates for a given model while it steps
-(modules with a hashed name) are still compiled on first use. Training starts the compiles
-on a background thread (:func:`start_precompile`) so that they run while the XLA programs
-trace and compile.
+Warp compiles a module the first time one of its kernels launches, one module after another.
+MuJoCo Warp generates most of its kernels for the model at hand (one module per kernel, named
+with a hash of its code: collision, constraint and solver kernels sized to the model), so under
+MJX a cold start compiled some thirty modules in a row inside the first physics call, and an arm
+with mesh collisions spent most of its start there (its convex-collision kernels are the
+largest).
 
-:data:`STEP_MODULES` lists the modules, found by stepping the task models with an empty kernel
-cache and reading which modules hold a loaded binary (``benchmarks/bench_cold_start.py``
-records that list per start): the same eight for Reach and Touch. Collision detection runs in
-generated kernels only, so the collision files are not listed. A module missing from the
-installed MuJoCo Warp is skipped.
+:func:`step_loads` finds those modules without compiling anything: it runs MuJoCo Warp's
+``forward`` and ``step`` once in Python on the model built as MJX builds it, with Warp's module
+loader swapped for one that notes the module and its block size and loads nothing (a launch
+whose module did not load returns without running). Conditional graph nodes take both branches
+and loops one pass, so every kernel the step can launch is noted. :func:`precompile` then
+compiles the noted modules on a thread pool (NVRTC runs outside Python's lock), and the first
+step finds them loaded. Training starts the compiles on a background thread
+(:func:`start_precompile`) so that they run while the XLA programs trace and compile.
 """
 
 from __future__ import annotations
 
+import contextlib
 import time
+from collections.abc import Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any
 
+import mujoco
+
 PACKAGE = "mujoco.mjx.third_party.mujoco_warp._src"
 
-STEP_MODULES: tuple[str, ...] = (
-    "constraint",
-    "derivative",
-    "forward",
-    "passive",
-    "sensor",
-    "smooth",
-    "solver",
-    "support",
-)
+# block size -> the modules to build at it
+Loads = dict[int, list[Any]]
 
 
-def _cuda_devices() -> list[Any]:
+def cuda_devices() -> list[Any]:
     """Warp's CUDA devices that JAX uses (every local GPU); empty without a GPU, where Warp is
     not imported."""
     import jax
@@ -49,41 +46,102 @@ def _cuda_devices() -> list[Any]:
     return [wp.device_from_jax(d) for d in gpus]
 
 
-def precompile(threads: int, names: tuple[str, ...] = STEP_MODULES) -> float:
-    """Compile and load the named MuJoCo Warp modules on every local GPU, ``threads`` at once.
+@contextlib.contextmanager
+def _noting_loads(noted: set[tuple[Any, int]]) -> Iterator[None]:
+    """Within the block, Warp loads no module: each load is noted as (module, block size) and
+    returns nothing, so launches return without running. Conditional graph nodes run both of
+    their bodies and loops one pass, and occupancy queries answer (256, 1)."""
+    import warp as wp
+    from warp._src import context
+
+    saved = (context.Module.load, wp.get_suggested_block_size, wp.capture_if, wp.capture_while)
+
+    def load(module: Any, device: Any, block_dim: int | None = None, *_: Any, **__: Any) -> None:
+        noted.add((module, int(block_dim or module.options.get("block_dim", 256))))
+
+    def suggested_block_size(kernel: Any, device: Any = None) -> tuple[int, int]:
+        load(kernel.module, device)
+        return 256, 1
+
+    def capture_if(condition: Any, on_true: Any = None, on_false: Any = None, **kwargs: Any):
+        for body in (on_true, on_false):
+            if callable(body):
+                body(**kwargs)
+
+    def capture_while(condition: Any, while_body: Any, stream: Any = None, **kwargs: Any):
+        while_body(**kwargs)
+
+    context.Module.load = load
+    wp.get_suggested_block_size = suggested_block_size
+    wp.capture_if, wp.capture_while = capture_if, capture_while
+    try:
+        yield
+    finally:
+        context.Module.load, wp.get_suggested_block_size, wp.capture_if, wp.capture_while = saved
+
+
+def step_loads(mj_model: mujoco.MjModel, naconmax: int, njmax: int, device: Any) -> Loads:
+    """The Warp modules that ``mjx.forward`` and ``mjx.step`` of ``mj_model`` launch on
+    ``device``, found without compiling any (about a second).
+
+    Args:
+        mj_model: the model as handed to ``mjx.put_model(impl="warp")``.
+        naconmax: contacts of the batch's shared pool; njmax: constraint rows per env.
+        device: the Warp device the step will run on (its kind picks some kernels).
+
+    Returns:
+        Block size -> the modules launched at it, already loaded ones included.
+    """
+    import warp as wp
+    from mujoco.mjx.third_party import mujoco_warp as mjw
+
+    with wp.ScopedDevice("cpu"):  # as mjx.put_model and mjx.make_data build them
+        model = mjw.put_model(mj_model)
+        data = mjw.make_data(mj_model, nworld=1, naconmax=naconmax, njmax=njmax)
+    model.opt.warn_overflow = 0  # as MjxPhysics sets it: the flag is compiled into kernels
+    noted: set[tuple[Any, int]] = set()
+    with wp.ScopedDevice(device), _noting_loads(noted):
+        mjw.forward(model, data)
+        mjw.step(model, data)
+    loads: Loads = {}
+    for module, block_dim in sorted(noted, key=lambda item: (item[1], item[0].name)):
+        loads.setdefault(block_dim, []).append(module)
+    return loads
+
+
+def precompile(threads: int, loads: Loads, devices: list[Any] | None = None) -> float:
+    """Compile and load ``loads`` on ``devices`` (default: every local GPU), ``threads`` at once.
 
     Args:
         threads: worker threads; 0 does nothing (modules compile on first use).
-        names: module names relative to MuJoCo Warp's ``_src`` package.
+        loads: from :func:`step_loads`.
+        devices: Warp devices; None takes :func:`cuda_devices`.
 
     Returns:
-        Seconds spent (0.0 when skipped: no threads, no GPU or no module found).
+        Seconds spent (0.0 when skipped: no threads, no device or nothing to load).
     """
-    devices = _cuda_devices() if threads > 0 else []
-    if not devices:
+    devices = (cuda_devices() if devices is None else devices) if threads > 0 else []
+    if not devices or not loads:
         return 0.0
     import warp as wp
-    from warp._src.context import user_modules  # Warp's registry of imported modules
 
-    modules = [user_modules[f"{PACKAGE}.{n}"] for n in names if f"{PACKAGE}.{n}" in user_modules]
-    if not modules:
-        return 0.0
     start = time.perf_counter()
-    wp.force_load(device=devices, modules=modules, max_workers=threads)
+    for block_dim, modules in loads.items():
+        wp.force_load(device=devices, modules=modules, block_dim=block_dim, max_workers=threads)
     return time.perf_counter() - start
 
 
-def start_precompile(threads: int, names: tuple[str, ...] = STEP_MODULES) -> Future | None:
+def start_precompile(threads: int, loads: Loads) -> Future | None:
     """:func:`precompile` on a background thread, so that the XLA programs trace and compile
-    meanwhile; None where there is nothing to compile (no threads, no GPU).
+    meanwhile; None where there is nothing to compile (no threads, no GPU, no loads).
 
     The future's result is the seconds the compiles took. Call ``result()`` before the first
     physics step runs (:meth:`mjx_arm.envs.mjx_physics.MjxPhysics.wait_precompiled`).
     """
-    if threads <= 0 or not _cuda_devices():
+    if threads <= 0 or not loads or not cuda_devices():
         return None
     pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="warp-precompile")
-    future = pool.submit(precompile, threads, names)
+    future = pool.submit(precompile, threads, loads)
     pool.shutdown(wait=False)
     return future
 
