@@ -195,7 +195,8 @@ class MjxPhysics:
         threads = self.config.compile_threads
         devices = warp_compile.cuda_devices() if threads else []
         if devices:
-            loads = warp_compile.step_loads(mj_model, per_env * self.batch_size, njmax, devices[0])
+            naconmax = per_env * self.batch_size
+            loads = warp_compile.try_step_loads(mj_model, naconmax, njmax, devices[0])
             if self._background:
                 self._precompile = warp_compile.start_precompile(threads, loads)
             else:

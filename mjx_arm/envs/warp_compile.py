@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import time
+import warnings
 from collections.abc import Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any
@@ -107,6 +108,21 @@ def step_loads(mj_model: mujoco.MjModel, naconmax: int, njmax: int, device: Any)
     for module, block_dim in sorted(noted, key=lambda item: (item[1], item[0].name)):
         loads.setdefault(block_dim, []).append(module)
     return loads
+
+
+def try_step_loads(mj_model: mujoco.MjModel, naconmax: int, njmax: int, device: Any) -> Loads:
+    """:func:`step_loads`, or no loads with a warning where the dry pass fails (a MuJoCo Warp
+    or Warp release that launches differently): the modules then compile on first use."""
+    try:
+        return step_loads(mj_model, naconmax, njmax, device)
+    except Exception as error:  # any failure only costs the parallel compile
+        warnings.warn(
+            f"could not list MuJoCo Warp's kernels ahead of the first step ({error!r}); "
+            "they compile one after another when it runs",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+        return {}
 
 
 def precompile(threads: int, loads: Loads, devices: list[Any] | None = None) -> float:
