@@ -9,6 +9,7 @@
 #   bash benchmarks/gpu_suite.sh cold-touch   # Touch cold and warm to 0.95, warmup then a start
 #   bash benchmarks/gpu_suite.sh cold-lift    # Lift (gripper arm) cold and warm to 0.9
 #   bash benchmarks/gpu_suite.sh cold-arm     # a mesh-collision arm: cold, a second task, warm
+#   bash benchmarks/gpu_suite.sh warp-kernels # Warp's kernel compiles by optimisation level
 #   bash benchmarks/gpu_suite.sh parity       # C MuJoCo, MJX on Warp and MJX on JAX agree
 #   bash benchmarks/gpu_suite.sh sweep        # Touch over a few seeds per candidate (CANDIDATES)
 #   bash benchmarks/gpu_suite.sh seeds        # the fast preset as shipped, seeds 0-9, both tasks
@@ -94,6 +95,17 @@ cold-lift)
     --threshold 0.9 --child-timeout 230 --results-dir "$OUT" --name cold_start_fast_lift \
     2>&1 | tee "$OUT/log_cold_lift.txt"
   ;;
+warp-kernels)
+  # MuJoCo Warp's kernel compiles module by module at Warp's optimisation levels (LEVELS), and
+  # the physics speed each gives: a mesh-collision arm (ARM under ROBOTS, Reach) with the level
+  # on its convex-collision kernels, then the shipped arm's Touch with it on every module.
+  export ROS_PACKAGE_PATH="${ROBOTS:?folder that holds example-robot-data}"
+  one_gpu python3 benchmarks/bench_warp_kernels.py --task reach --scope ccd \
+    --arm "$ROBOTS/${ARM:-ur_description/urdf/ur5_robot.urdf}" --levels ${LEVELS:-default 2 1} \
+    --results-dir "$OUT" --name warp_kernels_arm_ccd
+  one_gpu python3 benchmarks/bench_warp_kernels.py --task touch --scope all \
+    --levels ${LEVELS:-default 2 1} --results-dir "$OUT" --name warp_kernels_touch_all
+  ;;
 cold-arm)
   # A published arm with mesh collisions (ARM, a URDF under ROBOTS): its first task with every
   # cache empty, a second task in a new process on those caches, the first again (warm); each
@@ -174,21 +186,25 @@ jobs)
   # The fast preset as shipped, one process per item "ARM:TASK:SEED" of JOBS (ARM: a URDF path
   # under ROBOTS, or "shipped" for the task's shipped arm; SEED one seed or several joined by
   # "+", run one after another in the process), PARALLEL processes at once on the one GPU,
-  # each stopped after RUN_LIMIT s. The file names carry _xPARALLEL.
+  # each stopped after RUN_LIMIT s. The file names carry _xPARALLEL. SETS: --set items for
+  # every job (a variant of the preset; TAG names it in the file names). MEM_FRACTION: each
+  # process's share of GPU memory (default 0.6 / PARALLEL; lower it where two suites share).
   export ROS_PACKAGE_PATH="${ROBOTS:-/tmp/robots}"
-  tag="_x${PARALLEL:-1}"
-  export XLA_PYTHON_CLIENT_MEM_FRACTION="0.$(printf %02d $((60 / ${PARALLEL:-1})))"
+  tag="${TAG:-}_x${PARALLEL:-1}"
+  export XLA_PYTHON_CLIENT_MEM_FRACTION="${MEM_FRACTION:-0.$(printf %02d $((60 / ${PARALLEL:-1})))}"
+  read -r -a sets <<< "${SETS:-}"
+  [ ${#sets[@]} -gt 0 ] && sets=(--set "${sets[@]}")
   seed_job() {
     local arm="${1%%:*}" rest="${1#*:}" task seed name args=()
     task="${rest%%:*}"; seed="${rest#*:}"
     name=$(basename "$arm" .urdf)
     [ "$arm" = shipped ] || args=(--arm "$ROBOTS/$arm")
     one_gpu timeout "${RUN_LIMIT:-580}" python3 -m mjx_arm.cli bench seeds --task "$task" \
-      --preset fast --seeds "${seed//+/,}" "${args[@]}" \
+      --preset fast --seeds "${seed//+/,}" "${args[@]}" "${sets[@]}" \
       --name "seeds_${task}_fast_${name}${tag}_seed${seed//+/_}" \
-      --runs "$OUT/runs_${name}_${task}_$seed" --out "$OUT" \
-      > "$OUT/log_${name}_${task}_seed$seed.txt" 2>&1
-    export_runs "$OUT/runs_${name}_${task}_$seed" "${name}_${task}"
+      --runs "$OUT/runs_${name}_${task}${TAG:-}_$seed" --out "$OUT" \
+      > "$OUT/log_${name}_${task}${TAG:-}_seed$seed.txt" 2>&1
+    export_runs "$OUT/runs_${name}_${task}${TAG:-}_$seed" "${name}_${task}${TAG:-}"
   }
   for item in ${JOBS:?ARM:TASK:SEED items}; do
     while [ "$(jobs -rp | wc -l)" -ge "${PARALLEL:-1}" ]; do sleep 1; done
