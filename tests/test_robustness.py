@@ -293,3 +293,24 @@ def test_quick_run_writes_the_report(tmp_path: Path):
     assert main([*argv, "--joint-episodes", "2", "--name", "r"]) == 0
     for suffix in ("md", "json", "png"):
         assert (tmp_path / f"r.{suffix}").stat().st_size > 0
+
+
+def test_robust_preset_is_the_measured_training():
+    """The ``robust`` preset is exactly the ``fast`` preset with the ``--set`` items that the
+    GPU runs of ``benchmarks/results/robustness/{latency_gpu,selected_gpu}`` trained with."""
+    from mjx_arm.train.config import load_config
+
+    latency = [
+        "randomization.enabled=true",
+        "randomization.latency_prob=1",
+        "randomization.latency_steps=[0,3]",
+    ]
+    selected = [
+        *latency,
+        "randomization.table_height=[-0.02,0.02]",
+        "randomization.ft_force_bias=[-4,4]",
+        "randomization.frictionloss=[0,0.1]",
+    ]
+    for task, sets in (("touch", latency), ("lift", selected)):
+        measured = load_config("fast", None, [f"task={task}", *sets])
+        assert load_config("robust", None, [f"task={task}"]) == measured, task
