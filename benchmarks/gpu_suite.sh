@@ -183,7 +183,7 @@ arms)
   wait
   ;;
 jobs)
-  # The fast preset as shipped, one process per item "ARM:TASK:SEED" of JOBS (ARM: a URDF path
+  # The fast preset (or PRESET) as shipped, one process per item "ARM:TASK:SEED" of JOBS (ARM: a URDF path
   # under ROBOTS, or "shipped" for the task's shipped arm; SEED one seed or several joined by
   # "+", run one after another in the process), PARALLEL processes at once on the one GPU,
   # each stopped after RUN_LIMIT s. The file names carry _xPARALLEL. SETS: --set items for
@@ -200,8 +200,8 @@ jobs)
     name=$(basename "$arm" .urdf)
     [ "$arm" = shipped ] || args=(--arm "$ROBOTS/$arm")
     one_gpu timeout "${RUN_LIMIT:-580}" python3 -m mjx_arm.cli bench seeds --task "$task" \
-      --preset fast --seeds "${seed//+/,}" "${args[@]}" "${sets[@]}" \
-      --name "seeds_${task}_fast_${name}${tag}_seed${seed//+/_}" \
+      --preset "${PRESET:-fast}" --seeds "${seed//+/,}" "${args[@]}" "${sets[@]}" \
+      --name "seeds_${task}_${PRESET:-fast}_${name}${tag}_seed${seed//+/_}" \
       --runs "$OUT/runs_${name}_${task}${TAG:-}_$seed" --out "$OUT" \
       > "$OUT/log_${name}_${task}${TAG:-}_seed$seed.txt" 2>&1
     export_runs "$OUT/runs_${name}_${task}${TAG:-}_$seed" "${name}_${task}${TAG:-}"

@@ -135,3 +135,25 @@ def test_the_step_compiles_nothing_the_precompile_missed():
     assert set(new) <= {"mujoco.mjx.warp.ffi"}, new  # the FFI shim holds no kernel
     if jax.default_backend() != "cpu":
         assert physics.precompile_seconds > 0.0
+
+
+def test_table_height_reaches_warp_collisions():
+    """A lowered table lowers the resting cube under MuJoCo Warp as under MJX's JAX
+    implementation: Warp places the world body's geoms once, so the env moves the table in
+    the data (measured: the cube's height after 10 still steps, -0.020 m both; before the
+    fix Warp pushed it back to 0.000)."""
+    from mjx_arm.bench import robustness as rb
+    from mjx_arm.task import task_config
+
+    table = {p.name: p for p in rb.perturbations_for(True)}["table_height"]
+    point = rb.Point("table_height", -0.02, table.config(-0.02), True)
+    for impl in ("warp", "jax"):
+        env = rb.make_env(task_config("lift"), "mjx", impl, None, 2)
+        state = jax.jit(jax.vmap(env.start))(
+            jax.random.split(jax.random.PRNGKey(0), 2), rb._episodes(env, [point], [2], 0)
+        )
+        step = jax.jit(jax.vmap(env.step))
+        for _ in range(10):
+            state = step(state, jnp.zeros((2, env.action_size)))
+        height = np.asarray(state.metrics["lift_height"])
+        np.testing.assert_allclose(height, -0.02, atol=2e-3, err_msg=impl)

@@ -268,6 +268,8 @@ class MjxPhysics:
         if self.grip is not None and object_params is not None:
             model = self.grip.dress(model, object_params[0], object_params[1])
         data = data.replace(ctrl=data.ctrl.at[self._actuators].set(ctrl))
+        if dynamics is not None and self.impl == "warp":
+            data = self._place_table(data, dynamics.table)
 
         def substep(d: Any, _: Any) -> tuple[Any, None]:
             return mjx.step(model, d), None
@@ -276,6 +278,20 @@ class MjxPhysics:
         # kinematics and sensors stay those of the last substep's forward pass (1/240 s before
         # the integrated qpos/qvel), as in the CPU env: no extra forward per control step
         return data
+
+    def _place_table(self, data: Any, offset: jax.Array) -> Any:
+        """The table's geoms ``offset`` (m) up from where the model puts them, in the data.
+
+        MuJoCo Warp computes the world positions of the world body's geoms once and does not
+        read a changed ``geom_pos`` for them, so :meth:`randomized`'s table height reaches its
+        collisions only through here (the table is a geom of the world body: its world
+        position is its ``geom_pos``).
+        """
+        ids = self.ids.table_geoms
+        if not len(ids):
+            return data
+        z = jnp.asarray(self.mj_model.geom_pos[ids, 2], jnp.float32) + offset
+        return data.replace(geom_xpos=data.geom_xpos.at[ids, 2].set(z))
 
     def randomized(self, dyn: Dynamics) -> Any:
         """The model with ``dyn``'s changes applied (one env; batched under vmap)."""
