@@ -148,6 +148,7 @@ ANY_ARM_SUMMARIES = (
     "arms/any_arm/variants_8b146b9/summary.json",
 )
 LIFT_SUMMARY = "lift/seeds_40576be/summary.json"
+ROBUST_LIFT_SUMMARY = "robustness/selected_gpu/summary.json"
 TOUCH_TRANSFER = [f"contact/transfer/touch_fast_seed{i}.json" for i in range(3)]
 LIFT_TRANSFER = [f"contact/transfer/lift_seed{i}.json" for i in range(5)]
 HEADLINES: tuple[Headline, ...] = (
@@ -163,6 +164,8 @@ HEADLINES: tuple[Headline, ...] = (
     _transfer_row("Lift", LIFT_TRANSFER, ("mujoco", "pybullet")),
     Headline(_any_arm_row),
     _summary_row(LIFT_SUMMARY, "Lift: `--preset fast` as shipped, seeds and transfer"),
+    _summary_row(ROBUST_LIFT_SUMMARY, "Lift: `--preset robust` (before the Warp table fix), "
+                 "seeds and transfer"),
     Headline(_cold_row),
     Headline(_throughput_row),
     Headline(_parity_row),
