@@ -183,10 +183,10 @@ arms)
   wait
   ;;
 jobs)
-  # The fast preset (or PRESET) as shipped, one process per item "ARM:TASK:SEED" of JOBS (ARM: a URDF path
-  # under ROBOTS, or "shipped" for the task's shipped arm; SEED one seed or several joined by
-  # "+", run one after another in the process), PARALLEL processes at once on the one GPU,
-  # each stopped after RUN_LIMIT s. The file names carry _xPARALLEL. SETS: --set items for
+  # The fast preset (or PRESET) as shipped, one process per item "ARM:TASK:SEED" of JOBS (ARM:
+  # a URDF path under ROBOTS, or "shipped" for the task's shipped arm; SEED one seed or several
+  # joined by "+", run one after another in the process), PARALLEL processes at once on the
+  # one GPU, each stopped after RUN_LIMIT s. The file names carry _xPARALLEL. SETS: --set items for
   # every job (a variant of the preset; TAG names it in the file names). MEM_FRACTION: each
   # process's share of GPU memory (default 0.6 / PARALLEL; lower it where two suites share).
   export ROS_PACKAGE_PATH="${ROBOTS:-/tmp/robots}"

@@ -154,8 +154,8 @@ def perturbations_for(gripper: bool) -> tuple[Perturbation, ...]:
 
 
 def joint_config(perturbations: tuple[Perturbation, ...]) -> RandomizationConfig:
-    """Every perturbation drawn at once, uniform over its stated range (the joint draw; also
-    the training randomisation the measurements chose, :data:`ROBUST`)."""
+    """Every perturbation drawn at once, uniform over its stated range (the joint draw,
+    :data:`ROBUST`)."""
     changes: dict[str, Any] = {}
     for p in perturbations:
         changes.update(p.joint_changes())

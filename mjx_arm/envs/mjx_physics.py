@@ -191,14 +191,14 @@ class MjxPhysics:
         # Warp prints a warning per env and substep on any overflow; this layer reads the bits.
         opt_impl = model.opt._impl.replace(warn_overflow=0)
         model = model.replace(opt=model.opt.replace(_impl=opt_impl))
-        data = mjx.make_data(mj_model, impl="warp", naconmax=per_env * self.batch_size, njmax=njmax)
+        naconmax = self.buffers["naconmax"]
+        data = mjx.make_data(mj_model, impl="warp", naconmax=naconmax, njmax=njmax)
         threads = self.config.compile_threads
         devices = warp_compile.cuda_devices() if threads else []
         if devices:
-            naconmax = per_env * self.batch_size
             loads = warp_compile.try_step_loads(mj_model, naconmax, njmax, devices[0])
             if self._background:
-                self._precompile = warp_compile.start_precompile(threads, loads)
+                self._precompile = warp_compile.start_precompile(threads, loads, devices)
             else:
                 self.precompile_seconds = warp_compile.precompile(threads, loads, devices)
         return model, data

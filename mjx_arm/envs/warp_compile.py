@@ -147,17 +147,18 @@ def precompile(threads: int, loads: Loads, devices: list[Any] | None = None) -> 
     return time.perf_counter() - start
 
 
-def start_precompile(threads: int, loads: Loads) -> Future | None:
+def start_precompile(threads: int, loads: Loads, devices: list[Any] | None = None) -> Future | None:
     """:func:`precompile` on a background thread, so that the XLA programs trace and compile
-    meanwhile; None where there is nothing to compile (no threads, no GPU, no loads).
+    meanwhile; None where there is nothing to compile (no threads, no device, no loads).
 
     The future's result is the seconds the compiles took. Call ``result()`` before the first
     physics step runs (:meth:`mjx_arm.envs.mjx_physics.MjxPhysics.wait_precompiled`).
     """
-    if threads <= 0 or not loads or not cuda_devices():
+    devices = (cuda_devices() if devices is None else devices) if threads > 0 and loads else []
+    if not devices:
         return None
     pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="warp-precompile")
-    future = pool.submit(precompile, threads, loads)
+    future = pool.submit(precompile, threads, loads, devices)
     pool.shutdown(wait=False)
     return future
 
