@@ -297,7 +297,8 @@ def test_quick_run_writes_the_report(tmp_path: Path):
 
 def test_robust_preset_is_the_measured_training():
     """The ``robust`` preset is exactly the ``fast`` preset with the ``--set`` items that the
-    GPU runs of ``benchmarks/results/robustness/{latency_gpu,selected_gpu}`` trained with."""
+    GPU runs of ``benchmarks/results/robustness/{latency_gpu,selected_gpu,robust_seeds}``
+    trained with (Touch with twice fast's budget)."""
     from mjx_arm.train.config import load_config
 
     latency = [
@@ -311,6 +312,7 @@ def test_robust_preset_is_the_measured_training():
         "randomization.ft_force_bias=[-4,4]",
         "randomization.frictionloss=[0,0.1]",
     ]
-    for task, sets in (("touch", latency), ("lift", selected)):
+    budget = ["num_timesteps=60000000", "num_evals=61"]
+    for task, sets in (("touch", [*latency, *budget]), ("lift", selected)):
         measured = load_config("fast", None, [f"task={task}", *sets])
         assert load_config("robust", None, [f"task={task}"]) == measured, task
