@@ -109,11 +109,13 @@ def _any_arm_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
     return figure, "; ".join(parts), list(ANY_ARM_SUMMARIES)
 
 
-def _summary_row(rel: str, figure: str) -> Headline:
-    """Seeds solved and their exported policies' transfer, from a ``summarize_seeds`` file."""
+def _summary_row(rel: str, figure: str, task: str | None = None) -> Headline:
+    """Seeds solved and their exported policies' transfer, from a ``summarize_seeds`` file (its
+    one entry, or the entry of ``task``)."""
 
     def read(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
-        (entry,) = load(rel)["entries"]
+        entries = load(rel)["entries"]
+        (entry,) = [e for e in entries if task is None or e["task"] == task]
         seeds = entry["seeds"]
         parts = [f"{entry['solved']} of {len(seeds)} seeds at {fmt(entry['threshold'])} "
                  f"(seeds {', '.join(str(s['seed']) for s in seeds)})"]  # fmt: skip
@@ -147,25 +149,23 @@ ANY_ARM_SUMMARIES = (
     "arms/any_arm/cradle_40576be/summary.json",
     "arms/any_arm/variants_8b146b9/summary.json",
 )
-LIFT_SUMMARY = "lift/seeds_40576be/summary.json"
-ROBUST_LIFT_SUMMARY = "robustness/selected_gpu/summary.json"
+LIFT_SUMMARY = "lift/seeds_c57f2ae/summary.json"
+ROBUST_LIFT_SUMMARY = "robustness/robust_seeds_c57f2ae/summary.json"
+ROBUST_TOUCH_SUMMARY = "robustness/robust_seeds/summary.json"
 TOUCH_TRANSFER = [f"contact/transfer/touch_fast_seed{i}.json" for i in range(3)]
-LIFT_TRANSFER = [f"contact/transfer/lift_seed{i}.json" for i in range(5)]
 HEADLINES: tuple[Headline, ...] = (
     _seeds_row("Touch", "seeds/seeds_touch_fast.json", "`--preset fast`, time to threshold"),
     _seeds_row("Reach", "seeds/seeds_reach_fast.json", "`--preset fast`, time to threshold"),
-    _seeds_row("Lift", "seeds/seeds_lift_fast.json",
-               "`--preset fast` at the solver's earlier 2/4 iterations, time to threshold"),
     _seeds_row("Touch", "seeds/seeds_touch_cpu_c_backend.json",
                "`--preset cpu --backend mujoco`, time to threshold", warm=False),
     _seeds_row("Reach", "seeds/seeds_reach_cpu_c_backend.json",
                "`--preset cpu --backend mujoco`, time to threshold", warm=False),
     _transfer_row("Touch", TOUCH_TRANSFER, ("mujoco", "pybullet")),
-    _transfer_row("Lift", LIFT_TRANSFER, ("mujoco", "pybullet")),
     Headline(_any_arm_row),
     _summary_row(LIFT_SUMMARY, "Lift: `--preset fast` as shipped, seeds and transfer"),
-    _summary_row(ROBUST_LIFT_SUMMARY, "Lift: `--preset robust` (before the Warp table fix), "
-                 "seeds and transfer"),
+    _summary_row(ROBUST_LIFT_SUMMARY, "Lift: `--preset robust` as shipped, seeds and transfer"),
+    _summary_row(ROBUST_TOUCH_SUMMARY, "Touch: `--preset robust` as shipped, seeds and transfer",
+                 task="touch"),
     Headline(_cold_row),
     Headline(_throughput_row),
     Headline(_parity_row),
