@@ -125,6 +125,14 @@ def try_step_loads(mj_model: mujoco.MjModel, naconmax: int, njmax: int, device: 
         return {}
 
 
+def _targets(threads: int, loads: Loads, devices: list[Any] | None) -> list[Any]:
+    """The devices to compile ``loads`` on: ``devices`` (None: :func:`cuda_devices`), or none
+    where there is nothing to do (no threads or no loads)."""
+    if threads <= 0 or not loads:
+        return []
+    return cuda_devices() if devices is None else devices
+
+
 def precompile(threads: int, loads: Loads, devices: list[Any] | None = None) -> float:
     """Compile and load ``loads`` on ``devices`` (default: every local GPU), ``threads`` at once.
 
@@ -136,8 +144,8 @@ def precompile(threads: int, loads: Loads, devices: list[Any] | None = None) -> 
     Returns:
         Seconds spent (0.0 when skipped: no threads, no device or nothing to load).
     """
-    devices = (cuda_devices() if devices is None else devices) if threads > 0 else []
-    if not devices or not loads:
+    devices = _targets(threads, loads, devices)
+    if not devices:
         return 0.0
     import warp as wp
 
@@ -154,7 +162,7 @@ def start_precompile(threads: int, loads: Loads, devices: list[Any] | None = Non
     The future's result is the seconds the compiles took. Call ``result()`` before the first
     physics step runs (:meth:`mjx_arm.envs.mjx_physics.MjxPhysics.wait_precompiled`).
     """
-    devices = (cuda_devices() if devices is None else devices) if threads > 0 and loads else []
+    devices = _targets(threads, loads, devices)
     if not devices:
         return None
     pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="warp-precompile")
