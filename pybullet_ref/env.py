@@ -21,6 +21,14 @@ is zeroed in PyBullet (Bullet applies it explicitly, which diverges on the light
 is part of the law above). ``kv``, ``d``, the effort and the armature are read from the
 converted MuJoCo model. Friction is MuJoCo's 1.0 per contact.
 
+Self-collision as the task model has it: the task models turn the arm's self-collision off
+(:func:`mjx_arm.envs.model_io.task_convert_config`), so the arm is loaded without Bullet's
+``URDF_USE_SELF_COLLISION`` and its links pass through each other as in MuJoCo. With it on,
+a policy trained without self-collision meets contacts MuJoCo never made: the joint-limited UR10
+of example-robot-data drove its wrist_2 mesh into the forearm's in 12 % of Reach episodes and
+stopped there, 2-11 cm short of the target, under about 1.3 kN of contact. A task model with
+self-collision on gets the pairs MuJoCo filters disabled (:func:`excluded_pairs`).
+
 Contacts as MuJoCo makes them: the arm is loaded from a copy of its URDF whose collision meshes
 are convex hulls shrunk by the 1 mm margin Bullet pads them with (:mod:`pybullet_ref.hulls`),
 and the table, the box and the cube are compliant, calibrated on trained policies against
@@ -67,6 +75,7 @@ with native_output_silenced((STDOUT, STDERR)):  # "pybullet build time: ..."
     from pybullet_utils.bullet_client import BulletClient
 
 from mjx_arm.envs.base import DEFAULT_HEIGHT, DEFAULT_WIDTH, BaseRobotEnv, PhysicsReading
+from mjx_arm.envs.model_io import task_convert_config
 from mjx_arm.paths import asset
 from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
@@ -93,7 +102,7 @@ _NO_GRIP = np.zeros(0)  # the reading's grip without a gripper
 # MuJoCo's sliding friction (every geom 1.0, a contact takes the larger); Bullet multiplies the
 # two bodies' coefficients, so 1.0 on every body gives the same 1.0 per contact.
 FRICTION = 1.0
-ARM_FLAGS = pybullet.URDF_USE_INERTIA_FROM_FILE | pybullet.URDF_USE_SELF_COLLISION
+ARM_FLAGS = pybullet.URDF_USE_INERTIA_FROM_FILE
 TARGET_MARKER_RADIUS = 0.02
 TARGET_MARKER_RGBA = (0.1, 0.8, 0.2, 0.5)
 NEAR, FAR = 0.01, 10.0
@@ -118,7 +127,8 @@ class ArmIds:
             reports the F/T torque about this point.
         inertia: principal inertia (kg m^2) of each actuated joint's child link with the
             joint's armature added, 6 triples.
-        self_collision_off: arm link pairs whose contacts are disabled.
+        self_collision_off: arm link pairs whose contacts are disabled, where the task model
+            lets the arm collide with itself (else empty: no arm link meets another).
         finger: the driven finger joint of a gripper (-1 without one); finger_lower: its lower
             limit (m); pads: the finger links, whose contacts make the pad forces.
     """
@@ -142,8 +152,9 @@ class PybulletArmEnv(BaseRobotEnv):
     """The arm task on PyBullet (one world, CPU), same contract as ``MujocoArmEnv``.
 
     The world is rebuilt at every reset (PyBullet reproduces a seeded episode exactly only after
-    a full rebuild). Self-collision mirrors the MuJoCo model (:func:`excluded_pairs`); the joint
-    drive is the MuJoCo model's servo (see the module docstring).
+    a full rebuild). Self-collision mirrors the MuJoCo task model (off, or on with
+    :func:`excluded_pairs`); the joint drive is the MuJoCo model's servo (see the module
+    docstring).
 
     Args:
         task: the task configuration (default: Touch).
@@ -171,6 +182,7 @@ class PybulletArmEnv(BaseRobotEnv):
         self._urdf = bullet_urdf(self.arm.urdf)
         self._ee_offset = self.arm.ee_offset.copy() if np.any(self.arm.ee_offset) else None
         self.servo = joint_servo(self.arm, self.task.spec.servo_dt or self.task.sim_dt)
+        self.self_collision = task_convert_config(self.task, self.arm).self_collision
         with native_output_silenced():  # "argv[0]="
             self.client = BulletClient(connection_mode=pybullet.DIRECT)
         self._calls = HotCalls.of(self.client)
@@ -198,9 +210,10 @@ class PybulletArmEnv(BaseRobotEnv):
     # ------------------------------------------------------------------ world
 
     def _load_arm(self) -> int:
-        return self.client.loadURDF(
-            str(self._urdf), useFixedBase=True, flags=ARM_FLAGS | self._load_flags
-        )
+        flags = ARM_FLAGS | self._load_flags
+        if self.self_collision:  # as the task model: else Bullet's links never meet
+            flags |= pybullet.URDF_USE_SELF_COLLISION
+        return self.client.loadURDF(str(self._urdf), useFixedBase=True, flags=flags)
 
     def _lookup_ids(self) -> ArmIds:
         """Load the arm alone at q = 0 and look its indices up by name."""
@@ -231,7 +244,7 @@ class PybulletArmEnv(BaseRobotEnv):
                 inertia_with_armature(c, arm, j, a)
                 for j, a in zip(joints, self.servo.armature, strict=True)
             ),
-            self_collision_off=excluded_pairs(c, arm),
+            self_collision_off=excluded_pairs(c, arm) if self.self_collision else (),
             **self._gripper_ids(joint, link, infos),
         )
 
