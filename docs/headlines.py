@@ -96,11 +96,8 @@ def _fuzz_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
 
 
 def _any_arm_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
-    entries: dict[tuple[str, str], Json] = {}
-    for rel in ANY_ARM_SUMMARIES:  # a later run of an (arm, task) replaces an earlier one
-        entries.update({(e["arm"], e["task"]): e for e in load(rel)["entries"]})
     parts = []
-    for e in entries.values():
+    for e in _merged_entries(load, ANY_ARM_SUMMARIES):  # a later run of a seed replaces it
         moved = [s["transfer"] for s in e["seeds"] if s["solved"] and s["transfer"]]
         low = min((min(v[0] for v in t.values()) for t in moved), default=None)
         worst = f", exported >= {low:.3f}" if low is not None else ""
@@ -109,13 +106,26 @@ def _any_arm_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
     return figure, "; ".join(parts), list(ANY_ARM_SUMMARIES)
 
 
-def _summary_row(rel: str, figure: str, task: str | None = None) -> Headline:
-    """Seeds solved and their exported policies' transfer, from a ``summarize_seeds`` file (its
-    one entry, or the entry of ``task``)."""
+def _merged_entries(load: Callable[[str], Json], rels: tuple[str, ...]) -> list[Json]:
+    """The (arm, task) entries of ``summarize_seeds`` files, their seeds merged by number (a
+    later file's seed replaces an earlier one's); solved counts follow the merged seeds."""
+    merged: dict[tuple[str, str], Json] = {}
+    for rel in rels:
+        for e in load(rel)["entries"]:
+            old = merged.get((e["arm"], e["task"]), {"seeds": []})
+            seeds = {s["seed"]: s for s in old["seeds"]} | {s["seed"]: s for s in e["seeds"]}
+            ordered = [seeds[k] for k in sorted(seeds)]
+            solved = sum(s["solved"] for s in ordered)
+            merged[(e["arm"], e["task"])] = {**e, "seeds": ordered, "solved": solved}
+    return list(merged.values())
+
+
+def _summary_row(rels: tuple[str, ...], figure: str, task: str | None = None) -> Headline:
+    """Seeds solved and their exported policies' transfer, from ``summarize_seeds`` files (their
+    one entry, or the entry of ``task``; seeds merged over the files)."""
 
     def read(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
-        entries = load(rel)["entries"]
-        (entry,) = [e for e in entries if task is None or e["task"] == task]
+        (entry,) = [e for e in _merged_entries(load, rels) if task is None or e["task"] == task]
         seeds = entry["seeds"]
         parts = [f"{entry['solved']} of {len(seeds)} seeds at {fmt(entry['threshold'])} "
                  f"(seeds {', '.join(str(s['seed']) for s in seeds)})"]  # fmt: skip
@@ -125,9 +135,23 @@ def _summary_row(rel: str, figure: str, task: str | None = None) -> Headline:
                 low, high = min(r[0] for r in rates), max(r[0] for r in rates)
                 peak = max(r[1] for r in rates)
                 parts.append(f"{label} {low:.3f}-{high:.3f} (mean peak up to {peak:.0f} N)")
-        return figure, "; ".join(parts), [rel]
+        return figure, "; ".join(parts), list(rels)
 
     return Headline(read)
+
+
+def _pick_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
+    """Lift on the Panda beside Playground's PandaPickCube (``benchmarks/summarize_pick.py``)."""
+    rel = PICK_COMPARISON
+    parts = []
+    for side, label in (("mjx_arm", "this project"), ("Playground", "Playground")):
+        rows = [r for r in load(rel)["rows"] if r["side"].startswith(side)]
+        times = [secs(r["time_to_threshold_s"]) for r in rows if r["reached"]]
+        reached = sum(r["reached"] for r in rows)
+        parts.append(f"{label}: {reached} of {len(rows)} seeds at {fmt(rows[0]['threshold'])}"
+                     f" in {', '.join(times) or 'none'}")  # fmt: skip
+    figure = "Lift on the Panda's own hand beside Playground's PandaPickCube (first seed cold)"
+    return figure, "; ".join(parts), [rel]
 
 
 def _cold_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
@@ -148,10 +172,13 @@ ANY_ARM_SUMMARIES = (
     "arms/any_arm/z1_1192947/summary.json",
     "arms/any_arm/cradle_40576be/summary.json",
     "arms/any_arm/variants_8b146b9/summary.json",
+    "arms/any_arm/touch_c05a54b/summary.json",
+    "arms/any_arm/pick_c05a54b/summary.json",
 )
-LIFT_SUMMARY = "lift/seeds_c57f2ae/summary.json"
-ROBUST_LIFT_SUMMARY = "robustness/robust_seeds_c57f2ae/summary.json"
-ROBUST_TOUCH_SUMMARY = "robustness/robust_seeds/summary.json"
+PICK_COMPARISON = "arms/any_arm/pick_c05a54b/comparison.json"
+LIFT_SUMMARIES = ("lift/seeds_c57f2ae/summary.json", "lift/seeds_c05a54b/summary.json")
+ROBUST_LIFT_SUMMARY = ("robustness/robust_seeds_c57f2ae/summary.json",)
+ROBUST_TOUCH_SUMMARY = ("robustness/robust_seeds/summary.json",)
 TOUCH_TRANSFER = [f"contact/transfer/touch_fast_seed{i}.json" for i in range(3)]
 HEADLINES: tuple[Headline, ...] = (
     _seeds_row("Touch", "seeds/seeds_touch_fast.json", "`--preset fast`, time to threshold"),
@@ -162,7 +189,8 @@ HEADLINES: tuple[Headline, ...] = (
                "`--preset cpu --backend mujoco`, time to threshold", warm=False),
     _transfer_row("Touch", TOUCH_TRANSFER, ("mujoco", "pybullet")),
     Headline(_any_arm_row),
-    _summary_row(LIFT_SUMMARY, "Lift: `--preset fast` as shipped, seeds and transfer"),
+    Headline(_pick_row),
+    _summary_row(LIFT_SUMMARIES, "Lift: `--preset fast` as shipped, seeds and transfer"),
     _summary_row(ROBUST_LIFT_SUMMARY, "Lift: `--preset robust` as shipped, seeds and transfer"),
     _summary_row(ROBUST_TOUCH_SUMMARY, "Touch: `--preset robust` as shipped, seeds and transfer",
                  task="touch"),
