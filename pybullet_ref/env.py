@@ -12,19 +12,14 @@ joint with ``clip(kv * (u - qdot), +-effort)`` (a velocity actuator) and adds jo
 ``VELOCITY_CONTROL`` motor is a hard velocity constraint instead: blocked by the box it pushes
 with its whole torque cap (measured: about 380 N at the tool where MuJoCo gives 26 N), so contact
 forces would not be comparable. Here, at every substep, the same law goes through
-``TORQUE_CONTROL``: ``clip(kv * (u - v), +-effort) - d * v + g(q)``, with ``g(q)`` from
-``calculateInverseDynamics`` (MuJoCo's ``gravcomp``; gravity is -9.81 in both engines) and
-``v`` the velocity the substep reaches through the arm's mass matrix
-(``calculateMassMatrix``), as MuJoCo's ``implicitfast`` treats the servo and the damping
-(:meth:`pybullet_ref.arm_model.JointServo.torque`). A servo this stiff (``kv * dt`` equals the
-joint's smallest apparent inertia *with* armature) needs the armature, which PyBullet lacks, so
-each joint's child link gets it as a rotor disc: ``a`` about the joint axis, ``a / 2`` across
-(a valid inertia tensor). The discs of parallel joints couple them (a disc turns with every
-joint above it), which an explicit law ``v = qdot`` did not survive on the Unitree Z1: its
-pitch joints chattered at +-0.7 rad/s against their torque caps while holding still. URDF
-joint damping is zeroed in PyBullet (Bullet applies it explicitly, which diverges on the light
-wrist links; it is part of the law above). ``kv``, ``d``, the effort and the armature are read
-from the converted MuJoCo model. Friction is MuJoCo's 1.0 per contact.
+``TORQUE_CONTROL``: ``clip(kv * (u - qdot), +-effort) - d * qdot + g(q)``, with ``g(q)`` from
+``calculateInverseDynamics`` (MuJoCo's ``gravcomp``; gravity is -9.81 in both engines). A servo
+this stiff (``kv * dt`` equals the joint's smallest apparent inertia *with* armature) is only
+stable with the armature, which PyBullet lacks, so each joint's child link gets it as a rotor
+disc: ``a`` about the joint axis, ``a / 2`` across (a valid inertia tensor). URDF joint damping
+is zeroed in PyBullet (Bullet applies it explicitly, which diverges on the light wrist links; it
+is part of the law above). ``kv``, ``d``, the effort and the armature are read from the
+converted MuJoCo model. Friction is MuJoCo's 1.0 per contact.
 
 Self-collision as the task model has it: the task models turn the arm's self-collision off
 (:func:`mjx_arm.envs.model_io.task_convert_config`), so the arm is loaded without Bullet's
@@ -365,31 +360,22 @@ class PybulletArmEnv(BaseRobotEnv):
         )
 
     def _physics_step(self, n_substeps: int) -> None:
-        calls, body, joints, dt = self._calls, self.body, self.ids.joints, self.task.sim_dt
+        calls, body, joints, zeros = self._calls, self.body, self.ids.joints, self._dof_zeros
         dofs, pick, torque, u = self.ids.dofs, self._pick, self.servo.torque, self._u
         # the joint states of the last read, where nothing has moved since (arm-only dofs)
         states, self._read_states = self._read_states, None
         for i in range(n_substeps):
             if states is None:
                 states = calls.get_joint_states(body, dofs)
-            gravity, mass = self._gravity_and_mass([s[0] for s in states])
+            gravity = calls.inverse_dynamics(body, [s[0] for s in states], zeros, zeros)
             if pick is not None:  # the arm's joints among the dofs (5 or more: a tuple)
                 states, gravity = pick(states), pick(gravity)
-            forces = torque(u, [s[1] for s in states], gravity, mass, dt)
+            forces = torque(u, [s[1] for s in states], gravity)
             calls.set_motors(body, joints, pybullet.TORQUE_CONTROL, forces=forces)
             if i == n_substeps - 1:
                 self._tool_before = self._tool_velocity()
             calls.step()
             states = None
-
-    def _gravity_and_mass(self, q: list[float]) -> tuple[list[float], np.ndarray]:
-        """Gravity compensation torques of every dof (N m) and the arm joints' block of the
-        joint-space mass matrix (kg m^2, ``(n, n)``) at the dofs' angles ``q`` (rad)."""
-        calls, body, zeros = self._calls, self.body, self._dof_zeros
-        mass = np.asarray(calls.mass_matrix(body, q))
-        if self._pick is not None:
-            mass = mass[np.ix_(self.ids.arm_in_dofs, self.ids.arm_in_dofs)]
-        return calls.inverse_dynamics(body, q, zeros, zeros), mass
 
     def _physics_read(self) -> PhysicsReading:
         calls = self._calls

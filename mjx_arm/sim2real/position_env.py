@@ -341,11 +341,11 @@ class PybulletPositionArmEnv(_ChainActuation, PybulletArmEnv):
 
     def _physics_step(self, n_substeps: int) -> None:
         # PybulletArmEnv._physics_step with the position loop in front of the velocity servo
-        calls, body, joints, dt = self._calls, self.body, self.ids.joints, self.task.sim_dt
+        calls, body, joints, zeros = self._calls, self.body, self.ids.joints, self._dof_zeros
         dofs, pick, gain = self.ids.dofs, self._pick, self._gain
         for i in range(n_substeps):
             states = calls.get_joint_states(body, dofs)
-            gravity, mass = self._gravity_and_mass([s[0] for s in states])
+            gravity = calls.inverse_dynamics(body, [s[0] for s in states], zeros, zeros)
             if pick is not None:  # the arm's joints among the dofs (5 or more: a tuple)
                 states, gravity = pick(states), pick(gravity)
             arm = states
@@ -354,7 +354,7 @@ class PybulletPositionArmEnv(_ChainActuation, PybulletArmEnv):
                 u = self._servo_velocity((i + 1) / n_substeps, np.asarray(q)).tolist()
             else:
                 u = [gain * (t - x) for t, x in zip(self._q_target, q, strict=True)]
-            torque = self.servo.torque(u, [s[1] for s in arm], gravity, mass, dt)
+            torque = self.servo.torque(u, [s[1] for s in arm], gravity)
             calls.set_motors(body, joints, pybullet.TORQUE_CONTROL, forces=torque)
             if i == n_substeps - 1:
                 self._tool_before = self._tool_velocity()
