@@ -11,20 +11,15 @@ joint with ``clip(kv * (u - qdot), +-effort)`` (a velocity actuator) and adds jo
 ``-d * qdot``, reflected rotor inertia (armature) and gravity compensation. PyBullet's
 ``VELOCITY_CONTROL`` motor is a hard velocity constraint instead: blocked by the box it pushes
 with its whole torque cap (measured: about 380 N at the tool where MuJoCo gives 26 N), so contact
-forces would not be comparable. Here, at every substep, ``TORQUE_CONTROL`` applies the torque
-that makes PyBullet's step MuJoCo's (:meth:`pybullet_ref.arm_model.JointServo.torque`): MuJoCo's
-joint accelerations solved from ``(M + A + dt (kv + d)) qddot = servo - d qdot + tau_ext`` (the
-armature ``A`` on the diagonal only, the servo implicit as in ``implicitfast``), then
-``M qddot - tau_ext + g(q)`` on PyBullet's own mass matrix (``calculateMassMatrix``), with
-``g(q)`` from ``calculateInverseDynamics`` (MuJoCo's ``gravcomp``; gravity is -9.81 in both
-engines) and ``tau_ext``, the contacts' and velocity terms' share, from the last substep
-(:class:`~pybullet_ref.arm_model.ExternalTorque`); blocked, a joint pushes ``kv u`` as in MuJoCo.
-An explicit law ``clip(kv * (u - qdot)) - d qdot`` with the armature as a rotor disc on each
-child link, used before, coupled parallel joints through the discs (a disc turns with every
-joint above it): on the Unitree Z1 it was unstable at ``sim_dt`` and shook the pitch joints at
-up to 0.7 rad/s while holding still. URDF joint damping is zeroed in PyBullet (it is part of the
-law above). ``kv``, ``d``, the effort and the armature are read from the converted MuJoCo
-model. Friction is MuJoCo's 1.0 per contact.
+forces would not be comparable. Here, at every substep, the same law goes through
+``TORQUE_CONTROL``: ``clip(kv * (u - qdot), +-effort) - d * qdot + g(q)``, with ``g(q)`` from
+``calculateInverseDynamics`` (MuJoCo's ``gravcomp``; gravity is -9.81 in both engines). A servo
+this stiff (``kv * dt`` equals the joint's smallest apparent inertia *with* armature) is only
+stable with the armature, which PyBullet lacks, so each joint's child link gets it as a rotor
+disc: ``a`` about the joint axis, ``a / 2`` across (a valid inertia tensor). URDF joint damping
+is zeroed in PyBullet (Bullet applies it explicitly, which diverges on the light wrist links; it
+is part of the law above). ``kv``, ``d``, the effort and the armature are read from the
+converted MuJoCo model. Friction is MuJoCo's 1.0 per contact.
 
 Self-collision as the task model has it: the task models turn the arm's self-collision off
 (:func:`mjx_arm.envs.model_io.task_convert_config`), so the arm is loaded without Bullet's
@@ -48,10 +43,11 @@ last substep. In fast free motion the tared reading stays below 0.6 N and 0.04 N
 joint reaction carries a small velocity-product term when several joints turn at once.
 
 An arm without a fixed F/T joint takes its reading at the last arm joint. PyBullet's reaction
-at a motorised joint carries the motor torque and Bullet's own constraint terms: tared, it
-still read up to 50 N m on a Panda in free motion. There the reading is instead the sum of
-the contact forces on the links of the tool subtree (normal and friction, about the ee point):
-zero in free motion, as MuJoCo's tared sensor reads.
+at a motorised joint carries the motor torque, the joint's rotor inertia (given to the link,
+above) and Bullet's own constraint terms: tared, it still read up to 50 N m on a Panda in free
+motion. There the reading is instead the sum of the contact forces on the links of the tool
+subtree (normal and friction, about the ee point): zero in free motion, as MuJoCo's tared
+sensor reads.
 
 Each control step starts from the joint states its previous read took (nothing moves between
 the two): a change made to the world through ``env.client`` between steps shows from the
@@ -65,7 +61,7 @@ rest so the F/T sensor has a reading, and puts the joints back at the sampled an
 from __future__ import annotations
 
 import operator
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -90,8 +86,8 @@ from mjx_arm.urdf.scene import CAMERA_EYE, CAMERA_FOVY, CAMERA_TARGET
 from mjx_arm.urdf.scene_shapes import CUBE_HALF, CUBE_MASS
 from pybullet_ref.arm_model import (
     BASE,
-    ExternalTorque,
     excluded_pairs,
+    inertia_with_armature,
     joint_servo,
     subtree_links,
 )
@@ -129,6 +125,8 @@ class ArmIds:
             tool subtree, whose contacts make the reading; else empty (the F/T sensor reads).
         tool_com: the tool link's centre of mass in the tool link frame (m), ``(3,)``; PyBullet
             reports the F/T torque about this point.
+        inertia: principal inertia (kg m^2) of each actuated joint's child link with the
+            joint's armature added, 6 triples.
         self_collision_off: arm link pairs whose contacts are disabled, where the task model
             lets the arm collide with itself (else empty: no arm link meets another).
         finger: the driven finger joint of a gripper (-1 without one); finger_lower: its lower
@@ -143,6 +141,7 @@ class ArmIds:
     arm_in_dofs: tuple[int, ...]
     tool_links: frozenset[int]
     tool_com: np.ndarray
+    inertia: tuple[tuple[float, float, float], ...]
     self_collision_off: tuple[tuple[int, int], ...]
     finger: int = -1
     finger_lower: float = 0.0
@@ -196,7 +195,6 @@ class PybulletArmEnv(BaseRobotEnv):
         identity = arm_in_dofs == tuple(range(len(self.ids.dofs)))
         self._pick = None if identity else operator.itemgetter(*arm_in_dofs)
         self._read_states: tuple | None = None  # the joint states of the last read
-        self._external = ExternalTorque()  # the last substep's contact and velocity torques
         self._u = list(self._zeros)
         self._target_body = sampling.target_body_pos(np, np.full(3, 0.5), self.task)
         self._tool_before = (np.zeros(3), np.zeros(3))
@@ -242,6 +240,10 @@ class PybulletArmEnv(BaseRobotEnv):
             tool_links=tool_links,
             arm_in_dofs=tuple(dofs.index(j) for j in joints),
             tool_com=np.array(c.getDynamicsInfo(arm, ft)[3]),
+            inertia=tuple(
+                inertia_with_armature(c, arm, j, a)
+                for j, a in zip(joints, self.servo.armature, strict=True)
+            ),
             self_collision_off=excluded_pairs(c, arm) if self.self_collision else (),
             **self._gripper_ids(joint, link, infos),
         )
@@ -305,8 +307,8 @@ class PybulletArmEnv(BaseRobotEnv):
             c.changeDynamics(
                 arm, link, linearDamping=0.0, angularDamping=0.0, lateralFriction=FRICTION
             )
-        for j in ids.joints:
-            c.changeDynamics(arm, j, jointDamping=0.0)
+        for j, inertia in zip(ids.joints, ids.inertia, strict=True):
+            c.changeDynamics(arm, j, jointDamping=0.0, localInertiaDiagonal=inertia)
         for i, j in ids.self_collision_off:
             c.setCollisionFilterPair(arm, arm, i, j, 0)
         # free the joints of the default velocity motors: the servo acts through torques
@@ -332,7 +334,6 @@ class PybulletArmEnv(BaseRobotEnv):
         self, qpos: np.ndarray, target_body_pos: np.ndarray, obj: ObjectStart | None = None
     ) -> None:
         self._read_states = None  # the world is rebuilt: read it afresh
-        self._external.reset()
         self._target_body = np.asarray(target_body_pos, dtype=np.float64).copy()
         if obj is not None:
             self._object = obj
@@ -345,7 +346,6 @@ class PybulletArmEnv(BaseRobotEnv):
         self._physics_step(1)
         for j, q in zip(self.ids.joints, qpos, strict=True):
             self.client.resetJointState(self.body, j, float(q), 0.0)
-        self._external.reset()
         self._tool_before = (np.zeros(3), np.zeros(3))
 
     def _physics_set_velocity_targets(self, qdot_target: np.ndarray) -> None:
@@ -360,42 +360,22 @@ class PybulletArmEnv(BaseRobotEnv):
         )
 
     def _physics_step(self, n_substeps: int) -> None:
-        calls, body, joints, dofs, u = (
-            self._calls,
-            self.body,
-            self.ids.joints,
-            self.ids.dofs,
-            self._u,
-        )
+        calls, body, joints, zeros = self._calls, self.body, self.ids.joints, self._dof_zeros
+        dofs, pick, torque, u = self.ids.dofs, self._pick, self.servo.torque, self._u
         # the joint states of the last read, where nothing has moved since (arm-only dofs)
         states, self._read_states = self._read_states, None
         for i in range(n_substeps):
             if states is None:
                 states = calls.get_joint_states(body, dofs)
-            forces = self._drive(states, lambda q: u)
+            gravity = calls.inverse_dynamics(body, [s[0] for s in states], zeros, zeros)
+            if pick is not None:  # the arm's joints among the dofs (5 or more: a tuple)
+                states, gravity = pick(states), pick(gravity)
+            forces = torque(u, [s[1] for s in states], gravity)
             calls.set_motors(body, joints, pybullet.TORQUE_CONTROL, forces=forces)
             if i == n_substeps - 1:
                 self._tool_before = self._tool_velocity()
             calls.step()
             states = None
-
-    def _drive(self, states: Sequence[tuple], target: Callable[[list[float]], Sequence[float]]):
-        """The arm joints' torques (N m) for one substep from every dof's ``getJointStates``
-        row, the velocity targets ``target(q)`` (rad/s) of the arm joints' angles ``q``."""
-        calls, body, zeros, pick = self._calls, self.body, self._dof_zeros, self._pick
-        q = [s[0] for s in states]
-        gravity = calls.inverse_dynamics(body, q, zeros, zeros)
-        mass = np.asarray(calls.mass_matrix(body, q))
-        if pick is not None:  # the arm's joints among the dofs (5 or more: a tuple)
-            states, gravity = pick(states), pick(gravity)
-            mass = mass[np.ix_(self.ids.arm_in_dofs, self.ids.arm_in_dofs)]
-        qdot, dt = np.array([s[1] for s in states]), self.task.sim_dt
-        external = self._external.estimate(qdot, dt)
-        torque = self.servo.torque(
-            target([s[0] for s in states]), qdot, gravity, mass, external, dt
-        )
-        self._external.applied(mass, qdot, torque, gravity)
-        return torque.tolist()
 
     def _physics_read(self) -> PhysicsReading:
         calls = self._calls

@@ -22,7 +22,6 @@ class HotCalls(NamedTuple):
     get_link_state: Callable
     get_link_states: Callable
     inverse_dynamics: Callable
-    mass_matrix: Callable
     set_motors: Callable
     step: Callable
 
@@ -34,7 +33,6 @@ class HotCalls(NamedTuple):
             client.getLinkState,
             client.getLinkStates,
             client.calculateInverseDynamics,
-            client.calculateMassMatrix,
             client.setJointMotorControlArray,
             client.stepSimulation,
         )

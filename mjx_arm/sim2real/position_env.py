@@ -341,21 +341,21 @@ class PybulletPositionArmEnv(_ChainActuation, PybulletArmEnv):
 
     def _physics_step(self, n_substeps: int) -> None:
         # PybulletArmEnv._physics_step with the position loop in front of the velocity servo
-        calls, body, joints, dofs = self._calls, self.body, self.ids.joints, self.ids.dofs
-        gain = self._gain
+        calls, body, joints, zeros = self._calls, self.body, self.ids.joints, self._dof_zeros
+        dofs, pick, gain = self.ids.dofs, self._pick, self._gain
         for i in range(n_substeps):
+            states = calls.get_joint_states(body, dofs)
+            gravity = calls.inverse_dynamics(body, [s[0] for s in states], zeros, zeros)
+            if pick is not None:  # the arm's joints among the dofs (5 or more: a tuple)
+                states, gravity = pick(states), pick(gravity)
+            arm = states
+            q = [s[0] for s in arm]
             if self._feedforward and not self._holding:
-                frac = (i + 1) / n_substeps
-
-                def target(q: list[float], frac: float = frac) -> list[float]:
-                    return self._servo_velocity(frac, np.asarray(q)).tolist()
+                u = self._servo_velocity((i + 1) / n_substeps, np.asarray(q)).tolist()
             else:
-
-                def target(q: list[float]) -> list[float]:
-                    return [gain * (t - x) for t, x in zip(self._q_target, q, strict=True)]
-
-            forces = self._drive(calls.get_joint_states(body, dofs), target)
-            calls.set_motors(body, joints, pybullet.TORQUE_CONTROL, forces=forces)
+                u = [gain * (t - x) for t, x in zip(self._q_target, q, strict=True)]
+            torque = self.servo.torque(u, [s[1] for s in arm], gravity)
+            calls.set_motors(body, joints, pybullet.TORQUE_CONTROL, forces=torque)
             if i == n_substeps - 1:
                 self._tool_before = self._tool_velocity()
             calls.step()
