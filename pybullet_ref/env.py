@@ -21,13 +21,9 @@ is zeroed in PyBullet (Bullet applies it explicitly, which diverges on the light
 is part of the law above). ``kv``, ``d``, the effort and the armature are read from the
 converted MuJoCo model. Friction is MuJoCo's 1.0 per contact.
 
-Self-collision as the task model has it: the task models turn the arm's self-collision off
-(:func:`mjx_arm.envs.model_io.task_convert_config`), so the arm is loaded without Bullet's
-``URDF_USE_SELF_COLLISION`` and its links pass through each other as in MuJoCo. With it on,
-a policy trained without self-collision meets contacts MuJoCo never made: the joint-limited UR10
-of example-robot-data drove its wrist_2 mesh into the forearm's in 12 % of Reach episodes and
-stopped there, 2-11 cm short of the target, under about 1.3 kN of contact. A task model with
-self-collision on gets the pairs MuJoCo filters disabled (:func:`excluded_pairs`).
+Self-collision as the task model has it (:func:`mjx_arm.envs.model_io.task_convert_config`):
+off, so the arm is loaded without ``URDF_USE_SELF_COLLISION`` (with it, a joint-limited UR10
+ran its wrist into its forearm, which MuJoCo never does); on, without MuJoCo's filtered pairs.
 
 Contacts as MuJoCo makes them: the arm is loaded from a copy of its URDF whose collision meshes
 are convex hulls shrunk by the 1 mm margin Bullet pads them with (:mod:`pybullet_ref.hulls`),
@@ -127,8 +123,7 @@ class ArmIds:
             reports the F/T torque about this point.
         inertia: principal inertia (kg m^2) of each actuated joint's child link with the
             joint's armature added, 6 triples.
-        self_collision_off: arm link pairs whose contacts are disabled, where the task model
-            lets the arm collide with itself (else empty: no arm link meets another).
+        self_collision_off: arm link pairs whose contacts are disabled (empty: no self-collision).
         finger: the driven finger joint of a gripper (-1 without one); finger_lower: its lower
             limit (m); pads: the finger links, whose contacts make the pad forces.
     """
@@ -152,9 +147,8 @@ class PybulletArmEnv(BaseRobotEnv):
     """The arm task on PyBullet (one world, CPU), same contract as ``MujocoArmEnv``.
 
     The world is rebuilt at every reset (PyBullet reproduces a seeded episode exactly only after
-    a full rebuild). Self-collision mirrors the MuJoCo task model (off, or on with
-    :func:`excluded_pairs`); the joint drive is the MuJoCo model's servo (see the module
-    docstring).
+    a full rebuild). Self-collision and the joint drive follow the MuJoCo task model (see the
+    module docstring).
 
     Args:
         task: the task configuration (default: Touch).
