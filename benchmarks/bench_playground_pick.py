@@ -210,9 +210,9 @@ def train(args: argparse.Namespace) -> dict[str, Any]:
 
     def policy_params_fn(step: int, make_policy, policy_params) -> None:
         t0 = time.perf_counter()
+        wall = t0 - clock["start"] - clock["eval_s"]  # training time so far, evaluations out
         lift, target = evaluate(make_policy, policy_params, jax.random.PRNGKey(1000 + len(curve)))
         clock["eval_s"] += time.perf_counter() - t0
-        wall = t0 - clock["start"] - (clock["eval_s"] - (time.perf_counter() - t0))
         curve.append({"steps": int(step), "wall_s": wall, "lift": lift, "target": target})
         print(
             f"  {step:>11,d} steps  {wall:7.1f} s  lift {lift:.3f}  target {target:.3f}", flush=True
