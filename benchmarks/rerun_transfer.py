@@ -16,6 +16,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+from benchmarks.summarize_seeds import own_policy
 from mjx_arm.bench.results import environment_metadata
 from mjx_arm.bench.transfer import TransferConfig, transfer_matrix, write_report
 
@@ -27,9 +28,7 @@ def rerun(path: Path, engines: tuple[str, ...], reason: str) -> dict[str, Any]:
     data = json.loads(path.read_text())
     config = TransferConfig(**{**data["config"], "engines": tuple(engines)})
     recorded = Path(data["policy"])
-    # the folder's own copy first: a folder renamed since the run leaves the recorded path
-    own = path.parent.parent / "policies" / recorded.name
-    policy, _ = resolve_policy(str(own if own.is_file() else recorded))
+    policy, _ = resolve_policy(str(own_policy(path.parent.parent, recorded) or recorded))
     task, _ = eval_task(policy, data["task"])
     fresh = transfer_matrix(policy, task, config, jax_backend="cpu")
     new_rows = {row["key"]: row for row in fresh["rows"]}

@@ -48,6 +48,13 @@ def seed_rows(folder: Path) -> dict[Key, dict[int, dict[str, Any]]]:
     return rows
 
 
+def own_policy(folder: Path, recorded: Path) -> Path | None:
+    """A transfer result's policy file: the folder's own copy first (the recorded path is where
+    the policy was when its transfer ran; a folder renamed since leaves it dangling), else the
+    recorded path; None where neither exists."""
+    return next((p for p in (folder / "policies" / recorded.name, recorded) if p.is_file()), None)
+
+
 def transfer_rows(folder: Path) -> dict[tuple[str, str, str, int], dict[str, Any]]:
     """Each exported policy's transfer: ``{(arm, task, preset, seed): {engine: (success, peak
     N)}}``; the arm is the policy's own record."""
@@ -58,9 +65,7 @@ def transfer_rows(folder: Path) -> dict[tuple[str, str, str, int], dict[str, Any
         data = json.loads(path.read_text())
         policy = Path(data["policy"])
         match = POLICY_NAME.search(policy.stem)
-        # the folder's own copy first: the recorded path is where the policy was when its
-        # transfer ran (a folder renamed since leaves it dangling)
-        policy = next((p for p in (folder / "policies" / policy.name, policy) if p.is_file()), None)
+        policy = own_policy(folder, policy)
         if match is None or policy is None:
             continue
         arm = arm_name(load(policy).metadata["arm"])
