@@ -347,10 +347,16 @@ class PybulletArmEnv(BaseRobotEnv):
 
     def _physics_set_gripper(self, speed: float) -> None:
         # a velocity motor whose cap is the MuJoCo servo's press at this command (its gain is
-        # too stiff for an explicit torque law on a 60 g finger without the armature)
+        # too stiff for an explicit torque law on a 60 g finger without the armature), and whose
+        # target is the servo's free speed against the fingers' damping
         force = self.servo.finger_force(speed)
+        target = self.servo.finger_speed(speed)
         self.client.setJointMotorControl2(
-            self.body, self.ids.finger, pybullet.VELOCITY_CONTROL, targetVelocity=speed, force=force
+            self.body,
+            self.ids.finger,
+            pybullet.VELOCITY_CONTROL,
+            targetVelocity=target,
+            force=force,
         )
 
     def _physics_step(self, n_substeps: int) -> None:
