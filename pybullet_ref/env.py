@@ -346,17 +346,12 @@ class PybulletArmEnv(BaseRobotEnv):
         self._u = [float(v) for v in qdot_target]
 
     def _physics_set_gripper(self, speed: float) -> None:
-        # a velocity motor whose cap is the MuJoCo servo's press at this command (its gain is
-        # too stiff for an explicit torque law on a 60 g finger without the armature), and whose
-        # target is the servo's free speed against the fingers' damping
-        force = self.servo.finger_force(speed)
-        target = self.servo.finger_speed(speed)
+        # a velocity motor at the MuJoCo servo's free speed against the fingers' damping, capped
+        # at the servo's blocked press (an explicit torque law is too stiff for a 60 g finger)
+        target, force = self.servo.finger_speed(speed), self.servo.finger_force(speed)
+        mode = pybullet.VELOCITY_CONTROL
         self.client.setJointMotorControl2(
-            self.body,
-            self.ids.finger,
-            pybullet.VELOCITY_CONTROL,
-            targetVelocity=target,
-            force=force,
+            self.body, self.ids.finger, mode, targetVelocity=target, force=force
         )
 
     def _physics_step(self, n_substeps: int) -> None:
