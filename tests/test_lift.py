@@ -176,6 +176,20 @@ def test_cradle_pays_the_closure_only_with_the_cube_between_the_pads():
     assert cfg.reward.cradle > 0
 
 
+def test_stray_marks_a_finger_pressing_with_the_cube_not_between_the_pads():
+    """``stray`` is 1 where a pad presses (0.5 N or more) while the cube's centre is a half edge
+    or more from the ee point: a fingertip on the cube's top (centre 4.7 cm below the ee
+    point) or a finger on the table, not a grasp around the cube nor fingers touching nothing."""
+    task, cfg = lift_lib.LIFT, lift_config()
+    ee, quat = np.zeros((4, 3)), np.tile([1.0, 0.0, 0.0, 0.0], (4, 1))
+    grip = np.zeros((4, 10))
+    grip[:, 4] = 1.0  # cube quaternion w
+    grip[:, 1:4] = [[0.0, 0.0, -0.047], [0.2, 0.0, -0.1], [0.005, 0.0, 0.0], [0.0, 0.0, -0.047]]
+    grip[:, 8:] = [[3.0, 0.0], [0.0, 0.6], [5.0, 5.0], [0.4, 0.0]]  # pad forces (N)
+    stray = task.measures(np, ee, quat, grip, cfg)["stray"]
+    np.testing.assert_array_equal(stray, [1.0, 1.0, 0.0, 0.0])
+
+
 def test_soft_variant_charges_from_25_n_and_the_touchdown_speed():
     """``variant="soft"``: a 40 N wrist reading costs 0.6 of the band's top (gentle: nothing,
     its band ends at 50 N), ``approach_speed`` weighs -20; every other field is the preset's."""

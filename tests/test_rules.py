@@ -106,7 +106,13 @@ def _extra(seed: int) -> dict[str, np.ndarray]:
     rng = np.random.default_rng(seed)
     height = rng.choice([0.0, 0.05, 0.1, 0.15], N) * rng.uniform(0.9, 1.1, N)
     cradle = rng.choice([0.0, 0.4, 1.0], N)
-    return {"height": height, "grasp": (rng.random(N) < 0.5) * 1.0, "cradle": cradle}
+    stray = (rng.random(N) < 0.3) * 1.0
+    return {
+        "height": height,
+        "grasp": (rng.random(N) < 0.5) * 1.0,
+        "cradle": cradle,
+        "stray": stray,
+    }
 
 
 def _one_by_one(xp, cfg, x, extra=None) -> list:

@@ -53,6 +53,7 @@ def _steps(rng: np.random.Generator, n: int, lift: bool):
                 float(rng.choice([0.0, 0.05, 0.1, 0.2])),
                 float(rng.random() < 0.5),
                 float(rng.choice([0.0, 0.4, 1.0])),
+                float(rng.random() < 0.3),
             ]
             if lift
             else [],
@@ -76,7 +77,7 @@ def _steps(rng: np.random.Generator, n: int, lift: bool):
 def test_traced_rules_are_the_scalar_rules_bit_for_bit(make_cfg, diverged: bool) -> None:
     cfg = make_cfg()
     lift = cfg.task == "lift"
-    keys = ("height", "grasp", "cradle") if lift else ()
+    keys = ("height", "grasp", "cradle", "stray") if lift else ()
     score = compile_score(cfg, 6, BAND, diverged, keys)
     for x in _steps(np.random.default_rng(7), 400, lift):
         extra = dict(zip(keys, x["measures"], strict=True)) or None

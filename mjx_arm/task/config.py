@@ -48,8 +48,9 @@ class RewardConfig:
     has held ``success_hold_steps`` steps running (:func:`mjx_arm.task.reward.streak`),
     ``lift`` = how far a gripper task's object is up, as a fraction of the task's lift height
     (0 to 1), ``grasp`` = 1 while both finger pads press the object, ``cradle`` = the
-    fingers' closure (0 open, 1 closed) while the object's centre sits between them (gripper
-    tasks; see :mod:`mjx_arm.task.lift`).
+    fingers' closure (0 open, 1 closed) while the object's centre sits between them, ``stray``
+    = 1 while a finger presses something (the object's top, the table) with the object's centre
+    not between the pads (gripper tasks; see :mod:`mjx_arm.task.lift`).
     """
 
     distance: float = -10.0
@@ -67,6 +68,7 @@ class RewardConfig:
     lift: float = 0.0
     grasp: float = 0.0
     cradle: float = 0.0
+    stray: float = 0.0
     distance_length: float = 0.1
     proximity_length: float = 0.01
     soft_limit: float = 0.95
@@ -93,6 +95,7 @@ REWARD_TERMS = (
     "lift",
     "grasp",
     "cradle",
+    "stray",
 )
 
 

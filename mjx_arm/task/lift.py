@@ -165,23 +165,31 @@ class Lift(Task):
         pads press the cube (each at least :data:`GRASP_FORCE`, its centre within
         :data:`GRASP_RADIUS` of the ee point), else 0; ``cradle``: the fingers' closure where
         the cube's centre is within :data:`CRADLE_RADIUS` of the ee point (between the pads),
-        else 0."""
+        else 0; ``stray``: 1 where a finger presses something (at least :data:`GRASP_FORCE`)
+        while the cube's centre is not that near (a fingertip on the cube's top, a finger on
+        the table or on a cube held off centre), else 0."""
         parts = grip_lib.split_grip(grip)
         offset = parts["object_pos"] - ee_pos
         gap = xp.sqrt(xp.vecdot(offset, offset))
-        pressed = (parts["pad_force"] >= GRASP_FORCE).all(axis=-1)
+        touching = parts["pad_force"] >= GRASP_FORCE
         height = parts["object_pos"][..., 2] - CUBE_HALF
-        cradle = (gap < CRADLE_RADIUS) * parts["closure"][..., 0]
-        return {"height": height, "grasp": ((gap < GRASP_RADIUS) & pressed) * 1.0, "cradle": cradle}
+        between = gap < CRADLE_RADIUS
+        return {
+            "height": height,
+            "grasp": ((gap < GRASP_RADIUS) & touching.all(axis=-1)) * 1.0,
+            "cradle": between * parts["closure"][..., 0],
+            "stray": (touching.any(axis=-1) & ~between) * 1.0,
+        }
 
     def task_terms(self, xp: Any, extra: dict[str, Any], zero) -> dict[str, Any]:
         """``lift``: the height as a fraction of :data:`LIFT_HEIGHT`, in [0, 1]; ``grasp``;
-        ``cradle``."""
+        ``cradle``; ``stray``."""
         lift = xp.clip(extra["height"] / LIFT_HEIGHT, 0.0, 1.0)
         return {
             "lift": lift + zero,
             "grasp": extra["grasp"] + zero,
             "cradle": extra["cradle"] + zero,
+            "stray": extra["stray"] + zero,
         }
 
     def holds(self, xp: Any, distance, force_norm, cfg: TaskConfig, extra=None):

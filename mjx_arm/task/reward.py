@@ -261,7 +261,7 @@ def band_reward_terms(
         motion: the previous step's distance, the action change and the hold count (None: their
             terms are 0).
         extra: the task's measures (:meth:`mjx_arm.task.spec.Task.measures`; None: the
-            ``lift``, ``grasp`` and ``cradle`` terms are 0).
+            ``lift``, ``grasp``, ``cradle`` and ``stray`` terms are 0).
 
     Returns:
         Dict term name -> float array, shape ``(...)``; keys are ``REWARD_TERMS``.
@@ -289,6 +289,7 @@ def band_reward_terms(
         "lift": grip["lift"],
         "grasp": grip["grasp"],
         "cradle": grip["cradle"],
+        "stray": grip["stray"],
     }
     return terms
 

@@ -26,7 +26,8 @@ SCENES = (
 )  # what the converter can build around the arm (mjx_arm.urdf.scene)
 
 
-GRIP_TERMS = ("lift", "grasp", "cradle")  # the reward terms of a gripper task's measures
+# the reward terms of a gripper task's measures
+GRIP_TERMS = ("lift", "grasp", "cradle", "stray")
 
 
 class Task:
@@ -90,7 +91,8 @@ class Task:
         return {}
 
     def task_terms(self, xp: Any, extra: dict[str, Any], zero) -> dict[str, Any]:
-        """The raw ``lift``, ``grasp`` and ``cradle`` reward terms from :meth:`measures`, each
+        """The raw ``lift``, ``grasp``, ``cradle`` and ``stray`` reward terms from
+        :meth:`measures`, each
         ``(...)`` (``zero``: a zero array of the batch shape)."""
         return dict.fromkeys(GRIP_TERMS, zero)
 
