@@ -188,6 +188,7 @@ def test_stray_marks_a_finger_pressing_with_the_cube_not_between_the_pads():
     grip[:, 8:] = [[3.0, 0.0], [0.0, 0.6], [5.0, 5.0], [0.4, 0.0]]  # pad forces (N)
     stray = task.measures(np, ee, quat, grip, cfg)["stray"]
     np.testing.assert_array_equal(stray, [1.0, 1.0, 0.0, 0.0])
+    assert cfg.reward.stray < 0  # a charge in Lift's reward
 
 
 def test_soft_variant_charges_from_25_n_and_the_touchdown_speed():
