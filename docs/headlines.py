@@ -176,8 +176,8 @@ ANY_ARM_SUMMARIES = (
     "arms/any_arm/pick_c05a54b/summary.json",
 )
 PICK_COMPARISON = "arms/any_arm/pick_c05a54b/comparison.json"
-LIFT_SUMMARIES = ("lift/seeds_c57f2ae/summary.json", "lift/seeds_c05a54b/summary.json")
-ROBUST_LIFT_SUMMARY = ("robustness/robust_seeds_c57f2ae/summary.json",)
+LIFT_SUMMARIES = ("lift/seeds_3b50fcc/summary.json",)
+ROBUST_LIFT_SUMMARY = ("robustness/robust_seeds_3b50fcc/summary.json",)
 ROBUST_TOUCH_SUMMARY = ("robustness/robust_seeds/summary.json",)
 TOUCH_TRANSFER = [f"contact/transfer/touch_fast_seed{i}.json" for i in range(3)]
 HEADLINES: tuple[Headline, ...] = (
