@@ -250,7 +250,7 @@ CPU = TrainConfig(
 # Touch under :data:`mjx_arm.envs.physics_config.LATENCY`, Lift under ``SELECTED`` (why: see
 # there). Evaluation during training stays nominal. Its own preset, beside ``fast`` rather than
 # in it: it costs more than the 1.5x of ``fast``'s steps to solve that a default may cost
-# (Touch about 2.4x, Lift about 2.2x; docs/robustness.md). Reach takes LATENCY, not measured.
+# (Touch about 2.4x, Lift about 1.6x; docs/robustness.md). Reach takes LATENCY, not measured.
 ROBUST_FAST = FAST.replace(randomization=LATENCY)
 
 PRESETS = {"seed": SEED, "fast": FAST, "cpu": CPU, "robust": ROBUST_FAST}
