@@ -167,6 +167,27 @@ def _cold_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
     return "Start-up, every cache empty (cold) and after", "; ".join(parts), rels
 
 
+def _robustness_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
+    """Per group of shipped policies: perturbations held at the goal and the joint draw."""
+    parts, rels = [], []
+    for label, files in ROBUSTNESS_GROUPS:
+        held, joint = [], []
+        for rel in files:
+            summary = load(rel)["summary"]
+            held.append(sum(v["goal_met"] for v in summary["per_perturbation"].values()))
+            joint.append(summary["joint_success"])
+            total = len(summary["per_perturbation"])
+        held_text = ", ".join(str(h) for h in held)
+        draw = f"{min(joint):.2f}" + (f"-{max(joint):.2f}" if len(joint) > 1 else "")
+        parts.append(f"{label}: {held_text} of {total} held at 0.9, joint draw {draw}")
+        rels += files
+    return (
+        "Robustness of shipped policies (goals: 0.9 per point, joint draw 0.85)",
+        "; ".join(parts),
+        rels,
+    )
+
+
 ANY_ARM_SUMMARIES = (
     "arms/any_arm/final_2e708e5/summary.json",
     "arms/any_arm/z1_1192947/summary.json",
@@ -179,6 +200,12 @@ PICK_COMPARISON = "arms/any_arm/pick_c05a54b/comparison.json"
 LIFT_SUMMARIES = ("lift/seeds_3b50fcc/summary.json",)
 ROBUST_LIFT_SUMMARY = ("robustness/robust_seeds_3b50fcc/summary.json",)
 ROBUST_TOUCH_SUMMARY = ("robustness/robust_seeds/summary.json",)
+ROBUSTNESS_GROUPS = (
+    ("Lift robust", [f"robustness/robustness_lift_robust_stray_seed{i}.json" for i in range(3)]),
+    ("Lift fast", [f"robustness/robustness_lift_fast_stray_seed{i}.json" for i in (61, 74)]),
+    ("Touch robust", [f"robustness/robustness_touch_robust_seed{i}.json" for i in range(5)]),
+    ("Touch fast", ["robustness/robustness_touch_fast_seed0.json"]),
+)
 TOUCH_TRANSFER = [f"contact/transfer/touch_fast_seed{i}.json" for i in range(3)]
 HEADLINES: tuple[Headline, ...] = (
     _seeds_row("Touch", "seeds/seeds_touch_fast.json", "`--preset fast`, time to threshold"),
@@ -194,6 +221,7 @@ HEADLINES: tuple[Headline, ...] = (
     _summary_row(ROBUST_LIFT_SUMMARY, "Lift: `--preset robust` as shipped, seeds and transfer"),
     _summary_row(ROBUST_TOUCH_SUMMARY, "Touch: `--preset robust` as shipped, seeds and transfer",
                  task="touch"),
+    Headline(_robustness_row),
     Headline(_cold_row),
     Headline(_throughput_row),
     Headline(_parity_row),
