@@ -27,11 +27,14 @@ LEARN_STEPS = 160_000  # the cpu preset reaches 100% Reach success at ~123k step
 @pytest.fixture(scope="module")
 def figures(tmp_path_factory: pytest.TempPathFactory) -> dict:
     out = tmp_path_factory.mktemp("multidevice")
-    env = {
-        **os.environ,
-        "XLA_FLAGS": "--xla_force_host_platform_device_count=2",
-        "JAX_PLATFORMS": "cpu",
-    }
+    # XLA aborts a CPU all-reduce that one device joins 40 s after the other. On a busy 2-core
+    # host both devices' shares of the C MuJoCo rollout run on the same cores, and one CI run
+    # aborted there; the limit is raised to 10 minutes (a hang still ends, at the timeout below).
+    flags = (
+        "--xla_force_host_platform_device_count=2"
+        " --xla_cpu_collective_call_terminate_timeout_seconds=600"
+    )
+    env = {**os.environ, "XLA_FLAGS": flags, "JAX_PLATFORMS": "cpu"}
     done = subprocess.run(
         [sys.executable, str(WORKER), str(out), str(LEARN_STEPS)],
         env=env,
