@@ -8,6 +8,7 @@ import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
 from itertools import combinations
+from typing import NamedTuple
 
 import mujoco
 import numpy as np
@@ -25,6 +26,22 @@ from mjx_arm.urdf.convert import load_model
 BASE = -1  # PyBullet's link index of a multibody's base
 
 
+class FingerDrive(NamedTuple):
+    """The driven finger's servo in the MuJoCo model.
+
+    Attributes:
+        kv: velocity gain (N s/m).
+        cap: force cap (N).
+        damping: the joint damping (N s/m) it drives against: its own plus each ``<mimic>``
+            follower's times the multiplier squared (MuJoCo's joint equality moves them
+            together).
+    """
+
+    kv: float
+    cap: float
+    damping: float
+
+
 @dataclass(frozen=True)
 class JointServo:
     """The joint drive of the converted MuJoCo model, per actuated joint in contract order.
@@ -34,31 +51,27 @@ class JointServo:
         damping: joint damping (N m s/rad), ``(n,)``.
         effort: torque cap of the actuator (N m), ``(n,)``.
         armature: reflected rotor inertia (kg m^2), ``(n,)``.
-        finger: the driven finger's velocity gain (N s/m), force cap (N) and the joint damping
-            (N s/m) it drives against: its own plus each ``<mimic>`` follower's times the
-            multiplier squared (MuJoCo's joint equality moves them together), for an arm with a
-            parallel gripper; else empty.
+        finger: the driven finger's servo, for an arm with a parallel gripper; else None.
     """
 
     kv: tuple[float, ...]
     damping: tuple[float, ...]
     effort: tuple[float, ...]
     armature: tuple[float, ...]
-    finger: tuple[float, ...] = ()
+    finger: FingerDrive | None = None
 
     def finger_force(self, speed: float) -> float:
         """The force cap (N) of the finger's velocity motor at command ``speed`` (m/s): the
         MuJoCo servo's press when the finger is blocked, ``kv |speed|``, at most its cap."""
-        kv, cap = self.finger[:2]
-        return min(kv * abs(speed), cap)
+        return min(self.finger.kv * abs(speed), self.finger.cap)
 
     def finger_speed(self, speed: float) -> float:
         """The target (m/s) of the finger's velocity motor at command ``speed`` (m/s): the
         MuJoCo servo's free speed, where its push ``kv (speed - v)`` meets the fingers' damping
         ``d v``: ``speed kv / (kv + d)`` (0.89 ``speed`` on the shipped gripper; a motor at
         ``speed`` itself closed the fingers 12 % faster than MuJoCo)."""
-        kv, _, damping = self.finger
-        return speed * kv / (kv + damping)
+        kv = self.finger.kv
+        return speed * kv / (kv + self.finger.damping)
 
     def torque(self, u: list[float], qdot: list[float], gravity: list[float]) -> list[float]:
         """Joint torques (N m): ``clip(kv (u - qdot), +-effort) - d qdot + gravity``.
@@ -89,11 +102,11 @@ def _servo_cached(config: ArmConfig, mtime: float, sim_dt: float) -> JointServo:
     names = arm.joint_names
     actuators = [model.actuator(name) for name in names]
     joints = [model.joint(name) for name in names]
-    finger = ()
+    finger = None
     if arm.gripper is not None:
         act = model.actuator(arm.gripper.joint)
         damping = _drive_damping(model, model.joint(arm.gripper.joint).id)
-        finger = (float(act.gainprm[0]), float(act.forcerange[1]), damping)
+        finger = FingerDrive(float(act.gainprm[0]), float(act.forcerange[1]), damping)
     return JointServo(
         kv=tuple(float(a.gainprm[0]) for a in actuators),
         damping=tuple(float(j.damping[0]) for j in joints),

@@ -30,7 +30,7 @@ SPEED_TOLERANCE = 0.03  # relative: the closing speed per step, PyBullet against
 def test_the_servo_reads_the_damping_of_both_fingers() -> None:
     task = lift_config()
     servo = joint_servo(arm_info(asset("ur5e_gripper.urdf")), task.spec.servo_dt)
-    kv, _, damping = servo.finger
+    kv, damping = servo.finger.kv, servo.finger.damping
     assert damping == pytest.approx(20.0)  # N s/m: 10 on the driven finger, 10 on its mimic
     assert servo.finger_speed(0.15) == pytest.approx(0.15 * kv / (kv + 20.0))
     assert servo.finger_speed(-0.15) == pytest.approx(-servo.finger_speed(0.15))
