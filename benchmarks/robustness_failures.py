@@ -53,7 +53,7 @@ def run(policy_path: str, perturbation: str, values: list[float], episodes: int,
     pert = known[perturbation]
     points = [rb.Point(perturbation, v, pert.config(v), pert.inside(v)) for v in values]
     env = rb.make_env(task, "mujoco-batch", "auto", eval_arm(policy, None), episodes * len(values))
-    episode = rb._episodes(env, points, [episodes] * len(values), seed)
+    episode = rb.point_draws(env, points, [episodes] * len(values), seed)
     out = rb.rollout(env, policy, episode, seed)
     rows = []
     for i, value in enumerate(values):

@@ -209,7 +209,7 @@ def sweep_points(perturbations: tuple[Perturbation, ...]) -> list[Point]:
 # --------------------------------------------------------------------------- running
 
 
-def _episodes(env: Any, points: list[Point], counts: list[int], seed: int) -> Any:
+def point_draws(env: Any, points: list[Point], counts: list[int], seed: int) -> Any:
     """Each point's draws, ``counts[i]`` envs each, stacked into one batched Episode."""
     import jax
 
@@ -297,7 +297,7 @@ def run_robustness(
     joint_n = config.joint_episodes or 4 * config.episodes
     counts = [config.episodes] * (len(points) - 1) + [joint_n]
     env = make_env(task, config.engine, config.impl, arm, min(sum(counts), config.max_batch))
-    episode = _episodes(env, points, counts, config.seed)
+    episode = point_draws(env, points, counts, config.seed)
     bounds = np.cumsum([0, *counts])
     success, peak = np.zeros(bounds[-1], bool), np.zeros(bounds[-1])
     t0 = time.monotonic()
