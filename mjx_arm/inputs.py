@@ -214,3 +214,4 @@ def float_in(low: float, high: float | None = None) -> Callable[[str], float]:
 nonnegative_int = int_in(0)
 seed_int = int_in(0, MAX_SEED)
 pixels = int_in(16, 4096)  # video and plot sizes
+positive_int = int_in(1)

@@ -134,8 +134,16 @@ def model_bounds(mj_model: mujoco.MjModel) -> tuple[int, int]:
     the contact filters allow, with the largest contact count of its collision function, and
     every limited joint.
     """
-    data = mjx.make_data(mjx.put_model(mj_model, impl="jax"), impl="jax")
+    device = own_device()
+    data = mjx.make_data(mjx.put_model(mj_model, device, impl="jax"), device, impl="jax")
     return int(data._impl.contact.dist.shape[0]), int(data._impl.efc_J.shape[0])
+
+
+def own_device() -> jax.Device:
+    """This process's first device. MJX puts a model and data on ``jax.devices()[0]`` unless
+    told: where several processes train (one per GPU), that is process 0's GPU, which the
+    others cannot address."""
+    return jax.local_devices()[0]
 
 
 class MjxPhysics:
@@ -176,8 +184,8 @@ class MjxPhysics:
         if self.impl == "warp":
             self.model, self._template = self._warp_model_and_data()
         else:
-            self.model = mjx.put_model(mj_model, impl="jax")
-            self._template = mjx.make_data(self.model, impl="jax")
+            self.model = mjx.put_model(mj_model, own_device(), impl="jax")
+            self._template = mjx.make_data(self.model, own_device(), impl="jax")
         self._joint_dofs = jnp.asarray(self.ids.dof_adr)
         self.grip = GripReader(mj_model, arm) if task.spec.gripper else None
         acts = list(self.ids.actuators) + ([self.grip.finger_act] if self.grip else [])
@@ -196,12 +204,12 @@ class MjxPhysics:
             "model_rows": rows,
         }
         mj_model = warp_compatible(self.mj_model)
-        model = mjx.put_model(mj_model, impl="warp")
+        model = mjx.put_model(mj_model, own_device(), impl="warp")
         # Warp prints a warning per env and substep on any overflow; this layer reads the bits.
         opt_impl = model.opt._impl.replace(warn_overflow=0)
         model = model.replace(opt=model.opt.replace(_impl=opt_impl))
         naconmax = self.buffers["naconmax"]
-        data = mjx.make_data(mj_model, impl="warp", naconmax=naconmax, njmax=njmax)
+        data = mjx.make_data(mj_model, own_device(), impl="warp", naconmax=naconmax, njmax=njmax)
         threads = self.config.compile_threads
         devices = warp_compile.cuda_devices() if threads else []
         if devices:

@@ -5,9 +5,13 @@ Layout, under ``RUN_DIR/checkpoints/``::
     step_000001234/params/           (normaliser, policy, value) in Brax's format, by orbax
     step_000001234/meta.json         the step and what the run adds (task, metrics, ...)
     step_000001234/transitions.npz   a short rollout of the policy (obs, action, reward, done)
+    step_000001234/resume.npz        the training state (optimiser included) and PRNG keys
+    step_000001234/env_state.npz     the training envs' state (the newest checkpoint only)
 
-Checkpoints hold params only: a resumed run starts the optimiser's moment estimates from zero
-(google/brax#655) and may run on any number of devices.
+With ``resume.npz`` and ``env_state.npz`` (:mod:`mjx_arm.train.resume`) a resumed run goes on
+as if it had never stopped, on any number of devices. Checkpoints written before them hold
+params only (as Brax's do, google/brax#655): such a run resumes with fresh optimiser moments,
+new keys and reset envs.
 
 Nothing is lost: a save that fails (a full disk) or is killed leaves the checkpoints before it
 whole and the newest of them the latest, and a checkpoint that cannot be read is a named
@@ -48,8 +52,10 @@ def save_checkpoint(
     params: Any,
     meta: dict[str, Any],
     transitions: dict[str, np.ndarray] | None = None,
+    arrays: dict[str, dict[str, np.ndarray]] | None = None,
 ) -> Path:
-    """Save params (normaliser, policy, value) with orbax, ``meta.json`` and transitions.
+    """Save params (normaliser, policy, value) with orbax, ``meta.json``, transitions and the
+    ``arrays`` files (file name -> arrays, each written as an ``.npz``).
 
     Atomic: everything is written into a hidden folder that is then renamed to ``folder``, so a
     run killed mid-save never leaves a half-written checkpoint behind under a name
@@ -63,7 +69,7 @@ def save_checkpoint(
     partial = folder.with_name(f"{PARTIAL}{folder.name}")
     shutil.rmtree(partial, ignore_errors=True)
     try:
-        _write_partial(partial, step, params, meta, transitions)
+        _write_partial(partial, step, params, meta, transitions, arrays or {})
     except (OSError, ValueError) as err:  # orbax (tensorstore) reports a full disk as ValueError
         shutil.rmtree(partial, ignore_errors=True)
         kept = latest_checkpoint(folder.parent)
@@ -87,17 +93,37 @@ def _write_partial(
     params: Any,
     meta: dict[str, Any],
     transitions: dict[str, np.ndarray] | None,
+    arrays: dict[str, dict[str, np.ndarray]],
 ) -> None:
     """Write a whole checkpoint into ``partial`` and flush it to disk."""
-    import orbax.checkpoint as ocp
 
     partial.mkdir(parents=True)
-    ocp.PyTreeCheckpointer().save((partial / "params").resolve(), params, force=True)
+    checkpointer().save((partial / "params").resolve(), params, force=True)
     if transitions is not None:
         save_transitions(partial, transitions)
+    for name, content in arrays.items():
+        with (partial / name).open("wb") as f:
+            np.savez(f, **content)
     files = {PARAMS_FILES: params_files(partial / "params")}
     (partial / "meta.json").write_text(json.dumps({"step": step, **meta, **files}, indent=2))
     _fsync_tree(partial)
+
+
+def checkpointer() -> Any:
+    """orbax's checkpointer for host params, for this process alone.
+
+    Where several processes train, orbax waits for all of them at every save and restore;
+    here only process 0 saves (host arrays), so that wait would never end.
+    """
+    import jax
+    import orbax.checkpoint as ocp
+
+    if jax.process_count() == 1:
+        return ocp.PyTreeCheckpointer()
+    me = jax.process_index()
+    alone = ocp.options.MultiprocessingOptions(primary_host=me, active_processes={me})
+    handler = ocp.PyTreeCheckpointHandler(multiprocessing_options=alone)
+    return ocp.Checkpointer(handler, multiprocessing_options=alone)
 
 
 def params_files(params: Path) -> dict[str, list]:
@@ -174,7 +200,6 @@ def load_params(folder: Path) -> Any:
     Raises:
         CheckpointError: the params are missing or cannot be read (a damaged checkpoint).
     """
-    import orbax.checkpoint as ocp
 
     path = (folder / "params").resolve()
     if not path.is_dir():
@@ -185,7 +210,7 @@ def load_params(folder: Path) -> Any:
             f"checkpoint {folder} cannot be read: {damage}; delete it to use the one before"
         )
     try:
-        return ocp.PyTreeCheckpointer().restore(path)
+        return checkpointer().restore(path)
     except Exception as err:  # orbax and tensorstore raise many types for a damaged file
         raise CheckpointError(
             f"checkpoint {folder} cannot be read ({type(err).__name__}: {_cause(err)}); "

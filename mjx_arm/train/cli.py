@@ -7,7 +7,7 @@ import math
 from pathlib import Path
 
 from mjx_arm import names
-from mjx_arm.inputs import nonnegative_int
+from mjx_arm.inputs import nonnegative_int, positive_int
 from mjx_arm.jax_cache import enable_compilation_cache
 from mjx_arm.names import EXIT_OK
 from mjx_arm.settings import add_set_argument
@@ -15,27 +15,67 @@ from mjx_arm.task.registry import task_names
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    """Train a PPO policy with Brax on the batched env and write a run directory."""
+    """Train a PPO policy with Brax on the batched env and write a run directory.
+
+    On a host with several GPUs, one process per GPU (``--devices``, default all), joined by
+    jax.distributed; on several hosts, the same command on each with --coordinator, --hosts
+    and --host-rank (or MJX_ARM_COORDINATOR, MJX_ARM_HOSTS / SLURM_NNODES and
+    MJX_ARM_HOST_RANK / SLURM_NODEID).
+    """
+    import sys
     import time
 
+    from mjx_arm.train import launch
     from mjx_arm.train.config import saved_config
+    from mjx_arm.train.distributed import Hosts, ProcessGroup
     from mjx_arm.train.ppo import train
 
+    group = ProcessGroup.from_env()  # set where a launcher started this process
+    run_dir = Path(args.resume or args.run_dir or Path("runs") / time.strftime("%Y%m%d-%H%M%S"))
+    if not group.joined:
+        hosts = Hosts.from_args(args.coordinator, args.hosts, args.host_rank, args.join_timeout)
+        plan = launch.plan(hosts, args.devices)
+        if plan.spawns:
+            if not (args.resume or args.run_dir):  # one name for every process's run
+                run_dir = _default_run_dir(args)
+            print(f"run directory: {run_dir}")
+            argv = _child_argv(sys.argv[1:], run_dir, bool(args.resume or args.run_dir))
+            return launch.run(plan, argv, run_dir / "logs")
+        group = plan.group
+    group.join()
     enable_compilation_cache()
     if args.resume:
-        run_dir = Path(args.resume)
         config = saved_config(run_dir)
         if args.devices is not None:  # a run resumes on any number of devices
             config = config.replace(devices=args.devices)
     else:
         config = config_from_args(args)
-        stamp = time.strftime("%Y%m%d-%H%M%S")
-        run_dir = Path(args.run_dir or Path("runs") / f"{config.task}-{stamp}")
-    print(f"run directory: {run_dir}")
-    result = train(config, run_dir, resume=bool(args.resume), quiet=args.quiet)
-    print(done_line(result))
-    print(result.compile_summary)
+        if not args.run_dir:
+            run_dir = _default_run_dir(args, config.task)
+    if group.joined:
+        config = config.replace(devices=0)  # every process trains on all of its devices
+    if group.leader:
+        print(f"run directory: {run_dir}")
+    result = train(config, run_dir, resume=bool(args.resume), quiet=args.quiet or not group.leader)
+    if group.leader:
+        print(done_line(result))
+        print(result.compile_summary)
     return EXIT_OK
+
+
+def _default_run_dir(args: argparse.Namespace, task: str | None = None) -> Path:
+    """``runs/TASK-TIMESTAMP`` (the task of the flags, else of the preset)."""
+    import time
+
+    from mjx_arm.train.config import preset_config
+
+    task = task or args.task or preset_config(args.preset).task
+    return Path("runs") / f"{task}-{time.strftime('%Y%m%d-%H%M%S')}"
+
+
+def _child_argv(argv: list[str], run_dir: Path, named: bool) -> list[str]:
+    """``train``'s arguments for a started process: the run directory named."""
+    return argv if named else [*argv, "--run-dir", str(run_dir)]
 
 
 def config_from_args(args: argparse.Namespace):
@@ -129,8 +169,8 @@ def _add_config_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--devices",
         type=nonnegative_int,
-        help="local devices to train on, the env batch split evenly over them "
-        "(default: all; also on --resume, which may change it)",
+        help="devices of this host to train on, the env batch split evenly over them: on a "
+        "GPU host one process per GPU (default: all; also on --resume, which may change it)",
     )
     p.add_argument(
         "--arm",
@@ -151,6 +191,33 @@ def _add_config_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_host_arguments(p: argparse.ArgumentParser) -> None:
+    """The flags of a training over several hosts (docs/training.md, several hosts)."""
+    p.add_argument(
+        "--coordinator",
+        metavar="HOST:PORT",
+        help="several hosts: host 0's address and a free port, the same on every host "
+        "(default: $MJX_ARM_COORDINATOR)",
+    )
+    p.add_argument(
+        "--hosts",
+        type=positive_int,
+        help="several hosts: how many run this command (default: $MJX_ARM_HOSTS, "
+        "$SLURM_NNODES, else 1)",
+    )
+    p.add_argument(
+        "--host-rank",
+        type=nonnegative_int,
+        help="several hosts: this host's rank, 0 to hosts-1; host 0 logs and writes the run "
+        "directory (default: $MJX_ARM_HOST_RANK, $SLURM_NODEID, else 0)",
+    )
+    p.add_argument(
+        "--join-timeout",
+        type=positive_int,
+        help="seconds to wait for every host's processes at the start (default: 300)",
+    )
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``train`` and ``warmup`` to ``sub``."""
     p = sub.add_parser(
@@ -162,6 +229,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--run-dir", help="run directory (default: runs/TASK-TIMESTAMP)")
     p.add_argument("--resume", metavar="RUN_DIR", help="continue the run in RUN_DIR")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_host_arguments(p)
     p.set_defaults(func=cmd_train)
     w = sub.add_parser(
         "warmup",

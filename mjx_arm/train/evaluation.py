@@ -55,6 +55,11 @@ class Evaluator:
         """The evaluation program lowered for ``params`` (shapes only matter)."""
         return self._unroll.lower(params, self._key)
 
+    @property
+    def key(self) -> jax.Array:
+        """The key the next evaluation's key is split from (a checkpoint keeps it)."""
+        return self._key
+
     def use(self, compiled: Callable) -> None:
         """Run evaluations with ``compiled``, the compiled result of :meth:`lower`."""
         self._unroll = compiled

@@ -63,6 +63,21 @@ def local_devices(count: int = 0) -> list[jax.Device]:
     return devices[: count or len(devices)]
 
 
+def train_devices(count: int = 0) -> list[jax.Device]:
+    """The devices a training splits its env batch over.
+
+    Where several processes train together (``jax.distributed``, one per GPU), every device of
+    every process, each process using all of its own; alone, the first ``count`` local devices
+    (0: all of them).
+
+    Raises:
+        ConfigError: more local devices asked for than there are.
+    """
+    if jax.process_count() > 1:
+        return list(jax.devices())
+    return local_devices(count)
+
+
 def make_mesh(devices: list[jax.Device]) -> Mesh:
     """A one-axis mesh (``envs``) over ``devices``."""
     return Mesh(np.array(devices), (ENV_AXIS,))

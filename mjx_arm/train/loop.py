@@ -12,17 +12,19 @@ import functools
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax.sharding import NamedSharding
 from jax.sharding import PartitionSpec as P
 
 from mjx_arm.envs.wrappers import wrap_for_training
 from mjx_arm.train.compile_report import CompileReport
 from mjx_arm.train.config import TrainConfig
+from mjx_arm.train.distributed import gather, is_leader, share
 from mjx_arm.train.evaluation import Evaluator
 from mjx_arm.train.learner import (
     ENV_AXIS,
@@ -30,17 +32,27 @@ from mjx_arm.train.learner import (
     Learner,
     Params,
     batch_sharding,
-    local_devices,
     make_mesh,
+    train_devices,
 )
+from mjx_arm.train.resume import ResumeState, env_leaf_paths, replace_leaves, select_leaves
+
+# The evaluation figures every process needs (to stop together), sent from process 0.
+SHARED_EVAL = ("eval/episode_success", "eval/episode_physics_overflow")
 
 
 @dataclass
 class Callbacks:
-    """What the run reports to: Brax's ``progress_fn`` and ``policy_params_fn`` signatures."""
+    """What the run reports to: Brax's ``progress_fn`` and ``policy_params_fn`` signatures,
+    and ``snapshot(step, take)``, given after each epoch a function that gathers the run's
+    :class:`~mjx_arm.train.resume.ResumeState` (a collective: every process calls it, or none).
+    """
 
     progress: Callable[[int, dict[str, Any]], None]
     policy_params: Callable[[int, Callable, Params], None]
+    snapshot: Callable[[int, Callable[[], ResumeState]], None] = field(
+        default=lambda step, take: None
+    )
 
 
 def resolve_partition(config: TrainConfig, impl: str) -> str:
@@ -82,6 +94,7 @@ class Prepared:
         sizes: the epoch's cut.
         local_key: the key the epochs' keys are split from.
         devices, partition: where the run trains and how the physics is split.
+        env_paths: tree paths of the per-env leaves of ``env_state`` (what a checkpoint keeps).
     """
 
     learner: Learner
@@ -93,6 +106,13 @@ class Prepared:
     local_key: jax.Array
     devices: list
     partition: str
+    env_paths: list = field(default_factory=list)
+
+    def snapshot(self, state: Any, env_state: Any, local_key: jax.Array) -> ResumeState:
+        """The run between two epochs, gathered on the host (a collective)."""
+        leaves = gather(select_leaves(env_state, self.env_paths))
+        keys = {"epochs": np.asarray(local_key), "evaluation": np.asarray(self.evaluate.key)}
+        return ResumeState(gather(state), keys, leaves)
 
 
 def prepare_ppo(
@@ -100,7 +120,7 @@ def prepare_ppo(
     env: Any,
     eval_env: Any,
     episode_length: int,
-    restore: Params | None = None,
+    restore: Params | ResumeState | None = None,
     step_offset: int = 0,
     report: CompileReport | None = None,
 ) -> Prepared:
@@ -111,13 +131,20 @@ def prepare_ppo(
     at the same time on a thread pool; MuJoCo Warp's kernels, started when the env was built,
     compile meanwhile (:meth:`mjx_arm.envs.mjx_physics.MjxPhysics.wait_precompiled` is
     called before anything runs). Every stage is timed into ``report``.
+
+    ``restore`` is a checkpoint's whole state (:class:`ResumeState`: the run goes on exactly
+    where it stopped) or, from an older checkpoint, its params alone (new keys, fresh
+    optimiser moments, reset envs). Where several processes train, only process 0 compiles
+    the evaluation.
     """
     report = report or CompileReport()
-    devices = local_devices(config.devices)
+    devices = train_devices(config.devices)
     config.check_devices(len(devices))
     mesh = make_mesh(devices)
     partition = resolve_partition(config, env.physics.impl)
     key_policy, key_value, key_env, key_eval, local_key = _run_keys(config.seed + step_offset)
+    if isinstance(restore, ResumeState):
+        local_key, key_eval = (jnp.asarray(restore.keys[k]) for k in ("epochs", "evaluation"))
 
     split_mesh = mesh if partition == "per_device" else None
     train_env = wrap_for_training(env, episode_length, mesh=split_mesh, axis=ENV_AXIS)
@@ -136,21 +163,30 @@ def prepare_ppo(
         reset, shardings = _reset_fn(train_env, mesh, keys)
         env_shapes = jax.tree.map(_strong_shape, jax.eval_shape(reset, keys), shardings)
         epoch = learner.epoch_programs(train_env, sizes, shardings)
-        lowered = {
-            "reset": reset.lower(keys),
-            **epoch.lower(state, env_shapes, local_key),
-            "evaluation": evaluate.lower(learner.params(state)),
-        }
+        lowered = {"reset": reset.lower(keys), **epoch.lower(state, env_shapes, local_key)}
+        if is_leader():
+            lowered["evaluation"] = evaluate.lower(learner.params(state))
     with report.stage("XLA compile (in parallel)"):
         compiled = compile_all(lowered)
-    evaluate.use(compiled["evaluation"])
+    if "evaluation" in compiled:
+        evaluate.use(compiled["evaluation"])
     epoch = epoch.with_programs(compiled["rollout"], compiled["update"])
     _wait_for_kernels((env, eval_env), report)
     with report.stage("first reset run"):
         env_state = jax.block_until_ready(strong(compiled["reset"](keys)))
+    paths = env_leaf_paths(env_state, config.num_envs, env.physics.splits)
+    if isinstance(restore, ResumeState) and restore.env_leaves is not None:
+        env_state = _restored_envs(env_state, paths, restore.env_leaves)
     return Prepared(
-        learner, state, env_state, epoch, evaluate, sizes, local_key, devices, partition
+        learner, state, env_state, epoch, evaluate, sizes, local_key, devices, partition, paths
     )
+
+
+def _restored_envs(env_state: Any, paths: list, leaves: list[np.ndarray]) -> Any:
+    """``env_state`` with a checkpoint's per-env leaves, each laid out as the fresh one is."""
+    fresh = select_leaves(env_state, paths)
+    placed = [jax.device_put(np.asarray(x), f.sharding) for x, f in zip(leaves, fresh, strict=True)]
+    return replace_leaves(env_state, paths, placed)
 
 
 def _learner(
@@ -159,7 +195,11 @@ def _learner(
     """The learner and its first state: fresh from ``keys`` (policy, value), or restored."""
     learner = Learner(config, env.observation_size, env.action_size, mesh)
     state = learner.init(*keys)
-    return learner, state if restore is None else learner.restore(state, restore)
+    if restore is None:
+        return learner, state
+    if isinstance(restore, ResumeState):
+        return learner, learner.place(restore.train_state)
+    return learner, learner.restore(state, restore)
 
 
 def _wait_for_kernels(envs: tuple[Any, ...], report: CompileReport) -> None:
@@ -185,7 +225,7 @@ def run_ppo(
     eval_env: Any,
     episode_length: int,
     callbacks: Callbacks,
-    restore: Params | None = None,
+    restore: Params | ResumeState | None = None,
     step_offset: int = 0,
     report: CompileReport | None = None,
 ) -> dict[str, Any]:
@@ -200,7 +240,7 @@ def run_ppo(
         env, eval_env: the unwrapped training and evaluation envs (``MjxArmEnv``).
         episode_length: control steps before an episode is truncated.
         callbacks: where evaluations and params go (steps are the run's global steps).
-        restore: (normaliser, policy, value) to start from.
+        restore: the checkpoint's whole state, or its (normaliser, policy, value) alone.
         step_offset: env steps already trained (a resumed run's checkpoint step).
         report: where the start-up stages are timed (the first evaluation and epoch included).
     """
@@ -210,7 +250,7 @@ def run_ppo(
     params = run.learner.params(state)
     if config.num_evals > 1 and step_offset == 0:
         with report.stage("first evaluation run"):
-            metrics = run.evaluate.run_evaluation(params, {})
+            metrics = _evaluate(run.evaluate, params, {})
         callbacks.progress(0, metrics)
     walltime, step = 0.0, step_offset
     while step < config.num_timesteps:
@@ -224,9 +264,21 @@ def run_ppo(
         step += run.sizes.env_steps_per_epoch
         params = run.learner.params(state)
         callbacks.policy_params(step, run.learner.make_policy, params)
+        taken = (state, env_state, local_key)
+        callbacks.snapshot(step, functools.partial(run.snapshot, *taken))
         training = _training_metrics(metrics, run.sizes.env_steps_per_epoch / seconds, walltime)
-        callbacks.progress(step, run.evaluate.run_evaluation(params, training))
+        callbacks.progress(step, _evaluate(run.evaluate, params, training))
     return {"devices": [str(d) for d in run.devices], "partition": run.partition}
+
+
+def _evaluate(evaluate: Evaluator, params: Params, training: dict[str, Any]) -> dict[str, Any]:
+    """Process 0 evaluates ``params``; every process gets its success and overflow figures
+    (so that all stop at the same evaluation). Alone: the evaluation's metrics."""
+    if jax.process_count() == 1:
+        return evaluate.run_evaluation(params, training)
+    metrics = evaluate.run_evaluation(params, training) if is_leader() else dict(training)
+    shared = share({k: float(np.mean(metrics.get(k, 0.0))) for k in SHARED_EVAL})
+    return metrics if is_leader() else {**metrics, **shared}
 
 
 def _strong_shape(leaf: Any, sharding: Any) -> jax.ShapeDtypeStruct:

@@ -3,15 +3,18 @@
 ``train(config, run_dir)`` is what ``mjx-arm train`` calls. Brax's PPO does the learning, on one
 device or several (:mod:`mjx_arm.train.loop`, :mod:`mjx_arm.train.learner`); this module builds
 the env, wires the callbacks (:mod:`mjx_arm.train.progress`: metrics, checkpoints, transitions,
-progress bar) to the run directory and restores a run. Checkpoints hold params only (normaliser,
-policy, value), in Brax's format: on resume the optimiser's moment estimates start from zero
-again (google/brax#655), and a run resumes on any number of devices.
+progress bar) to the run directory and restores a run. Checkpoints hold the params in Brax's
+format and, beside them, the optimiser state, the PRNG keys and the envs' state
+(:mod:`mjx_arm.train.resume`): a resumed run goes on as the run it continues, on any number of
+devices. Where several processes train (:mod:`mjx_arm.train.distributed`), process 0 holds the
+run directory; the others read a checkpoint to resume from and write nothing.
 """
 
 from __future__ import annotations
 
 import itertools
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -25,9 +28,11 @@ from mjx_arm.task.config import TaskConfig
 from mjx_arm.train.checkpoints import CheckpointError, restore_brax_params
 from mjx_arm.train.compile_report import CompileReport
 from mjx_arm.train.config import TrainConfig
-from mjx_arm.train.learner import local_devices
+from mjx_arm.train.distributed import barrier, is_leader
+from mjx_arm.train.learner import train_devices
 from mjx_arm.train.loop import Callbacks, resolve_partition, run_ppo
 from mjx_arm.train.progress import Solved, Stopped, _Progress
+from mjx_arm.train.resume import has_resume_state
 from mjx_arm.train.rundir import RunDir, RunDirError
 
 
@@ -72,7 +77,8 @@ def full_config(
         "backend": resolve_backend(config.backend),
         "physics_resolved": physics or {},
         "jax_backend": jax.default_backend(),
-        "devices": [str(d) for d in local_devices(config.devices)],
+        "devices": [str(d) for d in train_devices(config.devices)],
+        "processes": jax.process_count(),
         "partition": resolve_partition(config, (physics or {}).get("impl", "")),
     }
 
@@ -104,7 +110,7 @@ def train(
             without a usable checkpoint.
     """
     config.validate()
-    config.check_devices(len(local_devices(config.devices)))
+    config.check_devices(len(train_devices(config.devices)))
     task = config.task_config()
     _check_arm(config, task)
     if resume and not (Path(run_dir) / "config.json").is_file():
@@ -112,11 +118,16 @@ def train(
             f"cannot resume {run_dir}: no checkpoint, it is not a run directory (no "
             "config.json); give the RUN_DIR of an earlier mjx-arm train"
         )
+    if not is_leader():  # process 0 holds the run directory; the others only read it
+        barrier("run directory ready")
+        step_offset, restore = _start_point(None, config, resume, Path(run_dir))
+        return _train(None, config, task, step_offset, restore, True, stop_after)
     run = RunDir(run_dir)
     with run.lock():
         step_offset, restore = _start_point(run, config, resume)
         run.check_writable()  # before any compilation
         run.truncate_metrics(step_offset)  # rows a killed run wrote after its last checkpoint
+        barrier("run directory ready")
         return _train(run, config, task, step_offset, restore, quiet, stop_after)
 
 
@@ -137,14 +148,27 @@ def _check_arm(config: TrainConfig, task: TaskConfig) -> None:
         raise ConfigError(str(err)) from err
 
 
-def _start_point(run: RunDir, config: TrainConfig, resume: bool) -> tuple[int, Any]:
-    """(step to start from, params to restore or None).
+def _start_point(
+    run: RunDir | None, config: TrainConfig, resume: bool, path: Path | None = None
+) -> tuple[int, Any]:
+    """(step to start from, what to restore: the checkpoint folder, its params, or None).
+
+    A checkpoint with the training state is returned as its folder (read once the run's
+    structure is known, :func:`_restore_state`); an older one as its params, with a warning.
+    ``run`` None: a process other than process 0, which reads ``path`` without changing it.
 
     Raises:
         InputError: a new run on a folder that holds one, or a resume without a usable
             checkpoint or with nothing left to train.
     """
-    latest = run.latest_checkpoint()
+    if run is None:
+        if not resume:
+            return 0, None
+        from mjx_arm.train.checkpoints import latest_checkpoint
+
+        latest = latest_checkpoint(path / "checkpoints")
+    else:
+        latest = run.latest_checkpoint()
     if not resume:
         if latest is not None:
             raise RunDirError(
@@ -157,8 +181,16 @@ def _start_point(run: RunDir, config: TrainConfig, resume: bool) -> tuple[int, A
     step_offset = int(RunDir.load_meta(latest)["step"])
     if step_offset >= config.num_timesteps:
         raise ConfigError(
-            f"nothing to resume: {run.path} already has {step_offset} of its "
+            f"nothing to resume: {latest.parent.parent} already has {step_offset} of its "
             f"{config.num_timesteps} steps"
+        )
+    if has_resume_state(latest):
+        return step_offset, latest
+    if is_leader():
+        warnings.warn(
+            f"{latest.name} holds params only (a checkpoint of an older version): the run "
+            "resumes with fresh optimiser moments, new keys and reset envs",
+            stacklevel=2,
         )
     raw = RunDir.load_params(latest)
     try:
@@ -168,7 +200,7 @@ def _start_point(run: RunDir, config: TrainConfig, resume: bool) -> tuple[int, A
 
 
 def _train(
-    run: RunDir,
+    run: RunDir | None,
     config: TrainConfig,
     task: TaskConfig,
     step_offset: int,
@@ -188,16 +220,19 @@ def _train(
     progress.physics = env.physics.describe()
     if not quiet:
         progress.start_up_summary = report.summary
-    if restore is None:
+    if restore is None and run is not None:
         run.save_config(full_config(config, task, env.physics.describe(), env.arm))
+    if isinstance(restore, Path):
+        restore = _restore_state(restore, config, env)
     progress.times.append((start, step_offset))
+    callbacks = Callbacks(progress.progress, progress.policy_params, progress.snapshot)
     try:
         run_ppo(
             config,
             env,
             eval_env,
             task.episode_steps,
-            Callbacks(progress.progress, progress.policy_params),
+            callbacks,
             restore=restore,
             step_offset=step_offset,
             report=report,
@@ -207,15 +242,42 @@ def _train(
     finally:
         report.close()
         progress.close()
-        run.close()
+        if run is not None:
+            run.close()
     total = time.monotonic() - start
     compile_s, sps = _timings(progress.times, config)
     steps = progress.times[-1][1]  # rounded up to whole epochs
     record = {"compile_s": compile_s, **report.to_dict()}
-    run.save_compile_report(record)
+    if run is not None:
+        run.save_compile_report(record)
     return TrainResult(
-        run.path, steps, progress.last_metrics, compile_s, total, sps, record, report.summary()
+        Path(run.path if run is not None else "."),
+        steps,
+        progress.last_metrics,
+        compile_s,
+        total,
+        sps,
+        record,
+        report.summary(),
     )
+
+
+def _restore_state(folder: Path, config: TrainConfig, env: Any):
+    """The :class:`~mjx_arm.train.resume.ResumeState` of a checkpoint, read into the
+    structure of this config's fresh state (shapes only: nothing is compiled or run)."""
+    from mjx_arm.envs.wrappers import wrap_for_training
+    from mjx_arm.train.learner import Learner, make_mesh
+    from mjx_arm.train.resume import env_leaf_paths, load_resume_state, select_leaves
+
+    mesh = make_mesh(train_devices(config.devices))
+    learner = Learner(config, env.observation_size, env.action_size, mesh)
+    key = jax.random.PRNGKey(0)
+    template = jax.eval_shape(learner._fresh_state, key, key)
+    wrapped = wrap_for_training(env, config.task_config().episode_steps)
+    keys = jax.ShapeDtypeStruct((config.num_envs, *key.shape), key.dtype)
+    env_shape = jax.eval_shape(wrapped.reset, keys)
+    paths = env_leaf_paths(env_shape, config.num_envs, env.physics.splits)
+    return load_resume_state(folder, template, np.asarray(key), select_leaves(env_shape, paths))
 
 
 def make_envs(

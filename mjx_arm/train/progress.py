@@ -1,5 +1,9 @@
 """What a training run does at each evaluation: log the metrics, show the progress bar, write
 checkpoints and transitions, keep the best evaluation, and stop once the run is solved.
+
+Where several processes train, every process makes the same decisions (from the evaluation
+figures process 0 shares) and takes part in gathering the env state for a checkpoint, but only
+process 0 (``run`` given) writes.
 """
 
 from __future__ import annotations
@@ -13,6 +17,7 @@ import numpy as np
 from mjx_arm.envs.mjx_physics import PhysicsOverflowError, overflow_message
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.train.config import TrainConfig
+from mjx_arm.train.resume import ENV_STATE_FILE, ResumeState, resume_arrays
 from mjx_arm.train.rundir import RunDir
 
 TRANSITIONS_KEPT = 100
@@ -33,11 +38,12 @@ class _Progress:
     Steps are the run's global env steps. Each evaluation's metrics row is written before the
     checkpoint of the same step, so a run killed between the two loses no row: it resumes from
     the checkpoint before and drops the rows after it (:meth:`RunDir.truncate_metrics`).
+    ``run`` None: a process other than process 0, which writes nothing and shows no bar.
     """
 
     def __init__(
         self,
-        run: RunDir,
+        run: RunDir | None,
         config: TrainConfig,
         task: TaskConfig,
         step_offset: int,
@@ -54,7 +60,7 @@ class _Progress:
             initial=step_offset,
             unit="step",
             unit_scale=True,
-            disable=quiet,
+            disable=quiet or run is None,
             desc=f"train {config.task}",
             dynamic_ncols=True,
         )
@@ -66,6 +72,11 @@ class _Progress:
         self.best: tuple[float, int, Any] | None = None
         self.times: list[tuple[float, int]] = []
         self.last_metrics: dict[str, float] = {}
+        self.take_snapshot: Any = None  # () -> ResumeState of the newest epoch (a collective)
+
+    def snapshot(self, step: int, take) -> None:
+        """Keep the function that gathers the newest epoch's state (called at a checkpoint)."""
+        self.take_snapshot = take
 
     def policy_params(self, step: int, make_policy, params) -> None:
         """Keep the newest params (saved by :meth:`progress` when a checkpoint is due)."""
@@ -80,8 +91,9 @@ class _Progress:
             if k.startswith(LOGGED_PREFIXES)
         }
         self.last_metrics = row
-        self.run.log_metrics(step, row)
-        self._show(step, row)
+        if self.run is not None:
+            self.run.log_metrics(step, row)
+            self._show(step, row)
         overflow = row.get("eval/episode_physics_overflow", 0.0)
         if overflow > 0:
             raise PhysicsOverflowError(overflow_message(overflow, self.physics))
@@ -96,6 +108,7 @@ class _Progress:
         self._remember_best(step, success)
         due = self.evals % self.config.checkpoint_every == 0
         if (due or solved or step >= self.total) and self.latest is not None:
+            resume = self.take_snapshot() if self.take_snapshot is not None else None
             make_policy, params = self.latest
             meta: dict[str, Any] = {}
             if step >= self.total and not solved and self._best_is_better(success):
@@ -105,7 +118,8 @@ class _Progress:
                     f"the final checkpoint keeps the params of step {best_step} "
                     f"(evaluation success {best_success:.3f}, last {success:.3f})"
                 )
-            self._save(step, make_policy, params, meta)
+            if self.run is not None:
+                self._save(step, make_policy, params, meta, resume)
         if solved:
             raise Solved(step)
         if self.stop_after and self.evals >= self.stop_after:
@@ -129,16 +143,35 @@ class _Progress:
         )
         self.bar.refresh()
 
-    def _save(self, step: int, make_policy, params, meta: dict[str, Any] | None = None) -> None:
+    def _save(
+        self,
+        step: int,
+        make_policy,
+        params,
+        meta: dict[str, Any] | None = None,
+        resume: ResumeState | None = None,
+    ) -> None:
         params = jax.tree.map(np.asarray, params)
         transitions = rollout_transitions(
             make_policy, params, self.task, seed=step, arm=self.config.arm
         )
         meta = {"task": self.config.task, **(meta or {})}
-        self.run.save_checkpoint(step, params, meta, transitions)
+        arrays = resume_arrays(resume) if resume is not None else None
+        self.run.save_checkpoint(
+            step, host_params(params), meta, transitions, arrays, newest_only=(ENV_STATE_FILE,)
+        )
 
     def close(self) -> None:
         self.bar.close()
+
+
+def host_params(params: Any) -> tuple:
+    """(normaliser, policy, value) as nested dicts of numpy arrays, as a checkpoint stores
+    them (Brax's ``UInt64`` sample count turns its halves back into JAX arrays, which orbax
+    will not save where several processes train)."""
+    from flax import serialization
+
+    return tuple(jax.tree.map(np.asarray, serialization.to_state_dict(p)) for p in params)
 
 
 def rollout_transitions(

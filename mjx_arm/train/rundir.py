@@ -229,10 +229,18 @@ class RunDir:
         params: Any,
         meta: dict[str, Any],
         transitions: dict[str, np.ndarray] | None = None,
+        arrays: dict[str, dict[str, np.ndarray]] | None = None,
+        newest_only: tuple[str, ...] = (),
     ) -> Path:
-        """Save the checkpoint of ``step``, atomically (see :mod:`mjx_arm.train.checkpoints`)."""
+        """Save the checkpoint of ``step``, atomically (see :mod:`mjx_arm.train.checkpoints`),
+        then delete the files named in ``newest_only`` from every other checkpoint."""
         folder = self.checkpoint_dir(step)
-        return ckpt.save_checkpoint(folder, step, params, meta, transitions)
+        saved = ckpt.save_checkpoint(folder, step, params, meta, transitions, arrays)
+        for name in newest_only:
+            for old in self.checkpoints.glob(f"{CHECKPOINT_PREFIX}*/{name}"):
+                if old.parent != saved:
+                    old.unlink(missing_ok=True)
+        return saved
 
     def latest_checkpoint(self) -> Path | None:
         """The newest checkpoint folder, or None."""
