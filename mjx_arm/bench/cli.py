@@ -8,11 +8,13 @@ ParityConfig`, :class:`~mjx_arm.bench.transfer.TransferConfig`).
 from __future__ import annotations
 
 import argparse
+import functools
+import os
 import time
 from pathlib import Path
 
 from mjx_arm.bench.settings import add_arguments, from_arguments
-from mjx_arm.inputs import check_folder
+from mjx_arm.inputs import ConfigError, check_folder
 from mjx_arm.names import EXIT_OK, PARITY_ENGINES
 from mjx_arm.settings import add_set_argument
 
@@ -143,7 +145,8 @@ def cmd_transfer(args: argparse.Namespace) -> int:
 
 
 def cmd_seeds(args: argparse.Namespace) -> int:
-    """Seeds benchmark: train a preset as shipped once per seed, one seed after another.
+    """Seeds benchmark: train a preset as shipped once per seed; on a GPU host each seed in its
+    own process, one per GPU at a time (--devices: how many GPUs).
 
     For each seed: final and best evaluation success, steps and wall time (from that seed's
     start, compilation included) to the first evaluation at --threshold, or "not reached".
@@ -154,26 +157,50 @@ def cmd_seeds(args: argparse.Namespace) -> int:
     """
     start = time.time()
     from mjx_arm.bench.results import environment_metadata
-    from mjx_arm.bench.seeds import SeedsConfig, check_seed_settings, run_seeds, write_report
+    from mjx_arm.bench.seeds import (
+        SeedsConfig,
+        check_seed_settings,
+        run_seeds,
+        run_seeds_on_gpus,
+        write_report,
+    )
+    from mjx_arm.train.launch import visible_gpus
 
     config = from_arguments(SeedsConfig(), args)
     check_folder(args.out, "--out")
     if args.runs:
         check_folder(args.runs, "--runs")
-    check_seed_settings(config, tuple(args.set or ()))
+    gpus = _seed_gpus(visible_gpus(), config.devices)
+    if gpus:  # this process leaves each GPU's memory to the seed trained on it
+        os.environ["XLA_PYTHON_CLIENT_PREALLOCATE"] = "false"
+    check_seed_settings(config, tuple(args.set or ()), 1 if gpus else None)
     _enable_jax_cache()
     meta = environment_metadata(accelerator=True)
     stamp = time.strftime("%Y%m%d-%H%M%S")
     runs_dir = args.runs or Path("runs") / f"seeds-{config.task}-{config.preset}-{stamp}"
     overrides = tuple(args.set or ())
-    runs, configs = run_seeds(
-        config, runs_dir, overrides, start, log=lambda text: print(text, flush=True)
-    )
+    log = functools.partial(print, flush=True)
+    if gpus:
+        runs, configs = run_seeds_on_gpus(config, runs_dir, gpus, overrides, log)
+    else:
+        runs, configs = run_seeds(config, runs_dir, overrides, start, log)
     name = args.name or f"seeds_{config.task}_{config.preset}"
-    paths = write_report(config, runs, configs, meta, args.out, name, overrides)
+    wall = time.time() - start
+    paths = write_report(config, runs, configs, meta, args.out, name, overrides, wall)
     print(paths[1].read_text())
     _print_paths(paths)
     return EXIT_OK
+
+
+def _seed_gpus(gpus: list[str], devices: int) -> list[str]:
+    """The GPUs the seeds run on (``devices`` of them, 0: all).
+
+    Raises:
+        ConfigError: more GPUs asked for than there are.
+    """
+    if devices > len(gpus) and gpus:
+        raise ConfigError(f"asked for {devices} GPUs, this host has {len(gpus)}")
+    return gpus[: devices or len(gpus)]
 
 
 def cmd_robustness(args: argparse.Namespace) -> int:

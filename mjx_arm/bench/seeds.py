@@ -1,8 +1,10 @@
 """Seeds benchmark: a training claim over seeds, not one run.
 
-``mjx-arm bench seeds --task touch --preset fast --seeds 0-9`` trains the preset once per seed,
-one seed after another in this process (the compilation caches are warm after the first seed),
-and reads each run's ``metrics.csv``:
+``mjx-arm bench seeds --task touch --preset fast --seeds 0-9`` trains the preset once per seed
+and reads each run's ``metrics.csv``. On a GPU host every seed trains in its own process on one
+GPU, as many seeds at once as there are GPUs (``--devices``: how many to use), so a seed's
+memory is given back when it ends and never starves the next; on a CPU the seeds train one
+after another in this process (the compilation caches are warm after the first seed). It reports
 
 - per seed: the evaluation success of the run's final policy (its last checkpoint: the best
   evaluation where the run ended on its budget, ``TrainConfig.keep_best``) and the best one,
@@ -21,6 +23,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
+import subprocess
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -71,7 +76,11 @@ class SeedsConfig:
     seeds: str = setting("0-9", "seeds: a range 0-9, a list 0,3,7 or both")
     backend: str = setting("auto", "physics backend", BACKENDS)
     threshold: float = setting(0.95, "evaluation success that counts as solved")
-    devices: int = setting(0, "local devices to train on (0: all)")
+    devices: int = setting(
+        0,
+        "GPUs to train on, one seed per GPU at a time, each in its own process (0: all); "
+        "on a CPU: local devices of each seed's run",
+    )
     arm: str = setting("", "the arm: a URDF or an arm file (.toml/.json); '' is the shipped arm")
 
     def __post_init__(self) -> None:
@@ -96,6 +105,8 @@ class SeedRun:
     curve: list[tuple[float, int, float]]  # (seconds, step, success) at each evaluation
     # where the start-up's seconds went (mjx_arm.train.compile_report: stages, JAX counts)
     compile_report: dict[str, Any] = dataclasses.field(default_factory=dict)
+    gpu: str = ""  # the GPU of the seed's process ("" where it trained in this process)
+    error: str = ""  # why the seed's process failed ("" where it ran to its end)
 
     @property
     def solved(self) -> bool:
@@ -150,8 +161,7 @@ def train_seed(
     train_config = load_config(config.preset, None, items)
     if config.arm:
         train_config = train_config.replace(arm=load_arm(config.arm))
-    arm_tag = f"{Path(config.arm).stem}-" if config.arm else ""
-    run_dir = out / f"{arm_tag}{config.task}-{config.preset}-seed{seed}"
+    run_dir = seed_run_dir(config, seed, out)
     start = time.time() if start is None else start
     result = train(train_config, run_dir, quiet=True)
     wall = time.time() - start
@@ -171,6 +181,121 @@ def train_seed(
         compile_report=result.compile_report,
     )
     return run, RunDir(run_dir).load_config()
+
+
+def seed_run_dir(config: SeedsConfig, seed: int, out: Path) -> Path:
+    """The run directory of ``seed`` under ``out``."""
+    arm_tag = f"{Path(config.arm).stem}-" if config.arm else ""
+    return out / f"{arm_tag}{config.task}-{config.preset}-seed{seed}"
+
+
+def seed_command(
+    config: SeedsConfig, seed: int, run_dir: Path, overrides: tuple[str, ...] = ()
+) -> list[str]:
+    """The ``mjx-arm train`` command line that trains ``seed`` in a process of its own."""
+    command = [sys.executable, "-m", "mjx_arm.cli", "train", "--task", config.task]
+    command += ["--preset", config.preset, "--backend", config.backend, "--devices", "1"]
+    command += ["--set", *overrides, f"seed={seed}", "--run-dir", str(run_dir), "--quiet"]
+    return command + (["--arm", config.arm] if config.arm else [])
+
+
+def read_seed_run(
+    config: SeedsConfig, seed: int, run_dir: Path, start: float, end: float
+) -> SeedRun:
+    """A seed's result from its run directory (trained by another process), times from
+    ``start``."""
+    import json
+
+    curve = read_curve(run_dir, start) if (run_dir / "metrics.csv").is_file() else []
+    hit = first_at(curve, config.threshold)
+    starts = json.loads((run_dir / "compile.json").read_text())
+    report = starts[-1] if starts else {}
+    from mjx_arm.train.rundir import RunDir
+
+    speeds = [r.get("training/sps", math.nan) for r in RunDir(run_dir).read_metrics()]
+    speeds = [v for v in speeds if math.isfinite(v)]
+    return SeedRun(
+        seed=seed,
+        final_success=final_policy_success(run_dir, curve),
+        best_success=max((v for _, _, v in curve), default=math.nan),
+        steps_to_threshold=hit[1] if hit else None,
+        time_to_threshold=hit[0] if hit else None,
+        total_steps=curve[-1][1] if curve else 0,
+        wall_s=end - start,
+        compile_s=float(report.get("compile_s", math.nan)),
+        training_steps_per_s=float(np.median(speeds)) if speeds else math.nan,
+        curve=curve,
+        compile_report=report,
+    )
+
+
+def failed_seed(seed: int, gpu: str, wall: float, error: str) -> SeedRun:
+    """The result of a seed whose process failed: not solved, the error kept."""
+    nan = math.nan
+    return SeedRun(seed, nan, nan, None, None, 0, wall, nan, nan, [], {}, gpu, error)
+
+
+def run_seeds_on_gpus(
+    config: SeedsConfig,
+    runs_dir: Path,
+    gpus: list[str],
+    overrides: tuple[str, ...] = (),
+    log=print,
+) -> tuple[list[SeedRun], list[dict[str, Any]]]:
+    """Train every seed in a process of its own, one per GPU of ``gpus`` at a time.
+
+    Each seed's times count from its own process's start (imports, cache loads and any
+    compilation included). A seed whose process fails is reported as not solved, with the
+    end of its log, and the others go on.
+    """
+    from mjx_arm.train.rundir import RunDir
+
+    queue, free = list(parse_seeds(config.seeds)), list(gpus)
+    running: dict[int, tuple[subprocess.Popen, str, float, Path]] = {}
+    done: dict[int, tuple[SeedRun, dict[str, Any]]] = {}
+    runs_dir.mkdir(parents=True, exist_ok=True)
+    env = {k: v for k, v in os.environ.items() if k != "XLA_PYTHON_CLIENT_PREALLOCATE"}
+    while queue or running:
+        while queue and free:
+            seed, gpu = queue.pop(0), free.pop(0)
+            run_dir = seed_run_dir(config, seed, runs_dir)
+            with (runs_dir / f"seed{seed}.log").open("wb") as out:
+                proc = subprocess.Popen(
+                    seed_command(config, seed, run_dir, overrides),
+                    env={**env, "CUDA_VISIBLE_DEVICES": gpu},
+                    stdout=out,
+                    stderr=subprocess.STDOUT,
+                )
+            running[seed] = (proc, gpu, time.time(), run_dir)
+            log(f"seed {seed}: training {config.task} / {config.preset} on GPU {gpu}")
+        for seed, (proc, gpu, start, run_dir) in list(running.items()):
+            if proc.poll() is None:
+                continue
+            del running[seed]
+            free.append(gpu)
+            end = time.time()
+            if proc.returncode != 0:
+                tail = (runs_dir / f"seed{seed}.log").read_text(errors="replace")
+                error = f"exit code {proc.returncode}: " + " | ".join(tail.splitlines()[-3:])
+                log(f"seed {seed}: its process failed ({error[:400]})")
+                done[seed] = (failed_seed(seed, gpu, end - start, error), {})
+                continue
+            run = read_seed_run(config, seed, run_dir, start, end)
+            run.gpu = gpu
+            done[seed] = (run, RunDir(run_dir).load_config())
+            log(_seed_line(config, run))
+        time.sleep(0.5)
+    ordered = [done[s] for s in parse_seeds(config.seeds)]
+    return [r for r, _ in ordered], [c for _, c in ordered]
+
+
+def _seed_line(config: SeedsConfig, run: SeedRun) -> str:
+    reached = fmt(run.time_to_threshold) + " s" if run.solved else "not reached"
+    return (
+        f"seed {run.seed}: final {run.final_success:.3f}, best {run.best_success:.3f}, "
+        f"{config.threshold:.2f} at {reached}, wall {run.wall_s:.1f} s, "
+        f"compile {fmt(run.compile_s)} s"
+    )
 
 
 def start_up_line(report: dict[str, Any]) -> str:
@@ -292,10 +417,13 @@ def plot_curves(runs: list[SeedRun], threshold: float, title: str, path: Path) -
     return path
 
 
-def check_seed_settings(config: SeedsConfig, overrides: tuple[str, ...] = ()) -> None:
+def check_seed_settings(
+    config: SeedsConfig, overrides: tuple[str, ...] = (), devices: int | None = None
+) -> None:
     """Check everything the seeds' trainings take before the first starts: the preset with
-    the task, backend and ``overrides`` (:func:`~mjx_arm.train.config.load_config`), and the
-    arm.
+    the task, backend and ``overrides`` (:func:`~mjx_arm.train.config.load_config`), the
+    device count of each seed's run (``devices``; default: ``config.devices`` local devices)
+    and the arm.
 
     Raises:
         InputError: a bad override, an arm that does not validate, a bad device count.
@@ -307,7 +435,8 @@ def check_seed_settings(config: SeedsConfig, overrides: tuple[str, ...] = ()) ->
 
     items = [f"task={config.task}", f"backend={config.backend}", *overrides]
     train_config = load_config(config.preset, None, items)
-    train_config.check_devices(len(local_devices(config.devices)))
+    count = devices if devices is not None else len(local_devices(config.devices))
+    train_config.check_devices(count)
     arm = config.arm or train_config.arm
     validated_arm_info(default_arm(train_config.task_config(), arm), "mujoco")
 
@@ -332,12 +461,7 @@ def run_seeds(
         run, saved = train_seed(config, seed, runs_dir, overrides, start)
         runs.append(run)
         configs.append(saved)
-        reached = fmt(run.time_to_threshold) + " s" if run.solved else "not reached"
-        log(
-            f"seed {seed}: final {run.final_success:.3f}, best {run.best_success:.3f}, "
-            f"{config.threshold:.2f} at {reached}, wall {run.wall_s:.1f} s, "
-            f"compile {fmt(run.compile_s)} s"
-        )
+        log(_seed_line(config, run))
         log(f"seed {seed} {start_up_line(run.compile_report)}")
     return runs, configs
 
@@ -350,9 +474,15 @@ def write_report(
     out: Path,
     name: str,
     overrides: tuple[str, ...] = (),
+    wall_s: float | None = None,
 ) -> list[Path]:
-    """Write NAME.json, NAME.md and NAME.png into ``out``; return their paths."""
+    """Write NAME.json, NAME.md and NAME.png into ``out``; return their paths.
+
+    ``wall_s``: the whole benchmark's wall time (recorded with the GPUs the seeds ran on)."""
     summary = summarize(runs, config.threshold)
+    if wall_s is not None:
+        summary["wall_s"] = wall_s
+        summary["gpus"] = sorted({r.gpu for r in runs if r.gpu})
     table = seeds_table(runs, summary)
     changed = f", with {' '.join(overrides)}" if overrides else " as shipped"
     title = f"{config.task}, preset {config.preset}{changed}, {meta['device']['kind']}"
