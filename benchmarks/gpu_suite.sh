@@ -17,6 +17,8 @@
 #   bash benchmarks/gpu_suite.sh transfer     # MJX rows of the transfer matrix, seeds' policies
 #   bash benchmarks/gpu_suite.sh arms         # published arms with no arm file, over seeds
 #   bash benchmarks/gpu_suite.sh jobs         # one seeds run per ARM:TASK:SEED item of JOBS
+#   bash benchmarks/gpu_suite.sh scaling-gpus # 1, 2, 4 GPUs: steps/s per GPU, Touch time to 0.95
+#   bash benchmarks/gpu_suite.sh seeds-gpus   # Touch seeds one per GPU against one after another
 #
 # Results go to $OUT (default: benchmarks/results/gpu); the trained policies are exported to
 # $OUT/policies as .npz. Single-GPU stages use GPU 0 only.
@@ -43,6 +45,11 @@ setup)
   [ -n "${WARP_WHEEL:-}" ] && wheels+=("$WARP_WHEEL")
   python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
     --target "$SITE" "${wheels[@]}" || exit 1
+  # Warp as the pieces of an xz tarball of its wheel's files (without warp-clang.so, Warp's
+  # CPU compiler): WARP_PARTS holds them, gathered over several calls
+  if compgen -G "${WARP_PARTS:-/tmp/wparts}/wpart_*" >/dev/null; then
+    cat "${WARP_PARTS:-/tmp/wparts}"/wpart_* | xz -dc | tar x -C "$SITE" || exit 1
+  fi
   nvidia-smi --query-gpu=name,memory.total --format=csv
   python3 -c "import jax, mujoco, warp; from mujoco import mjx; print(jax.devices(), mujoco.__version__, warp.__version__)"
   ;;
@@ -211,6 +218,27 @@ jobs)
     seed_job "$item" &
   done
   wait
+  ;;
+scaling-gpus)
+  # Every GPU count of DEVICES on this host, one command each as a user types it (one process
+  # per GPU, joined by jax.distributed): steady env steps/s at 8192 envs per GPU, then Touch's
+  # time to 0.95 with the fast preset as shipped over SEEDS. Runs go to RUNS (not $OUT).
+  # THROUGHPUT=0 skips the first part; SOLVE_DEVICES: the counts of the second (--append keeps
+  # the others already in $OUT, so the counts can be measured over several calls).
+  [ "${THROUGHPUT:-1}" = 1 ] && timeout "${RUN_LIMIT:-280}" python3 benchmarks/bench_scaling.py \
+    throughput --devices ${DEVICES:-1 2 4} --out "$OUT" --runs "${RUNS:-/tmp/runs}" --limit 200 \
+    --name scaling_throughput_touch
+  timeout "${SOLVE_LIMIT:-600}" python3 benchmarks/bench_scaling.py solve --append \
+    --devices ${SOLVE_DEVICES:-1 2 4} --seeds "${SEEDS:-0-2}" --out "$OUT" \
+    --runs "${RUNS:-/tmp/runs}" --limit 200 --name "scaling_solve_touch${TAG:-}" ${SOLVE_ARGS:-}
+  ;;
+seeds-gpus)
+  # Touch seeds (SEEDS) on one GPU, one process after another, then one per GPU at once.
+  for n in ${GPU_COUNTS:-1 4}; do
+    timeout "${RUN_LIMIT:-300}" python3 -m mjx_arm.cli bench seeds --task touch --preset fast \
+      --seeds "${SEEDS:-0-3}" --devices "$n" --runs "${RUNS:-/tmp/runs}/seeds_${n}gpu" \
+      --name "seeds_touch_fast_${n}gpu" --out "$OUT"
+  done
   ;;
 parity)
   one_gpu python3 -m mjx_arm.cli bench parity --engines mujoco mjx --impls warp jax \
