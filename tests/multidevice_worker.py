@@ -21,6 +21,7 @@ from mjx_arm.task import OBS_SIZE
 from mjx_arm.train.config import load_config
 from mjx_arm.train.learner import ENV_AXIS, Learner, make_mesh
 from mjx_arm.train.ppo import train
+from mjx_arm.train.resume import has_resume_state
 from mjx_arm.train.rundir import RunDir
 
 # The PPO settings of the gradient comparison (a small Reach config; no env is stepped). The
@@ -121,7 +122,8 @@ def gradient_errors() -> dict[str, float]:
 
 
 def learn_and_resume(out: Path, steps: int) -> dict:
-    """Reach on 2 devices; then drop its last checkpoint and resume that run on 1 device."""
+    """Reach on 2 devices; then drop its last checkpoint and resume that run on 1 device (from
+    the training state, optimiser included, saved on 2)."""
     config = load_config(
         "cpu", None, ["task=reach", "backend=mujoco", f"num_timesteps={steps}", "devices=2"]
     )
@@ -137,10 +139,11 @@ def learn_and_resume(out: Path, steps: int) -> dict:
         "partition": json.loads((run_dir / "config.json").read_text())["partition"],
     }
     shutil.rmtree(run.latest_checkpoint())
-    kept = int(RunDir.load_meta(run.latest_checkpoint())["step"])
+    kept = run.latest_checkpoint()
     resumed = train(config.replace(devices=1), run_dir, resume=True, quiet=True)
     figures.update(
-        kept_step=kept,
+        kept_step=int(RunDir.load_meta(kept)["step"]),
+        kept_training_state=has_resume_state(kept),
         resumed_steps=resumed.steps,
         resumed_success=resumed.metrics["eval/episode_success"],
     )

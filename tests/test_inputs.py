@@ -266,18 +266,18 @@ def test_a_full_disk_during_a_checkpoint_keeps_the_last_good_one_tmpfs(tmp_path:
 def test_a_full_disk_during_a_checkpoint_keeps_the_last_good_one_simulated(
     tmp_path: Path, monkeypatch
 ) -> None:
-    """The same on any machine: ENOSPC simulated by making the transitions writer fail."""
+    """The same on any machine: ENOSPC simulated by making the checkpoint writer fail."""
     from mjx_arm.train import checkpoints
 
     state = {"full": False}
     real = checkpoints._write_partial
 
-    def write(partial, step, params, meta, transitions):
+    def write(partial, *args):
         if state["full"]:
             partial.mkdir(parents=True)
             (partial / "half").write_bytes(b"x")
             raise OSError(errno.ENOSPC, "No space left on device")
-        return real(partial, step, params, meta, transitions)
+        return real(partial, *args)
 
     monkeypatch.setattr(checkpoints, "_write_partial", write)
     _check_full_disk_keeps_the_last_checkpoint(

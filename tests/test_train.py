@@ -158,7 +158,7 @@ def test_final_checkpoint_keeps_the_best_evaluation(tmp_path: Path, keep_best: b
     config = config.replace(keep_best=keep_best)
     progress = _Progress(RunDir(tmp_path / "run"), config, task_config("reach"), 0, quiet=True)
     saved = []
-    progress._save = lambda step, make_policy, params, meta=None: saved.append(
+    progress._save = lambda step, make_policy, params, meta=None, resume=None: saved.append(
         (step, params, meta or {})
     )
     for step, success in ((10, 0.5), (20, 0.9), (30, 0.4)):

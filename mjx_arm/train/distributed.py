@@ -16,6 +16,8 @@ save the env state.
 from __future__ import annotations
 
 import os
+import socket
+import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -31,6 +33,7 @@ ENV_PROCESS_ID = "MJX_ARM_PROCESS_ID"
 ENV_HOSTS = "MJX_ARM_HOSTS"
 ENV_HOST_RANK = "MJX_ARM_HOST_RANK"
 DEFAULT_JOIN_TIMEOUT = 300  # seconds a process waits for the others at the start
+HELLO = "mjx-arm-join"  # the first word a process sends to process 0 when it joins
 
 
 class JoinError(InputError):
@@ -137,14 +140,18 @@ class ProcessGroup:
     def join(self) -> None:
         """Join the other processes (``jax.distributed.initialize``); a no-op alone.
 
-        Must run before anything else uses JAX. Afterwards computations that name no device
-        run on this process's own first device, and CPU processes reduce through gloo.
+        Must run before anything else uses JAX. The processes first meet on the coordinator's
+        port (:meth:`_meet`): JAX's own join ends the process natively (SIGABRT, no Python
+        error) when one does not come, so a missing process is told apart here, before it.
+        Afterwards computations that name no device run on this process's own first device,
+        and CPU processes reduce through gloo.
 
         Raises:
             JoinError: not every process joined within ``join_timeout`` seconds.
         """
         if not self.joined:
             return
+        self._meet(time.monotonic() + self.join_timeout)
         import jax
 
         jax.config.update("jax_cpu_collectives_implementation", "gloo")
@@ -154,16 +161,115 @@ class ProcessGroup:
                 self.num_processes,
                 self.process_id,
                 initialization_timeout=self.join_timeout,
+                local_device_ids=_local_device_ids(),
             )
         except Exception as err:  # XlaRuntimeError: DEADLINE_EXCEEDED, UNAVAILABLE, ...
-            raise JoinError(
-                f"process {self.process_id} of {self.num_processes} could not join the training "
-                f"at {self.coordinator} within {self.join_timeout} s "
-                f"({str(err).splitlines()[0][:200]}): start the same command on every host, "
-                "each with its own --host-rank, check that host 0's address and port are "
-                "reachable from every host, or raise --join-timeout"
-            ) from err
+            raise self._join_error(str(err).splitlines()[0][:200]) from err
         jax.config.update("jax_default_device", jax.local_devices()[0])
+
+    def _join_error(self, reason: str) -> JoinError:
+        return JoinError(
+            f"process {self.process_id} of {self.num_processes} could not join the training "
+            f"at {self.coordinator} within {self.join_timeout} s ({reason}): start the same "
+            "command on every host, each with its own --host-rank, check that host 0's "
+            "address and port are reachable from every host, or raise --join-timeout"
+        )
+
+    def _meet(self, deadline: float) -> None:
+        """Wait until every process is up: process 0 listens on the coordinator's port until
+        each other process said hello, then answers all of them and frees the port for JAX's
+        service; the others connect (again and again until ``deadline``) and wait for it.
+
+        Raises:
+            JoinError: a process missing at ``deadline``, or two with the same id.
+        """
+        if self.leader:
+            self._gather(deadline)
+            return
+        host, _, port = self.coordinator.rpartition(":")
+        last = "nothing listens there"
+        while True:
+            try:
+                conn = socket.create_connection((host.strip("[]"), int(port)), timeout=5)
+                break
+            except OSError as err:  # refused, unreachable, an unknown name
+                last = err.strerror or type(err).__name__
+            if time.monotonic() >= deadline:
+                raise self._join_error(f"process 0 could not be reached: {last}")
+            time.sleep(0.2)
+        with conn:  # process 0 answers by its own deadline: wait a little longer
+            conn.settimeout(max(deadline - time.monotonic(), 0.0) + 15)
+            try:
+                conn.sendall(f"{HELLO} {self.num_processes} {self.process_id}\n".encode())
+                reply = conn.makefile("r").readline().strip()
+            except OSError as err:
+                reply = f"process 0 did not answer ({err.strerror or type(err).__name__})"
+        if reply != "go":
+            raise self._join_error(reply or "process 0 closed the connection")
+
+    def _gather(self, deadline: float) -> None:
+        """Process 0's side of :meth:`_meet`: accept a hello from every other process, then
+        answer each one ``go`` (or what went wrong)."""
+        port = int(self.coordinator.rpartition(":")[2])
+        try:
+            dual = socket.has_dualstack_ipv6()
+            family = socket.AF_INET6 if dual else socket.AF_INET
+            server = socket.create_server(("", port), family=family, dualstack_ipv6=dual)
+        except OSError as err:
+            raise self._join_error(f"port {port} cannot be listened on: {err.strerror}") from err
+        joined: dict[int, socket.socket] = {}
+        problem = ""
+        with server:
+            while len(joined) < self.num_processes - 1 and not problem:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    missing = sorted(set(range(1, self.num_processes)) - set(joined))
+                    problem = f"process(es) {', '.join(map(str, missing))} did not come"
+                    break
+                server.settimeout(remaining)
+                try:
+                    conn, _ = server.accept()
+                except TimeoutError:
+                    continue
+                problem = self._hello(conn, remaining, joined)
+        for conn in joined.values():
+            with conn:
+                try:
+                    conn.sendall(f"{problem or 'go'}\n".encode())
+                    conn.settimeout(2)
+                    conn.recv(1)  # the other side closes first: no TIME_WAIT on the port
+                except OSError:
+                    pass
+        if problem:
+            raise self._join_error(problem)
+
+    def _hello(self, conn: socket.socket, timeout: float, joined: dict) -> str:
+        """Read a process's hello; keep its connection in ``joined`` under its id. What is
+        wrong with it ("" where nothing; a connection that is not one of ours is closed)."""
+        conn.settimeout(timeout)
+        try:
+            words = conn.makefile("r").readline().split()
+        except (OSError, UnicodeDecodeError):
+            words = []
+        if len(words) != 3 or words[0] != HELLO or not all(w.isdigit() for w in words[1:]):
+            conn.close()
+            return ""
+        count, ident = int(words[1]), int(words[2])
+        taken = ident in joined or not 0 < ident < self.num_processes
+        joined[-len(joined) - 1 if taken else ident] = conn  # a negative key: told, then closed
+        if count != self.num_processes:
+            return (
+                f"process {ident} expects {count} processes, process 0 "
+                f"{self.num_processes}: give every host the same --hosts"
+            )
+        return f"two processes have id {ident}: give each its own --host-rank" if taken else ""
+
+
+def _local_device_ids() -> list[int] | None:
+    """The GPU of this process where the launcher named it in ``MJX_ARM_LOCAL_DEVICE`` (every
+    GPU visible, JAX told which to use), else None (the GPU is the only one visible)."""
+    text = os.environ.get("MJX_ARM_LOCAL_DEVICE", "")
+    return [int(text)] if text.isdigit() else None
 
 
 def is_leader() -> bool:

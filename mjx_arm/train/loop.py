@@ -150,13 +150,7 @@ def prepare_ppo(
     train_env = wrap_for_training(env, episode_length, mesh=split_mesh, axis=ENV_AXIS)
     with report.stage("learner init"):
         learner, state = _learner(config, env, mesh, (key_policy, key_value), restore)
-    evaluate = Evaluator(
-        wrap_for_training(eval_env, episode_length),
-        functools.partial(learner.make_policy, deterministic=True),
-        config.num_eval_envs,
-        episode_length,
-        key_eval,
-    )
+    evaluate = _evaluator(config, eval_env, learner, episode_length, key_eval)
     sizes = EpochSizes.of(config, config.num_timesteps)
     with report.stage("trace + lower"):
         keys = jax.random.split(key_env, config.num_envs)
@@ -180,6 +174,15 @@ def prepare_ppo(
     return Prepared(
         learner, state, env_state, epoch, evaluate, sizes, local_key, devices, partition, paths
     )
+
+
+def _evaluator(
+    config: TrainConfig, eval_env: Any, learner: Learner, episode_length: int, key: jax.Array
+) -> Evaluator:
+    """The evaluator of the run's deterministic policy on the evaluation envs."""
+    policy = functools.partial(learner.make_policy, deterministic=True)
+    wrapped = wrap_for_training(eval_env, episode_length)
+    return Evaluator(wrapped, policy, config.num_eval_envs, episode_length, key)
 
 
 def _restored_envs(env_state: Any, paths: list, leaves: list[np.ndarray]) -> Any:

@@ -177,7 +177,9 @@ def _start_point(
             )
         return 0, None
     if latest is None:
-        raise CheckpointError(f"no checkpoint to resume from in {run.path}")
+        raise CheckpointError(
+            f"no checkpoint to resume from in {path if run is None else run.path}"
+        )
     step_offset = int(RunDir.load_meta(latest)["step"])
     if step_offset >= config.num_timesteps:
         raise ConfigError(
@@ -186,17 +188,18 @@ def _start_point(
         )
     if has_resume_state(latest):
         return step_offset, latest
-    if is_leader():
+    raw = RunDir.load_params(latest)
+    try:
+        params = restore_brax_params(raw)
+    except (KeyError, TypeError, ValueError, IndexError) as err:
+        raise CheckpointError(f"checkpoint {latest} holds no Brax PPO params ({err})") from err
+    if is_leader():  # once the params are read: a damaged checkpoint is an error, not this
         warnings.warn(
             f"{latest.name} holds params only (a checkpoint of an older version): the run "
             "resumes with fresh optimiser moments, new keys and reset envs",
             stacklevel=2,
         )
-    raw = RunDir.load_params(latest)
-    try:
-        return step_offset, restore_brax_params(raw)
-    except (KeyError, TypeError, ValueError, IndexError) as err:
-        raise CheckpointError(f"checkpoint {latest} holds no Brax PPO params ({err})") from err
+    return step_offset, params
 
 
 def _train(
@@ -211,37 +214,25 @@ def _train(
     """Build the envs and run PPO from ``step_offset`` (the checks are done)."""
     report = CompileReport().open()
     start = time.monotonic()
-    with report.stage("build env"):
-        env, eval_env = make_envs(config, task, background_compile=True)
-    for name, seconds in env.build_seconds.items():
-        report.add(f"of it {name}", seconds)
-    task = env.task  # with the arm's home pose and reach scale
-    progress = _Progress(run, config, task, step_offset, quiet, stop_after)
-    progress.physics = env.physics.describe()
-    if not quiet:
-        progress.start_up_summary = report.summary
-    if restore is None and run is not None:
-        run.save_config(full_config(config, task, env.physics.describe(), env.arm))
-    if isinstance(restore, Path):
-        restore = _restore_state(restore, config, env)
-    progress.times.append((start, step_offset))
-    callbacks = Callbacks(progress.progress, progress.policy_params, progress.snapshot)
-    try:
-        run_ppo(
-            config,
-            env,
-            eval_env,
-            task.episode_steps,
-            callbacks,
-            restore=restore,
-            step_offset=step_offset,
-            report=report,
-        )
-    except (Solved, Stopped):
-        pass
+    try:  # a run that fails (a checkpoint that does not fit) leaves nothing open
+        env, eval_env, restore = _envs_and_restore(run, config, task, restore, report)
+        task = env.task  # with the arm's home pose and reach scale
+        progress = _Progress(run, config, task, step_offset, quiet, stop_after)
+        progress.physics = env.physics.describe()
+        if not quiet:
+            progress.start_up_summary = report.summary
+        progress.times.append((start, step_offset))
+        callbacks = Callbacks(progress.progress, progress.policy_params, progress.snapshot)
+        try:
+            run_ppo(
+                config, env, eval_env, task.episode_steps, callbacks, restore, step_offset, report
+            )
+        except (Solved, Stopped):
+            pass
+        finally:
+            progress.close()
     finally:
         report.close()
-        progress.close()
         if run is not None:
             run.close()
     total = time.monotonic() - start
@@ -260,6 +251,22 @@ def _train(
         record,
         report.summary(),
     )
+
+
+def _envs_and_restore(
+    run: RunDir | None, config: TrainConfig, task: TaskConfig, restore: Any, report: CompileReport
+) -> tuple[Any, Any, Any]:
+    """The training and evaluation envs (their build timed into ``report``) and what to
+    restore (a checkpoint folder read: :func:`_restore_state`); a new run's config saved."""
+    with report.stage("build env"):
+        env, eval_env = make_envs(config, task, background_compile=True)
+    for name, seconds in env.build_seconds.items():
+        report.add(f"of it {name}", seconds)
+    if restore is None and run is not None:
+        run.save_config(full_config(config, env.task, env.physics.describe(), env.arm))
+    if isinstance(restore, Path):
+        restore = _restore_state(restore, config, env)
+    return env, eval_env, restore
 
 
 def _restore_state(folder: Path, config: TrainConfig, env: Any):

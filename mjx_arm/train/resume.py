@@ -17,6 +17,7 @@ named error, never a wrong run. None of them is pickled.
 from __future__ import annotations
 
 import warnings
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -164,12 +165,13 @@ def _read_npz(path: Path) -> dict[str, np.ndarray]:
     """Every array of an ``.npz`` (no pickles).
 
     Raises:
-        ResumeStateError: missing, not an npz, or holding pickled objects.
+        ResumeStateError: missing, not an npz (a file cut short included), or holding
+            pickled objects.
     """
     try:
         with np.load(path, allow_pickle=False) as data:
             return {name: data[name] for name in data.files}
-    except (OSError, ValueError, EOFError) as err:
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:  # cut short: BadZipFile
         raise ResumeStateError(
             f"{path} cannot be read ({type(err).__name__}: {str(err)[:200]}); delete the "
             "checkpoint to resume from the one before"
