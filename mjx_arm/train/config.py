@@ -57,6 +57,10 @@ class TrainConfig:
         num_evals: evaluations over the run (metrics are written at each).
         num_eval_envs: envs per evaluation (one episode each).
         checkpoint_every: save a checkpoint every this many evaluations (and at the end).
+        env_state_every: the training envs' state (hundreds of MB for 8192 MJX envs) goes
+            into every this many evaluations' checkpoint; a resume starts from the newest
+            checkpoint that holds it, so it repeats at most this many epochs and then follows
+            the run it continues exactly.
         stop_at_success: stop once an evaluation's success rate reaches this (its checkpoint
             is saved); 0 trains all ``num_timesteps``.
         keep_best: a run that ends on its budget (``stop_at_success`` not reached) saves the
@@ -98,6 +102,7 @@ class TrainConfig:
     num_evals: int = 10
     num_eval_envs: int = 128
     checkpoint_every: int = 1
+    env_state_every: int = 5
     stop_at_success: float = 0.0
     keep_best: bool = True
     seed: int = 0
@@ -200,6 +205,7 @@ _POSITIVE_INTS = (
     "num_evals",
     "num_eval_envs",
     "checkpoint_every",
+    "env_state_every",
 )
 MAX_BATCH = 2**20  # envs or sequences in one batch: beyond any accelerator's memory
 MAX_LAYER = 2**14  # units in one hidden layer

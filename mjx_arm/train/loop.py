@@ -45,7 +45,8 @@ SHARED_EVAL = ("eval/episode_success", "eval/episode_physics_overflow")
 class Callbacks:
     """What the run reports to: Brax's ``progress_fn`` and ``policy_params_fn`` signatures,
     and ``snapshot(step, take)``, given after each epoch a function that gathers the run's
-    :class:`~mjx_arm.train.resume.ResumeState` (a collective: every process calls it, or none).
+    :class:`~mjx_arm.train.resume.ResumeState` (``take(with_envs)``; a collective: every process
+    calls it, or none).
     """
 
     progress: Callable[[int, dict[str, Any]], None]
@@ -108,9 +109,12 @@ class Prepared:
     partition: str
     env_paths: list = field(default_factory=list)
 
-    def snapshot(self, state: Any, env_state: Any, local_key: jax.Array) -> ResumeState:
-        """The run between two epochs, gathered on the host (a collective)."""
-        leaves = gather(select_leaves(env_state, self.env_paths))
+    def snapshot(
+        self, state: Any, env_state: Any, local_key: jax.Array, with_envs: bool = True
+    ) -> ResumeState:
+        """The run between two epochs, gathered on the host (a collective); the envs' state
+        only ``with_envs``."""
+        leaves = gather(select_leaves(env_state, self.env_paths)) if with_envs else None
         keys = {"epochs": np.asarray(local_key), "evaluation": np.asarray(self.evaluate.key)}
         return ResumeState(gather(state), keys, leaves)
 
@@ -216,8 +220,11 @@ def _wait_for_kernels(envs: tuple[Any, ...], report: CompileReport) -> None:
 
 
 def compile_all(lowered: dict[str, Any]) -> dict[str, Any]:
-    """Compile every lowered program at once (XLA compiles outside Python's lock)."""
-    with ThreadPoolExecutor(max_workers=len(lowered)) as pool:
+    """Compile every lowered program at once (XLA compiles outside Python's lock); one after
+    another where several processes train (XLA's GPU compiler crashed, SIGSEGV, compiling two
+    programs at once in a process joined by jax.distributed on H100s, jax 0.11)."""
+    workers = len(lowered) if jax.process_count() == 1 else 1
+    with ThreadPoolExecutor(max_workers=workers) as pool:
         futures = {name: pool.submit(low.compile) for name, low in lowered.items()}
         return {name: future.result() for name, future in futures.items()}
 

@@ -32,7 +32,7 @@ from mjx_arm.train.distributed import barrier, is_leader
 from mjx_arm.train.learner import train_devices
 from mjx_arm.train.loop import Callbacks, resolve_partition, run_ppo
 from mjx_arm.train.progress import Solved, Stopped, _Progress
-from mjx_arm.train.resume import has_resume_state
+from mjx_arm.train.resume import has_resume_state, newest_whole_state
 from mjx_arm.train.rundir import RunDir, RunDirError
 
 
@@ -187,6 +187,9 @@ def _start_point(
             f"{config.num_timesteps} steps"
         )
     if has_resume_state(latest):
+        whole = newest_whole_state(latest.parent)
+        if whole is not None and whole != latest:  # exact: go back to the envs' last state
+            return int(RunDir.load_meta(whole)["step"]), whole
         return step_offset, latest
     raw = RunDir.load_params(latest)
     try:

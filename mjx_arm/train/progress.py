@@ -72,7 +72,8 @@ class _Progress:
         self.best: tuple[float, int, Any] | None = None
         self.times: list[tuple[float, int]] = []
         self.last_metrics: dict[str, float] = {}
-        self.take_snapshot: Any = None  # () -> ResumeState of the newest epoch (a collective)
+        # (with_envs) -> ResumeState of the newest epoch, a collective where several processes run
+        self.take_snapshot: Any = None
 
     def snapshot(self, step: int, take) -> None:
         """Keep the function that gathers the newest epoch's state (called at a checkpoint)."""
@@ -108,7 +109,9 @@ class _Progress:
         self._remember_best(step, success)
         due = self.evals % self.config.checkpoint_every == 0
         if (due or solved or step >= self.total) and self.latest is not None:
-            resume = self.take_snapshot() if self.take_snapshot is not None else None
+            with_envs = self.evals % self.config.env_state_every == 0
+            take = self.take_snapshot
+            resume = take(with_envs) if take is not None else None
             make_policy, params = self.latest
             meta: dict[str, Any] = {}
             if step >= self.total and not solved and self._best_is_better(success):
@@ -157,8 +160,11 @@ class _Progress:
         )
         meta = {"task": self.config.task, **(meta or {})}
         arrays = resume_arrays(resume) if resume is not None else None
+        # the envs' state is kept in the newest checkpoint that has it, only
+        envs = resume is not None and resume.env_leaves is not None
+        newest_only = (ENV_STATE_FILE,) if envs else ()
         self.run.save_checkpoint(
-            step, host_params(params), meta, transitions, arrays, newest_only=(ENV_STATE_FILE,)
+            step, host_params(params), meta, transitions, arrays, newest_only=newest_only
         )
 
     def close(self) -> None:

@@ -99,6 +99,19 @@ def has_resume_state(folder: Path) -> bool:
     return (folder / RESUME_FILE).is_file()
 
 
+def newest_whole_state(checkpoints: Path) -> Path | None:
+    """The newest usable checkpoint under ``checkpoints`` with the training state and the
+    envs' state (None where none has both)."""
+    from mjx_arm.train.checkpoints import CHECKPOINT_PREFIX, usable
+
+    found = sorted(
+        p
+        for p in checkpoints.glob(f"{CHECKPOINT_PREFIX}*")
+        if usable(p) and has_resume_state(p) and (p / ENV_STATE_FILE).is_file()
+    )
+    return found[-1] if found else None
+
+
 def load_resume_state(
     folder: Path, template: Any, key_template: np.ndarray, env_template: list[Any] | None
 ) -> ResumeState:
