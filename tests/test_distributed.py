@@ -247,18 +247,24 @@ def test_no_gpu_or_one_trains_in_this_process() -> None:
     assert (joined.coordinator, joined.num_processes, joined.process_id) == ("10.0.0.1:1234", 2, 1)
 
 
+def test_several_gpus_train_in_this_process_unless_one_process_per_gpu_is_asked_for() -> None:
+    assert not plan(Hosts(), None, ["0", "1"], per_gpu=False).spawns
+    joined = plan(Hosts("10.0.0.1:1234", 2, 1), None, ["0", "1"], per_gpu=False).group
+    assert (joined.num_processes, joined.process_id) == (2, 1)
+
+
 def test_several_gpus_start_one_process_each() -> None:
-    chosen = plan(Hosts(), None, ["0", "1", "2", "3"])
+    chosen = plan(Hosts(), None, ["0", "1", "2", "3"], per_gpu=True)
     assert chosen.spawns and chosen.gpus == ("0", "1", "2", "3")
     assert [g.process_id for g in chosen.groups] == [0, 1, 2, 3]
     assert {g.num_processes for g in chosen.groups} == {4}
     (coordinator,) = {g.coordinator for g in chosen.groups}
     assert coordinator.startswith("127.0.0.1:")
-    assert plan(Hosts(), 2, ["0", "1", "2", "3"]).gpus == ("0", "1")
+    assert plan(Hosts(), 2, ["0", "1", "2", "3"], per_gpu=True).gpus == ("0", "1")
 
 
 def test_the_second_of_two_hosts_numbers_its_processes_after_the_first() -> None:
-    chosen = plan(Hosts("10.0.0.1:1234", 2, 1), None, ["0", "1"])
+    chosen = plan(Hosts("10.0.0.1:1234", 2, 1), None, ["0", "1"], per_gpu=True)
     assert [g.process_id for g in chosen.groups] == [2, 3]
     assert {(g.num_processes, g.coordinator) for g in chosen.groups} == {(4, "10.0.0.1:1234")}
 
@@ -316,7 +322,7 @@ def test_bad_host_settings_are_config_errors(host_env, variables: dict, message:
 def test_children_that_fail_end_the_launch_with_their_code(tmp_path: Path, capfd) -> None:
     """A bad argument: every child exits 2 at once; the launcher returns 2 and names one."""
     lines: list[str] = []
-    chosen = plan(Hosts(), None, ["0", "1"])
+    chosen = plan(Hosts(), None, ["0", "1"], per_gpu=True)
     code = launch.run(chosen, ["train", "--preset", "none"], tmp_path / "logs", log=lines.append)
     assert code == 2
     assert lines[0].startswith("2 processes of 2, one per GPU (GPU 0: process 0, GPU 1: process 1)")
@@ -351,3 +357,22 @@ def test_one_failed_child_stops_the_others(tmp_path: Path, monkeypatch) -> None:
     assert lines[-1].startswith("error: process 1 (GPU 1) ended with exit code 3")
     assert "process 1 gives up" in lines[-1]  # the end of its log
     assert stopped.read_text().strip() == "0"
+
+
+def test_mujoco_warp_trains_on_one_gpu_of_several(monkeypatch) -> None:
+    """Warp on several GPUs of one process crashes: the default takes one, more is an error;
+    MJX's JAX physics keeps every device asked for."""
+    import jax
+
+    from mjx_arm.train.config import TrainConfig
+
+    monkeypatch.setattr(jax, "local_device_count", lambda: 2)
+    monkeypatch.setattr("mjx_arm.envs.physics_config.resolve_impl", lambda impl: impl)
+    warp = TrainConfig(backend="mjx").replace(
+        physics=TrainConfig().physics.__class__(impl="warp")
+    )
+    assert launch.devices_for_physics(warp).devices == 1
+    with pytest.raises(ConfigError, match="MuJoCo Warp trains on one GPU per process"):
+        launch.devices_for_physics(warp.replace(devices=2))
+    jax_physics = warp.replace(physics=warp.physics.__class__(impl="jax"), devices=2)
+    assert launch.devices_for_physics(jax_physics).devices == 2

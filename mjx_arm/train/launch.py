@@ -1,7 +1,8 @@
 """Start a host's share of a training: one process per GPU, joined by ``jax.distributed``.
 
-``mjx-arm train --devices N`` on a host with several GPUs runs N copies of the same command,
-each with one GPU (``CUDA_VISIBLE_DEVICES``) and its place in the group
+With ``MJX_ARM_PROCESS_PER_GPU=1``, ``mjx-arm train --devices N`` on a host with several GPUs
+runs N copies of the same command, each with one GPU (``CUDA_VISIBLE_DEVICES``) and its place in
+the group
 (:class:`~mjx_arm.train.distributed.ProcessGroup`, handed over in environment variables). The
 launcher itself never starts JAX on a GPU: it counts the GPUs from the driver, so every GPU's
 memory is left to the process that trains on it.
@@ -22,12 +23,18 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from mjx_arm.inputs import ConfigError
 from mjx_arm.train.distributed import Hosts, ProcessGroup
 
 NVIDIA_GPUS = Path("/proc/driver/nvidia/gpus")
 STOP_GRACE_S = 10.0  # seconds a stopped process gets before it is killed
+# Opt-in: on jax 0.11.2 with mujoco-mjx 3.17 and warp-lang 1.19 on H100s, XLA's compiler crashed
+# (SIGSEGV) compiling the training programs of MJX on MuJoCo Warp in every process joined by
+# jax.distributed, with one program compiled at a time and with XLA's caches off
+# (docs/training.md). Kept to be tried again on newer versions; CPU processes work (CI).
+PROCESS_PER_GPU = "MJX_ARM_PROCESS_PER_GPU"
 CUDA_PLUGINS = (
     "jax_cuda13_plugin",
     "jax_cuda12_plugin",
@@ -77,16 +84,28 @@ class Plan:
         return bool(self.gpus)
 
 
-def plan(hosts: Hosts, devices: int | None, gpus: list[str] | None = None) -> Plan:
+def process_per_gpu() -> bool:
+    """Whether several GPUs of a host train in one process each (``MJX_ARM_PROCESS_PER_GPU=1``)."""
+    return os.environ.get(PROCESS_PER_GPU) == "1"
+
+
+def plan(
+    hosts: Hosts,
+    devices: int | None,
+    gpus: list[str] | None = None,
+    per_gpu: bool | None = None,
+) -> Plan:
     """The processes of this host for ``--devices`` (None or 0: every GPU; else that many).
 
-    One GPU, or none (a CPU: its devices are split in one process), trains in this process,
-    joined to the other hosts where there are several. Several GPUs start one process each,
-    numbered ``host rank * GPUs per host + GPU index`` (every host must use as many GPUs).
+    Without ``per_gpu`` (default: :func:`process_per_gpu`), or with one GPU or none (a CPU),
+    the training runs in this process on its local devices, joined to the other hosts where
+    there are several. With it, several GPUs start one process each, numbered
+    ``host rank * GPUs per host + GPU index`` (every host must use as many GPUs).
 
     Raises:
         ConfigError: more GPUs asked for than this host has.
     """
+    per_gpu = process_per_gpu() if per_gpu is None else per_gpu
     gpus = visible_gpus() if gpus is None else gpus
     if devices and gpus and devices > len(gpus):
         raise ConfigError(
@@ -94,7 +113,7 @@ def plan(hosts: Hosts, devices: int | None, gpus: list[str] | None = None) -> Pl
             f"{len(gpus)} or fewer"
         )
     chosen = gpus[: devices or len(gpus)]
-    if len(chosen) <= 1:
+    if len(chosen) <= 1 or not per_gpu:
         if hosts.count == 1:
             return Plan()
         group = ProcessGroup(hosts.coordinator, hosts.count, hosts.rank, hosts.join_timeout)
@@ -199,3 +218,39 @@ def _stop(procs: list[subprocess.Popen]) -> None:
         except subprocess.TimeoutExpired:
             p.kill()
             p.wait()
+
+
+def devices_for_physics(config: Any) -> Any:
+    """``config`` with the device count its physics can train on in this process.
+
+    MuJoCo Warp steps one GPU per process: two devices in one process crash at its first
+    call (its foreign call assumes the first device), and processes joined by jax.distributed
+    crash XLA's compiler (``PROCESS_PER_GPU``). So on Warp the default (``devices=0``) is one
+    GPU, more is a named error that says what works, and MJX's JAX physics or the C MuJoCo
+    batch keep every device asked for.
+
+    Raises:
+        ConfigError: several GPUs, or several processes, on MuJoCo Warp.
+    """
+    import jax
+
+    from mjx_arm.envs.backend import resolve_backend
+    from mjx_arm.envs.physics_config import resolve_impl
+
+    if resolve_backend(config.backend) != "mjx" or resolve_impl(config.physics.impl) != "warp":
+        return config
+    if jax.process_count() > 1:
+        if process_per_gpu():
+            return config
+        raise ConfigError(
+            "MuJoCo Warp cannot train in processes joined by jax.distributed yet (XLA's "
+            "compiler crashes on it): use --set physics.impl=jax for several hosts, or one host"
+        )
+    if config.devices > 1 and jax.local_device_count() > 1:
+        raise ConfigError(
+            f"MuJoCo Warp trains on one GPU per process (asked for {config.devices}): use "
+            "--devices 1; for several GPUs use --set physics.impl=jax (XLA splits the batch, "
+            "about half Warp's speed per GPU), or `mjx-arm bench seeds`, which trains one seed "
+            "per GPU"
+        )
+    return config.replace(devices=1) if jax.local_device_count() > 1 else config

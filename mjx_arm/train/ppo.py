@@ -29,6 +29,7 @@ from mjx_arm.train.checkpoints import CheckpointError, restore_brax_params
 from mjx_arm.train.compile_report import CompileReport
 from mjx_arm.train.config import TrainConfig
 from mjx_arm.train.distributed import barrier, is_leader
+from mjx_arm.train.launch import devices_for_physics
 from mjx_arm.train.learner import train_devices
 from mjx_arm.train.loop import Callbacks, resolve_partition, run_ppo
 from mjx_arm.train.progress import Solved, Stopped, _Progress
@@ -110,6 +111,7 @@ def train(
             without a usable checkpoint.
     """
     config.validate()
+    config = devices_for_physics(config)
     config.check_devices(len(train_devices(config.devices)))
     task = config.task_config()
     _check_arm(config, task)
