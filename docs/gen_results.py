@@ -63,6 +63,10 @@ SECTIONS: tuple[Section, ...] = (
     Section("seeds", "Training over seeds",
             "The presets as shipped, trained seed after seed by `mjx-arm bench seeds`.",
             ("seeds/*",)),
+    Section("scaling", "Several GPUs",
+            "Seeds one per GPU (`mjx-arm bench seeds --devices N`) and training over GPUs "
+            "(`benchmarks/bench_scaling.py`), with the runs that crashed.",
+            ("scaling/*",)),
     Section("transfer", "Transfer",
             "One exported policy in every engine, by `mjx-arm bench transfer`.",
             ("transfer/*", "transfer_*", "contact/transfer/*", "lift/*")),

@@ -207,6 +207,19 @@ ROBUSTNESS_GROUPS = (
     ("Touch fast", ["robustness/robustness_touch_fast_seed0.json"]),
 )
 TOUCH_TRANSFER = [f"contact/transfer/touch_fast_seed{i}.json" for i in range(3)]
+GPU_SEEDS = ("scaling/seeds_touch_fast_2gpu_of_2.json", "scaling/seeds_touch_fast_1gpu_of_2.json")
+
+
+def _gpu_seeds_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
+    """The seeds benchmark with one seed per GPU at once beside the same seeds on one GPU."""
+    many, one = (load(rel)["summary"] for rel in GPU_SEEDS)
+    gpus = len(many["gpus"])
+    value = (
+        f"{many['seeds']} seeds on {gpus} GPUs at once {secs(many['wall_s'])} "
+        f"({many['solved']} solved), one after another on 1 GPU {secs(one['wall_s'])} "
+        f"({one['solved']} solved): {many['wall_s'] / one['wall_s']:.2f}x the wall time"
+    )
+    return "Touch `--preset fast` seeds, one process per GPU", value, list(GPU_SEEDS)
 HEADLINES: tuple[Headline, ...] = (
     _seeds_row("Touch", "seeds/seeds_touch_fast.json", "`--preset fast`, time to threshold"),
     _seeds_row("Reach", "seeds/seeds_reach_fast.json", "`--preset fast`, time to threshold"),
@@ -223,6 +236,7 @@ HEADLINES: tuple[Headline, ...] = (
                  task="touch"),
     Headline(_robustness_row),
     Headline(_cold_row),
+    Headline(_gpu_seeds_row),
     Headline(_throughput_row),
     Headline(_parity_row),
     Headline(_cpu_row),
