@@ -101,3 +101,33 @@ def test_two_tiny_seeds_on_the_c_backend(tmp_path: Path) -> None:
     for run in runs:
         assert run.curve[0][1] == 0 and run.total_steps >= 2560
         assert 0.0 <= run.final_success <= 1.0 and not math.isnan(run.wall_s)
+
+
+@pytest.mark.slow
+def test_seeds_in_processes_of_their_own(tmp_path: Path) -> None:
+    """Each seed trains in a process of its own (as on each GPU of a host; here two CPU
+    processes at once): the same report, each seed's own config, the GPU it ran on, and a seed
+    whose process fails is reported unsolved with its error while the others go on."""
+    from mjx_arm.bench.seeds import run_seeds_on_gpus
+
+    config = SeedsConfig(task="reach", preset="cpu", seeds="0-1", backend="mujoco")
+    sets = ("num_timesteps=2560", "num_evals=2", "num_eval_envs=8")
+    runs, configs = run_seeds_on_gpus(config, tmp_path, ["", ""], sets, log=lambda _: None)
+    assert [r.seed for r in runs] == [0, 1] and not any(r.error for r in runs)
+    assert [c["train"]["seed"] for c in configs] == [0, 1]
+    for run in runs:
+        assert run.curve[0][1] == 0 and run.total_steps >= 2560 and run.compile_report
+        assert "stages" in run.compile_report and 0.0 <= run.final_success <= 1.0
+    failed, _ = run_seeds_on_gpus(
+        SeedsConfig(task="reach", preset="cpu", seeds="2", backend="mujoco"),
+        tmp_path,
+        [""],
+        (*sets, "num_envs=63"),
+        log=lambda _: None,
+    )
+    assert not failed[0].solved and "exit code 2" in failed[0].error
+    assert "num_envs" in failed[0].error
+    paths = write_report(config, runs + failed, [*configs, {}], {"device": {"kind": "cpu"}},
+                         tmp_path, "p", sets, wall_s=12.5)  # fmt: skip
+    summary = json.loads(paths[0].read_text())["summary"]
+    assert summary["wall_s"] == 12.5 and summary["solved"] <= 2
