@@ -220,6 +220,8 @@ def _gpu_seeds_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
         f"({one['solved']} solved): {many['wall_s'] / one['wall_s']:.2f}x the wall time"
     )
     return "Touch `--preset fast` seeds, one process per GPU", value, list(GPU_SEEDS)
+
+
 HEADLINES: tuple[Headline, ...] = (
     _seeds_row("Touch", "seeds/seeds_touch_fast.json", "`--preset fast`, time to threshold"),
     _seeds_row("Reach", "seeds/seeds_reach_fast.json", "`--preset fast`, time to threshold"),

@@ -368,9 +368,7 @@ def test_mujoco_warp_trains_on_one_gpu_of_several(monkeypatch) -> None:
 
     monkeypatch.setattr(jax, "local_device_count", lambda: 2)
     monkeypatch.setattr("mjx_arm.envs.physics_config.resolve_impl", lambda impl: impl)
-    warp = TrainConfig(backend="mjx").replace(
-        physics=TrainConfig().physics.__class__(impl="warp")
-    )
+    warp = TrainConfig(backend="mjx").replace(physics=TrainConfig().physics.__class__(impl="warp"))
     assert launch.devices_for_physics(warp).devices == 1
     with pytest.raises(ConfigError, match="MuJoCo Warp trains on one GPU per process"):
         launch.devices_for_physics(warp.replace(devices=2))
