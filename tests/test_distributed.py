@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from tiny_run import EPOCH_STEPS, EPOCHS, SETTINGS
 
 from mjx_arm.inputs import ConfigError
 from mjx_arm.train import distributed, launch
@@ -27,24 +28,6 @@ from mjx_arm.train.launch import Plan, free_port, plan
 from mjx_arm.train.resume import ENV_STATE_FILE, RESUME_FILE
 from mjx_arm.train.rundir import RunDir
 
-EPOCH_STEPS = 640  # one training step: 32 envs x 4 minibatches x 5 unrolls
-EPOCHS = 3
-SETTINGS = {
-    "task": "reach",
-    "backend": "mujoco",
-    "num_timesteps": EPOCHS * EPOCH_STEPS,
-    "num_evals": EPOCHS + 1,
-    "num_envs": 32,
-    "batch_size": 32,
-    "num_minibatches": 4,
-    "unroll_length": 5,
-    "num_updates_per_batch": 2,
-    "num_eval_envs": 16,
-    "policy_hidden": "32,32",
-    "value_hidden": "32,32",
-    "checkpoint_every": 1,
-    "env_state_every": 1,
-}
 # Allowed difference of a stored array between the two runs, relative to its largest entry.
 # Both runs split the 32 envs over a mesh of 2 devices the same way (envs 0-15 on the first),
 # so each device runs the same program on the same data; the gradient is the mean of the two

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from tiny_run import EPOCH_STEPS, EPOCHS, SETTINGS
 
 from mjx_arm.cli import main
 from mjx_arm.inputs import InputError
@@ -27,24 +28,6 @@ from mjx_arm.train.ppo import train
 from mjx_arm.train.resume import ENV_STATE_FILE, RESUME_FILE, ResumeStateError
 from mjx_arm.train.rundir import RunDir
 
-EPOCH_STEPS = 640  # one training step: 32 envs x 4 minibatches x 5 unrolls
-EPOCHS = 3
-SETTINGS = {
-    "task": "reach",
-    "backend": "mujoco",
-    "num_timesteps": EPOCHS * EPOCH_STEPS,
-    "num_evals": EPOCHS + 1,
-    "num_envs": 32,
-    "batch_size": 32,
-    "num_minibatches": 4,
-    "unroll_length": 5,
-    "num_updates_per_batch": 2,
-    "num_eval_envs": 16,
-    "policy_hidden": "32,32",
-    "value_hidden": "32,32",
-    "checkpoint_every": 1,
-    "env_state_every": 1,  # every checkpoint takes the envs' state (the newest keeps it)
-}
 CONFIG = load_config("cpu", None, [f"{k}={v}" for k, v in SETTINGS.items()])
 FIRST, LAST = EPOCH_STEPS, EPOCHS * EPOCH_STEPS
 
