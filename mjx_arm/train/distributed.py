@@ -161,7 +161,6 @@ class ProcessGroup:
                 self.num_processes,
                 self.process_id,
                 initialization_timeout=self.join_timeout,
-                local_device_ids=_local_device_ids(),
             )
         except Exception as err:  # XlaRuntimeError: DEADLINE_EXCEEDED, UNAVAILABLE, ...
             raise self._join_error(str(err).splitlines()[0][:200]) from err
@@ -263,13 +262,6 @@ class ProcessGroup:
                 f"{self.num_processes}: give every host the same --hosts"
             )
         return f"two processes have id {ident}: give each its own --host-rank" if taken else ""
-
-
-def _local_device_ids() -> list[int] | None:
-    """The GPU of this process where the launcher named it in ``MJX_ARM_LOCAL_DEVICE`` (every
-    GPU visible, JAX told which to use), else None (the GPU is the only one visible)."""
-    text = os.environ.get("MJX_ARM_LOCAL_DEVICE", "")
-    return [int(text)] if text.isdigit() else None
 
 
 def is_leader() -> bool:

@@ -154,7 +154,7 @@ def run(plan: Plan, argv: list[str], logs: Path, log=print) -> int:
     log(f"{len(plan.gpus)} processes of {plan.groups[0].num_processes}, one per GPU ({ids})")
     try:
         for gpu, group in zip(plan.gpus, plan.groups, strict=True):
-            env = {**os.environ, **group.env(), **_gpu_env(gpu)}
+            env = {**os.environ, **group.env(), "CUDA_VISIBLE_DEVICES": gpu}
             command = [sys.executable, "-m", "mjx_arm.cli", *argv]
             if group.leader:
                 children.append((group, gpu, subprocess.Popen(command, env=env), None))
@@ -166,14 +166,6 @@ def run(plan: Plan, argv: list[str], logs: Path, log=print) -> int:
         return _wait(children, log)
     finally:
         _stop([c[2] for c in children])
-
-
-def _gpu_env(gpu: str) -> dict[str, str]:
-    """How a started process gets its GPU: the only one visible (``CUDA_VISIBLE_DEVICES``), or
-    with ``MJX_ARM_GPU_SELECT=jax`` every GPU visible and JAX told which one is its own."""
-    if os.environ.get("MJX_ARM_GPU_SELECT") == "jax":
-        return {"MJX_ARM_LOCAL_DEVICE": gpu}
-    return {"CUDA_VISIBLE_DEVICES": gpu}
 
 
 def _wait(children: list, log) -> int:
