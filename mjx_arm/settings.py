@@ -72,6 +72,14 @@ def _parse(text: str, kind: Any) -> Any:
     return json.loads(text)
 
 
+def did_you_mean(name: str, known: Any) -> str:
+    """`` (did you mean 'x'?)`` for the known name closest to a mistyped one, else ""."""
+    import difflib
+
+    close = difflib.get_close_matches(name, list(known), n=1, cutoff=0.75)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
 def set_path(config: Any, path: list[str], text: str, label: str = "setting") -> Any:
     """A copy of the dataclass ``config`` with the field at ``path`` set from ``text``.
 
@@ -81,7 +89,8 @@ def set_path(config: Any, path: list[str], text: str, label: str = "setting") ->
     """
     hints = field_types(type(config))
     if path[0] not in hints:
-        raise ConfigError(f"unknown {label} {path[0]!r}; choose one of {sorted(hints)}")
+        raise ConfigError(f"unknown {label} {path[0]!r}{did_you_mean(path[0], hints)}; choose "
+                          f"one of {sorted(hints)}")  # fmt: skip
     current = getattr(config, path[0])
     if dataclasses.is_dataclass(current):
         if len(path) == 1:

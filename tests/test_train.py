@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from mjx_arm.inputs import ConfigError
 from mjx_arm.train.config import load_config
 from mjx_arm.train.ppo import train
 from mjx_arm.train.rundir import RunDir
@@ -197,3 +198,15 @@ def test_a_checkpoint_restores_the_params_it_saved(tmp_path: Path) -> None:
     for a, b in zip(jax.tree.leaves(saved), jax.tree.leaves(learner.params(state)), strict=True):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
     assert int(RunDir.load_meta(run.latest_checkpoint())["step"]) == 640
+
+
+def test_a_mistyped_setting_names_the_closest_known_one() -> None:
+    with pytest.raises(
+        ConfigError, match=r"unknown config key 'num_env' \(did you mean 'num_envs'\?\)"
+    ):
+        load_config("cpu", None, ["num_env=64"])
+    with pytest.raises(ConfigError, match=r"'impll' \(did you mean 'impl'\?\)"):
+        load_config("cpu", None, ["physics.impll=jax"])
+    with pytest.raises(ConfigError) as caught:
+        load_config("cpu", None, ["zzz=1"])
+    assert "did you mean" not in str(caught.value)
