@@ -201,10 +201,11 @@ def _case(command: str, head: list, positional: list, options: dict, most: int =
 def _train_case():
     @st.composite
     def build(draw) -> Case:
-        argv = ["train", "--preset", "cpu", "--backend", "mujoco", "--quiet"]
-        if draw(st.booleans()):
+        argv = ["train", "--quiet"]
+        if draw(st.booleans()):  # a resumed run takes its config from the run directory
             argv += ["--resume", draw(infile("run_dir"))]
         else:
+            argv += ["--preset", "cpu", "--backend", "mujoco"]
             argv += ["--run-dir", draw(st.one_of(outfile(""), infile("run_dir")))]
             argv += draw(flags(_train(), 3))
             if draw(st.booleans()):

@@ -148,3 +148,11 @@ def test_a_damaged_resume_file_is_a_named_error(stopped: Path, tmp_path, damage:
     with pytest.raises(ResumeStateError, match=f"{RESUME_FILE} cannot be read") as caught:
         train(CONFIG, run_dir, resume=True, quiet=True)
     assert isinstance(caught.value, InputError)
+
+
+def test_flags_that_would_change_a_resumed_run_are_an_error(tmp_path: Path, capsys) -> None:
+    """--resume keeps the run's config: --task, --arm, --set ... are named, not dropped."""
+    code = main(["train", "--resume", str(tmp_path), "--task", "lift", "--set", "no_such_key=1"])
+    assert code == EXIT_INVALID
+    line = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "--task, --set would be ignored" in line and line.startswith("error:")

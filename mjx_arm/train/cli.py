@@ -7,11 +7,13 @@ import math
 from pathlib import Path
 
 from mjx_arm import names
-from mjx_arm.inputs import nonnegative_int, positive_int
+from mjx_arm.inputs import ConfigError, nonnegative_int, positive_int
 from mjx_arm.jax_cache import enable_compilation_cache
 from mjx_arm.names import EXIT_OK
 from mjx_arm.settings import add_set_argument
 from mjx_arm.task.registry import task_names
+
+DEFAULT_PRESET = "seed"
 
 
 def cmd_train(args: argparse.Namespace) -> int:
@@ -30,6 +32,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     from mjx_arm.train.distributed import Hosts, ProcessGroup
     from mjx_arm.train.ppo import train
 
+    if args.resume:
+        _check_resume_flags(args)
     group = ProcessGroup.from_env()  # set where a launcher started this process
     run_dir = Path(args.resume or args.run_dir or Path("runs") / time.strftime("%Y%m%d-%H%M%S"))
     if not group.joined:
@@ -63,13 +67,39 @@ def cmd_train(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _check_resume_flags(args: argparse.Namespace) -> None:
+    """A resumed run keeps the config it was started with: the flags that would change it are
+    an error, not silently dropped.
+
+    Raises:
+        ConfigError: ``--resume`` with --task, --preset, --backend, --arm, --ee-link, --config
+            or --set.
+    """
+    flags = {
+        "--task": args.task,
+        "--preset": args.preset,
+        "--backend": args.backend,
+        "--arm": args.arm,
+        "--ee-link": args.ee_link,
+        "--config": args.config,
+        "--set": args.set,
+    }
+    given = [flag for flag, value in flags.items() if value]
+    if given:
+        raise ConfigError(
+            f"--resume continues a run with the config it was started with, so {', '.join(given)} "
+            "would be ignored: drop them (only --devices, --quiet and the host flags go with "
+            "--resume), or start a new run with --run-dir"
+        )
+
+
 def _default_run_dir(args: argparse.Namespace, task: str | None = None) -> Path:
     """``runs/TASK-TIMESTAMP`` (the task of the flags, else of the preset)."""
     import time
 
     from mjx_arm.train.config import preset_config
 
-    task = task or args.task or preset_config(args.preset).task
+    task = task or args.task or preset_config(args.preset or DEFAULT_PRESET).task
     return Path("runs") / f"{task}-{time.strftime('%Y%m%d-%H%M%S')}"
 
 
@@ -90,7 +120,7 @@ def config_from_args(args: argparse.Namespace):
         overrides.insert(0, f"task={args.task.lower()}")
     if args.backend:
         overrides.insert(0, f"backend={args.backend}")
-    config = load_config(args.preset, args.config, overrides)
+    config = load_config(args.preset or DEFAULT_PRESET, args.config, overrides)
     return _with_arm(config, args.arm, args.ee_link)
 
 
@@ -108,7 +138,8 @@ def cmd_warmup(args: argparse.Namespace) -> int:
 
     enable_compilation_cache()
     config = config_from_args(args)
-    print(f"warming up {config.task} on {config.arm.urdf or 'the shipped arm'} ({args.preset})")
+    preset = args.preset or DEFAULT_PRESET
+    print(f"warming up {config.task} on {config.arm.urdf or 'the shipped arm'} ({preset})")
     result = warm_up(config, quiet=args.quiet)
     print(result.compile_summary)
     print("caches (share these folders between machines of the same GPU and versions):")
@@ -158,8 +189,7 @@ def _add_config_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--preset",
         choices=names.PRESET_NAMES,
-        default="seed",
-        help="hyperparameter preset (default: seed)",
+        help=f"hyperparameter preset (default: {DEFAULT_PRESET})",
     )
     p.add_argument(
         "--backend",
