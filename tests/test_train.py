@@ -210,3 +210,17 @@ def test_a_mistyped_setting_names_the_closest_known_one() -> None:
     with pytest.raises(ConfigError) as caught:
         load_config("cpu", None, ["zzz=1"])
     assert "did you mean" not in str(caught.value)
+
+
+def test_a_full_disk_is_named_before_the_lock_file_is_made(tmp_path: Path, monkeypatch) -> None:
+    """The free-space check runs before anything is written: no empty .lock is left behind."""
+    from mjx_arm.train.rundir import RunDir, RunDirError
+
+    def full(self, free_bytes: int = 0) -> None:
+        raise RunDirError(f"the disk of {self.path} has 0 MiB free")
+
+    monkeypatch.setattr(RunDir, "check_writable", full)
+    config = load_config("cpu", None, ["task=reach"])
+    with pytest.raises(RunDirError, match="0 MiB free"):
+        train(config, tmp_path / "run", quiet=True)
+    assert not (tmp_path / "run" / ".lock").exists()

@@ -125,9 +125,9 @@ def train(
         step_offset, restore = _start_point(None, config, resume, Path(run_dir))
         return _train(None, config, task, step_offset, restore, True, stop_after)
     run = RunDir(run_dir)
+    run.check_writable()  # before the lock file and any compilation (a full disk)
     with run.lock():
         step_offset, restore = _start_point(run, config, resume)
-        run.check_writable()  # before any compilation
         run.truncate_metrics(step_offset)  # rows a killed run wrote after its last checkpoint
         barrier("run directory ready")
         return _train(run, config, task, step_offset, restore, quiet, stop_after)

@@ -88,7 +88,13 @@ class RunDir:
         import fcntl
 
         path = self.path / LOCK_NAME
-        with path.open("a+") as f:
+        try:
+            handle = path.open("a+")
+        except OSError as err:
+            raise RunDirError(
+                f"cannot create the lock file of {self.path}: {err.strerror or err}"
+            ) from err
+        with handle as f:
             try:
                 fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except OSError:
@@ -98,10 +104,17 @@ class RunDir:
                     f"the run directory {self.path} is in use by another training (pid "
                     f"{owner}); wait for it to end, or choose another --run-dir"
                 ) from None
-            f.seek(0)
-            f.truncate()
-            f.write(str(os.getpid()))
-            f.flush()
+            try:
+                f.seek(0)
+                f.truncate()
+                f.write(str(os.getpid()))
+                f.flush()
+            except OSError as err:  # a disk that filled since the check
+                fcntl.flock(f, fcntl.LOCK_UN)
+                raise RunDirError(
+                    f"cannot write the lock file of {self.path} ({err.strerror or err}); free "
+                    "some space and start again"
+                ) from err
             try:
                 yield
             finally:
