@@ -10,6 +10,12 @@ physics diverged. The step then returns the last sane observation (finite and in
 observation space), ``terminated=True``, ``info["diverged"] = True`` (also under its older name
 ``info["nonfinite"]``) and the ``nonfinite`` reward term; the next ``reset()`` starts from a
 clean physics state.
+
+After ``close()`` every call that needs the physics (``reset``, ``step``, ``apply_action``,
+``render``, ``get_ee_pose``) raises Gymnasium's own ``ClosedEnvironmentError`` in every engine, as
+Gymnasium's vector envs do: ``close()`` frees the engine (PyBullet's server is gone), so an env
+that went on working in one engine and failed in another would hide a use-after-close bug.
+``close()`` itself may be called again.
 """
 
 from __future__ import annotations
@@ -89,6 +95,7 @@ class BaseRobotEnv(gym.Env):
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array", "human"], "render_fps": 30}
     engine: str = "none"
+    _closed: bool = False
 
     def __init__(
         self,
@@ -175,6 +182,7 @@ class BaseRobotEnv(gym.Env):
         ``object_quat`` (the object's orientation, w x y z), ``object_mass`` (kg) and
         ``object_friction`` replace the drawn ones.
         """
+        self._ensure_open("reset")
         super().reset(seed=seed)
         n = self.arm.n_joints
         u = self.np_random.uniform(size=sampling.n_uniforms(n, self.task))
@@ -198,6 +206,7 @@ class BaseRobotEnv(gym.Env):
 
     def step(self, action):
         """Apply one action for ``ctrl_dt``: (obs, reward, terminated, truncated, info)."""
+        self._ensure_open("step")
         if self._reading is None:
             raise RuntimeError("call reset() before step()")
         clipped = check_action(action, self._action_bounds)
@@ -219,6 +228,7 @@ class BaseRobotEnv(gym.Env):
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array'")
             return None
+        self._ensure_open("render")
         frame = self._render_frame()
         if self.render_mode == "human":
             self._show(frame)
@@ -227,13 +237,26 @@ class BaseRobotEnv(gym.Env):
 
     def get_ee_pose(self) -> np.ndarray:
         """End-effector pose (x, y, z, qw, qx, qy, qz), float64, ``w >= 0``."""
+        self._ensure_open("get_ee_pose")
         reading = self._physics_read()
         quat = obs_lib.canonical_quat(np, reading.ee_quat)
         return np.concatenate([reading.ee_pos, quat])
 
     def apply_action(self, action) -> np.ndarray:
         """Check and clip an action, command joint velocity targets; return them (rad/s)."""
+        self._ensure_open("apply_action")
         return self._command(check_action(action, self._action_bounds))
+
+    def close(self) -> None:
+        """Mark the env closed (engines free their resources first); calling it again is fine."""
+        self._closed = True
+        super().close()
+
+    def _ensure_open(self, method: str) -> None:
+        if self._closed:
+            raise gym.error.ClosedEnvironmentError(
+                f"{method}() called after close(); make a new {self.engine} env"
+            )
 
     def _command(self, clipped: np.ndarray) -> np.ndarray:
         """Send a clipped action to the physics: the arm's joint velocity targets (returned,
@@ -430,23 +453,34 @@ def gripper_speed(arm: ArmInfo, task: TaskConfig) -> float:
     return arm.gripper.v_max * arm.gripper.closing_sign
 
 
+class InvalidActionError(ValueError, TypeError):
+    """An action that is not ``(n,)`` finite real numbers (both a ValueError and a TypeError)."""
+
+
 def check_action(action, bounds: tuple[np.ndarray, np.ndarray] = _SHIPPED_BOUNDS) -> np.ndarray:
-    """Validate an action: shape ``(n,)``, finite; clip into [-1, 1]; return float32.
+    """Validate an action: shape ``(n,)``, real (bool, int or float), finite; clip into [-1, 1];
+    return float32. Every engine's env checks its actions here.
 
     Args:
         action: the action, ``(n,)``.
         bounds: ``(-1, 1)`` arrays of float32, ``(n,)`` each (default: 6 joints).
 
     Raises:
-        ValueError: wrong shape, or NaN / inf entries.
+        InvalidActionError: not an array of real numbers (complex, strings, objects, ragged
+            lists), wrong shape, or NaN / inf entries.
     """
-    arr = np.asarray(action)
+    try:
+        arr = np.asarray(action)
+    except (ValueError, TypeError) as exc:
+        raise InvalidActionError(f"action must be an array of real numbers: {exc}") from None
+    if arr.dtype.kind not in "biuf":
+        raise InvalidActionError(f"action must hold real numbers, got dtype {arr.dtype}")
     if arr.dtype is not _FLOAT32:  # float32 clips exactly as its float64 widening would
         arr = arr.astype(np.float64)
     low, high = bounds
     if arr.shape != low.shape:
-        raise ValueError(f"action must have shape {low.shape}, got {arr.shape}")
+        raise InvalidActionError(f"action must have shape {low.shape}, got {arr.shape}")
     # finite sum of squares <=> finite entries, barring overflow, which the exact test rules out
     if not (math.isfinite(arr.dot(arr)) or np.isfinite(arr).all()):
-        raise ValueError(f"action contains NaN or inf: {arr.tolist()}")
+        raise InvalidActionError(f"action contains NaN or inf: {arr.tolist()}")
     return np.minimum(np.maximum(arr, low), high).astype(np.float32, copy=False)

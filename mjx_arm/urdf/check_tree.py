@@ -8,6 +8,7 @@ from pathlib import Path
 from mjx_arm.urdf.findings import (
     JOINT_TYPES,
     MAX_LINKS,
+    MAX_NAME_CHARS,
     MAX_OFFSET,
     _Findings,
     _Joint,
@@ -47,7 +48,7 @@ def _check_tree(path: Path, root: ET.Element, out: _Findings) -> _Tree | None:
             "has no name (PyBullet refuses the file)",
             'give the root element a name: <robot name="my_arm">',
         )
-    if not _check_counts(root, out):
+    if not _check_counts(root, out) or not _check_name_lengths(root, out):
         return None
     tree = _Tree(path, root)
     _collect_links(tree, out)
@@ -74,6 +75,35 @@ def _check_counts(root: ET.Element, out: _Findings) -> bool:
             )
             fine = False
     return fine
+
+
+# Attributes that hold a name or refer to one, per element tag (None: any tag).
+_NAME_ATTRS: tuple[tuple[str | None, str], ...] = (
+    (None, "name"),
+    ("parent", "link"),
+    ("child", "link"),
+    ("mimic", "joint"),
+)
+
+
+def _check_name_lengths(root: ET.Element, out: _Findings) -> bool:
+    """No name (or reference to one) is longer than MAX_NAME_CHARS: PyBullet's loader crashes
+    the process on long link and joint names, so they must be refused before it reads the file.
+    Each long name is reported once, where it first occurs, showing its start only."""
+    seen: set[str] = set()
+    for elem in root.iter():
+        for tag, attr in _NAME_ATTRS:
+            value = elem.get(attr) if tag in (None, elem.tag) else None
+            if value is not None and len(value) > MAX_NAME_CHARS and value not in seen:
+                seen.add(value)
+                out.error(
+                    1,
+                    f"<{elem.tag} {attr}={value[:32] + '...'!r}>",
+                    f"has a {attr} of {len(value)} characters, more than the "
+                    f"{MAX_NAME_CHARS} this tool accepts",
+                    f"use a {attr} of at most {MAX_NAME_CHARS} characters",
+                )
+    return not seen
 
 
 def _collect_links(tree: _Tree, out: _Findings) -> None:

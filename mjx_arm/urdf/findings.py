@@ -26,6 +26,11 @@ _AXIS_EPS = 1e-9
 # Links (and joints) a URDF may have: far above any arm, low enough to keep every check and
 # native load well under a second.
 MAX_LINKS = 512
+# Longest name (robot, link, joint, material, ...) a URDF may use. PyBullet 3.2 segfaults while
+# loading a URDF whose joint name has 1,264 or more characters, or whose link name has 2,288
+# or more (robot names crash from 42,184; material names up to 70,000 do not). 256 leaves a
+# margin of about 5x below the lowest of these and is far above any real name.
+MAX_NAME_CHARS = 256
 # Largest ratio of two sizes of one primitive shape that survives MuJoCo's MJCF writer.
 MAX_SIZE_RATIO = 1e5
 # Largest origin offset (m): a robot is metres across; beyond this, float rounding eats its shapes.

@@ -10,7 +10,9 @@ or names an external DTD is refused before the document is parsed, with a named 
 The limits keep every later step fast and safe: a file above :data:`MAX_BYTES` is not read, and a
 tree deeper than :data:`MAX_DEPTH` (Python's serialiser recurses per level), with more than
 :data:`MAX_ELEMENTS` elements or with an attribute longer than :data:`MAX_ATTRIBUTE_CHARS`
-characters (PyBullet's loader crashes on a robot name of about 64k characters) is refused.
+characters is refused. Names are bounded much lower by the tree checks
+(:data:`mjx_arm.urdf.findings.MAX_NAME_CHARS`): PyBullet's loader crashes on a joint name of
+1,264 characters.
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ from mjx_arm.urdf.errors import UrdfError
 MAX_BYTES = 8 * 2**20
 MAX_DEPTH = 64
 MAX_ELEMENTS = 50_000
-# Longest attribute value (a path's limit on Linux); PyBullet crashes on names of about 64k.
+# Longest attribute value (a path's limit on Linux); names have a lower limit (MAX_NAME_CHARS).
 MAX_ATTRIBUTE_CHARS = 4096
 
 
