@@ -168,6 +168,106 @@ def write_atomic(data: bytes, target: Path) -> None:
             os.unlink(temporary)
 
 
+# --------------------------------------------------------------------------- .npz files
+
+MiB = 2**20
+
+
+class OversizedInputError(InputFileError, ValueError):
+    """An input file (an ``.npz`` member) larger than the limit its reader sets."""
+
+
+def read_npz_members(
+    path: str | Path,
+    what: str,
+    wanted: Callable[[str], bool] | None = None,
+    *,
+    max_member_bytes: int,
+    max_total_bytes: int,
+    error: type[Exception] = InputFileError,
+) -> dict[str, Any]:
+    """The arrays of an ``.npz`` file, read without trusting it: only the members ``wanted``
+    accepts (None: all), each checked before anything is allocated (its size in the zip
+    directory, then the shape and dtype its ``.npy`` header declares) against
+    ``max_member_bytes``, and all the read members together against ``max_total_bytes``;
+    no pickled objects.
+
+    Raises:
+        OversizedInputError: a member or the total over its limit (with its declared size).
+        ``error``: a file that is not a readable ``.npz`` (not a zip, truncated, a pickle).
+    """
+    import zipfile
+    import zlib
+
+    path = Path(path)
+    try:
+        with zipfile.ZipFile(path) as archive:
+            infos = [i for i in archive.infolist() if i.filename.endswith(".npy")]
+            infos = [i for i in infos if wanted is None or wanted(i.filename[:-4])]
+            _check_sizes(path, what, infos, max_member_bytes, max_total_bytes)
+            return {
+                i.filename[:-4]: _read_member(archive, i, path, what, max_member_bytes, error)
+                for i in infos
+            }
+    except (OversizedInputError, error):
+        raise
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as err:
+        raise error(
+            f"cannot read {path} as a {what} .npz (truncated or not such a file?): "
+            f"{type(err).__name__}: {err}"
+        ) from err
+
+
+def _too_big(path: Path, what: str, subject: str, size: int, limit: int) -> OversizedInputError:
+    return OversizedInputError(
+        f"{path}: {subject} would unpack to {size / MiB:,.1f} MiB, over the limit of "
+        f"{limit / MiB:,.0f} MiB for a {what}: a damaged or hostile file, not one mjx_arm wrote"
+    )
+
+
+def _check_sizes(path: Path, what: str, infos: list, member_limit: int, total_limit: int) -> None:
+    """The unpacked sizes the zip directory states, before any member is unpacked."""
+    for info in infos:
+        if info.file_size > member_limit:
+            raise _too_big(path, what, f"member {info.filename!r}", info.file_size, member_limit)
+    total = sum(info.file_size for info in infos)
+    if total > total_limit:
+        raise _too_big(path, what, "the members it reads, together,", total, total_limit)
+
+
+def _read_member(
+    archive: Any, info: Any, path: Path, what: str, limit: int, error: type[Exception]
+) -> Any:
+    """One ``.npy`` member, allocated only once its header's shape and dtype fit the bytes the
+    zip directory states (already checked against the limits); pickled objects are refused."""
+    import numpy as np
+    from numpy.lib import format as npy
+
+    member = f"member {info.filename!r}"
+    with archive.open(info) as stream:
+        version = npy.read_magic(stream)
+        read_header = npy.read_array_header_1_0 if version == (1, 0) else npy.read_array_header_2_0
+        shape, fortran, dtype = read_header(stream)
+        if dtype.hasobject:
+            raise error(f"{path}: {member} holds pickled Python objects, refused")
+        declared = math.prod(shape) * dtype.itemsize
+        if declared > limit:
+            raise _too_big(path, what, f"{member} (shape {shape}, {dtype})", declared, limit)
+        if declared > info.file_size:
+            raise error(
+                f"{path}: {member} declares shape {shape} ({dtype}), {declared:,} bytes, more "
+                f"than the {info.file_size:,} bytes it holds: a damaged {what}"
+            )
+        array = np.empty(shape[::-1] if fortran else shape, dtype=dtype)
+        view, got = memoryview(array.reshape(-1).view(np.uint8)), 0
+        while got < declared:  # in chunks: no second copy of the member in memory
+            n = stream.readinto(view[got : got + 4 * MiB])
+            if not n:
+                raise error(f"{path}: {member} is truncated: a damaged {what}")
+            got += n
+    return array.T if fortran else array
+
+
 # --------------------------------------------------------------------------- argparse types
 
 MAX_SEED = 2**32 - 1  # JAX's and NumPy's seeds: an unsigned 32-bit integer

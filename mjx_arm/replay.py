@@ -18,8 +18,6 @@ import io
 import json
 import os
 import warnings
-import zipfile
-import zlib
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
@@ -30,7 +28,9 @@ from mjx_arm.inputs import (
     ConfigError,
     InputError,
     InputFileError,
+    MiB,
     read_json_object,
+    read_npz_members,
     require_file,
     write_atomic,
 )
@@ -38,6 +38,13 @@ from mjx_arm.task.config import TaskConfig, task_config
 from mjx_arm.task.observation import decode_joints, n_joints_of, obs_size, obs_slices
 
 REQUIRED_KEYS = ("obs", "reward", "ee_pos", "contact_force")
+# The members a trajectory's reader unpacks (any other is never read), and what they may unpack
+# to, each and together. A checkpoint's transitions.npz holds about 13 KiB; a million recorded
+# steps of 30 float64 observations are 240 MiB. The limits stop a file that would unpack to
+# gigabytes before it is unpacked.
+TRAJECTORY_KEYS = frozenset((*REQUIRED_KEYS, "action", "done", "task_config"))
+TRAJECTORY_MEMBER_BYTES = 512 * MiB
+TRAJECTORY_TOTAL_BYTES = 1024 * MiB
 DEFAULT_WIDTH, DEFAULT_HEIGHT = 800, 600
 DPI = 100
 
@@ -57,13 +64,14 @@ def load_trajectory(path: str | Path) -> dict[str, Any]:
         TrajectoryError: not a readable trajectory file.
     """
     path = require_file(path, "trajectory file")
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            traj: dict[str, Any] = {k: data[k] for k in data.files}
-    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as err:
-        raise TrajectoryError(
-            f"cannot read {path} as a trajectory .npz: {type(err).__name__}: {err}"
-        ) from err
+    traj: dict[str, Any] = read_npz_members(
+        path,
+        "trajectory",
+        TRAJECTORY_KEYS.__contains__,
+        max_member_bytes=TRAJECTORY_MEMBER_BYTES,
+        max_total_bytes=TRAJECTORY_TOTAL_BYTES,
+        error=TrajectoryError,
+    )
     missing = [k for k in REQUIRED_KEYS if k not in traj]
     if missing:
         raise TrajectoryError(f"{path} is not a trajectory file: it lacks {missing}")

@@ -11,21 +11,45 @@ only; :func:`export_policy` reads Brax checkpoints and so imports jax when it is
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
-from mjx_arm.inputs import require_file
+from mjx_arm.inputs import MiB, read_npz_members, require_file
 from mjx_arm.policy.numpy_policy import (
     CONTRACT_VERSION,
     BasePolicy,
     ContractVersionError,
+    NonFiniteActionError,
     NumpyPolicy,
     PolicyFileError,
 )
+
+# What a policy .npz may unpack to. Exported policies hold at most 180 KiB in all, 64 KiB in
+# their largest member (a 128 x 128 float32 kernel, benchmarks/results): the limits leave a
+# margin of thousands (a 8192 x 8192 float32 kernel is 256 MiB) and stop a file whose member
+# would unpack to gigabytes before it is unpacked. Members a policy does not use are never read.
+POLICY_MEMBER_BYTES = 256 * MiB
+POLICY_TOTAL_BYTES = 512 * MiB
+
+
+def read_policy_members(path: Path, wanted: Callable[[str], bool]) -> dict[str, Any]:
+    """The members ``wanted`` of a policy .npz, each checked against the limits above."""
+    return read_npz_members(
+        path,
+        "policy",
+        wanted,
+        max_member_bytes=POLICY_MEMBER_BYTES,
+        max_total_bytes=POLICY_TOTAL_BYTES,
+        error=PolicyFileError,
+    )
+
 
 __all__ = [
     "CONTRACT_VERSION",
     "BasePolicy",
     "ContractVersionError",
+    "NonFiniteActionError",
     "NumpyPolicy",
     "PolicyFileError",
     "export_policy",
@@ -47,7 +71,8 @@ def load(path: str | Path, deterministic: bool = True, seed: int | None = None) 
 
     Raises:
         FileNotFoundError: no such file (an :class:`~mjx_arm.inputs.InputError`).
-        PolicyFileError: not a policy file; ContractVersionError: another contract version.
+        PolicyFileError: not a policy file; ContractVersionError: another contract version;
+            OversizedInputError: a member that would unpack to more than its limit.
     """
     path = require_file(path, "policy file")
     if path.suffix == ".onnx":
@@ -55,7 +80,7 @@ def load(path: str | Path, deterministic: bool = True, seed: int | None = None) 
 
         return OnnxPolicy(path, deterministic, seed)
     if path.suffix == ".npz":
-        return NumpyPolicy.load(path, deterministic, seed)
+        return NumpyPolicy.load(path, deterministic, seed, read_policy_members)
     raise PolicyFileError(f"{path}: a policy file ends in .npz or .onnx")
 
 

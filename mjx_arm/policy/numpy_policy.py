@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import io
 import json
+import re
 import zipfile
 import zlib
 from collections.abc import Callable, Mapping
@@ -39,6 +40,10 @@ class PolicyFileError(ValueError):
 
 class ContractVersionError(PolicyFileError):
     """A policy file was exported for another contract version than this runtime's."""
+
+
+class NonFiniteActionError(PolicyFileError):
+    """A policy computed a NaN or infinite action: damaged weights or a diverged training."""
 
 
 def _swish(x: np.ndarray) -> np.ndarray:
@@ -231,6 +236,7 @@ class BasePolicy:
         self.obs_layout = [(str(k), int(n)) for k, n in self.metadata["obs_layout"]]
         self.obs_size = sum(n for _, n in self.obs_layout)
         self.action_size = int(self.metadata["action_size"])
+        self.observation_steps = 0  # calls so far: the step a non-finite action is reported at
 
     # ------------------------------------------------------------------ to implement
 
@@ -244,7 +250,7 @@ class BasePolicy:
 
     def mode(self, state: np.ndarray) -> np.ndarray:
         """The deterministic action ``(N, action_size)`` for ``state (N, 22)``."""
-        params = self.distribution_params(state)
+        params = self.check_finite(self.distribution_params(state))
         return np.tanh(params[:, : self.action_size])
 
     # ------------------------------------------------------------------ public API
@@ -263,12 +269,30 @@ class BasePolicy:
         state = self.flatten(obs)
         single = state.ndim == 1
         batch = state[None] if single else state
-        if self.deterministic if deterministic is None else deterministic:
-            action = self.mode(batch)
-        else:
-            action = self.sample(self.distribution_params(batch))
-        action = np.clip(action, -1.0, 1.0).astype(np.float32)
+        self.observation_steps += 1
+        with np.errstate(over="ignore", invalid="ignore"):  # reported by check_finite instead
+            if self.deterministic if deterministic is None else deterministic:
+                action = self.mode(batch)
+            else:
+                action = self.sample(self.check_finite(self.distribution_params(batch)))
+        action = np.clip(self.check_finite(action), -1.0, 1.0).astype(np.float32)
         return action[0] if single else action
+
+    def check_finite(self, values: np.ndarray) -> np.ndarray:
+        """``values`` (network outputs or actions) when all are finite.
+
+        Raises:
+            NonFiniteActionError: a NaN or infinite value, named with the observation step.
+        """
+        values = np.asarray(values)
+        if not np.all(np.isfinite(values)):
+            raise NonFiniteActionError(
+                f"the policy produced a non-finite action (NaN or inf) at observation step "
+                f"{self.observation_steps}: the policy file is likely damaged or its training "
+                "diverged; export it again from a healthy checkpoint (mjx-arm export RUN_DIR "
+                "-o POLICY)"
+            )
+        return values
 
     def sample(self, params: np.ndarray) -> np.ndarray:
         """A tanh-normal sample ``(N, action_size)`` from distribution params ``(N, 2 * A)``."""
@@ -352,33 +376,52 @@ class NumpyPolicy(BasePolicy):
         return hidden
 
     @classmethod
-    def load(cls, path: str | Path, deterministic: bool = True, seed: int | None = None):
-        """Read a ``policy.npz`` written by :func:`mjx_arm.policy.export.export_run`.
+    def load(
+        cls,
+        path: str | Path,
+        deterministic: bool = True,
+        seed: int | None = None,
+        read_members: MemberReader | None = None,
+    ):
+        """Read a ``policy.npz`` written by :func:`mjx_arm.policy.export.export_run`
+        (``read_members``: see :func:`read_npz`).
 
         Raises:
             PolicyFileError: not a policy file; ContractVersionError: another contract version.
         """
-        arrays, metadata = read_npz(path)
+        arrays, metadata = read_npz(path, read_members)
         return cls(arrays, metadata, deterministic, seed)
 
 
-def read_npz(path: str | Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+# (path, wanted member names) -> the arrays of those members
+MemberReader = Callable[[Path, Callable[[str], bool]], Mapping[str, np.ndarray]]
+
+
+def is_policy_member(name: str) -> bool:
+    """Whether a policy runtime reads the ``.npz`` member ``name``: the metadata, the
+    normaliser, the layers; any other member is never unpacked."""
+    layer = re.fullmatch(r"(kernel|bias)_\d{1,3}", name) is not None
+    return layer or name in ("metadata", "obs_mean", "obs_std")
+
+
+def read_npz(
+    path: str | Path, read_members: MemberReader | None = None
+) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     """Arrays and metadata of a ``policy.npz``, checked: format, contract version, fields,
-    shapes and finite weights.
+    shapes and finite weights. Only the members :func:`is_policy_member` names are read.
+
+    Args:
+        path: the file.
+        read_members: the reader of the members; :func:`mjx_arm.policy.load` passes
+            :func:`mjx_arm.inputs.read_npz_members`, which checks each member's size before
+            unpacking it. The default, for this file copied on its own, is ``numpy.load``.
 
     Raises:
         PolicyFileError: not a readable policy file (truncated, not a zip, not ours, damaged).
         ContractVersionError: another contract version.
     """
     path = Path(path)
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            arrays = {k: data[k] for k in data.files}
-    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as exc:
-        raise PolicyFileError(
-            f"cannot read {path} as a policy .npz (truncated or not an exported policy?): "
-            f"{type(exc).__name__}: {exc}"
-        ) from exc
+    arrays = dict(read_members(path, is_policy_member) if read_members else _np_load(path))
     if "metadata" not in arrays:
         raise PolicyFileError(f"{path} is not an mjx_arm policy file (no metadata)")
     try:
@@ -388,6 +431,26 @@ def read_npz(path: str | Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     check_metadata(metadata, str(path))
     check_arrays(arrays, metadata, str(path))
     return arrays, metadata
+
+
+def _np_load(path: Path) -> dict[str, np.ndarray]:
+    """The policy members of an ``.npz``, with ``numpy.load`` (no pickles)."""
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return {k: data[k] for k in data.files if is_policy_member(k)}
+    except (
+        OSError,
+        ValueError,
+        EOFError,
+        KeyError,
+        MemoryError,
+        zipfile.BadZipFile,
+        zlib.error,
+    ) as exc:
+        raise PolicyFileError(
+            f"cannot read {path} as a policy .npz (truncated or not an exported policy?): "
+            f"{type(exc).__name__}: {exc}"
+        ) from exc
 
 
 def npz_bytes(arrays: Mapping[str, np.ndarray], metadata: Mapping) -> bytes:

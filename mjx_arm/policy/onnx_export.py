@@ -180,6 +180,9 @@ class OnnxPolicy(BasePolicy):
         return params
 
     def mode(self, state: np.ndarray) -> np.ndarray:
-        """The graph's deterministic ``action`` output ``(N, action_size)``."""
-        (action,) = self.session.run([ACTION], {INPUT: np.asarray(state, np.float32)})
+        """The graph's deterministic ``action`` output ``(N, action_size)``, its distribution
+        params checked finite (:meth:`~mjx_arm.policy.numpy_policy.BasePolicy.check_finite`)."""
+        feed = {INPUT: np.asarray(state, np.float32)}
+        action, params = self.session.run([ACTION, PARAMS], feed)
+        self.check_finite(params)
         return action

@@ -1,0 +1,154 @@
+"""Hostile policy and trajectory files: ``.npz`` members that would unpack to gigabytes are
+refused (or, unused by a policy, never unpacked) before any allocation, and a policy that
+computes a non-finite action or holds non-finite weights is a named error, not a traceback.
+
+A policy reads only its own members (metadata, normaliser, layers), each under a size limit; a
+trajectory reads all its members under a total budget, so a big unused member is refused there.
+"""
+
+from __future__ import annotations
+
+import io
+import tracemalloc
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+from numpy.lib import format as npy
+
+from input_fuzz.corpus import Corpus, build
+from mjx_arm.cli import main
+from mjx_arm.inputs import InputError, OversizedInputError, read_npz_members
+from mjx_arm.names import EXIT_INVALID
+from mjx_arm.policy import NonFiniteActionError, PolicyFileError, load
+from mjx_arm.policy.numpy_policy import read_npz, write_npz
+from mjx_arm.replay import TrajectoryError, load_trajectory
+
+pytestmark = pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
+HUGE = (10**6, 10**6)  # 4 TB of float32, declared by a header of a few bytes
+
+
+@pytest.fixture(scope="module")
+def corpus(tmp_path_factory) -> Corpus:
+    return build(tmp_path_factory.mktemp("hostile_corpus"))
+
+
+def _header(shape: tuple[int, ...], descr: str = "<f4") -> bytes:
+    buffer = io.BytesIO()
+    npy.write_array_header_1_0(buffer, {"descr": descr, "fortran_order": False, "shape": shape})
+    return buffer.getvalue()
+
+
+def _with_member(source: Path, target: Path, name: str, data: bytes | None = None, zeros=0):
+    """A copy of the .npz ``source`` whose member ``name`` is ``data`` (a header alone), or a
+    float32 array of ``zeros`` bytes streamed through the compressor."""
+    with zipfile.ZipFile(source) as old, zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as z:
+        for info in old.infolist():
+            if info.filename != f"{name}.npy":
+                z.writestr(info.filename, old.read(info))
+        with z.open(f"{name}.npy", "w", force_zip64=True) as member:
+            member.write(data if data is not None else _header((zeros // 4,)))
+            chunk = bytes(2**20)
+            for _ in range(zeros // len(chunk)):
+                member.write(chunk)
+    return target
+
+
+def _fails(argv: list[str], capsys) -> str:
+    code = main(argv)
+    err = capsys.readouterr().err
+    assert code == EXIT_INVALID, err
+    assert "Traceback" not in err
+    (line,) = [line for line in err.splitlines() if line.startswith("error:")]
+    return line
+
+
+def test_a_huge_declared_shape_is_refused_before_allocation(corpus: Corpus, tmp_path: Path, capsys):
+    bomb = _with_member(corpus.policy, tmp_path / "bomb.npz", "kernel_0", _header(HUGE))
+    assert bomb.stat().st_size < 100_000
+    tracemalloc.start()
+    with pytest.raises(OversizedInputError, match=r"'kernel_0.npy'.*over the limit of 256 MiB"):
+        load(bomb)
+    assert tracemalloc.get_traced_memory()[1] < 20 * 2**20
+    tracemalloc.stop()
+    assert "kernel_0.npy" in _fails(["eval", str(bomb), "--episodes", "1"], capsys)
+    traj = _with_member(corpus.trajectory, tmp_path / "traj.npz", "obs", _header(HUGE))
+    with pytest.raises(OversizedInputError, match=r"'obs.npy'.*over the limit of 512 MiB"):
+        load_trajectory(traj)
+
+
+def test_a_header_larger_than_its_member_is_a_damaged_file(corpus: Corpus, tmp_path: Path):
+    bomb = _with_member(corpus.policy, tmp_path / "lie.npz", "kernel_0", _header((1000, 1000)))
+    with pytest.raises(PolicyFileError, match=r"declares shape \(1000, 1000\).*more than"):
+        load(bomb)
+    pickled = io.BytesIO()
+    np.save(pickled, np.array([{"a": 1}], dtype=object), allow_pickle=True)
+    bad = _with_member(corpus.trajectory, tmp_path / "pickle.npz", "obs", pickled.getvalue())
+    with pytest.raises(TrajectoryError, match="pickled Python objects, refused"):
+        load_trajectory(bad)
+
+
+def test_a_big_unused_member_is_never_unpacked(corpus: Corpus, tmp_path: Path):
+    """Policies and trajectories skip it (300 MiB unpacked, a few hundred kB packed); a reader
+    of all the members refuses it from the zip directory's sizes, before unpacking anything."""
+    big = _with_member(corpus.policy, tmp_path / "big.npz", "unused", zeros=300 * 2**20)
+    assert big.stat().st_size < 2 * 2**20
+    tracemalloc.start()
+    policy = load(big)
+    assert tracemalloc.get_traced_memory()[1] < 20 * 2**20
+    with pytest.raises(
+        OversizedInputError, match="members it reads, together, would unpack to 300"
+    ):
+        read_npz_members(big, "test", max_member_bytes=2**30, max_total_bytes=2**28)
+    assert tracemalloc.get_traced_memory()[1] < 20 * 2**20
+    tracemalloc.stop()
+    assert policy(np.zeros(policy.obs_size)).shape == (policy.action_size,)
+    traj = _with_member(corpus.trajectory, tmp_path / "traj.npz", "unused", zeros=300 * 2**20)
+    tracemalloc.start()
+    assert "unused" not in load_trajectory(traj)
+    assert tracemalloc.get_traced_memory()[1] < 20 * 2**20
+    tracemalloc.stop()
+
+
+def _overflowing(corpus: Corpus, tmp_path: Path) -> tuple[Path, dict, dict]:
+    """A policy of finite weights, +-3e38 (the columns alternate), whose layers overflow."""
+    arrays, meta = read_npz(corpus.policy)
+    for key in [k for k in arrays if k.startswith("kernel")]:
+        arrays[key] = np.full_like(arrays[key], 3e38)
+        arrays[key][:, ::2] *= -1
+    return write_npz(tmp_path / "overflow.npz", arrays, meta), arrays, meta
+
+
+def test_an_overflowing_policy_is_a_named_error_in_eval(corpus: Corpus, tmp_path: Path, capsys):
+    path, arrays, _ = _overflowing(corpus, tmp_path)
+    line = _fails(["eval", str(path), "--episodes", "1"], capsys)
+    assert "non-finite action" in line and "observation step 1" in line
+    assert "damaged or its training diverged" in line
+    policy = load(path)
+    with pytest.raises(NonFiniteActionError, match="observation step 1"):
+        policy(arrays["obs_mean"] + arrays["obs_std"], deterministic=False)
+    assert isinstance(NonFiniteActionError("x"), PolicyFileError)
+
+
+def test_an_onnx_policy_that_outputs_nan_is_a_named_error(corpus: Corpus, tmp_path: Path):
+    if corpus.onnx is None:
+        pytest.skip("onnx or onnxruntime is not installed")
+    from mjx_arm.policy.onnx_export import write_onnx
+
+    _, arrays, meta = _overflowing(corpus, tmp_path)
+    policy = load(write_onnx(tmp_path / "overflow.onnx", arrays, meta))
+    with pytest.raises(NonFiniteActionError, match=r"non-finite action .* observation step 1:"):
+        policy(arrays["obs_mean"] + arrays["obs_std"])
+
+
+def test_non_finite_weights_are_refused_at_load(corpus: Corpus, tmp_path: Path, capsys):
+    arrays, meta = read_npz(corpus.policy)
+    for value in (np.nan, np.inf):
+        bias = arrays["bias_0"].copy()
+        bias[0] = value
+        path = write_npz(tmp_path / "nan.npz", {**arrays, "bias_0": bias}, meta)
+        with pytest.raises(PolicyFileError, match="bias_0 holds NaN or infinite numbers"):
+            load(path)
+    assert "bias_0 holds NaN" in _fails(["eval", str(path), "--episodes", "1"], capsys)
+    assert issubclass(OversizedInputError, InputError)
