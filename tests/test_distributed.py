@@ -357,3 +357,11 @@ def test_mujoco_warp_trains_on_one_gpu_of_several(monkeypatch) -> None:
         launch.devices_for_physics(warp.replace(devices=2))
     jax_physics = warp.replace(physics=warp.physics.__class__(impl="jax"), devices=2)
     assert launch.devices_for_physics(jax_physics).devices == 2
+
+
+def test_no_cuda_plugin_means_no_gpu(monkeypatch) -> None:
+    """Without JAX_PLATFORMS and without a CUDA plugin for JAX (a CPU install), no GPU is
+    counted, and the plugin names that live in a missing package raise nothing."""
+    monkeypatch.delenv("JAX_PLATFORMS", raising=False)
+    monkeypatch.setattr(launch, "CUDA_PLUGINS", ("no_such_plugin", "no_such_package.plugin"))
+    assert launch.visible_gpus() == []

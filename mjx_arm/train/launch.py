@@ -49,18 +49,26 @@ def visible_gpus() -> list[str]:
     Empty where JAX has no CUDA plugin, runs on the CPU by request (``JAX_PLATFORMS``), or
     the driver lists no GPU.
     """
-    import importlib.util
-
     platforms = os.environ.get("JAX_PLATFORMS", "")
     if platforms and "cuda" not in platforms and "gpu" not in platforms:
         return []
-    if not any(importlib.util.find_spec(name) for name in CUDA_PLUGINS):
+    if not any(_installed(name) for name in CUDA_PLUGINS):
         return []
     visible = os.environ.get("CUDA_VISIBLE_DEVICES")
     if visible is not None:
         return [g for g in (s.strip() for s in visible.split(",")) if g and g != "-1"]
     count = len(list(NVIDIA_GPUS.iterdir())) if NVIDIA_GPUS.is_dir() else 0
     return [str(i) for i in range(count)]
+
+
+def _installed(module: str) -> bool:
+    """Whether ``module`` can be imported (a dotted name whose package is missing: no)."""
+    import importlib.util
+
+    try:
+        return importlib.util.find_spec(module) is not None
+    except ModuleNotFoundError:
+        return False
 
 
 @dataclass(frozen=True)
