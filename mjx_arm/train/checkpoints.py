@@ -172,10 +172,17 @@ def latest_checkpoint(checkpoints: Path) -> Path | None:
         target = old.with_name(old.name.removeprefix(OLD))
         if not target.exists():
             os.replace(old, target)
-    found = sorted(
+    found = usable_checkpoints(checkpoints)
+    return found[-1] if found else None
+
+
+def usable_checkpoints(checkpoints: Path) -> list[Path]:
+    """Every usable checkpoint folder under ``checkpoints`` (:func:`usable`), oldest first."""
+    if not checkpoints.is_dir():
+        return []
+    return sorted(
         p for p in checkpoints.iterdir() if p.name.startswith(CHECKPOINT_PREFIX) and usable(p)
     )
-    return found[-1] if found else None
 
 
 def load_meta(folder: Path) -> dict[str, Any]:

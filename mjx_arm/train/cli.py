@@ -19,13 +19,12 @@ DEFAULT_PRESET = "seed"
 def cmd_train(args: argparse.Namespace) -> int:
     """Train a PPO policy with Brax on the batched env and write a run directory.
 
-    On a host with several GPUs, one process per GPU (``--devices``, default all), joined by
-    jax.distributed; on several hosts, the same command on each with --coordinator, --hosts
-    and --host-rank (or MJX_ARM_COORDINATOR, MJX_ARM_HOSTS / SLURM_NNODES and
-    MJX_ARM_HOST_RANK / SLURM_NODEID).
+    On several hosts, the same command on each with --coordinator, --hosts and --host-rank
+    (or MJX_ARM_COORDINATOR, MJX_ARM_HOSTS / SLURM_NNODES and MJX_ARM_HOST_RANK /
+    SLURM_NODEID), joined by jax.distributed; with MJX_ARM_PROCESS_PER_GPU=1, one process per
+    GPU of a host (docs/training.md, "Several devices").
     """
     import sys
-    import time
 
     from mjx_arm.train import launch
     from mjx_arm.train.config import saved_config
@@ -35,27 +34,25 @@ def cmd_train(args: argparse.Namespace) -> int:
     if args.resume:
         _check_resume_flags(args)
     group = ProcessGroup.from_env()  # set where a launcher started this process
-    run_dir = Path(args.resume or args.run_dir or Path("runs") / time.strftime("%Y%m%d-%H%M%S"))
+    named = args.resume or args.run_dir
     if not group.joined:
         hosts = Hosts.from_args(args.coordinator, args.hosts, args.host_rank, args.join_timeout)
         plan = launch.plan(hosts, args.devices)
-        if plan.spawns:
-            if not (args.resume or args.run_dir):  # one name for every process's run
-                run_dir = _default_run_dir(args)
+        if plan.spawns:  # one run directory, named, for every process
+            run_dir = Path(named) if named else _default_run_dir(args)
             print(f"run directory: {run_dir}")
-            argv = _child_argv(sys.argv[1:], run_dir, bool(args.resume or args.run_dir))
+            argv = _child_argv(sys.argv[1:], run_dir, bool(named))
             return launch.run(plan, argv, run_dir / "logs")
         group = plan.group
     group.join()
     enable_compilation_cache()
     if args.resume:
-        config = saved_config(run_dir)
+        config = saved_config(args.resume)
         if args.devices is not None:  # a run resumes on any number of devices
             config = config.replace(devices=args.devices)
     else:
         config = config_from_args(args)
-        if not args.run_dir:
-            run_dir = _default_run_dir(args, config.task)
+    run_dir = Path(named) if named else _default_run_dir(args, config.task)
     if group.joined:
         config = config.replace(devices=0)  # every process trains on all of its devices
     if group.leader:

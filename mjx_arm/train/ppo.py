@@ -25,7 +25,7 @@ import numpy as np
 from mjx_arm.envs.backend import make_batched_env, resolve_backend
 from mjx_arm.inputs import ConfigError, MissingInputError
 from mjx_arm.task.config import TaskConfig
-from mjx_arm.train.checkpoints import CheckpointError, restore_brax_params
+from mjx_arm.train.checkpoints import CheckpointError, latest_checkpoint, restore_brax_params
 from mjx_arm.train.compile_report import CompileReport
 from mjx_arm.train.config import TrainConfig
 from mjx_arm.train.distributed import barrier, is_leader
@@ -163,14 +163,10 @@ def _start_point(
         InputError: a new run on a folder that holds one, or a resume without a usable
             checkpoint or with nothing left to train.
     """
-    if run is None:
-        if not resume:
-            return 0, None
-        from mjx_arm.train.checkpoints import latest_checkpoint
-
-        latest = latest_checkpoint(path / "checkpoints")
-    else:
-        latest = run.latest_checkpoint()
+    if run is None and not resume:
+        return 0, None
+    folder = path if run is None else run.path
+    latest = latest_checkpoint(folder / "checkpoints")  # process 0 restored any .old- first
     if not resume:
         if latest is not None:
             raise RunDirError(
@@ -179,9 +175,7 @@ def _start_point(
             )
         return 0, None
     if latest is None:
-        raise CheckpointError(
-            f"no checkpoint to resume from in {path if run is None else run.path}"
-        )
+        raise CheckpointError(f"no checkpoint to resume from in {folder}")
     step_offset = int(RunDir.load_meta(latest)["step"])
     if step_offset >= config.num_timesteps:
         raise ConfigError(

@@ -102,13 +102,13 @@ def has_resume_state(folder: Path) -> bool:
 def newest_whole_state(checkpoints: Path) -> Path | None:
     """The newest usable checkpoint under ``checkpoints`` with the training state and the
     envs' state (None where none has both)."""
-    from mjx_arm.train.checkpoints import CHECKPOINT_PREFIX, usable
+    from mjx_arm.train.checkpoints import usable_checkpoints
 
-    found = sorted(
+    found = [
         p
-        for p in checkpoints.glob(f"{CHECKPOINT_PREFIX}*")
-        if usable(p) and has_resume_state(p) and (p / ENV_STATE_FILE).is_file()
-    )
+        for p in usable_checkpoints(checkpoints)
+        if has_resume_state(p) and (p / ENV_STATE_FILE).is_file()
+    ]
     return found[-1] if found else None
 
 
