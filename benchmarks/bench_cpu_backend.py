@@ -17,6 +17,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.common import (
+    RESULTS_DIR,
     compile_and_time,
     environment_metadata,
     markdown_table,
@@ -72,7 +73,7 @@ def main() -> None:
     parser.add_argument("--batches", type=int, nargs="+", default=[64, 128, 256, 512])
     parser.add_argument("--steps", type=int, default=100)
     parser.add_argument("--mjx", action="store_true", help="also time MJX on the CPU (batch 64)")
-    parser.add_argument("--results-dir", type=Path, default=None)
+    parser.add_argument("--results-dir", type=Path, default=RESULTS_DIR / "throughput")
     args = parser.parse_args()
     rows = [rollout_rate("mujoco", args.task, b, args.steps) for b in args.batches]
     for r in rows:

@@ -33,7 +33,7 @@ with 2 workers >= 1.6 x sync.
 
 Run from the repository root: ``python -m benchmarks.bench_cpu_envs`` (``--repeats``,
 ``--quick`` for a smoke run, ``--label`` to name the code measured). Results:
-``benchmarks/results/cpu_envs.{json,md}``; the JSON keeps the summaries of the earlier runs
+``benchmarks/results/cpu/cpu_envs.{json,md}``; the JSON keeps the summaries of the earlier runs
 under ``history``.
 """
 
@@ -845,8 +845,8 @@ def main(argv: list[str] | None = None) -> None:
     text = table(payload)
     print(text)
     if not quick:
-        payload = with_history(payload, RESULTS_DIR / f"{NAME}.json")
-        json_path, md_path = save_results(NAME, payload, text)
+        payload = with_history(payload, RESULTS_DIR / "cpu" / f"{NAME}.json")
+        json_path, md_path = save_results(NAME, payload, text, RESULTS_DIR / "cpu")
         print(f"saved {json_path} and {md_path}")
 
 

@@ -23,6 +23,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.common import (
+    RESULTS_DIR,
     compile_and_time,
     environment_metadata,
     markdown_table,
@@ -159,7 +160,7 @@ def main() -> None:
     parser.add_argument("--batches", type=int, nargs="+", default=[1024, 8192, 32768, 131072])
     parser.add_argument("--steps", type=int, default=50, help="control steps timed per batch")
     parser.add_argument("--backend", default="mjx", choices=["mjx", "mujoco"])
-    parser.add_argument("--results-dir", type=Path, default=None)
+    parser.add_argument("--results-dir", type=Path, default=RESULTS_DIR / "throughput")
     parser.add_argument("--name", default=None, help="result file stem")
     parser.add_argument(
         "--convert",

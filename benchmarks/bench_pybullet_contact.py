@@ -34,14 +34,19 @@ import numpy as np
 from benchmarks.common import RESULTS_DIR, environment_metadata, markdown_table, save_results
 
 UR10 = str(Path(__file__).resolve().parent / "arms" / "ur10.toml")
-CASES = {  # name: (policy file, arm file or None for the one the policy records)
-    **{f"touch_seed{s}": (f"seeds/policies/touch_fast_seed{s}.npz", None) for s in range(3)},
+# name: (policy file under the results, arm file or None for the one the policy records). Only
+# the reference policies in ``policies/`` are tracked; export the others first from the runs
+# their seeds JSON records (``mjx-arm bench seeds``, then ``mjx-arm export``).
+CASES = {
+    "touch_seed0": ("policies/touch_fast_seed0.npz", None),
+    **{f"touch_seed{s}": (f"seeds/policies/touch_fast_seed{s}.npz", None) for s in (1, 2)},
     "touch_gentle_c": ("transfer/policies/touch_gentle_c_backend_cpu.npz", None),
     **{
         f"ur10_touch_seed{s}": (f"arms/policies_ur10/ur10-touch-fast-seed{s}.npz", UR10)
         for s in range(3)
     },
-    **{f"lift_seed{s}": (f"lift/policies/lift-fast-seed{s}.npz", None) for s in range(5)},
+    "lift_seed0": ("policies/lift-fast-seed0.npz", None),
+    **{f"lift_seed{s}": (f"lift/policies/lift-fast-seed{s}.npz", None) for s in range(1, 5)},
 }
 
 

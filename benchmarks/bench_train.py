@@ -27,6 +27,7 @@ from pathlib import Path  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.common import (  # noqa: E402
+    RESULTS_DIR,
     empty_cache_env,
     environment_metadata,
     markdown_table,
@@ -108,7 +109,7 @@ def main() -> None:
     parser.add_argument("--devices", type=int, default=0, help="train on N devices (0: all)")
     parser.add_argument("--set", nargs="*", default=[], help="config overrides key=value")
     parser.add_argument("--out", type=Path, default=Path("runs/bench"))
-    parser.add_argument("--results-dir", type=Path, default=None)
+    parser.add_argument("--results-dir", type=Path, default=RESULTS_DIR / "train")
     parser.add_argument("--name", default=None)
     parser.add_argument("--cold", action="store_true", help="empty compilation caches")
     args = parser.parse_args()

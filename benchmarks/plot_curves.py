@@ -1,6 +1,6 @@
 """Learning curves (eval success and reward vs env steps and wall time) from run metrics CSVs.
 
-python benchmarks/plot_curves.py benchmarks/results/curves/*.csv -o benchmarks/results/curves.png
+python benchmarks/plot_curves.py benchmarks/results/train/curves/*.csv -o curves.png
 """
 
 from __future__ import annotations

@@ -19,7 +19,7 @@ FOLDER = Path("benchmarks/results/robustness")
 
 def policy_label(path: Path) -> str:
     """A policy file's name, with the folder of its run where it sits in a ``policies/``
-    folder (``seeds_40576be/shipped_lift_lift-fast-seed0.npz``): runs of several code versions
+    folder (``seeds_cradle/shipped_lift_lift-fast-seed0.npz``): runs of several code versions
     export files of the same name."""
     if path.parent.name == "policies":
         return f"{path.parent.parent.name}/{path.name}"

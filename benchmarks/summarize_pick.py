@@ -7,7 +7,7 @@ written by ``mjx-arm bench seeds --task lift --arm panda.urdf``) and Playground'
 threshold, the steps and wall seconds to it (compiles included; the first run of each side
 started with empty caches), and each side's training rate.
 
-    python -m benchmarks.summarize_pick benchmarks/results/arms/any_arm/pick_c05a54b
+    python -m benchmarks.summarize_pick benchmarks/results/arms/any_arm/pick
 """
 
 from __future__ import annotations

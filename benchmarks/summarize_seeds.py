@@ -4,12 +4,12 @@ Reads the seeds results (``seeds_*.json``, one or more per (arm, task, preset), 
 ``mjx-arm bench seeds``, e.g. through ``gpu_suite.sh arms``) and the transfer results of their
 exported policies (``transfer/*.json``, written by ``mjx-arm bench transfer``; a policy file's
 name ends in ``TASK-PRESET-seedN``) under a folder such as
-``benchmarks/results/arms/any_arm/final_2e708e5`` and writes ``summary.json`` and
+``benchmarks/results/arms/any_arm/final`` and writes ``summary.json`` and
 ``summary.md`` beside them: per (arm, task, preset), each seed's best MJX success, whether it
 reached the task's threshold, and its exported policy's success and mean peak force in CPU
 MuJoCo and PyBullet. The arm is named by its URDF's file name, as each run recorded it.
 
-    python -m benchmarks.summarize_seeds benchmarks/results/arms/any_arm/final_2e708e5
+    python -m benchmarks.summarize_seeds benchmarks/results/arms/any_arm/final
 """
 
 from __future__ import annotations

@@ -69,17 +69,17 @@ SECTIONS: tuple[Section, ...] = (
             ("scaling/*",)),
     Section("transfer", "Transfer",
             "One exported policy in every engine, by `mjx-arm bench transfer`.",
-            ("transfer/*", "transfer_*", "contact/transfer/*", "lift/*")),
+            ("transfer/*", "contact/transfer/*", "lift/*")),
     Section("parity", "Engine parity",
             "The same inputs in C MuJoCo, MJX and PyBullet, by `mjx-arm bench parity`.",
             ("parity/*", "parity_gpu/*", "arms/parity_*/*")),
     Section("throughput", "Throughput and cold start",
             "Env and physics steps per second, and where a cold start's seconds go.",
-            ("warp/mjx_throughput*", "warp/cold_start*", "mjx_throughput*", "cpu_backend*",
-             "sweep_*", "arms/throughput_*")),
+            ("throughput/*", "sweep/*", "warp/mjx_throughput*", "warp/cold_start*",
+             "arms/throughput_*")),
     Section("cpu", "CPU envs",
             "The Gymnasium envs on the CPU beside raw physics (`bench_cpu_envs.py`).",
-            ("cpu_envs*",)),
+            ("cpu/*",)),
     Section("arms", "Other arms",
             "Published arm URDFs through the pipeline: checks, training, transfer.",
             ("arms/*",)),
@@ -91,7 +91,7 @@ SECTIONS: tuple[Section, ...] = (
             ("urdf_fuzz*", "input_fuzz*", "robustness/*")),
     Section("earlier", "Earlier training runs",
             "Single runs of older presets, kept for the record; not figures of the presets as "
-            "shipped.", ("train_*", "warp/*", "solver4/*", "gentle/*", "curves*")),
+            "shipped.", ("train/*", "warp/*", "solver4/*", "gentle/*")),
 )  # fmt: skip
 OTHER = Section("other", "Other results", "Result files no section names yet.", ("*",))
 

@@ -77,7 +77,7 @@ def _parity_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
 
 
 def _cpu_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
-    rel = "cpu_envs.json"
+    rel = "cpu/cpu_envs.json"
     cases = load(rel)["cases"]
     value = "; ".join(f"{case} {fmt(c['env_steps_per_s']['median'])} steps/s "
                       f"({fmt(c['ratio'], 2)} of raw)" for case, c in cases.items())  # fmt: skip
@@ -189,16 +189,16 @@ def _robustness_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
 
 
 ANY_ARM_SUMMARIES = (
-    "arms/any_arm/final_2e708e5/summary.json",
-    "arms/any_arm/z1_1192947/summary.json",
-    "arms/any_arm/cradle_40576be/summary.json",
-    "arms/any_arm/variants_8b146b9/summary.json",
-    "arms/any_arm/touch_c05a54b/summary.json",
-    "arms/any_arm/pick_c05a54b/summary.json",
+    "arms/any_arm/final/summary.json",
+    "arms/any_arm/z1/summary.json",
+    "arms/any_arm/cradle/summary.json",
+    "arms/any_arm/variants/summary.json",
+    "arms/any_arm/touch_ur10_joint_limited/summary.json",
+    "arms/any_arm/pick/summary.json",
 )
-PICK_COMPARISON = "arms/any_arm/pick_c05a54b/comparison.json"
-LIFT_SUMMARIES = ("lift/seeds_3b50fcc/summary.json",)
-ROBUST_LIFT_SUMMARY = ("robustness/robust_seeds_3b50fcc/summary.json",)
+PICK_COMPARISON = "arms/any_arm/pick/comparison.json"
+LIFT_SUMMARIES = ("lift/seeds_stray_charge/summary.json",)
+ROBUST_LIFT_SUMMARY = ("robustness/robust_seeds_lift_stray/summary.json",)
 ROBUST_TOUCH_SUMMARY = ("robustness/robust_seeds/summary.json",)
 ROBUSTNESS_GROUPS = (
     ("Lift robust", [f"robustness/robustness_lift_robust_stray_seed{i}.json" for i in range(3)]),

@@ -33,9 +33,9 @@ def _results_copy(tmp_path: Path) -> Path:
     """A small copy of the committed results: the seeds and transfer files the headline reads,
     and the CPU envs' file."""
     src, dst = gen.RESULTS, tmp_path / "results"
-    for rel in ("seeds", "contact/transfer", "warp", "parity"):
+    for rel in ("seeds", "contact/transfer", "warp", "parity", "cpu"):
         shutil.copytree(src / rel, dst / rel, ignore=shutil.ignore_patterns("*.npz", "*.mp4"))
-    for rel in ("cpu_envs.json", "urdf_fuzz.json", "input_fuzz.json"):
+    for rel in ("urdf_fuzz.json", "input_fuzz.json"):
         shutil.copy(src / rel, dst / rel)
     return dst
 
@@ -86,7 +86,7 @@ def test_every_figure_names_its_date_device_and_versions(tmp_path):
 def test_unknown_and_broken_files_are_skipped_gracefully(tmp_path):
     results = _results_copy(tmp_path)
     (results / "robustness").mkdir()
-    meta = json.loads((results / "cpu_envs.json").read_text())["meta"]
+    meta = json.loads((results / "cpu" / "cpu_envs.json").read_text())["meta"]
     new_kind = {"meta": meta, "rows": [{"case": "a", "value": 1.5}], "summary": "one new kind"}
     (results / "robustness" / "new_kind.json").write_text(json.dumps(new_kind))
     (results / "brand_new").mkdir()

@@ -36,7 +36,7 @@ pytestmark = pytest.mark.pybullet
 ROOT = Path(__file__).resolve().parents[1]
 ROBOTS = Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix/share/example-robot-data/robots"
 UR10 = ROBOTS / "ur_description/urdf/ur10_robot.urdf"
-LIFT_SEED0 = ROOT / "benchmarks/results/lift/policies/lift-fast-seed0.npz"
+LIFT_SEED0 = ROOT / "benchmarks/results/policies/lift-fast-seed0.npz"
 UR10_HOME = (0.0, -1.3291, 2.1732, -2.4149, -1.5708, 0.0)  # benchmarks/arms/ur10.toml's
 BOX_BODY = 2  # PyBullet body ids: the arm 0, the table 1, the box 2
 needs_ur10 = pytest.mark.skipif(not UR10.is_file(), reason="example-robot-data not installed")

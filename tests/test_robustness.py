@@ -269,7 +269,7 @@ def test_cli_rejects_bad_input(tmp_path: Path, capsys):
     argv = ["bench", "robustness", str(tmp_path / "none.npz"), "--out", str(tmp_path)]
     assert main(argv) == EXIT_INVALID
     assert "none.npz" in capsys.readouterr().err
-    policy = Path(__file__).parents[1] / "benchmarks/results/seeds/policies/touch_fast_seed0.npz"
+    policy = Path(__file__).parents[1] / "benchmarks/results/policies/touch_fast_seed0.npz"
     assert main(["bench", "robustness", str(policy), "--episodes", "0"]) == EXIT_INVALID
     assert "episodes" in capsys.readouterr().err
     with pytest.raises(SystemExit):
@@ -279,7 +279,7 @@ def test_cli_rejects_bad_input(tmp_path: Path, capsys):
 @pytest.mark.slow
 def test_quick_run_writes_the_report(tmp_path: Path):
     """End to end on the C batch: one episode per point, the three files."""
-    policy = Path(__file__).parents[1] / "benchmarks/results/seeds/policies/touch_fast_seed0.npz"
+    policy = Path(__file__).parents[1] / "benchmarks/results/policies/touch_fast_seed0.npz"
     argv = [
         "bench",
         "robustness",

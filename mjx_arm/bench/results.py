@@ -1,7 +1,9 @@
 """What every benchmark result carries: run metadata, a markdown table and the files written.
 
-A result is two files in a folder: ``<name>.json`` (the numbers and :func:`environment_metadata`)
-and ``<name>.md`` (the table printed), plus any plots beside them.
+A result is two files in a topic folder (``benchmarks/results/<topic>/``): ``<name>.json`` (the
+numbers and :func:`environment_metadata`, which holds the date and commit) and ``<name>.md`` (the
+table printed). No plots beside them: the docs build draws them from the JSON
+(``benchmarks/README.md`` states the rule).
 """
 
 from __future__ import annotations

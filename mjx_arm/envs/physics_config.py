@@ -210,8 +210,9 @@ ROBUST = NOMINAL.replace(
 # latency, payload and cube friction. SELECTED adds what those Lift policies still missed: the
 # table's height, an F/T bias and joint friction. Under the ``robust`` preset Touch (LATENCY,
 # 60M steps) and Lift (SELECTED) each solve 5 of 5 seeds (robustness/robust_seeds and
-# robust_seeds_c57f2ae; with Lift's stray charge 3 of 3, robust_seeds_3b50fcc). A 0-5 kg payload
-# added to Lift's draw had learned nothing by 17M steps on two seeds (payload_cut_3b50fcc).
+# robust_seeds_lift_boxbox; with Lift's stray charge 3 of 3, robust_seeds_lift_stray). A
+# 0-5 kg payload added to Lift's draw had learned nothing by 17M steps on two seeds
+# (payload_cut).
 LATENCY = RandomizationConfig(enabled=True, latency_prob=1.0, latency_steps=(0, 3))
 SELECTED = LATENCY.replace(
     frictionloss=(0.0, 0.1), ft_force_bias=(-4.0, 4.0), table_height=(-0.02, 0.02)

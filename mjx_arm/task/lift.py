@@ -48,7 +48,7 @@ FRICTION_RANGE = (0.8, 1.0)
 # Lift seeds 13 and 27 landed a fingertip on the cube's top in almost every episode (mean wrist
 # peaks 43-48 N) and gripped it low; in PyBullet they scored 0.755 and 0.685. With it (the same
 # seeds, H200) they scored 0.995 and 0.990 there, with peaks of 8-20 N in both CPU engines
-# (benchmarks/results/lift/stray_7538ca0).
+# (benchmarks/results/lift/stray_trial).
 LIFT_REWARD = RewardConfig(
     distance=-4.0,
     contact=0.0,
