@@ -20,12 +20,13 @@ from typing import Any
 import numpy as np
 
 from mjx_arm.inputs import InputError, write_atomic
-from mjx_arm.policy.numpy_policy import BasePolicy, PolicyFileError, check_metadata
+from mjx_arm.policy import onnx_checks as checks
+from mjx_arm.policy.numpy_policy import BasePolicy, PolicyFileError
 
 OPSET = 17
 IR_VERSION = 8  # readable by onnxruntime >= 1.10
-METADATA_KEY = "mjx_arm"
-INPUT, ACTION, PARAMS = "state", "action", "distribution_params"
+METADATA_KEY = checks.METADATA_KEY
+INPUT, ACTION, PARAMS = "state", checks.ACTION, checks.PARAMS
 
 
 def _activation_nodes(helper, name: str, x: str, out: str) -> list:
@@ -122,34 +123,34 @@ def write_onnx(path: str | Path, arrays: Mapping[str, np.ndarray], metadata: Map
     return path
 
 
-def _session_metadata(session: Any, path: str | Path) -> dict[str, Any]:
-    """The checked metadata of an ONNX policy, whose graph must take ``state (batch, obs)``
-    and give ``action`` and ``distribution_params`` of the sizes it records.
+def read_checked_model(path: str | Path) -> tuple[bytes, dict[str, Any], str, int]:
+    """Read an ONNX policy and check it before onnxruntime opens it
+    (:mod:`mjx_arm.policy.onnx_checks`: contract, element limit, bounded shapes).
+
+    Returns:
+        (the file's bytes, its checked metadata, the input's name, the input's rank).
 
     Raises:
-        PolicyFileError: no or broken metadata, or a graph of other inputs or sizes.
+        PolicyFileError: not an ONNX policy; OnnxContractError: other inputs or outputs;
+            OnnxGraphLimitError: a tensor above the limit or of unbounded shape.
     """
-    try:
-        props = session.get_modelmeta().custom_metadata_map
-    except UnicodeDecodeError as exc:  # onnxruntime decodes the properties as UTF-8
-        raise PolicyFileError(f"{path}: its metadata is not UTF-8 text ({exc})") from exc
-    if METADATA_KEY not in props:
-        raise PolicyFileError(f"{path} is not an mjx_arm policy file (no metadata)")
-    try:
-        metadata = json.loads(props[METADATA_KEY])
-    except (ValueError, RecursionError) as exc:
-        raise PolicyFileError(f"{path}: its metadata is not valid JSON ({exc})") from exc
-    check_metadata(metadata, str(path))
-    obs = sum(int(n) for _, n in metadata["obs_layout"])
-    action = int(metadata["action_size"])
-    shapes = {x.name: list(x.shape) for x in [*session.get_inputs(), *session.get_outputs()]}
-    expected = {INPUT: obs, ACTION: action, PARAMS: 2 * action}
-    if any(shapes.get(name, [None, None])[1:] != [size] for name, size in expected.items()):
-        raise PolicyFileError(
-            f"{path}: the graph's inputs and outputs {shapes} do not fit its metadata "
-            f"(state {obs}, action {action}); export the policy again"
+    onnx = _require("onnx")
+    path = Path(path)
+    size = path.stat().st_size
+    if size > checks.MAX_FILE_BYTES:
+        raise checks.OnnxGraphLimitError(
+            f"{path} is {size} bytes, over the limit of {checks.MAX_FILE_BYTES // 2**20} MiB "
+            "for an ONNX policy"
         )
-    return metadata
+    data = path.read_bytes()
+    try:
+        model = onnx.load_model_from_string(data)
+    except Exception as exc:  # protobuf's DecodeError and onnx's own errors
+        raise PolicyFileError(f"cannot read {path} as an ONNX model: {exc}") from exc
+    metadata = checks.model_metadata(model, str(path))
+    name, rank = checks.check_contract(onnx, model, metadata, str(path))
+    checks.check_bounded(onnx, model, name, str(path))
+    return data, metadata, name, rank
 
 
 class OnnxPolicy(BasePolicy):
@@ -161,28 +162,54 @@ class OnnxPolicy(BasePolicy):
         seed: seed of the sampler when not deterministic.
 
     Raises:
-        PolicyFileError: not an mjx_arm policy; ContractVersionError: another contract version.
+        PolicyFileError: not an mjx_arm policy; ContractVersionError: another contract version;
+            OnnxContractError, OnnxGraphLimitError: see :func:`read_checked_model`. Running it
+            raises OnnxRunError when onnxruntime fails, NonFiniteActionError on NaN or inf.
     """
 
     def __init__(self, path: str | Path, deterministic: bool = True, seed: int | None = None):
         ort = _require("onnxruntime")
+        data, metadata, self.input_name, self.input_rank = read_checked_model(path)
         try:
-            session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+            session = ort.InferenceSession(data, providers=["CPUExecutionProvider"])
         except Exception as exc:  # onnxruntime raises its own exception types
             raise PolicyFileError(f"cannot read {path} as an ONNX model: {exc}") from exc
-        metadata = _session_metadata(session, path)
         super().__init__(metadata, deterministic, seed)
         self.session = session
+        self.path = path
+
+    def _run(self, names: list[str], state: np.ndarray) -> list[np.ndarray]:
+        """The outputs ``names`` for ``state (N, obs)``, each ``(N, ..)`` float32; a graph of
+        rank-1 input runs row by row.
+
+        Raises:
+            OnnxRunError: onnxruntime failed, or an output of another shape or type.
+        """
+        state = np.asarray(state, np.float32)
+        feeds = [state] if self.input_rank == 2 else list(state)
+        try:
+            runs = [self.session.run(names, {self.input_name: x}) for x in feeds]
+        except Exception as exc:  # onnxruntime's exceptions share no base class but Exception
+            raise checks.OnnxRunError(
+                f"{self.path}: onnxruntime failed to run the policy: {type(exc).__name__}: {exc}"
+            ) from exc
+        outs = [np.stack(o) if self.input_rank == 1 else o[0] for o in zip(*runs, strict=True)]
+        for name, out in zip(names, outs, strict=True):
+            if out.dtype != np.float32 or out.ndim != 2 or len(out) != len(state):
+                raise checks.OnnxRunError(
+                    f"{self.path}: output {name!r} came out {out.dtype} {out.shape}, "
+                    f"expected float32 ({len(state)}, ..)"
+                )
+        return outs
 
     def distribution_params(self, state: np.ndarray) -> np.ndarray:
         """The network output ``(N, 2 * action_size)`` for ``state (N, 22)``."""
-        (params,) = self.session.run([PARAMS], {INPUT: np.asarray(state, np.float32)})
+        (params,) = self._run([PARAMS], state)
         return params
 
     def mode(self, state: np.ndarray) -> np.ndarray:
         """The graph's deterministic ``action`` output ``(N, action_size)``, its distribution
         params checked finite (:meth:`~mjx_arm.policy.numpy_policy.BasePolicy.check_finite`)."""
-        feed = {INPUT: np.asarray(state, np.float32)}
-        action, params = self.session.run([ACTION, PARAMS], feed)
+        action, params = self._run([ACTION, PARAMS], state)
         self.check_finite(params)
         return action
