@@ -1,13 +1,14 @@
 """``mjx-arm demo``: the whole product on a CPU in a few minutes.
 
 1. validate the arm's URDF (three layers, MuJoCo and PyBullet; the shipped arm unless
-   ``--arm`` names another) and convert it to MJCF;
+   ``--arm`` names another) and write the MJCF of the model Reach trains on
+   (``<urdf stem>_reach.xml``);
 2. train Reach with Brax PPO (preset ``cpu``, backend ``auto``);
 3. export the policy to ``.npz`` (and ``.onnx`` when onnxruntime is installed) and check that
    the exports agree with each other;
-4. evaluate it in CPU MuJoCo, PyBullet and the batched JAX env (MJX on an accelerator, its C
-   MuJoCo backend on a CPU), filming the first MuJoCo episodes (skipped, with a note, where
-   MuJoCo cannot render);
+4. evaluate it on the three engines (:data:`mjx_arm.names.EVAL_ENGINES`): CPU MuJoCo, PyBullet
+   and ``mjx``, the batched JAX env (backend ``mjx`` on an accelerator, ``mujoco`` on a CPU),
+   filming the first MuJoCo episodes (skipped, with a note, where MuJoCo cannot render);
 5. plot the longest MuJoCo episode;
 6. print and save a summary with the path of every file written.
 """
@@ -25,6 +26,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from mjx_arm.inputs import InputError
+from mjx_arm.names import EVAL_ENGINES, engine_label
 
 if TYPE_CHECKING:
     from mjx_arm.evaluate import EvalRun
@@ -56,6 +58,7 @@ class DemoSettings:
     height: int
 
 
+TASK = "reach"  # what the demo trains; the MJCF it writes is this task's model
 FULL = DemoSettings(300_000, 6, 50, 10, 640, 480)
 QUICK = DemoSettings(122_880, 4, 20, 2, 320, 240)
 
@@ -79,13 +82,16 @@ class _Log:
 
 
 def validate_and_convert(
-    out: Path, echo: Callable[[str], None], arm: ArmConfig | None = None
+    out: Path, echo: Callable[[str], None], arm: ArmConfig | None = None, task: str = TASK
 ) -> dict[str, Any]:
     """Validate ``arm`` (default: the shipped arm) for both engines, with the repairs its config
-    allows, and write its Touch-scene MJCF (``<urdf stem>_touch.xml``)."""
+    allows, and write the MJCF of ``task``'s model: the arm in the task's scene, as the envs
+    build it (``<urdf stem>_<task>.xml``)."""
     import mujoco
 
     from mjx_arm.envs.arm import arm_info
+    from mjx_arm.envs.model_io import task_convert_config
+    from mjx_arm.task.config import task_config
     from mjx_arm.urdf import to_mjcf
     from mjx_arm.urdf.arm_config import ArmConfig
     from mjx_arm.urdf.validate import validate
@@ -101,12 +107,12 @@ def validate_and_convert(
     echo(f"{urdf}: {len(report.errors)} errors, {len(report.warnings)} warnings")
     if not report.ok:
         raise DemoError(f"{urdf} does not validate:\n{report.format()}")
-    mjcf = out / f"{urdf.stem}_touch.xml"
-    mjcf.write_text(to_mjcf(urdf, arm_info(arm).convert_config(scene="touch")))
+    mjcf = out / f"{urdf.stem}_{task}.xml"
+    mjcf.write_text(to_mjcf(urdf, task_convert_config(task_config(task), arm_info(arm))))
     model = mujoco.MjModel.from_xml_path(str(mjcf))
     echo(
-        f"wrote {mjcf}: {model.nbody} bodies, {model.nu} velocity actuators, "
-        f"{model.nsensor} sensors"
+        f"wrote {mjcf} ({task.capitalize()}'s model): {model.nbody} bodies, "
+        f"{model.nu} velocity actuators, {model.nsensor} sensors"
     )
     return {"urdf": str(urdf), "warnings": len(report.warnings), "mjcf": str(mjcf)}
 
@@ -126,7 +132,7 @@ def train_reach(
     config = load_config(
         "cpu",
         overrides=[
-            "task=reach",
+            f"task={TASK}",
             "backend=auto",
             f"num_timesteps={settings.timesteps}",
             f"num_evals={settings.num_evals}",
@@ -142,7 +148,7 @@ def train_reach(
     success = result.metrics.get("eval/episode_success", float("nan"))
     echo(
         f"{trained_steps(run_dir):,} steps in {result.train_seconds:.0f} s "
-        f"(compile {result.compile_seconds:.0f} s), training eval success {success:.2f}"
+        f"(compiled in {result.compile_seconds:.0f} s), training eval success {success:.2f}"
     )
     return result
 
@@ -187,11 +193,12 @@ def _probe_states(policy: Any, rng: np.random.Generator, n: int = 256) -> np.nda
 def evaluate_engines(
     policy_path: Path, out: Path, settings: DemoSettings, echo: Callable[[str], None]
 ) -> tuple[dict[str, dict], EvalRun]:
-    """Evaluate on CPU MuJoCo (filming the first episodes), PyBullet and the batched JAX env,
-    on the arm the policy records.
+    """Evaluate on CPU MuJoCo (filming the first episodes), PyBullet and ``mjx`` (the batched
+    JAX env on the ``auto`` backend), on the arm the policy records.
 
     Returns:
-        Results per engine label and the MuJoCo :class:`~mjx_arm.evaluate.EvalRun`.
+        Results per engine name (``eval_<engine>.json`` each) and the MuJoCo
+        :class:`~mjx_arm.evaluate.EvalRun`.
     """
     from mjx_arm.envs.backend import resolve_backend
     from mjx_arm.evaluate import eval_arm, eval_task, evaluate, format_summary
@@ -203,7 +210,7 @@ def evaluate_engines(
     backend = resolve_backend("auto")
     runs: dict[str, dict] = {}
     mujoco_run = None
-    for label, engine in (("mujoco", "mujoco"), ("pybullet", "pybullet"), ("batch", "mjx")):
+    for engine in EVAL_ENGINES:
         video = out / "episodes_mujoco.mp4" if engine == "mujoco" else None
         result, run = evaluate(
             policy,
@@ -219,10 +226,10 @@ def evaluate_engines(
             arm=arm,
         )
         result["policy"] = str(policy_path)
-        path = out / f"eval_{label}.json"
+        path = out / f"eval_{engine}.json"
         path.write_text(json.dumps(result, indent=2))
         result["json"] = str(path)
-        runs[label] = {k: v for k, v in result.items() if k != "per_episode"}
+        runs[engine] = {k: v for k, v in result.items() if k != "per_episode"}
         echo(format_summary(result))
         mujoco_run = run if engine == "mujoco" else mujoco_run
     return runs, mujoco_run
@@ -279,10 +286,10 @@ def run_demo(
     summary: dict[str, Any] = {"out": str(out), "quick": quick, "settings": vars(settings)}
     summary["arm"] = str(arm) if arm else "shipped"
 
-    log.step("validate", "1/5 validate and convert the arm")
+    log.step("validate", f"1/5 validate the arm and write {TASK.capitalize()}'s MJCF")
     summary["urdf"] = validate_and_convert(out, echo, arm_config)
     log.done("validate")
-    log.step("train", "2/5 train Reach with Brax PPO")
+    log.step("train", f"2/5 train {TASK.capitalize()} with Brax PPO")
     trained = train_reach(run_dir, settings, echo, arm_config)
     summary["train"] = {
         "run_dir": str(run_dir),
@@ -327,19 +334,19 @@ def format_demo_summary(summary: dict[str, Any]) -> str:
         "",
         f"== demo done in {summary['wall_seconds']:.0f} s "
         f"(train {summary['timings_s']['train']:.0f} s)",
-        f"{'engine':<16}{'success':>9}{'95% CI':>17}{'return':>10}{'steps':>8}{'peak N':>9}",
+        f"{'engine':<22}{'success':>9}{'95% CI':>17}{'return':>10}{'steps':>8}{'peak N':>9}",
     ]
-    for label, r in summary["eval"].items():
+    for engine, r in summary["eval"].items():
         low, high = r["success_ci95"]
         steps = r["mean_steps_to_success"]
-        name = f"{label} ({r['backend']})" if "backend" in r else label
+        name = engine_label(engine, r.get("backend"))
         lines.append(
-            f"{name:<16}{r['success_rate']:>9.3f}{f'{low:.3f} - {high:.3f}':>17}"
+            f"{name:<22}{r['success_rate']:>9.3f}{f'{low:.3f} - {high:.3f}':>17}"
             f"{r['mean_return']:>10.2f}{'n/a' if steps is None else f'{steps:.1f}':>8}"
             f"{r['mean_peak_contact_force']:>9.2f}"
         )
     files = [
-        ("MJCF", summary["urdf"]["mjcf"]),
+        (f"MJCF ({TASK} model)", summary["urdf"]["mjcf"]),
         ("run directory", summary["train"]["run_dir"]),
         *((f"policy .{k}", v) for k, v in summary["export"].items() if k in ("npz", "onnx")),
         *((f"eval {k} JSON", r["json"]) for k, r in summary["eval"].items()),

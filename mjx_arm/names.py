@@ -2,9 +2,12 @@
 presets, defined once and used by the configs, the envs and the command line's choices.
 
 - engine: where one policy runs. ``mujoco`` and ``pybullet`` are the Gymnasium envs on a CPU
-  (:data:`CPU_ENGINES`); ``mjx`` is the batched JAX env.
+  (:data:`CPU_ENGINES`); ``mjx`` is the batched JAX env, whatever steps its physics.
 - backend: what steps the batched JAX env's physics (:data:`BACKENDS`): ``mjx`` (MuJoCo's MJX)
   or ``mujoco`` (C MuJoCo behind a host callback, the CPU path); ``auto`` picks by device.
+  Only the ``mjx`` engine has a backend; reports name the two together with
+  :func:`engine_label` (``mjx (backend mujoco)``), and JSON keeps them as ``engine`` and
+  ``backend``.
 - implementation: how MJX steps the model (:data:`IMPLS`): ``jax`` (XLA) or ``warp`` (MuJoCo
   Warp's CUDA kernels); ``auto`` picks Warp where a GPU and warp-lang are present.
 """
@@ -27,8 +30,20 @@ EVAL_ENGINES = (*CPU_ENGINES, "mjx")
 PARITY_ENGINES = ("mujoco", "mjx", "pybullet")
 
 BACKENDS = ("auto", "mjx", "mujoco")
+
 IMPLS = ("auto", "jax", "warp")
 PRESET_NAMES = ("seed", "fast", "cpu", "robust")
 
 # Exit codes of every command: success, and an invalid input or setting (a named error).
 EXIT_OK, EXIT_INVALID = 0, 2
+
+
+def engine_label(engine: str, backend: str | None = None) -> str:
+    """How output names where a policy ran: the engine, and for the ``mjx`` engine its backend.
+
+    ``engine_label("pybullet")`` -> ``pybullet``; ``engine_label("mjx", "mujoco")`` ->
+    ``mjx (backend mujoco)``. A backend given with a CPU engine is ignored (they have none).
+    """
+    if engine != "mjx" or not backend:
+        return engine
+    return f"{engine} (backend {backend})"

@@ -19,15 +19,17 @@ def test_demo_quick_end_to_end(tmp_path: Path, capsys):
     printed = capsys.readouterr().out
     summary = json.loads((out / "summary.json").read_text())
     assert summary["quick"] and "demo done" in printed
-    for name in ("ur5e_touch.xml", "policy.npz", "replay.png", "trajectory_mujoco.npz"):
+    for name in ("ur5e_reach.xml", "policy.npz", "replay.png", "trajectory_mujoco.npz"):
         assert (out / name).is_file(), name
         assert name in printed
-    assert set(summary["eval"]) == {"mujoco", "pybullet", "batch"}
+    assert set(summary["eval"]) == {"mujoco", "pybullet", "mjx"}
     for result in summary["eval"].values():
         low, high = result["success_ci95"]
         assert 0.0 <= low <= result["success_rate"] <= high <= 1.0
         assert result["episodes"] == 20
         assert Path(result["json"]).is_file()
+    assert json.loads((out / "eval_mjx.json").read_text())["engine"] == "mjx"
+    assert "mjx (backend mujoco)" in printed  # one name for the engine and its backend
     if "onnx" in summary["export"]:
         assert summary["export"]["npz_vs_onnx_max_abs_diff"] < 1e-5
     video = summary["eval"]["mujoco"]["video"]
@@ -42,19 +44,57 @@ def test_demo_refuses_a_folder_with_a_run(tmp_path: Path, capsys):
     assert "already holds a demo run" in capsys.readouterr().err
 
 
-def test_demo_converts_the_arm_it_is_given(tmp_path: Path):
-    from mjx_arm.demo import validate_and_convert
+def test_demo_writes_the_model_of_the_task_it_trains(tmp_path: Path):
+    """The MJCF is named after the task the demo trains and holds that task's model."""
+    from mjx_arm.demo import TASK, validate_and_convert
+    from mjx_arm.envs.mujoco_env import MujocoArmEnv
     from mjx_arm.paths import asset
+    from mjx_arm.task.config import task_config
     from mjx_arm.urdf.arm_config import load_arm
 
+    arm = load_arm(asset("ur5e_gripper.urdf"))
     lines: list[str] = []
-    result = validate_and_convert(tmp_path, lines.append, load_arm(asset("ur5e_gripper.urdf")))
-    mjcf = tmp_path / "ur5e_gripper_touch.xml"
-    assert result["mjcf"] == str(mjcf)
+    result = validate_and_convert(tmp_path, lines.append, arm)
+    mjcf = tmp_path / f"ur5e_gripper_{TASK}.xml"
+    assert TASK == "reach" and result["mjcf"] == str(mjcf)
     model = mujoco.MjModel.from_xml_path(str(mjcf))
+    env = MujocoArmEnv(task_config(TASK), arm)  # the model the Reach envs build
+    try:
+        trained = env.model
+        assert (model.nbody, model.nu, model.ngeom) == (trained.nbody, trained.nu, trained.ngeom)
+        # the MJCF text keeps six significant digits
+        assert model.opt.timestep == pytest.approx(trained.opt.timestep, rel=1e-6)
+    finally:
+        env.close()
     assert model.nu == 7  # six arm joints and the driven finger
-    assert model.body("target").id > 0  # the Touch scene
-    assert "0 errors" in lines[0]
+    assert "0 errors" in lines[0] and "Reach's model" in lines[1]
+
+
+def test_demo_summary_names_each_engine_with_its_backend():
+    """The closing table names the batched env ``mjx (backend B)``; the CPU engines alone."""
+    from mjx_arm.demo import format_demo_summary
+    from mjx_arm.evaluate import format_summary
+
+    def result(engine: str, **extra) -> dict:
+        return {
+            "engine": engine, "task": "reach", "episodes": 4, "wall_seconds": 1.0,
+            "success_rate": 0.5, "success_ci95": [0.1, 0.9], "mean_return": -3.0,
+            "mean_steps_to_success": None, "mean_peak_contact_force": 0.0,
+            "json": f"eval_{engine}.json", "video": None, "notes": [], **extra,
+        }  # fmt: skip
+
+    summary = {
+        "out": "o", "wall_seconds": 9.0, "timings_s": {"train": 5.0},
+        "urdf": {"mjcf": "o/ur5e_reach.xml"}, "train": {"run_dir": "o/run"},
+        "export": {"npz": "o/policy.npz"}, "replay": {"trajectory": "t.npz", "plot": "r.png"},
+        "eval": {"mujoco": result("mujoco"), "mjx": result("mjx", backend="mujoco")},
+    }  # fmt: skip
+    table = format_demo_summary(summary).splitlines()
+    assert any(line.startswith("mjx (backend mujoco) ") for line in table)
+    assert any(line.startswith("mujoco ") for line in table)
+    assert "MJCF (reach model)" in "\n".join(table)
+    first = format_summary(result("mjx", backend="mujoco")).splitlines()[0]
+    assert first == "mjx (backend mujoco), task reach: 4 episodes in 1.0 s"
 
 
 def test_demo_names_an_arm_it_cannot_load(tmp_path: Path, capsys):
@@ -81,4 +121,4 @@ def test_demo_quick_on_another_arm(tmp_path: Path):
     assert summary["arm"] == arm
     recorded = load_policy(out / "policy.npz").metadata["arm"]  # the policy records its arm
     assert Path(recorded["config"]["urdf"]).name == "ur5e_gripper.urdf"
-    assert set(summary["eval"]) == {"mujoco", "pybullet", "batch"}
+    assert set(summary["eval"]) == {"mujoco", "pybullet", "mjx"}

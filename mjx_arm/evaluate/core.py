@@ -16,7 +16,7 @@ from mjx_arm.evaluate.runners import Policy, check_policy_arm, run_batched, run_
 from mjx_arm.evaluate.stats import EvalRun, summarize
 from mjx_arm.inputs import ConfigError, MissingInputError
 from mjx_arm.names import EVAL_ENGINES as ENGINES
-from mjx_arm.names import env_id
+from mjx_arm.names import engine_label, env_id
 from mjx_arm.task.config import TaskConfig, task_config
 
 # Fields of a task that change what an action does or what an observation reads; kept from the
@@ -258,8 +258,8 @@ def format_summary(result: dict[str, Any]) -> str:
         return "n/a" if value is None else format(value, fmt)
 
     lines = [
-        f"{result['engine']} ({result['task']}): {result['episodes']} episodes "
-        f"in {result['wall_seconds']:.1f} s",
+        f"{engine_label(result['engine'], result.get('backend'))}, task {result['task']}: "
+        f"{result['episodes']} episodes in {result['wall_seconds']:.1f} s",
         f"  success rate      {result['success_rate']:.3f}  (95% CI {low:.3f} - {high:.3f})",
         f"  mean return       {num('mean_return', '.2f')}",
         f"  steps to success  {num('mean_steps_to_success', '.1f')}",
