@@ -8,6 +8,8 @@ process 0 (``run`` given) writes.
 
 from __future__ import annotations
 
+import math
+import threading
 import time
 from typing import Any
 
@@ -16,7 +18,9 @@ import numpy as np
 
 from mjx_arm.envs.mjx_physics import PhysicsOverflowError, overflow_message
 from mjx_arm.task.config import TaskConfig
+from mjx_arm.train.compile_report import CompileReport, expected_compile, remember_compile
 from mjx_arm.train.config import TrainConfig
+from mjx_arm.train.learner import EpochSizes
 from mjx_arm.train.resume import ENV_STATE_FILE, ResumeState, resume_arrays
 from mjx_arm.train.rundir import RunDir
 
@@ -30,6 +34,72 @@ class Solved(Exception):
 
 class Stopped(Exception):
     """The run trained the epochs it was asked to stop after (``train(stop_after=N)``)."""
+
+
+def planned_steps(config: TrainConfig, step_offset: int = 0) -> int:
+    """The env step a run from ``step_offset`` ends on: ``num_timesteps`` rounded up to whole
+    epochs (:class:`~mjx_arm.train.learner.EpochSizes`), as the training loop runs them."""
+    epoch = EpochSizes.of(config, config.num_timesteps).env_steps_per_epoch
+    return step_offset + math.ceil(max(config.num_timesteps - step_offset, 0) / epoch) * epoch
+
+
+def compiling_text(elapsed: float, expected: float | None) -> str:
+    """What the bar says while the run compiles: seconds so far, and the last run's figure."""
+    last = f"; the last run of this setup compiled in {expected:.0f} s" if expected else ""
+    return f"compiling {elapsed:.0f} s{last}"
+
+
+class CompileClock:
+    """Says on the progress bar that the run is compiling, once a second, until the first
+    program runs (the report's ``first reset run`` stage), then gives the bar its name back.
+
+    Args:
+        bar: the tqdm bar.
+        desc: the bar's own description (``train reach``).
+        report: the run's :class:`CompileReport`, read for the end of the compile.
+        expected: the compile time of the last run of the same setup (s), or None.
+    """
+
+    DONE = "first reset run"  # the stage that follows every compile stage
+
+    def __init__(self, bar: Any, desc: str, report: CompileReport, expected: float | None):
+        self.bar, self.desc, self.report, self.expected = bar, desc, report, expected
+        self.start = time.monotonic()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="compile-clock", daemon=True)
+
+    def text(self) -> str:
+        """The bar's description now."""
+        return f"{self.desc}: {compiling_text(time.monotonic() - self.start, self.expected)}"
+
+    def begin(self) -> CompileClock:
+        """Show the clock and update it every second; returns self."""
+        self.bar.set_description_str(self.text())
+        self._thread.start()
+        return self
+
+    def _run(self) -> None:
+        while not self._stop.wait(1.0):
+            if self.DONE in self.report.stages:
+                break
+            self.bar.set_description_str(self.text())
+        self.bar.set_description_str(self.desc)
+
+    def stop(self) -> None:
+        """Stop updating (the bar's name is given back); waits for the clock's thread."""
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join()
+
+
+def compile_setup(config: TrainConfig) -> str:
+    """The setup a compile time is remembered for: task, backend, env counts, arm, device."""
+    import jax
+
+    device = jax.devices()[0].device_kind
+    arm = config.arm.urdf_path.name
+    envs = f"{config.num_envs}/{config.num_eval_envs} envs"
+    return f"{config.task} {config.backend} {envs} {arm} {device}"
 
 
 class _Progress:
@@ -54,9 +124,9 @@ class _Progress:
 
         self.run, self.config, self.task = run, config, task
         self.physics: dict[str, Any] = {}
-        self.total = config.num_timesteps
+        self.total = config.num_timesteps  # the run ends on the first evaluation at or past it
         self.bar = tqdm(
-            total=self.total,
+            total=planned_steps(config, step_offset),
             initial=step_offset,
             unit="step",
             unit_scale=True,
@@ -74,6 +144,16 @@ class _Progress:
         self.last_metrics: dict[str, float] = {}
         # (with_envs) -> ResumeState of the newest epoch, a collective where several processes run
         self.take_snapshot: Any = None
+        self.report: CompileReport | None = None
+        self.clock: CompileClock | None = None
+
+    def watch_compile(self, report: CompileReport) -> None:
+        """Show on the bar that the run compiles (seconds so far, the last run's compile time);
+        remember this run's compile time once its first epoch has run."""
+        self.report = report
+        if not self.bar.disable:
+            expected = expected_compile(compile_setup(self.config))
+            self.clock = CompileClock(self.bar, self.bar.desc, report, expected).begin()
 
     def snapshot(self, step: int, take) -> None:
         """Keep the function that gathers the newest epoch's state (called at a checkpoint)."""
@@ -103,8 +183,8 @@ class _Progress:
         if not any("training/" in k for k in row):  # the evaluation before training
             return
         self.evals += 1
-        if self.evals == 1 and self.start_up_summary is not None:
-            self.bar.write(self.start_up_summary())
+        if self.evals == 1:
+            self._start_up_done()
         success = row.get("eval/episode_success", 0.0)
         self._remember_best(step, success)
         due = self.evals % self.config.checkpoint_every == 0
@@ -127,6 +207,15 @@ class _Progress:
             raise Solved(step)
         if self.stop_after and self.evals >= self.stop_after:
             raise Stopped(step)
+
+    def _start_up_done(self) -> None:
+        """After the first epoch: the start-up line, and the compile time kept for next time."""
+        if self.clock is not None:
+            self.clock.stop()
+        if self.start_up_summary is not None:
+            self.bar.write(self.start_up_summary())
+        if self.report is not None and self.run is not None:
+            remember_compile(compile_setup(self.config), self.report.compile_seconds)
 
     def _remember_best(self, step: int, success: float) -> None:
         """Keep a host copy of the params of the best evaluation so far (ties: the later)."""
@@ -168,6 +257,8 @@ class _Progress:
         )
 
     def close(self) -> None:
+        if self.clock is not None:
+            self.clock.stop()
         self.bar.close()
 
 
