@@ -47,6 +47,9 @@ TRAJECTORY_MEMBER_BYTES = 512 * MiB
 TRAJECTORY_TOTAL_BYTES = 1024 * MiB
 DEFAULT_WIDTH, DEFAULT_HEIGHT = 800, 600
 DPI = 100
+# A contact-force axis spans at least this (N), so that solver noise (1e-12 N in free space)
+# draws as a flat line at zero instead of being scaled up to look like a signal.
+FORCE_AXIS_MIN_N = 5.0
 
 
 # --------------------------------------------------------------------------- files
@@ -200,8 +203,7 @@ def plot_trajectory(
     fig, axes = plt.subplots(3, 1, sharex=True, figsize=(width / DPI, height / DPI), dpi=DPI)
     _plot_reward(axes[0], steps, traj["reward"])
     _plot_position(axes[1], steps, traj)
-    axes[2].plot(steps, traj["contact_force"], color="tab:purple")
-    axes[2].set_ylabel("contact force (N)")
+    _plot_force(axes[2], steps, np.asarray(traj["contact_force"], dtype=float))
     axes[2].set_xlabel("control step")
     drop = largest_reward_drop(traj["reward"])
     for ax in axes:
@@ -217,6 +219,19 @@ def plot_trajectory(
     plt.close(fig)
     write_atomic(buffer.getvalue(), output)
     return output
+
+
+def force_axis_limits(force: np.ndarray, span: float = FORCE_AXIS_MIN_N) -> tuple[float, float]:
+    """The y range of a contact-force axis for ``force`` ``(T,)`` or ``(T, k)`` (N): from 0 (or
+    the lowest value, if below) to the highest value plus 5 %, and at least ``span`` N tall."""
+    low, high = min(0.0, float(np.min(force))), float(np.max(force))
+    return low, max(high + 0.05 * (high - low), low + span)
+
+
+def _plot_force(ax, steps: np.ndarray, force: np.ndarray) -> None:
+    ax.plot(steps, force, color="tab:purple")
+    ax.set_ylim(*force_axis_limits(force))
+    ax.set_ylabel("contact force (N)")
 
 
 def _plot_reward(ax, steps: np.ndarray, reward: np.ndarray) -> None:

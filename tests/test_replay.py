@@ -54,6 +54,33 @@ def _synthetic(steps: int = 12) -> dict[str, np.ndarray]:
     }
 
 
+@pytest.mark.parametrize(
+    ("force", "limits"),
+    [
+        (np.array([2.5e-12, 4e-13, 3e-13, 6e-13]), (0.0, 5.0)),  # noise in free space: flat
+        (np.zeros(5), (0.0, 5.0)),
+        (np.array([0.0, 10.0, 30.0, 20.0]), (0.0, 31.5)),  # a press: the data and 5 %
+        (np.array([[0.0, 1.0], [2.0, 8.0]]), (0.0, 8.4)),  # one column per finger pad
+    ],
+)
+def test_a_force_axis_spans_at_least_a_few_newtons(force: np.ndarray, limits: tuple) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from mjx_arm.replay import FORCE_AXIS_MIN_N, _plot_force, force_axis_limits
+
+    assert FORCE_AXIS_MIN_N == 5.0
+    np.testing.assert_allclose(force_axis_limits(force), limits, atol=1e-9)
+    fig, ax = plt.subplots()
+    try:
+        _plot_force(ax, np.arange(len(force)), force)
+        np.testing.assert_allclose(ax.get_ylim(), limits, atol=1e-9)  # what the plot shows
+    finally:
+        plt.close(fig)
+
+
 def test_largest_reward_drop_hand_worked():
     assert largest_reward_drop(np.array([0.0, 1.0, -2.0, -1.0, -4.5])) == 4
     assert largest_reward_drop(np.array([0.0, 1.0, 2.0])) is None
