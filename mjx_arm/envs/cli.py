@@ -14,9 +14,9 @@ def cmd_arm(args: argparse.Namespace) -> int:
     """Show the arm the tasks would drive: the defaults an arm config takes from its URDF.
 
     With --check, also each task's setup derived from the model (home pose, task area, episode)
-    and whether the arm can do the task, and why not; and a picture of the home pose over the
-    task area (--picture). With -o, writes the resolved config as an arm file (TOML) to edit
-    and pass to --arm.
+    and whether the arm can do the task, and why not. With --picture P.png, draws the home pose
+    over the task area into P.png (nothing is drawn unless asked). With -o, writes the resolved
+    config as an arm file (TOML) to edit and pass to --arm. Every file written is named.
     """
     from mjx_arm.envs.arm import validated_arm_info
     from mjx_arm.envs.arm_report import arm_file_text, check_lines, describe, draw_check
@@ -28,7 +28,7 @@ def cmd_arm(args: argparse.Namespace) -> int:
 
     if args.output:  # named errors (bad files, bad arm) go to mjx_arm.cli.main
         check_output(args.output, "-o", (".toml",))
-    picture = args.picture or (f"{Path(args.arm).stem}_check.png" if args.check else None)
+    picture = args.picture
     if picture:
         check_output(picture, "--picture", (".png",))
     config = load_arm(args.arm)
@@ -41,7 +41,9 @@ def cmd_arm(args: argparse.Namespace) -> int:
         print(check_lines(arm, tasks))
     if picture:
         draw_check(arm, tasks, Path(picture))
-        print(f"wrote {picture}")
+        print(f"wrote the picture of the home pose over the task area to {Path(picture).resolve()}")
+    elif args.check:
+        print("(add --picture P.png to draw the home pose over the task area)")
     if args.output:
         touch = None if config.home_qpos else arm_setup(arm, task_config("touch"))
         write_atomic(arm_file_text(arm, touch).encode(), Path(args.output))
@@ -63,6 +65,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="derive each task's setup and say whether the arm can do it (and why not)",
     )
     p.add_argument(
-        "--picture", help="draw the home pose over the task area (.png; --check: STEM_check.png)"
+        "--picture",
+        metavar="P.png",
+        help="draw the home pose over the task area into this file (nothing drawn otherwise)",
     )
     p.set_defaults(func=cmd_arm)
