@@ -31,6 +31,10 @@ PARTITIONS = ("auto", "xla", "per_device")
 # Nested sections of the config: name -> type (``--set physics.impl=warp``).
 SECTIONS = {"physics": PhysicsConfig, "randomization": RandomizationConfig, "arm": ArmConfig}
 
+# Adam's update of a weight is about learning_rate in size whatever the gradient; the networks'
+# weights start near 0.1, so a rate above 1 can never train.
+MAX_LEARNING_RATE = 1.0
+
 
 @dataclass(frozen=True)
 class TrainConfig:
@@ -120,6 +124,13 @@ class TrainConfig:
         check_range(self, ("reward_scaling", "discounting"), above=0)
         check_range(self, ("discounting", "gae_lambda", "stop_at_success"), low=0, high=1)
         check_range(self, ("vf_loss_coefficient", "entropy_cost"), low=0)
+        if self.learning_rate > MAX_LEARNING_RATE:
+            raise ConfigError(
+                f"learning_rate must be <= {MAX_LEARNING_RATE:g}, got {self.learning_rate:g}: "
+                "Adam moves every weight by about learning_rate per update, so a larger rate "
+                "replaces the network with noise at every update "
+                f"(default {type(self).learning_rate:g})"
+            )
 
     def samples_per_update(self) -> int:
         """Env steps consumed by one PPO update (one rollout batch)."""

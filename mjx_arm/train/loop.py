@@ -25,6 +25,7 @@ from mjx_arm.envs.wrappers import wrap_for_training
 from mjx_arm.train.compile_report import CompileReport
 from mjx_arm.train.config import TrainConfig
 from mjx_arm.train.distributed import gather, is_leader, share
+from mjx_arm.train.divergence import check_epoch
 from mjx_arm.train.evaluation import Evaluator
 from mjx_arm.train.learner import (
     ENV_AXIS,
@@ -272,6 +273,7 @@ def run_ppo(
             report.add("first epoch run", seconds)
         walltime += seconds
         step += run.sizes.env_steps_per_epoch
+        check_epoch(config, step, state, metrics)  # before anything of the epoch is saved
         params = run.learner.params(state)
         callbacks.policy_params(step, run.learner.make_policy, params)
         taken = (state, env_state, local_key)
