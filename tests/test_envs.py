@@ -16,11 +16,13 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import gymnasium as gym
+import jax.numpy as jnp
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
 import mjx_arm  # noqa: F401  (registers the ids)
+from mjx_arm.envs.registration import make_async_vec
 from mjx_arm.paths import default_arm_urdf
 from mjx_arm.task.config import REWARD_TERMS
 from mjx_arm.task.observation import OBS_KEYS, flatten_obs
@@ -370,10 +372,18 @@ def test_record_video(engine: str, tmp_path: Path) -> None:
 # ----------------------------------------------------------------------------- vector envs
 
 
+# JAX warns inside an at-fork hook, where a raised warning becomes an unraisable exception
+@pytest.mark.filterwarnings("error:.*os.fork.*:RuntimeWarning")
+@pytest.mark.filterwarnings("error::pytest.PytestUnraisableExceptionWarning")
 @pytest.mark.parametrize("mode", ["sync", "async"])
 def test_make_vec(engine: str, env_id: str, mode: str) -> None:
-    """Gymnasium's sync and async vector envs run both engines (each env its own world)."""
-    envs = gym.make_vec(env_id, num_envs=2, vectorization_mode=mode, engine=engine)
+    """Gymnasium's sync and async vector envs run both engines (each env its own world); the
+    async workers are not forked from this multithreaded JAX process (JAX's warning fails it)."""
+    jnp.zeros(1).block_until_ready()  # JAX's threads are running, as in a training process
+    if mode == "async":
+        envs = make_async_vec(env_id, num_envs=2, engine=engine)
+    else:
+        envs = gym.make_vec(env_id, num_envs=2, vectorization_mode=mode, engine=engine)
     try:
         obs, info = envs.reset(seed=0)
         assert tuple(obs) == OBS_KEYS

@@ -1,7 +1,8 @@
 """Gymnasium ids of the tasks, registered on ``import mjx_arm``, and the one CPU env factory.
 
 ``gymnasium.make("mjx_arm/Touch-v0", engine="mujoco" | "pybullet")`` builds a CPU env;
-``gymnasium.make_vec(id, num_envs=N, vectorization_mode="vector_entry_point")`` the MJX batch.
+``gymnasium.make_vec(id, num_envs=N, vectorization_mode="vector_entry_point")`` the MJX batch;
+:func:`make_async_vec` Gymnasium's AsyncVectorEnv of CPU envs, whose workers are not forked.
 A task added with :func:`mjx_arm.task.registry.register_task` gets its id from
 :func:`register_envs`.
 """
@@ -65,6 +66,25 @@ def make_vector(task_name: str, num_envs: int = 1, **kwargs: Any):
     from mjx_arm.envs.vector import make_vector_env
 
     return make_vector_env(task_name, num_envs=num_envs, **kwargs)
+
+
+# Start method of the workers of a Gymnasium AsyncVectorEnv. Forking a process in which JAX has
+# started its threads can deadlock the child (JAX warns on ``os.fork()``); a forkserver forks
+# the workers from a clean single-threaded server process instead.
+ASYNC_CONTEXT = "forkserver"
+
+
+def make_async_vec(env_name: str, num_envs: int, vector_kwargs: dict | None = None, **kwargs):
+    """``gymnasium.make_vec(env_name, num_envs, vectorization_mode="async")`` of the CPU envs,
+    its workers started by :data:`ASYNC_CONTEXT` (``vector_kwargs`` may set another)."""
+    vector_kwargs = {"context": ASYNC_CONTEXT, **(vector_kwargs or {})}
+    return gym.make_vec(
+        env_name,
+        num_envs=num_envs,
+        vectorization_mode="async",
+        vector_kwargs=vector_kwargs,
+        **kwargs,
+    )
 
 
 def register_envs() -> None:
