@@ -5,19 +5,74 @@ Every bad input ends the same way, here in :func:`main`: a named error
 (:class:`~mjx_arm.inputs.InputError`, or a policy file's
 :class:`~mjx_arm.policy.PolicyFileError`) becomes one ``error:`` line on stderr and exit code
 :data:`~mjx_arm.names.EXIT_INVALID` (2); argparse reports bad arguments with the same code. Any
-other exception is a bug: its traceback shows and the exit code is 1.
+other exception is a bug: its traceback shows and the exit code is 1. An argparse error is one
+line too (:class:`OneLineParser`), and a line that would be longer than 300
+characters is shortened, the whole text going to an error-report file it names
+(:func:`report_folders` says where).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+import tempfile
+import time
+from pathlib import Path
 
 from mjx_arm.inputs import InputError
 from mjx_arm.jax_cache import enable_compilation_cache
 from mjx_arm.names import EXIT_INVALID, EXIT_OK
 
-__all__ = ["EXIT_INVALID", "EXIT_OK", "build_parser", "main"]
+__all__ = [
+    "EXIT_INVALID",
+    "EXIT_OK",
+    "MAX_LINE_CHARS",
+    "OneLineParser",
+    "build_parser",
+    "error_line",
+    "main",
+    "report_folders",
+]
+
+# Longest ``error:`` line the command prints; a longer one is shortened and its whole text
+# written to an error-report file that the line names.
+MAX_LINE_CHARS = 300
+# Characters of the shortened line kept for the fix (the part after the last "; ").
+_FIX_CHARS = 110
+# Attributes of a command's arguments that name the folder it writes into: its error reports go
+# there when the folder exists.
+_OUT_FOLDERS = ("out", "run", "run_dir", "out_dir")
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """An ``ArgumentParser`` whose errors are one line, ``error: MESSAGE (see: PROG --help)``,
+    on stderr with exit code 2 (instead of the usage block). ``add_subparsers`` gives every
+    subcommand's parser this class too."""
+
+    def parse_args(self, args=None, namespace=None):  # type: ignore[override]
+        """As ``ArgumentParser.parse_args``; unknown arguments are reported by the parser of
+        the subcommand they were given to, so the line points at that command's help."""
+        parsed, extra = self.parse_known_args(args, namespace)
+        if extra:
+            self._owner(parsed).error(f"unrecognized arguments: {' '.join(extra)}")
+        return parsed
+
+    def _owner(self, parsed: argparse.Namespace) -> argparse.ArgumentParser:
+        """The parser of the subcommand named in ``parsed``, else this one."""
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                chosen = action.choices.get(getattr(parsed, action.dest, None) or "")
+                if chosen is not None:
+                    return chosen
+        return self
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        from mjx_arm.urdf.errors import one_line
+
+        tail = f" (see: {self.prog} --help)"
+        text = _cut(one_line(message), MAX_LINE_CHARS - len("error: ") - len(tail))
+        self.exit(EXIT_INVALID, f"error: {text}{tail}\n")
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
@@ -65,7 +120,7 @@ def build_parser() -> argparse.ArgumentParser:
     from mjx_arm.train import cli as train_cli
     from mjx_arm.urdf import cli as urdf_cli
 
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="mjx-arm",
         description="Train and check 6-DoF arm control policies (URDF -> MJCF -> MJX + Brax PPO).",
     )
@@ -88,18 +143,92 @@ def named_errors() -> tuple[type[Exception], ...]:
     return InputError, PolicyFileError, ArmConfigError, ArmMismatchError
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``mjx-arm`` console script: parse, run the command, and turn a named
-    input error (:func:`named_errors`) into one ``error:`` line and :data:`EXIT_INVALID`."""
+def error_line(err: Exception, args: argparse.Namespace, argv: list[str]) -> str:
+    """The ``error:`` line of a named error, at most :data:`MAX_LINE_CHARS` characters.
+
+    The line is the error's ``headline`` when it has one (a long report behind it), else its
+    message on one line. When there is a report or the line is too long, the whole text is
+    written to a file and the line, shortened (the cause first, then the fix, the part after
+    the last ``"; "``), ends in ``(full report: PATH)``.
+    """
     from mjx_arm.urdf.errors import one_line
 
+    text = one_line(err) or type(err).__name__
+    headline = getattr(err, "headline", "")
+    line = f"error: {headline or text}"
+    if not headline and len(line) <= MAX_LINE_CHARS:
+        return line
+    command = " ".join(["mjx-arm", *argv])
+    body = f"{command}\n\n{type(err).__name__}:\n{err}\n"
+    path = _write_report(body, report_folders(args))
+    if path is None:  # nowhere to write: the line alone, shortened
+        return "error: " + _shorten(headline or text, MAX_LINE_CHARS - len("error: "))
+    tail = f" (full report: {path})"
+    budget = max(MAX_LINE_CHARS - len("error: ") - len(tail), 80)
+    return f"error: {_shorten(headline or text, budget)}{tail}"
+
+
+def _shorten(text: str, budget: int) -> str:
+    """``text`` in at most ``budget`` characters: the cause (before the first ``"; "``) cut to
+    fit, then the fix (after the last ``"; "``) cut to :data:`_FIX_CHARS`."""
+    if len(text) <= budget:
+        return text
+    cause, _, rest = text.partition("; ")
+    fix = _cut(rest.rpartition("; ")[2], min(_FIX_CHARS, budget // 2)) if rest else ""
+    room = budget - (len(fix) + 2 if fix else 0)
+    return f"{_cut(cause, room)}; {fix}" if fix else _cut(cause, budget)
+
+
+def _cut(text: str, chars: int) -> str:
+    """``text`` cut to at most ``chars`` characters, ending in ``...`` when cut."""
+    return text if len(text) <= chars else text[: max(chars - 3, 0)].rstrip() + "..."
+
+
+def report_folders(args: argparse.Namespace) -> list[Path]:
+    """Where an error report may go, in order of preference: the folder the command writes
+    into (``--out`` or the run folder) when it exists, ``$XDG_STATE_HOME/mjx_arm/errors``
+    (default ``~/.local/state/mjx_arm/errors``), then ``mjx_arm-errors`` in the temp folder."""
+    folders = []
+    for name in _OUT_FOLDERS:
+        value = getattr(args, name, None)
+        if isinstance(value, str | Path) and Path(value).expanduser().is_dir():
+            folders.append(Path(value).expanduser())
+    state = os.environ.get("XDG_STATE_HOME") or str(Path.home() / ".local" / "state")
+    folders.append(Path(state) / "mjx_arm" / "errors")
+    folders.append(Path(tempfile.gettempdir()) / "mjx_arm-errors")
+    return folders
+
+
+def _write_report(body: str, folders: list[Path]) -> Path | None:
+    """Write ``body`` atomically to ``error-TIME-PID.txt`` in the first folder that takes it;
+    its absolute path, or None when none does."""
+    from mjx_arm.inputs import OutputWriteError, write_atomic
+
+    name = f"error-{time.strftime('%Y%m%d-%H%M%S', time.gmtime())}-{os.getpid()}.txt"
+    for folder in folders:
+        try:
+            write_atomic(body.encode("utf-8", "replace"), folder / name)
+        except (OutputWriteError, OSError):
+            continue
+        return (folder / name).resolve()
+    return None
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``mjx-arm`` console script: parse, run the command, and turn a named
+    input error (:func:`named_errors`) into one ``error:`` line and :data:`EXIT_INVALID`.
+
+    A line over :data:`MAX_LINE_CHARS` characters, or an error that carries
+    a long report (its ``headline``), is shortened and the whole text goes to an error-report
+    file that the line names (:func:`report_folders` says where).
+    """
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args) or 0)
     except Exception as err:
         if not isinstance(err, named_errors()):
             raise  # a bug: its traceback shows, exit code 1
-        print(f"error: {one_line(err) or type(err).__name__}", file=sys.stderr)
+        print(error_line(err, args, sys.argv[1:] if argv is None else argv), file=sys.stderr)
         return EXIT_INVALID
 
 

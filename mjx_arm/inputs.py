@@ -24,7 +24,15 @@ from typing import Any
 
 class InputError(Exception):
     """An input (file, setting, argument) that cannot be used; the message names it, says what
-    is wrong and how to fix it."""
+    is wrong and how to fix it.
+
+    Attributes:
+        headline: a one-line summary for the command line when the message is a long report
+            (a validation report, say); empty: the message itself is the line. ``mjx-arm``
+            prints the headline and writes the whole message to an error-report file.
+    """
+
+    headline: str = ""
 
 
 class ConfigError(InputError, ValueError):

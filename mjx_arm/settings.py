@@ -80,8 +80,14 @@ def did_you_mean(name: str, known: Any) -> str:
     return f" (did you mean {close[0]!r}?)" if close else ""
 
 
-def set_path(config: Any, path: list[str], text: str, label: str = "setting") -> Any:
+def set_path(
+    config: Any, path: list[str], text: str, label: str = "setting", group: str = ""
+) -> Any:
     """A copy of the dataclass ``config`` with the field at ``path`` set from ``text``.
+
+    ``group`` is the dotted path of ``config`` inside the outer config (for messages: an
+    unknown field is named by its whole path, ``physics.timestepp``, with the closest known
+    field of its own group as a suggestion).
 
     Raises:
         ConfigError: an unknown field (the message lists the known ones), a group set as a
@@ -89,13 +95,14 @@ def set_path(config: Any, path: list[str], text: str, label: str = "setting") ->
     """
     hints = field_types(type(config))
     if path[0] not in hints:
-        raise ConfigError(f"unknown {label} {path[0]!r}{did_you_mean(path[0], hints)}; choose "
-                          f"one of {sorted(hints)}")  # fmt: skip
+        name, known = group + path[0], [group + field for field in sorted(hints)]
+        hint = did_you_mean(name, known)
+        raise ConfigError(f"unknown {label} {name!r}{hint}; choose one of {known}")
     current = getattr(config, path[0])
     if dataclasses.is_dataclass(current):
         if len(path) == 1:
             raise ConfigError(f"{path[0]!r} is a group; set one of its fields ({path[0]}.NAME)")
-        value = set_path(current, path[1:], text, label)
+        value = set_path(current, path[1:], text, label, f"{group}{path[0]}.")
     elif len(path) > 1:
         raise ConfigError(f"{path[0]!r} has no fields")
     else:

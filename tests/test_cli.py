@@ -53,7 +53,8 @@ def test_subcommand_help(command: str, capsys):
 
 def test_no_command_is_a_usage_error(capsys):
     assert _exit_code([]) == 2
-    assert "usage" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert err == "error: the following arguments are required: COMMAND (see: mjx-arm --help)\n"
 
 
 def test_validate_the_shipped_arm(capfd):

@@ -562,10 +562,16 @@ def test_finding_and_report_format():
     report = ValidationReport("arm.urdf", "all", (warning, error))
     assert report.errors == (error,) and report.warnings == (warning,) and not report.ok
     lines = report.format().splitlines()
-    assert lines[0].startswith("Validating arm.urdf")
-    assert lines[1].startswith("ERROR") and lines[2].startswith("WARNING")
-    assert lines[-1] == "INVALID: 1 errors, 1 warnings"
-    assert ValidationReport("a", "all", (warning,)).format().endswith("valid (1 warnings)")
+    assert lines[0].startswith("Validating arm.urdf")  # the path once, in the header
+    assert lines[1] == "  ERROR [2] joint 'j': has no <limit>. Fix: add one"
+    assert lines[2].startswith("  WARNING") and "arm.urdf" not in lines[2]
+    assert lines[-1] == "INVALID: 1 error, 1 warning"
+    assert ValidationReport("a", "all", (warning,)).format().endswith("valid (1 warning)")
+    assert report.summary() == "1 error (joint 'j': has no <limit>)"
+    many = ValidationReport("a", "all", (error,) * 5)
+    assert many.summary() == (
+        "5 errors (joint 'j': has no <limit>; joint 'j': has no <limit>; and 3 more)"
+    )
 
 
 def test_repair_inertia_turns_the_error_into_a_warning_for_mujoco(tmp_path: Path):

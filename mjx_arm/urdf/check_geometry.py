@@ -32,6 +32,7 @@ from mjx_arm.urdf.mesh_convert import (
     mesh_bounds,
     missing_packages,
 )
+from mjx_arm.urdf.mesh_limits import mesh_problem
 from mjx_arm.urdf.meshes import (
     MUJOCO_MESH_FORMATS,
     PYBULLET_MESH_FORMATS,
@@ -94,7 +95,8 @@ def _check_shape(
     geometry = item.find("geometry")
     shapes = [] if geometry is None else list(geometry)
     if len(shapes) != 1 or shapes[0].tag not in SHAPES:
-        found = ", ".join(f"<{s.tag}>" for s in shapes) or "nothing"
+        found = ", ".join(f"<{s.tag[:32]}>" for s in shapes[:4]) or "nothing"
+        found += f" and {len(shapes) - 4} more" if len(shapes) > 4 else ""
         out.error(
             2,
             _link(link),
@@ -188,6 +190,15 @@ def _check_mesh(
         )
         return None
     if resolved is None:
+        return None
+    too_large = mesh_problem(resolved)
+    if too_large:
+        out.error(
+            2,
+            _link(link),
+            f"has <{role}> mesh {filename!r}, which {too_large}",
+            "simplify the mesh (e.g. a quadric decimation in MeshLab or Blender)",
+        )
         return None
     if convert:
         box = _converted_box(link, filename, resolved, out)

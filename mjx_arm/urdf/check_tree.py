@@ -7,6 +7,7 @@ from pathlib import Path
 
 from mjx_arm.urdf.findings import (
     JOINT_TYPES,
+    MAX_CHAIN_LINKS,
     MAX_LINKS,
     MAX_NAME_CHARS,
     MAX_OFFSET,
@@ -16,6 +17,7 @@ from mjx_arm.urdf.findings import (
     _link,
     _numbers,
     _Tree,
+    name_list,
 )
 from mjx_arm.urdf.safe_xml import XmlError, read_xml
 
@@ -56,6 +58,7 @@ def _check_tree(path: Path, root: ET.Element, out: _Findings) -> _Tree | None:
     _check_parents(tree, out)
     _check_roots(tree, out)
     _check_cycles(tree, out)
+    _check_depth(tree, out)
     _check_joint_types(tree, out)
     _check_origins(tree, out)
     return tree
@@ -174,8 +177,7 @@ def _check_parents(tree: _Tree, out: _Findings) -> None:
             parents.setdefault(j.child, []).append(j.name)
     for link, joints in parents.items():
         if len(joints) > 1 and link in tree.links:
-            names = ", ".join(repr(n) for n in joints)
-            problem = f"has {len(joints)} parents: it is the child of joints {names}"
+            problem = f"has {len(joints)} parents: it is the child of joints {name_list(joints)}"
             out.error(
                 1,
                 _link(link),
@@ -189,11 +191,10 @@ def _check_roots(tree: _Tree, out: _Findings) -> None:
     children = {j.child for j in tree.joints.values()}
     roots = [name for name in tree.links if name not in children]
     if len(roots) > 1:
-        names = ", ".join(repr(r) for r in roots)
         out.error(
             1,
             "robot",
-            f"has {len(roots)} root links ({names}); a URDF has exactly one",
+            f"has {len(roots)} root links ({name_list(roots)}); a URDF has exactly one",
             "connect every extra root link to the tree with a joint, or remove it",
         )
     elif not roots and tree.links:
@@ -209,7 +210,8 @@ def _check_cycles(tree: _Tree, out: _Findings) -> None:
     """Report each closed loop of joints once, at the joint that closes it."""
     for links, closing in _find_cycles(tree):
         if len(links) > 1:  # a joint from a link to itself is reported by _check_parents
-            loop = " -> ".join([*links, links[0]])
+            shown = links if len(links) <= 6 else [*links[:4], f"... ({len(links)} links)"]
+            loop = " -> ".join([*shown, links[0]])
             out.error(
                 1,
                 _joint(closing),
@@ -243,6 +245,38 @@ def _find_cycles(tree: _Tree) -> list[tuple[list[str], str]]:
                 path.append(joint.child)
                 stack.append(iter(children.get(joint.child, [])))
     return cycles
+
+
+def chain_depth(tree: _Tree) -> tuple[int, str]:
+    """Links on the longest path down from a root link, and the last link of that path (a
+    link reached twice, through a loop or a second parent, is counted once)."""
+    children: dict[str, list[str]] = {}
+    for j in tree.joints.values():
+        if j.parent in tree.links and j.child in tree.links:
+            children.setdefault(j.parent, []).append(j.child)
+    has_parent = {j.child for j in tree.joints.values()}
+    level = [name for name in tree.links if name not in has_parent]
+    seen, depth, last = set(level), 0, ""
+    while level:
+        depth, last = depth + 1, level[0]
+        level = [c for link in level for c in children.get(link, []) if c not in seen]
+        seen.update(level)
+    return depth, last
+
+
+def _check_depth(tree: _Tree, out: _Findings) -> None:
+    """At most MAX_CHAIN_LINKS links from the root to the deepest link: the MJCF nests one
+    body per link, and MuJoCo's XML reader refuses deep nesting."""
+    depth, last = chain_depth(tree)
+    if depth > MAX_CHAIN_LINKS:
+        out.error(
+            1,
+            _link(last),
+            f"is {depth} links down from the root link, more than the {MAX_CHAIN_LINKS} this "
+            "tool accepts (MuJoCo cannot read an MJCF nested that deep)",
+            f"shorten the kinematic chain to at most {MAX_CHAIN_LINKS} links, e.g. by merging "
+            "links joined by fixed joints",
+        )
 
 
 def _check_joint_types(tree: _Tree, out: _Findings) -> None:

@@ -6,9 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from mjx_arm.inputs import InputError, check_output, float_in, write_atomic
+from mjx_arm.inputs import InputError, check_output, float_in, require_file, write_atomic
 from mjx_arm.names import EXIT_INVALID, EXIT_OK
-from mjx_arm.urdf.errors import one_line
 from mjx_arm.urdf.scene_shapes import SCENES
 
 
@@ -29,15 +28,17 @@ def _package_dirs(items: list[str]) -> dict[str, str]:
     return out
 
 
+# Length of the error line after a failed validation (mjx_arm.cli.MAX_LINE_CHARS for others).
+LINE_CHARS = 300
+
+
 def _invalid(urdf: str, report) -> int:
-    """The one ``error:`` line after a failed validation's report (on stdout): each error's
-    element and problem; returns :data:`EXIT_INVALID`."""
-    errors = "; ".join(f"{f.element}: {f.problem.rstrip('. ')}" for f in report.errors)
-    print(
-        f"error: {urdf}: {len(report.errors)} errors ({one_line(errors)}); each with its fix in "
-        "the report above",
-        file=sys.stderr,
-    )
+    """The one ``error:`` line after a failed validation's report (on stdout): the number of
+    errors and the first of them, in at most :data:`LINE_CHARS` characters (for a path of a
+    usual length); returns :data:`EXIT_INVALID`."""
+    head, tail = f"error: {urdf}: ", "; each with its fix in the report above"
+    room = max(LINE_CHARS - len(head) - len(tail) - 20, 60)  # 20: the count and brackets
+    print(f"{head}{report.summary(room)}{tail}", file=sys.stderr)
     return EXIT_INVALID
 
 
@@ -45,6 +46,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
     """Validate a URDF in three layers and print every finding."""
     from mjx_arm.urdf.validate import validate
 
+    require_file(args.urdf, "URDF")  # a missing file is one error line, not a report
     report = validate(args.urdf, engine=args.engine, package_dirs=_package_dirs(args.package))
     print(report.format())
     return EXIT_OK if report.ok else _invalid(args.urdf, report)

@@ -22,7 +22,7 @@ from mjx_arm.urdf.convert_config import (
     TOOL_COM_SITE,
     ConvertConfig,
 )
-from mjx_arm.urdf.errors import ConversionError
+from mjx_arm.urdf.errors import ConversionError, report_error
 from mjx_arm.urdf.mjcf import build_checked_spec, compile_spec, mjcf_text
 
 __all__ = [
@@ -74,7 +74,7 @@ def build_spec(urdf: str | Path, config: ConvertConfig | None = None) -> mujoco.
         default_limits=config.default_limits(),
     )
     if not report.ok:
-        raise ConversionError(report.format())
+        raise report_error(ConversionError, report)
     try:
         return build_checked_spec(path, config)
     except ConversionError:

@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+from typing import TypeVar
+
 from mjx_arm.inputs import InputError
+
+_E = TypeVar("_E", bound=InputError)
 
 
 class UrdfError(InputError, ValueError):
@@ -16,3 +20,12 @@ class ConversionError(UrdfError):
 def one_line(text: object) -> str:
     """``text`` (an exception, a message) on one line: its non-empty lines joined by ``; ``."""
     return "; ".join(part.strip() for part in str(text).splitlines() if part.strip())
+
+
+def report_error(kind: type[_E], report) -> _E:
+    """A ``kind`` error whose message is a failed validation's whole report and whose
+    :attr:`~mjx_arm.inputs.InputError.headline` is its one-line summary (path, error count,
+    the first errors)."""
+    err = kind(report.format())
+    err.headline = f"{report.path}: {report.summary()}; mjx-arm validate gives every fix"
+    return err

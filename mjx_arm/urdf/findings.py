@@ -24,8 +24,26 @@ SHAPES = frozenset({"box", "sphere", "cylinder", "capsule", "mesh"})
 SIZE_RATIO_LIMIT = 2.0
 _AXIS_EPS = 1e-9
 # Links (and joints) a URDF may have: far above any arm, low enough to keep every check and
-# native load well under a second.
+# native load well under a second. PyBullet 3.2 loads a 5,000-joint chain without trouble.
 MAX_LINKS = 512
+# Links on the longest path from the root link (the depth of the kinematic chain). The MJCF
+# nests one <body> per link, and MuJoCo's XML reader (MuJoCo 3.x, tinyxml2) refuses nesting
+# deeper than 500 elements with "XML_ELEMENT_DEPTH_EXCEEDED: Element nesting is too deep".
+# Measured on serial chains: MuJoCo's own URDF import written and read back works up to 497
+# links and fails at 498; through this converter (mjx_arm.urdf.to_mjcf) 496 links convert and
+# 497 fail. 256 is about half of that and far above any arm (a 6-DoF arm with a gripper is
+# about 15 links deep).
+MAX_CHAIN_LINKS = 256
+# Triangles of one mesh file. MuJoCo's STL reader refuses a binary STL of more than 200,000
+# faces ("number of faces should be between 1 and 200000"; 200,000 random faces load in 12 s
+# on a 2-core CPU, mostly for the convex hull). Every format (OBJ, and the meshes trimesh
+# converts) is held to the same count, and an OBJ to three vertices per face.
+MAX_MESH_FACES = 200_000
+MAX_MESH_VERTICES = 3 * MAX_MESH_FACES
+# Bytes of one mesh file, checked before any reader opens it: a binary STL at MAX_MESH_FACES is
+# 10,000,084 bytes; an OBJ with normals and texture coordinates for as many faces stays under
+# 32 MiB.
+MAX_MESH_BYTES = 32 * 2**20
 # Longest name (robot, link, joint, material, ...) a URDF may use. PyBullet 3.2 segfaults while
 # loading a URDF whose joint name has 1,264 or more characters, or whose link name has 2,288
 # or more (robot names crash from 42,184; material names up to 70,000 do not). 256 leaves a
@@ -60,9 +78,13 @@ class Finding:
     fix: str
 
     def __str__(self) -> str:
+        return self.line(with_file=True)
+
+    def line(self, with_file: bool = False) -> str:
+        """``SEVERITY [layer] (file: )element: problem. Fix: fix`` on one line."""
         problem, fix = self.problem.rstrip(". "), self.fix.rstrip(". ")
-        head = f"{self.severity.upper()} [{self.layer}] {self.file}: {self.element}"
-        return f"{head}: {problem}. Fix: {fix}"
+        where = f"{self.file}: {self.element}" if with_file else self.element
+        return f"{self.severity.upper()} [{self.layer}] {where}: {problem}. Fix: {fix}"
 
 
 @dataclass(frozen=True)
@@ -89,15 +111,38 @@ class ValidationReport:
         return not self.errors
 
     def format(self) -> str:
-        """A header line, the errors, the warnings, and a verdict line."""
+        """A header line with the path, the errors, the warnings (indented, without the
+        path), and a verdict line."""
         lines = [f"Validating {self.path} (engine: {self.engine})"]
-        lines += [str(f) for f in (*self.errors, *self.warnings)]
+        lines += ["  " + f.line() for f in (*self.errors, *self.warnings)]
         n_err, n_warn = len(self.errors), len(self.warnings)
         if n_err:
-            lines.append(f"INVALID: {n_err} errors, {n_warn} warnings")
+            lines.append(f"INVALID: {plural(n_err, 'error')}, {plural(n_warn, 'warning')}")
         else:
-            lines.append("valid" + (f" ({n_warn} warnings)" if n_warn else ""))
+            lines.append("valid" + (f" ({plural(n_warn, 'warning')})" if n_warn else ""))
         return "\n".join(lines)
+
+    def summary(self, chars: int = 200, first: int = 2) -> str:
+        """The errors on one line of about ``chars`` characters: their count and the first
+        ``first`` of them (element and problem, sharing ``chars``, each cut to its share),
+        e.g. ``3 errors (joint 'a': has no <limit>; link 'b': ...; and 1 more)``."""
+        parts = [f"{f.element}: {f.problem.rstrip('. ')}" for f in self.errors]
+        shown = parts[:first]
+        share = max(chars // max(len(shown), 1) - 2, 20)
+        listed = "; ".join(_cut(part, share) for part in shown)
+        listed += f"; and {len(parts) - first} more" if len(parts) > first else ""
+        return f"{plural(len(parts), 'error')} ({listed})" if parts else "no errors"
+
+
+def plural(n: int, noun: str) -> str:
+    """``1 error``, ``2 errors``."""
+    return f"{n} {noun}" + ("" if n == 1 else "s")
+
+
+def _cut(text: str, chars: int) -> str:
+    """``text`` on one line, cut to at most ``chars`` characters (ending in ``...`` when cut)."""
+    text = " ".join(text.split())
+    return text if len(text) <= chars else text[: chars - 3].rstrip() + "..."
 
 
 class _Findings:
@@ -160,6 +205,13 @@ class _Tree:
                     out[joint.child] = False
                     stack.append(joint.child)
         return out
+
+
+def name_list(names: list[str], first: int = 4) -> str:
+    """Names quoted and joined by commas, the first ``first`` of them and a count of the rest:
+    ``'a', 'b', 'c', 'd' and 5 more``."""
+    shown = ", ".join(repr(n) for n in names[:first])
+    return shown + (f" and {len(names) - first} more" if len(names) > first else "")
 
 
 def _link(name: str) -> str:

@@ -24,6 +24,7 @@ import numpy as np
 
 from mjx_arm.inputs import write_atomic
 from mjx_arm.urdf.errors import ConversionError, one_line
+from mjx_arm.urdf.mesh_limits import count_problem, mesh_problem
 
 # Mesh formats trimesh reads, with the modules each needs (import name -> pip name).
 CONVERTIBLE_FORMATS = frozenset({".dae", ".zae", ".ply", ".off", ".glb", ".gltf"})
@@ -39,6 +40,7 @@ _FIX = (
     "re-export the mesh as binary .stl or .obj (e.g. with Blender or MeshLab) and point the "
     "URDF's filename at it"
 )
+_FIX_LARGE = "simplify the mesh (e.g. a quadric decimation in MeshLab or Blender)"
 
 
 class MeshConvertError(ConversionError):
@@ -149,6 +151,9 @@ def load_mesh(path: str | Path) -> Any:
             finite triangles.
     """
     source = Path(path)
+    too_large = mesh_problem(source)
+    if too_large:
+        raise MeshConvertError(source, f"the file {too_large}", _FIX_LARGE)
     missing = missing_packages(source.suffix)
     if missing:
         raise MeshConvertError(
@@ -163,6 +168,9 @@ def load_mesh(path: str | Path) -> Any:
         mesh.apply_scale(scale)
     if len(mesh.faces) == 0:
         raise MeshConvertError(source, "the mesh holds no triangles", _FIX)
+    too_many = count_problem(len(mesh.faces), len(mesh.vertices))
+    if too_many:
+        raise MeshConvertError(source, f"the mesh {too_many}", _FIX_LARGE)
     if not np.all(np.isfinite(mesh.vertices)):
         raise MeshConvertError(source, "the mesh has non-finite vertex coordinates", _FIX)
     return mesh

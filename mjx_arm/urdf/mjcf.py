@@ -107,12 +107,22 @@ def mjcf_text(spec: mujoco.MjSpec, urdf: str | Path) -> str:
     try:
         mujoco.MjModel.from_xml_string(text)
     except Exception as exc:
+        message = one_line(exc)
         raise ConversionError(
-            f"{urdf}: the written MJCF does not compile again (MuJoCo keeps about 6 significant "
-            f"digits per vector; check the URDF for extreme values; an inertia on the edge of the "
-            f"triangle inequality is moved inside it by --repair-inertia): {one_line(exc)}"
+            f"{urdf}: the written MJCF does not compile again: {message}; {_reread_fix(message)}"
         ) from exc
     return text
+
+
+def _reread_fix(message: str) -> str:
+    """How to fix a URDF whose written MJCF MuJoCo refuses, from MuJoCo's ``message``."""
+    if "DEPTH_EXCEEDED" in message or "nesting is too deep" in message:
+        return "the kinematic chain is too deep for MuJoCo's XML reader: shorten it"
+    return (
+        "MuJoCo keeps about 6 significant digits per vector: check the URDF for extreme values "
+        "(an inertia on the edge of the triangle inequality is moved inside it by "
+        "--repair-inertia)"
+    )
 
 
 # Model arrays that must be finite, with the object each row belongs to.

@@ -25,7 +25,7 @@ from mjx_arm.urdf.check_geometry import _check_geometry
 from mjx_arm.urdf.check_joints import _check_joints
 from mjx_arm.urdf.check_physics import _check_inertials, _load_mujoco, _load_pybullet
 from mjx_arm.urdf.check_tree import _check_tree, _read_xml
-from mjx_arm.urdf.errors import UrdfError, one_line
+from mjx_arm.urdf.errors import UrdfError, one_line, report_error
 from mjx_arm.urdf.findings import ENGINES, Finding, ValidationReport, _Findings, _Tree
 
 __all__ = ["ENGINES", "Finding", "ValidationReport", "require_valid", "validate", "validated"]
@@ -113,7 +113,7 @@ def require_valid(path: str | Path, engine: str = "all", **kw) -> ValidationRepo
     """Validate and return the report; raise :class:`UrdfError` with the report when not ok."""
     report = validate(path, engine=engine, **kw)
     if not report.ok:
-        raise UrdfError(report.format())
+        raise report_error(UrdfError, report)
     return report
 
 
