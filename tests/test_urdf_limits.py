@@ -96,7 +96,6 @@ def test_a_chain_at_the_depth_limit_converts_and_loads_in_both_engines(tmp_path)
     assert report.ok, report.format()
 
 
-@pytest.mark.slow
 def test_mujoco_reads_back_the_measured_chain_depth_and_refuses_one_more(tmp_path):
     """The failure point behind MAX_CHAIN_LINKS: MuJoCo's URDF import, written as MJCF, reads
     back with 497 links and not with 498 (tinyxml2's nesting limit of 500 elements)."""
