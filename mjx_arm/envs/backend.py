@@ -2,9 +2,15 @@
 
 from __future__ import annotations
 
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
 import jax
+import numpy as np
 
 from mjx_arm.envs.physics_config import PhysicsConfig
+from mjx_arm.inputs import ConfigError
 from mjx_arm.names import BACKENDS
 from mjx_arm.task.config import TaskConfig
 
@@ -55,4 +61,107 @@ def make_batched_env(
         batch_size=batch_size,
         randomization=randomization,
         background_compile=background_compile,
+    )
+
+
+# ------------------------------------------------------------------ host memory of a batch
+
+# Copies of the batch's JAX state alive at once while a batch steps: the state held, the state
+# stepped, the fresh reset of finished envs and their merge (ArmVectorEnv.step), besides XLA's
+# buffers; the rest of the estimate is the C rollout's float64 arrays.
+STATE_COPIES = 4
+
+
+class InsufficientMemoryError(ConfigError):
+    """A batch of envs (and its training buffers) would not fit in the host's available memory."""
+
+
+@dataclass(frozen=True)
+class MemoryEstimate:
+    """Host bytes of a batch of envs: ``fixed + per_env * num_envs``.
+
+    Attributes:
+        fixed: bytes that do not grow with the batch (the rollout threads' MjData).
+        per_env: bytes per env: its JAX state times :data:`STATE_COPIES`, the rollout's float64
+            states and sensors of a control step, and a randomised model copy where it has one.
+    """
+
+    fixed: int
+    per_env: int
+
+    def total(self, num_envs: int) -> int:
+        """Bytes of ``num_envs`` envs."""
+        return self.fixed + self.per_env * num_envs
+
+    def largest(self, available: int) -> int:
+        """The largest batch that fits in ``available`` bytes (0: none)."""
+        return max(0, (available - self.fixed) // max(self.per_env, 1))
+
+
+def available_memory() -> int:
+    """The host's available memory in bytes: ``MemAvailable`` of /proc/meminfo, else the free
+    physical pages (``os.sysconf``)."""
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+
+
+def _tree_bytes(tree) -> int:
+    return sum(int(np.prod(x.shape)) * np.dtype(x.dtype).itemsize for x in jax.tree.leaves(tree))
+
+
+def estimate_env_memory(env, randomized: bool = False) -> MemoryEstimate:
+    """The host memory of a batch of the single-env JAX ``env`` (``MjxArmEnv``), from the shapes
+    of its state (``jax.eval_shape``: nothing runs) and, on the C MuJoCo backend, from MuJoCo's
+    sizes (``mj_stateSize``, ``nsensordata``, ``mj_sizeModel``, the MjData per thread).
+
+    Args:
+        env: the env.
+        randomized: each env steps its own randomised model copy (C MuJoCo backend).
+    """
+    state = jax.eval_shape(env.reset, jax.random.PRNGKey(0))
+    per_env, fixed = STATE_COPIES * _tree_bytes(state), 0
+    physics = env.physics
+    if getattr(physics, "impl", "") == "c":
+        import mujoco
+
+        from mjx_arm.envs.mujoco_batch import STATE_SPEC
+
+        model = physics.mj_model
+        nstate = mujoco.mj_stateSize(model, STATE_SPEC)
+        steps = max(physics.n_substeps, 1)
+        per_env += 8 * (steps * (nstate + model.nsensordata) + 2 * nstate + model.nu + 3)
+        if randomized:
+            per_env += mujoco.mj_sizeModel(model)
+        data = mujoco.MjData(model)
+        fixed = physics.stepper.nthread * (data.nbuffer + data.narena)
+    return MemoryEstimate(fixed, per_env)
+
+
+def check_memory(
+    estimate: MemoryEstimate, num_envs: int, what: str, available: int | None = None
+) -> None:
+    """Refuse a batch whose estimate exceeds the available memory.
+
+    Args:
+        estimate: the batch's bytes.
+        num_envs: the batch size asked for.
+        what: the setting that sizes the batch, as the message names it ("num_envs").
+        available: bytes available (default: :func:`available_memory`).
+
+    Raises:
+        InsufficientMemoryError: the estimate, the available figure and the largest batch that fits.
+    """
+    available = available_memory() if available is None else available
+    need = estimate.total(num_envs)
+    if need <= available:
+        return
+    raise InsufficientMemoryError(
+        f"{what}={num_envs} needs about {need / 2**30:.1f} GiB of host memory "
+        f"({estimate.per_env} bytes per env), but {available / 2**30:.1f} GiB is available: "
+        f"the largest {what} that fits is about {estimate.largest(available)}"
     )

@@ -20,7 +20,12 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from mjx_arm.envs.backend import make_batched_env
+from mjx_arm.envs.backend import (
+    MemoryEstimate,
+    check_memory,
+    estimate_env_memory,
+    make_batched_env,
+)
 from mjx_arm.envs.base import check_action
 from mjx_arm.envs.mjx_physics import batched_where
 from mjx_arm.envs.physics_config import PhysicsConfig
@@ -38,6 +43,10 @@ class ArmVectorEnv(VectorEnv):
         physics: the MJX implementation (``mjx`` only; default ``impl="auto"``: Warp on a GPU
             where it is installed).
         arm: the arm (a URDF, an arm file or an ArmConfig; default: the shipped arm).
+
+    Raises:
+        InsufficientMemoryError: the batch would not fit in the host's available memory
+            (checked before anything of the batch is allocated).
     """
 
     metadata: ClassVar[dict[str, Any]] = {
@@ -56,6 +65,7 @@ class ArmVectorEnv(VectorEnv):
         self.num_envs = num_envs
         self.env = make_batched_env(task, backend, physics, batch_size=num_envs, arm=arm)
         self.task, n = self.env.task, self.env.action_size
+        check_memory(self.memory_estimate(), num_envs, "num_envs")
         joints, extra = self.env.arm.n_joints, self.env.task_spec.extra_obs
         coding = self.env.arm.joint_coding(self.task)
         self.single_observation_space = obs_lib.observation_space(
@@ -70,6 +80,15 @@ class ArmVectorEnv(VectorEnv):
         self._state = None
         self._steps = np.zeros(num_envs, np.int64)
         self._key = jax.random.PRNGKey(0)
+
+    def memory_estimate(self) -> MemoryEstimate:
+        """Host bytes of the batch: the env's (:func:`estimate_env_memory`) plus, per env, the
+        spaces' float32 bounds (low and high of the observation and the action) and three float32
+        observations (returned, final, reset) and float64 actions, rewards and flags."""
+        obs, act = self.env.observation_size, self.env.action_size
+        env = estimate_env_memory(self.env)
+        host = 4 * 2 * (obs + act) + 4 * 3 * obs + 8 * (act + 4)
+        return MemoryEstimate(env.fixed, env.per_env + host)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Reset every env; ``seed`` seeds the batch's PRNG key."""

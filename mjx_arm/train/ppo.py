@@ -32,6 +32,7 @@ from mjx_arm.train.distributed import barrier, is_leader
 from mjx_arm.train.launch import devices_for_physics
 from mjx_arm.train.learner import train_devices
 from mjx_arm.train.loop import Callbacks, resolve_partition, run_ppo
+from mjx_arm.train.memory import check_training_memory
 from mjx_arm.train.progress import Solved, Stopped, _Progress
 from mjx_arm.train.resume import has_resume_state, newest_whole_state
 from mjx_arm.train.rundir import RunDir, RunDirError
@@ -261,6 +262,7 @@ def _envs_and_restore(
     restore (a checkpoint folder read: :func:`_restore_state`); a new run's config saved."""
     with report.stage("build env"):
         env, eval_env = make_envs(config, task, background_compile=True)
+    check_training_memory(config, env)  # before the config is saved and anything allocated
     for name, seconds in env.build_seconds.items():
         report.add(f"of it {name}", seconds)
     if restore is None and run is not None:
