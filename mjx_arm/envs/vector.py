@@ -11,6 +11,7 @@ step on unaffected.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any, ClassVar
 
 import gymnasium as gym
@@ -26,7 +27,7 @@ from mjx_arm.envs.backend import (
     estimate_env_memory,
     make_batched_env,
 )
-from mjx_arm.envs.base import check_action
+from mjx_arm.envs.base import InvalidActionError, check_action
 from mjx_arm.envs.mjx_physics import batched_where
 from mjx_arm.envs.physics_config import PhysicsConfig
 from mjx_arm.task import observation as obs_lib
@@ -92,6 +93,7 @@ class ArmVectorEnv(VectorEnv):
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Reset every env; ``seed`` seeds the batch's PRNG key."""
+        self._ensure_open("reset")
         if seed is not None:
             self._key = jax.random.PRNGKey(seed)
         self._key, key = jax.random.split(self._key)
@@ -101,14 +103,10 @@ class ArmVectorEnv(VectorEnv):
 
     def step(self, actions):
         """Step every env with ``actions (num_envs, n)``; finished envs reset in the same step."""
+        self._ensure_open("step")
         if self._state is None:
             raise RuntimeError("call reset() before step()")
-        actions = np.asarray(actions, dtype=np.float64)
-        shape = (self.num_envs, self.env.action_size)
-        if actions.shape != shape:
-            raise ValueError(f"actions must have shape {shape}, got {actions.shape}")
-        bounds = (self.single_action_space.low, self.single_action_space.high)
-        actions = np.stack([check_action(a, bounds) for a in actions])
+        actions = self._check_actions(actions)
         state = self._step(self._state, jnp.asarray(actions))
         self.env.physics.check_overflow(state.metrics["physics_overflow"])
         self._steps += 1
@@ -129,6 +127,36 @@ class ArmVectorEnv(VectorEnv):
             obs = self._obs(state.obs)
         self._state = state
         return obs, rewards, terminated, truncated, info
+
+    def _check_actions(self, actions) -> np.ndarray:
+        """``actions (num_envs, n)`` checked as each engine's env checks one (real, finite:
+        :func:`~mjx_arm.envs.base.check_action`), clipped into [-1, 1], float32.
+
+        Raises:
+            InvalidActionError: not an array of real numbers, of another shape, NaN or inf.
+        """
+        bounds = (self.single_action_space.low, self.single_action_space.high)
+        try:
+            rows = np.asarray(actions)
+        except (ValueError, TypeError) as exc:
+            if isinstance(actions, Sequence) and len(actions) == self.num_envs:
+                for row in actions:  # a ragged row: the error of the single env
+                    check_action(row, bounds)
+            raise InvalidActionError(f"action must be an array of real numbers: {exc}") from None
+        shape = (self.num_envs, self.env.action_size)
+        if rows.shape != shape:
+            raise InvalidActionError(f"actions must have shape {shape}, got {rows.shape}")
+        return np.stack([check_action(a, bounds) for a in rows])
+
+    def close_extras(self, **kwargs: Any) -> None:
+        """Drop the batch's state; reset() and step() then raise ClosedEnvironmentError."""
+        self._state = None
+
+    def _ensure_open(self, method: str) -> None:
+        if self.closed:
+            raise gym.error.ClosedEnvironmentError(
+                f"{method}() called after close(); make a new batched env"
+            )
 
     def _merge(self, done: jax.Array, fresh, state):
         """Per env: the ``fresh`` state where done, else ``state`` (the physics merges data)."""
