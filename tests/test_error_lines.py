@@ -144,3 +144,11 @@ def test_reports_go_to_the_state_folder_else_the_temp_folder(tmp_path, _state_ho
     report = Path(line.rsplit("(full report: ", 1)[1].rstrip(")"))
     assert report.parent.name == "mjx_arm-errors" and "x" * 400 in report.read_text()
     report.unlink()
+
+
+def test_a_failed_validation_at_a_long_path_is_one_short_line(tmp_path, capsys):
+    folder = tmp_path / ("d" * 200)
+    folder.mkdir()
+    urdf = chain_urdf(folder / "deep.urdf", 300)
+    line = _one_error_line(["validate", str(urdf), "--engine", "mujoco"], capsys)
+    assert line.startswith("error: .../deep.urdf: 1 error (link 'l300': is 301 links down")

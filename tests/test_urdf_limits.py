@@ -5,6 +5,8 @@ named finding."""
 from __future__ import annotations
 
 import struct
+import subprocess
+import sys
 from pathlib import Path
 
 import mujoco
@@ -15,6 +17,7 @@ from test_error_lines import chain_urdf
 from mjx_arm.urdf import to_mjcf
 from mjx_arm.urdf.findings import (
     MAX_CHAIN_LINKS,
+    MAX_LINE_BYTES,
     MAX_LINKS,
     MAX_MESH_BYTES,
     MAX_MESH_FACES,
@@ -46,7 +49,7 @@ def star_urdf(path: Path, links: int) -> Path:
     for i in range(1, links):
         body.append(f'<link name="l{i}">{_INERTIAL}</link>')
         body.append(_JOINT.format(name=f"j{i}", parent="base", child=f"l{i}"))
-    path.write_text('<robot name="star">' + "".join(body) + "</robot>")
+    path.write_text('<robot name="star">\n' + "\n".join(body) + "\n</robot>")
     return path
 
 
@@ -179,3 +182,57 @@ def test_a_mesh_that_trimesh_reads_is_held_to_the_face_limit(tmp_path):
     assert len(load_mesh(ply("at.ply", MAX_MESH_FACES)).faces) == MAX_MESH_FACES
     with pytest.raises(MeshConvertError, match=f"more than the {MAX_MESH_FACES:,} MuJoCo reads"):
         load_mesh(ply("over.ply", MAX_MESH_FACES + 1))
+
+
+# --------------------------------------------------------------------------- line length
+
+
+def long_line_urdf(path: Path, line_bytes: int, joint: str = "abcdefghij") -> Path:
+    """A two-link URDF whose joint ends line 4, a line of ``line_bytes`` bytes padded by a
+    comment before the joint."""
+    joint_text = _JOINT.format(name=joint, parent="base", child="a")
+    pad = line_bytes - len(joint_text) - len("<!---->")
+    lines = [
+        '<robot name="long">',
+        f'<link name="base">{_INERTIAL}</link>',
+        f'<link name="a">{_INERTIAL}</link>',
+        "<!--" + "x" * pad + "-->" + joint_text,
+        "</robot>",
+    ]
+    path.write_text("\n".join(lines))
+    return path
+
+
+def test_a_line_at_the_byte_limit_passes_one_byte_more_is_an_error_for_pybullet(tmp_path):
+    at_limit = _static(long_line_urdf(tmp_path / "at.urdf", MAX_LINE_BYTES))
+    assert at_limit.ok, at_limit.format()
+    over = long_line_urdf(tmp_path / "over.urdf", MAX_LINE_BYTES + 1)
+    (error,) = _static(over).errors
+    assert error.element == "line 4" and error.layer == 2
+    assert f"has {MAX_LINE_BYTES + 1:,} bytes, more than the {MAX_LINE_BYTES:,}" in error.problem
+    assert _static(over, engine="mujoco").ok  # MuJoCo reads long lines whole
+
+
+def test_pybullet_cuts_a_name_on_a_line_longer_than_8191_bytes(tmp_path):
+    """The failure point behind MAX_LINE_BYTES: PyBullet breaks a line after 8,191 bytes, so a
+    joint name across that point reads back with a line break in it (in a child process, as
+    PyBullet may also crash on what it misreads)."""
+    joint_text = _JOINT.format(name="abcdefghij", parent="base", child="a")
+    name_end = joint_text.index('abcdefghij"') + 10
+
+    def name_read(cut_after: int) -> str:
+        # the line is cut after byte 8,191: put the name's byte `cut_after` there
+        line_bytes = 8191 - cut_after + (len(joint_text) - name_end) + 10
+        urdf = long_line_urdf(tmp_path / f"cut{cut_after}.urdf", line_bytes)
+        code = (
+            "import sys, pybullet as p; p.connect(p.DIRECT); "
+            "print(repr(p.getJointInfo(p.loadURDF(sys.argv[1]), 0)[1].decode()))"
+        )
+        run = subprocess.run(
+            [sys.executable, "-c", code, str(urdf)], capture_output=True, text=True, timeout=120
+        )
+        assert run.returncode == 0, run.stderr
+        return run.stdout.strip().splitlines()[-1]
+
+    assert name_read(11) == "'abcdefghij'"  # the name and its closing quote before the cut
+    assert name_read(5) == "'abcde\\nfghij'"  # cut after its fifth byte

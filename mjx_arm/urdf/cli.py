@@ -34,10 +34,13 @@ LINE_CHARS = 300
 
 def _invalid(urdf: str, report) -> int:
     """The one ``error:`` line after a failed validation's report (on stdout): the number of
-    errors and the first of them, in at most :data:`LINE_CHARS` characters (for a path of a
-    usual length); returns :data:`EXIT_INVALID`."""
-    head, tail = f"error: {urdf}: ", "; each with its fix in the report above"
-    room = max(LINE_CHARS - len(head) - len(tail) - 20, 60)  # 20: the count and brackets
+    errors and the first of them, in at most :data:`LINE_CHARS` characters (a long path is
+    shortened to its file name: the report above gives it whole); returns
+    :data:`EXIT_INVALID`."""
+    tail = "; each with its fix in the report above"
+    shown = urdf if len(urdf) <= 100 else f".../{Path(urdf).name[:90]}"
+    head = f"error: {shown}: "
+    room = LINE_CHARS - len(head) - len(tail) - 20  # 20: the count and brackets
     print(f"{head}{report.summary(room)}{tail}", file=sys.stderr)
     return EXIT_INVALID
 

@@ -34,6 +34,12 @@ MAX_LINKS = 512
 # 497 fail. 256 is about half of that and far above any arm (a 6-DoF arm with a gripper is
 # about 15 links deep).
 MAX_CHAIN_LINKS = 256
+# Bytes of one line of a URDF that PyBullet reads. PyBullet 3.2 reads a URDF in pieces of 8,191
+# bytes and puts a line break between them, so a longer line is silently changed where it is
+# cut: a joint name cut after 8,191 bytes of its line reads back as 'abcde\nfghij', and a cut
+# inside a tag ends the load with XML_ERROR_PARSING_ATTRIBUTE. 8,000 is a round figure below
+# that (a CRLF line ending counts one byte more).
+MAX_LINE_BYTES = 8000
 # Triangles of one mesh file. MuJoCo's STL reader refuses a binary STL of more than 200,000
 # faces ("number of faces should be between 1 and 200000"; 200,000 random faces load in 12 s
 # on a 2-core CPU, mostly for the convex hull). Every format (OBJ, and the meshes trimesh

@@ -24,7 +24,7 @@ from pathlib import Path
 from mjx_arm.urdf.check_geometry import _check_geometry
 from mjx_arm.urdf.check_joints import _check_joints
 from mjx_arm.urdf.check_physics import _check_inertials, _load_mujoco, _load_pybullet
-from mjx_arm.urdf.check_tree import _check_tree, _read_xml
+from mjx_arm.urdf.check_tree import _check_line_lengths, _check_tree, _read_xml
 from mjx_arm.urdf.errors import UrdfError, one_line, report_error
 from mjx_arm.urdf.findings import ENGINES, Finding, ValidationReport, _Findings, _Tree
 
@@ -64,6 +64,8 @@ def validate(
     engines, dirs = ENGINES[engine], dict(package_dirs or {})
     out = _Findings(str(path))
     tree = _guarded(out, 1, lambda: _layer1(Path(path), out))
+    if tree is not None and "pybullet" in engines:
+        _guarded(out, 2, lambda: _check_line_lengths(tree.path, out))
     if tree is not None:
         _guarded(
             out, 2, lambda: _check_joints(tree, engines, min_damping_pybullet, out, default_limits)
