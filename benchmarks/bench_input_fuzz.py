@@ -1,26 +1,29 @@
-"""Generated command lines against ``mjx-arm``: every subcommand, its numeric and named
-arguments, and mutated policy files, arm files, configs, run directories and trajectories.
+"""Generated command lines against ``mjx-arm``, run in worker processes under a memory cap:
+every subcommand, its arguments, and every kind of input file good, mutated or hostile.
 
 Hypothesis generates the cases (:mod:`input_fuzz.cases`) from good inputs built without
-training (:mod:`input_fuzz.corpus`): each file argument is the good file, a mutation of it
-(:mod:`input_fuzz.mutate`: truncated, flipped bytes, deleted keys, values of the wrong type or
-out of range, NaN weights, shapes that do not fit, a newer contract version, a damaged
-checkpoint), a missing path or another kind's file. Each case runs in process through
-``mjx_arm.cli.main`` (:mod:`input_fuzz.harness`) with its outputs seeded with good files. A case
-passes when it exits 0, or 2 with an ``error:`` line, or reaches the command's long work (stopped
-there: training, MJX, benchmarks, long evaluations); it fails on a traceback (or another exit
-code), exit code 2 without an ``error:`` line, more than 30 s, or a good output changed by a
-failing command or left broken.
+training (:mod:`input_fuzz.corpus`): each file argument is the good file, a generic mutation
+(:mod:`input_fuzz.mutate`: truncated, flipped bytes, deleted keys, values of the wrong type), a
+structure-aware hostile one (:mod:`input_fuzz.hostile`: ``.npz`` members declaring 2^40
+elements, zip bombs of 3 GiB, pickles, wrong dtypes, 3e38/NaN weights; ONNX graphs with a double
+input, the wrong rank, a 2^36-element allocation at run time or NaN outputs; damaged
+``resume.npz``/``env_state.npz``/orbax folders; configs and arm files with wrong types, huge
+numbers, deep nesting; URDFs with names of 255 to 100,000 characters, non-ASCII names, chains of
+500+ joints, huge mesh references), a missing path or another kind's file. Each case runs
+through ``mjx_arm.cli.main`` in a worker (:mod:`input_fuzz.pool`) whose address space is capped.
 
-Run from the repository root: ``python benchmarks/bench_input_fuzz.py --cases 3000``.
+A case passes when it exits 0, or 2 with an ``error:`` line of at most 300 characters, or
+reaches the command's long work (stopped there); it fails on a traceback, exit 2 without an
+error line, an error line over 300 characters (``long``), running out of memory under the cap
+(``memory``), the worker dying (``crash``), more than 30 s, or a good output spoiled.
+
+Run from the repository root: ``python benchmarks/bench_input_fuzz.py --cases 6000``.
 Results: ``benchmarks/results/input_fuzz.{json,md}``.
 """
 
 from __future__ import annotations
 
 import argparse
-import collections
-import itertools
 import statistics
 import sys
 import tempfile
@@ -32,34 +35,29 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.common import environment_metadata, markdown_table, save_results
 
 NAME = "input_fuzz"
-COLUMNS = ("cases", "ok", "named", "work", "traceback", "unnamed", "hang", "lost")
-HEADERS = ("command", "cases", "exit 0", "named errors", "work reached", "tracebacks",
-           "unnamed", "hangs > 30 s", "outputs lost", "median ms", "max s")  # fmt: skip
+STATUS_HEADERS = {
+    "ok": "exit 0",
+    "named": "named errors",
+    "work": "work reached",
+    "traceback": "tracebacks",
+    "unnamed": "unnamed",
+    "hang": "hangs > 30 s",
+    "lost": "outputs lost",
+    "long": "error lines > 300",
+    "memory": "out of memory",
+    "crash": "worker crashed",
+}
+MAX_EXAMPLES = 20
 
 
-def table_rows(counts: dict, seconds: dict[str, list[float]]) -> list[list[str]]:
-    """One row per command, then ``all``."""
-    rows = []
-    for command, row in counts.items():
-        cells = [str(int(row[c])) for c in COLUMNS]
-        median = 1e3 * statistics.median(seconds[command])
-        name = f"**{command}**" if command == "all" else command
-        rows.append([name, *cells, f"{median:.0f}", f"{row['max_s']:.2f}"])
-    return rows
-
-
-def run(count: int, seed: int, folder: Path, log) -> tuple[list, collections.Counter]:
-    """Generate and run ``count`` cases; the outcomes and the file slots' kinds and modes."""
+def generate(count: int, seed: int) -> list:
+    """``count`` cases drawn by Hypothesis (seeded: the same list each run)."""
     from hypothesis import HealthCheck, Phase, given, settings
     from hypothesis import seed as hypothesis_seed
 
-    from input_fuzz.cases import In, cases
-    from input_fuzz.corpus import build
-    from input_fuzz.harness import GOOD, run_case
+    from input_fuzz.cases import cases
 
-    corpus = build(folder / "corpus")
-    outcomes, files = [], collections.Counter()
-    counter = itertools.count()
+    drawn: list = []
 
     @hypothesis_seed(seed)
     @settings(
@@ -70,70 +68,155 @@ def run(count: int, seed: int, folder: Path, log) -> tuple[list, collections.Cou
         suppress_health_check=list(HealthCheck),
     )
     @given(case=cases())
-    def one(case) -> None:
-        files.update(f"{t.kind} {t.mode}" for t in case.argv if isinstance(t, In))
-        outcome = run_case(case, corpus, folder / f"case{next(counter)}")
-        outcomes.append(outcome)
-        if outcome.status not in GOOD:
-            log(f"{outcome.status}: mjx-arm {' '.join(outcome.argv)}\n{outcome.detail}")
-        if len(outcomes) % 250 == 0:
-            log(f"{len(outcomes)} cases")
+    def draw(case) -> None:
+        drawn.append(case)
 
-    one()
-    return outcomes, files
+    draw()
+    return drawn
 
 
-def examples(outcomes, per_command: int = 3) -> dict[str, list[dict]]:
-    """The first named errors of each command: what the user reads."""
-    found: dict[str, list[dict]] = {}
+def run(args, folder: Path, log) -> tuple[list, dict]:
+    """Run the generated cases in the pool; the outcomes and the pool's figures."""
+    from input_fuzz.corpus import build
+    from input_fuzz.harness import GOOD
+    from input_fuzz.pool import Pool
+
+    drawn = generate(args.cases, args.seed)
+    corpus = build(folder / "corpus")
+    outcomes = []
+    stop = time.perf_counter() + (args.budget or float("inf"))
+    jobs = (
+        (case, folder / f"case{i}")
+        for i, case in enumerate(drawn)
+        if time.perf_counter() < stop  # past the budget: the rest is not run (and reported)
+    )
+    with Pool(corpus, args.workers) as pool:
+        for outcome in pool.run(jobs):
+            outcomes.append(outcome)
+            if outcome.status not in GOOD:
+                log(f"{outcome.status}: mjx-arm {' '.join(outcome.argv)}\n{outcome.detail[-600:]}")
+            if len(outcomes) % 250 == 0:
+                log(f"{len(outcomes)} cases")
+    figures = {"workers": args.workers, "worker_restarts": pool.restarts}
+    return outcomes, {**figures, "cap_bytes": pool.cap, "cap_limit": pool.limit}
+
+
+def file_kinds(outcome) -> list[str]:
+    """Rows of the per-file-kind table a case counts in: each input's kind and mode."""
+    return [" ".join(label.split()[:2]) for label in outcome.inputs]
+
+
+def hostile_kinds(outcome) -> list[str]:
+    """Rows of the per-mutation table: each hostile input's kind and mutation."""
+    parts = [label.split() for label in outcome.inputs]
+    return [" ".join([p[0], *p[2:]]) for p in parts if len(p) > 2 and p[1] == "hostile"]
+
+
+def table(rows: dict, outcomes: list, key, first: str) -> str:
+    """A markdown table of ``rows`` (:func:`input_fuzz.harness.tally`) with the median and max
+    peak RSS of the outcomes each row counts."""
+    rss: dict[str, list[float]] = {}
     for o in outcomes:
-        picked = found.setdefault(o.command, [])
-        if o.status == "named" and len(picked) < per_command:
-            picked.append({"argv": o.argv, "error": o.detail})
-    return found
+        for name in [*dict.fromkeys(key(o)), "all"]:
+            rss.setdefault(name, []).append(o.peak_rss_mb)
+    headers = (first, "cases", *STATUS_HEADERS.values(), "longest error", "max s", "RSS MB med/max")
+    lines = []
+    for name, row in rows.items():
+        cells = [str(int(row[c])) for c in ("cases", *STATUS_HEADERS)]
+        memory = f"{statistics.median(rss[name]):.0f}/{row['max_rss_mb']:.0f}"
+        label = f"**{name}**" if name == "all" else name
+        lines.append([label, *cells, str(row["longest_error"]), f"{row['max_s']:.2f}", memory])
+    return markdown_table(headers, lines)
+
+
+def longest_errors(outcomes: list) -> dict[str, dict]:
+    """Per command: the longest ``error:`` line (its length, the first 400 characters)."""
+    found: dict[str, dict] = {}
+    for o in outcomes:
+        best = found.get(o.command, {"chars": -1})
+        if o.error_chars > best["chars"]:
+            found[o.command] = {"chars": o.error_chars, "line": o.error_line, "argv": o.argv}
+    return dict(sorted(found.items()))
+
+
+def failures(outcomes: list) -> list[dict]:
+    """At most :data:`MAX_EXAMPLES` failing cases, spread over the statuses."""
+    from input_fuzz.harness import GOOD
+
+    bad = [o for o in outcomes if o.status not in GOOD]
+    picked, seen = [], {}
+    for o in bad:
+        if seen.get(o.status, 0) < MAX_EXAMPLES // 4 and len(picked) < MAX_EXAMPLES:
+            seen[o.status] = seen.get(o.status, 0) + 1
+            picked.append({
+                "status": o.status,
+                "argv": o.argv,
+                "inputs": o.inputs,
+                "detail": o.detail[-500:],
+            })  # fmt: skip
+    return picked
+
+
+def summary_text(total: dict, wall: float, figures: dict, outcomes: list) -> str:
+    rss = [o.peak_rss_mb for o in outcomes]
+    vm = max(o.peak_vm_mb for o in outcomes)
+    counts = ", ".join(f"{int(total[s])} {STATUS_HEADERS[s]}" for s in STATUS_HEADERS)
+    return (
+        f"{int(total['cases'])} cases in {wall:.0f} s on {figures['workers']} workers "
+        f"({figures['worker_restarts']} restarted): {counts}. Each worker's "
+        f"{figures['cap_limit']} capped at {figures['cap_bytes'] / 2**30:.0f} GiB (peak address "
+        f"space seen {vm / 1024:.2f} GiB); peak RSS per case median {statistics.median(rss):.0f}"
+        f" MB, max {max(rss):.0f} MB; longest error line {int(total['longest_error'])} "
+        "characters."
+    )
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--cases", type=int, default=3000)
+    parser.add_argument("--cases", type=int, default=6000)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--budget", type=float, default=None, help="seconds; stop then")
     parser.add_argument("--name", default=NAME)
     parser.add_argument("--results-dir", type=Path, default=None)
     args = parser.parse_args()
 
-    from input_fuzz.harness import HANG_SECONDS, tally
+    from input_fuzz.harness import tally
 
     start = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="input_fuzz_") as folder:
-        outcomes, files = run(args.cases, args.seed, Path(folder), lambda t: print(t, flush=True))
+        outcomes, figures = run(args, Path(folder), lambda t: print(t, flush=True))
     wall = time.perf_counter() - start
-    counts = tally(outcomes)
-    seconds = collections.defaultdict(list)
-    for o in outcomes:
-        seconds[o.command].append(o.seconds)
-        seconds["all"].append(o.seconds)
-    table = markdown_table(HEADERS, table_rows(counts, seconds))
-    total = counts["all"]
-    summary = (
-        f"{int(total['cases'])} inputs in {wall:.0f} s: {int(total['traceback'])} tracebacks, "
-        f"{int(total['hang'])} hangs over {HANG_SECONDS:.0f} s, {int(total['lost'])} good "
-        f"outputs lost, {int(total['unnamed'])} exit-2 without an error line"
-    )
-    print(table)
-    print(summary)
+    by_command, by_kind = tally(outcomes), tally(outcomes, file_kinds)
+    by_hostile = tally(outcomes, hostile_kinds)
+    summary = summary_text(by_command["all"], wall, figures, outcomes)
+    text = "\n\n".join([
+        "## Per command\n\n" + table(by_command, outcomes, lambda o: [o.command], "command"),
+        "## Per input file (kind, how made)\n\n" + table(by_kind, outcomes, file_kinds, "input"),
+        "## Per hostile mutation\n\n" + table(by_hostile, outcomes, hostile_kinds, "mutation"),
+        summary,
+    ])  # fmt: skip
+    print(text)
     payload = {
         "meta": environment_metadata(),
-        "cases": args.cases,
+        "cases": len(outcomes),
+        "cases_asked": args.cases,
         "seed": args.seed,
-        "hang_seconds": HANG_SECONDS,
         "wall_seconds": wall,
+        **figures,
         "summary": summary,
-        "by_command": counts,
-        "file_arguments": dict(sorted(files.items())),
-        "failures": [vars(o) for o in outcomes if o.status not in ("ok", "named", "work")],
-        "named_error_examples": examples(outcomes),
+        "peak_rss_mb": {
+            "median": statistics.median(o.peak_rss_mb for o in outcomes),
+            "max": max(o.peak_rss_mb for o in outcomes),
+        },
+        "peak_address_space_mb": max(o.peak_vm_mb for o in outcomes),
+        "by_command": by_command,
+        "by_input": by_kind,
+        "by_hostile_mutation": by_hostile,
+        "longest_error_line": longest_errors(outcomes),
+        "failures": failures(outcomes),
     }
-    save_results(args.name, payload, f"{table.rstrip()}\n\n{summary}\n", args.results_dir)
+    save_results(args.name, payload, text + "\n", args.results_dir)
 
 
 if __name__ == "__main__":

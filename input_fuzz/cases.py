@@ -17,9 +17,10 @@ from hypothesis import strategies as st
 
 from mjx_arm.names import EVAL_ENGINES, IMPLS, PARITY_ENGINES, PRESET_NAMES, TASKS
 
-# How an input slot is filled: the good file, a mutation of it, no file, another kind's file.
-MODES = ("good", "mutated", "mutated", "missing", "other")
-FILE_KINDS = ("urdf", "arm_file", "config", "policy", "onnx", "trajectory", "run_dir")
+# How an input slot is filled: the good file, a generic mutation of it, a structure-aware
+# hostile one (:mod:`input_fuzz.hostile`), no file, another kind's file.
+MODES = ("good", "mutated", "hostile", "hostile", "missing", "other")
+FILE_KINDS = ("urdf", "arm_file", "arm_json", "config", "policy", "onnx", "trajectory", "run_dir")
 
 
 @dataclass(frozen=True)
@@ -119,7 +120,7 @@ def settings_items(keys: tuple[str, ...]) -> st.SearchStrategy[list[str]]:
 
 # --------------------------------------------------------------------------- commands
 
-ARMS = infile("urdf", "arm_file")
+ARMS = infile("urdf", "arm_file", "arm_json")
 POLICIES = infile("policy", "policy", "onnx", "run_dir")
 LINKS = st.sampled_from(["wrist_3_link", "tool0", "base_link", "no_link", ""])
 TRAIN_KEYS = (

@@ -12,6 +12,7 @@ from __future__ import annotations
 import itertools
 import json
 import shutil
+import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -39,6 +40,7 @@ class Corpus:
     folder: Path
     urdf: Path
     arm_file: Path
+    arm_json: Path
     config: Path
     run_dir: Path
     policy: Path
@@ -50,6 +52,7 @@ class Corpus:
         kinds = {
             "urdf": self.urdf,
             "arm_file": self.arm_file,
+            "arm_json": self.arm_json,
             "config": self.config,
             "policy": self.policy,
             "trajectory": self.trajectory,
@@ -69,13 +72,15 @@ def build(folder: Path) -> Corpus:
     arm = _arm()
     arm_file = folder / "arm.toml"
     arm_file.write_text(arm_file_text(arm).replace(str(arm.urdf), str(urdf.resolve())))
+    arm_json = folder / "arm.json"
+    arm_json.write_text(json.dumps(tomllib.loads(arm_file.read_text()), indent=2))
     config = folder / "train.json"
     config.write_text(json.dumps(TRAIN_SETTINGS, indent=2))
     run_dir = write_run(folder / "run", arm)
     policy = export_run(run_dir, folder / "policy.npz")
     onnx = export_run(run_dir, folder / "policy.onnx") if _have_onnx() else None
     trajectory = write_trajectory(folder / "trajectory.npz", arm)
-    return Corpus(folder, urdf, arm_file, config, run_dir, policy, onnx, trajectory)
+    return Corpus(folder, urdf, arm_file, arm_json, config, run_dir, policy, onnx, trajectory)
 
 
 def _arm():

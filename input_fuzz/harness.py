@@ -13,7 +13,11 @@ stderr captured and the folder as the working directory, and checks:
 - ``unnamed``: exit code 2 without an ``error:`` line;
 - ``hang``: the case took more than :data:`HANG_SECONDS`;
 - ``lost``: a good output (a seeded file, a run directory's checkpoint or config) was changed by
-  a failing command, or replaced by a broken file.
+  a failing command, or replaced by a broken file;
+- ``long``: an ``error:`` line longer than :data:`MAX_ERROR_CHARS` characters;
+- ``memory``: the case ran out of memory (a ``MemoryError`` or a native allocation failure
+  under the worker's cap, :mod:`input_fuzz.pool`);
+- ``crash``: the worker process running the case died (a signal: a native crash).
 """
 
 from __future__ import annotations
@@ -28,7 +32,7 @@ import signal
 import time
 import traceback
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from unittest import mock
 
@@ -40,7 +44,11 @@ from input_fuzz.mutate import mutate
 
 HANG_SECONDS = 30.0
 ALARM_SECONDS = 120  # a case still running then is stopped (and counted as a hang)
+MAX_ERROR_CHARS = 300
 STATUSES = ("ok", "named", "work", "traceback", "unnamed", "hang", "lost")
+STATUSES += ("long", "memory", "crash")
+# Native allocation failures that onnxruntime and C++ code raise as other exception types.
+MEMORY_TEXTS = ("bad_alloc", "Failed to allocate memory", "Cannot allocate memory")
 GOOD = ("ok", "named", "work")  # the statuses of a passing case
 
 
@@ -54,7 +62,11 @@ class Hang(Exception):
 
 @dataclass
 class Outcome:
-    """What one case did: its status, exit code, seconds, argv and the last stderr line."""
+    """What one case did: its status, exit code, seconds, argv and the last stderr line;
+    ``inputs``: each input slot as ``kind mode[ mutation]``; ``error_line``: the longest
+    ``error:`` line printed (its first 400 characters; ``error_chars``: its length);
+    ``peak_rss_mb``: the worker's peak resident memory during the case, ``peak_vm_mb``: its
+    peak address space so far (both 0 in process)."""
 
     command: str
     status: str
@@ -62,6 +74,11 @@ class Outcome:
     seconds: float
     argv: list[str]
     detail: str
+    inputs: list[str] = field(default_factory=list)
+    error_line: str = ""
+    error_chars: int = 0
+    peak_rss_mb: float = 0.0
+    peak_vm_mb: float = 0.0
 
 
 # --------------------------------------------------------------------------- stubs
@@ -127,25 +144,30 @@ def stubs() -> Iterator[None]:
 GOOD_OUTPUT = {".json": b'{"good": true}\n', ".txt": b"good\n", ".script": b"def good():\nend\n"}
 
 
-def _fill_in(slot: In, corpus: Corpus, folder: Path, index: int) -> Path:
-    """The path of an input slot, made in ``folder``."""
+def _fill_in(slot: In, corpus: Corpus, folder: Path, index: int) -> tuple[Path, str]:
+    """The path of an input slot, made in ``folder``, and what it is (``kind mode[ how]``)."""
     good = corpus.run_dir if slot.kind == "run_dir" else corpus.files().get(slot.kind)
+    label = f"{slot.kind} {slot.mode}"
+    if good is None:  # onnx without the onnx package: another kind's good file
+        good, label = corpus.policy, f"{slot.kind} other"
     name = folder / f"in{index}_{slot.kind}{'' if slot.kind == 'run_dir' else good.suffix}"
     rng = np.random.default_rng(slot.seed)
     if slot.mode == "missing":
-        return name.with_name("missing_" + name.name)
+        return name.with_name("missing_" + name.name), label
     if slot.mode == "other":
         files = list(corpus.files().values())
-        return files[int(rng.integers(len(files)))]
-    if slot.mode == "mutated":
-        kind = "onnx" if slot.kind == "onnx" else slot.kind
-        mutate(kind, good, name, rng)
-        return name
+        return files[int(rng.integers(len(files)))], label
+    if slot.mode in ("mutated", "hostile"):
+        what = mutate(slot.kind, good, name, rng, hostile=slot.mode == "hostile")
+        how, _, rest = what.partition(": ")
+        if how.startswith("hostile_"):  # a dispatcher: its own edit names the mutation
+            how = rest.partition(": ")[0]
+        return name, f"{label} {how}"
     if slot.kind == "run_dir":
         shutil.copytree(good, name)
     else:
         shutil.copy(good, name)
-    return name
+    return name, label
 
 
 def _seed_output(slot: Out, corpus: Corpus, path: Path) -> None:
@@ -164,12 +186,18 @@ def _seed_output(slot: Out, corpus: Corpus, path: Path) -> None:
         path.write_bytes(GOOD_OUTPUT.get(slot.suffix, b"good output\n"))
 
 
-def materialise(case: Case, corpus: Corpus, folder: Path) -> tuple[list[str], dict[Path, Out]]:
-    """The argv of ``case`` with its files made in ``folder``; and its output paths."""
+def materialise(
+    case: Case, corpus: Corpus, folder: Path, inputs: list[str] | None = None
+) -> tuple[list[str], dict[Path, Out]]:
+    """The argv of ``case`` with its files made in ``folder``; and its output paths. Each input
+    slot's ``kind mode[ how]`` is appended to ``inputs``."""
     argv, outputs = [], {}
     for i, token in enumerate(case.argv):
         if isinstance(token, In):
-            argv.append(str(_fill_in(token, corpus, folder, i)))
+            path, label = _fill_in(token, corpus, folder, i)
+            argv.append(str(path))
+            if inputs is not None:
+                inputs.append(label)
         elif isinstance(token, Out):
             path = folder / f"out{i}{token.suffix}"
             _seed_output(token, corpus, path)
@@ -183,16 +211,35 @@ def materialise(case: Case, corpus: Corpus, folder: Path) -> tuple[list[str], di
 # --------------------------------------------------------------------------- good outputs
 
 
+DIGEST_BYTES = 64 * 2**20  # a larger file (a hostile sparse one) is known by its size
+
+
+def _hash(path: Path) -> str:
+    """SHA-256 of a file read in chunks; its size alone over :data:`DIGEST_BYTES`, and its
+    target for a link (to /dev/zero, say)."""
+    if path.is_symlink():
+        return f"link to {os.readlink(path)}"
+    size = path.stat().st_size
+    if size > DIGEST_BYTES:
+        return f"{size} bytes"
+    digest = hashlib.sha256()
+    with path.open("rb") as f:
+        while chunk := f.read(2**20):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
 def _digest(path: Path) -> dict[str, str]:
-    """Relative path -> SHA-256 of every file at or under ``path`` (the lock file left out)."""
+    """Relative path -> :func:`_hash` of every file at or under ``path`` (the lock file left
+    out)."""
     if path.is_file():
-        return {"": hashlib.sha256(path.read_bytes()).hexdigest()}
+        return {"": _hash(path)}
     if not path.is_dir():
         return {}
     return {
-        str(p.relative_to(path)): hashlib.sha256(p.read_bytes()).hexdigest()
+        str(p.relative_to(path)): _hash(p)
         for p in sorted(path.rglob("*"))
-        if p.is_file() and p.name != ".lock"
+        if (p.is_file() or p.is_symlink()) and p.name != ".lock"
     }
 
 
@@ -247,6 +294,13 @@ def valid_output(path: Path) -> bool:
     return True
 
 
+def _changed(path: Path, digest: dict[str, str]) -> bool:
+    """Whether a file that was there (of ``digest``) is changed or gone: a new file beside
+    them (an error report in an output folder) spoils nothing."""
+    now = _digest(path)
+    return any(now.get(k) != v for k, v in digest.items()) or (not digest and bool(now))
+
+
 def lost_outputs(before: dict[Path, tuple[bool, dict]], failed: bool) -> list[str]:
     """Good outputs a case spoiled: changed by a failing command, or left broken; a run
     directory's config or newest usable checkpoint changed."""
@@ -256,7 +310,7 @@ def lost_outputs(before: dict[Path, tuple[bool, dict]], failed: bool) -> list[st
             now = _run_dir_state(path)
             if any(now.get(k) != v for k, v in digest.items()):
                 lost.append(f"{path.name}: checkpoint or config changed")
-        elif _digest(path) != digest and (failed or not valid_output(path)):
+        elif _changed(path, digest) and (failed or not valid_output(path)):
             lost.append(f"{path.name}: {'changed by a failing command' if failed else 'broken'}")
     return lost
 
@@ -299,6 +353,11 @@ def _alarm(*_args) -> None:
     raise Hang
 
 
+def error_lines(text: str) -> list[str]:
+    """The ``error:`` lines of a command's stderr (ours, or argparse's ``prog: error:``)."""
+    return [line for line in text.splitlines() if line.startswith("error:") or ": error:" in line]
+
+
 def _call_main(argv: list[str], err: io.StringIO) -> tuple[str, int | None, str]:
     """(status, exit code, detail) of ``mjx_arm.cli.main(argv)``."""
     from mjx_arm.cli import main
@@ -313,13 +372,16 @@ def _call_main(argv: list[str], err: io.StringIO) -> tuple[str, int | None, str]
         return "work", None, ""
     except Hang:
         return "hang", None, f"stopped after {ALARM_SECONDS} s"
-    except Exception:  # a bug: what the fuzz looks for
-        return "traceback", None, traceback.format_exc()[-3000:]
+    except MemoryError:
+        return "memory", None, traceback.format_exc()[-3000:]
+    except Exception as exc:  # a bug: what the fuzz looks for
+        memory = any(text in str(exc) for text in MEMORY_TEXTS)
+        return ("memory" if memory else "traceback"), None, traceback.format_exc()[-3000:]
     finally:
         signal.alarm(0)
         signal.signal(signal.SIGALRM, previous)
     lines = [line for line in err.getvalue().splitlines() if line.strip()]
-    named = any(line.startswith("error:") or ": error:" in line for line in lines)
+    named = bool(error_lines(err.getvalue()))
     last = lines[-1] if lines else ""
     if code == 0:
         return "ok", code, last
@@ -331,7 +393,8 @@ def _call_main(argv: list[str], err: io.StringIO) -> tuple[str, int | None, str]
 def run_case(case: Case, corpus: Corpus, folder: Path) -> Outcome:
     """Make the case's files in ``folder`` (created), run it and judge it."""
     folder.mkdir(parents=True, exist_ok=True)
-    argv, outputs = materialise(case, corpus, folder)
+    inputs: list[str] = []
+    argv, outputs = materialise(case, corpus, folder, inputs)
     before = snapshot(argv, outputs)
     out, err = io.StringIO(), io.StringIO()
     cwd = os.getcwd()
@@ -349,22 +412,32 @@ def run_case(case: Case, corpus: Corpus, folder: Path) -> Outcome:
     finally:
         os.chdir(cwd)
     seconds = time.perf_counter() - start
+    longest = max(error_lines(err.getvalue()), key=len, default="")
     if seconds > HANG_SECONDS:
         status = "hang"
     elif status in GOOD:
         lost = lost_outputs(before, failed=code not in (0, None))
         if lost:
             status, detail = "lost", "; ".join(lost)
-    return Outcome(case.command, status, code, seconds, argv, detail)
+        elif len(longest) > MAX_ERROR_CHARS:
+            status, detail = "long", f"{len(longest)} characters: {longest[:400]}"
+    outcome = Outcome(case.command, status, code, seconds, argv, detail, inputs, longest[:400])
+    outcome.error_chars = len(longest)
+    return outcome
 
 
-def tally(outcomes: list[Outcome]) -> dict[str, dict[str, float]]:
-    """Per command (and ``all``): cases, each status's count and the largest seconds."""
+def tally(outcomes: list[Outcome], key=lambda o: [o.command]) -> dict[str, dict[str, float]]:
+    """Per ``key(outcome)`` (a list of row names; default: its command) and ``all``: cases,
+    each status's count, the largest seconds and peak RSS (MB), and the longest error line's
+    characters."""
     rows: dict[str, dict[str, float]] = {}
+    empty = {"cases": 0, **dict.fromkeys(STATUSES, 0), "max_s": 0.0, "max_rss_mb": 0.0}
     for o in outcomes:
-        for key in (o.command, "all"):
-            row = rows.setdefault(key, {"cases": 0, **dict.fromkeys(STATUSES, 0), "max_s": 0.0})
+        for name in [*dict.fromkeys(key(o)), "all"]:
+            row = rows.setdefault(name, {**empty, "longest_error": 0})
             row["cases"] += 1
             row[o.status] += 1
             row["max_s"] = max(row["max_s"], o.seconds)
+            row["max_rss_mb"] = max(row["max_rss_mb"], o.peak_rss_mb)
+            row["longest_error"] = max(row["longest_error"], o.error_chars)
     return dict(sorted(rows.items(), key=lambda kv: (kv[0] == "all", kv[0])))

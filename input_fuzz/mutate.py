@@ -301,9 +301,35 @@ MUTATIONS: dict[str, tuple[Mutation, ...]] = {
     "trajectory": (*BYTE_MUTATIONS, mutate_npz_arrays, mutate_npz_arrays, mutate_npz_metadata),
     "run_dir": (mutate_run_dir,),
 }
+MUTATIONS["arm_json"] = (*BYTE_MUTATIONS, mutate_json, mutate_json, mutate_json)
 
 
-def mutate(kind: str, good: Path, out: Path, rng: np.random.Generator) -> str:
-    """Write a mutation of the good ``kind`` file ``good`` to ``out``; what was changed."""
-    mutation = pick(rng, MUTATIONS[kind])
+def _hostile() -> dict[str, tuple[Mutation, ...]]:
+    """The structure-aware mutations of each kind (:mod:`input_fuzz.hostile` and the modules
+    it names); ONNX ones need the onnx package."""
+    from input_fuzz import hostile
+    from input_fuzz.hostile_npz import NPZ_MUTATIONS
+
+    found = {
+        "urdf": (hostile.hostile_urdf,),
+        "arm_file": (hostile.hostile_toml,),
+        "arm_json": (hostile.hostile_json,),
+        "config": (hostile.hostile_json,),
+        "policy": NPZ_MUTATIONS,
+        "trajectory": NPZ_MUTATIONS,
+        "run_dir": (hostile.hostile_run_dir,),
+    }
+    try:
+        from input_fuzz.hostile_onnx import ONNX_MUTATIONS
+    except ImportError:  # pragma: no cover - onnx is a test dependency
+        return found
+    return {**found, "onnx": (*ONNX_MUTATIONS, truncate, flip_bytes)}
+
+
+def mutate(
+    kind: str, good: Path, out: Path, rng: np.random.Generator, hostile: bool = False
+) -> str:
+    """Write a mutation of the good ``kind`` file ``good`` to ``out``: a generic one, or with
+    ``hostile`` a structure-aware one (:mod:`input_fuzz.hostile`); ``name: what was changed``."""
+    mutation = pick(rng, _hostile()[kind] if hostile else MUTATIONS[kind])
     return f"{mutation.__name__}: {mutation(good, out, rng)}"

@@ -1,0 +1,217 @@
+"""Run cases in worker processes under a memory cap, so that a native crash or a memory bomb
+costs one worker, never the caller or the machine.
+
+Each worker (started by ``spawn``: no JAX state forked) sets ``resource.setrlimit`` on its
+address space (:data:`CAP_BYTES`, :data:`CAP_LIMIT`) before it imports anything, builds nothing
+(the caller's :class:`~input_fuzz.corpus.Corpus` is passed in), and runs cases with
+:func:`input_fuzz.harness.run_case`. Before each case it resets the kernel's peak-RSS mark
+(``/proc/self/clear_refs``), after it reads ``VmHWM``: the case's own peak resident memory.
+
+A worker that dies during a case (a signal, or an exit) makes that case ``crash`` (``memory``
+when the kernel killed it, SIGKILL) and is replaced; one that runs past :data:`KILL_SECONDS`
+is killed and its case is a ``hang``.
+
+The cap was chosen by measurement (benchmarks/bench_input_fuzz.py reports it with each case's
+peak RSS): a worker that has imported ``mjx_arm.cli`` and run every command maps about 2.2 GB
+of address space (JAX, XLA, MuJoCo, PyBullet, onnxruntime and their thread stacks) and a
+normal case's peak RSS stays under 0.5 GB; 4 GiB leaves room for the largest policy the
+readers accept (512 MiB) and stops any 3 GiB allocation.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import multiprocessing
+import resource
+import signal
+import time
+from collections.abc import Iterable, Iterator
+from multiprocessing.connection import wait
+from pathlib import Path
+
+from input_fuzz.cases import Case
+from input_fuzz.corpus import Corpus
+from input_fuzz.harness import ALARM_SECONDS, Outcome
+
+CAP_BYTES = 4 * 2**30
+CAP_LIMIT = "RLIMIT_AS"
+KILL_SECONDS = ALARM_SECONDS + 30  # the harness's own alarm comes first
+
+
+def set_cap(cap: int = CAP_BYTES, limit: str = CAP_LIMIT) -> None:
+    """Cap this process's address space (or data segment) at ``cap`` bytes."""
+    which = getattr(resource, limit)
+    resource.setrlimit(which, (cap, cap))
+
+
+def reset_peak_rss() -> None:
+    """Reset the kernel's peak-RSS mark of this process (``VmHWM``)."""
+    with open("/proc/self/clear_refs", "w") as f:
+        f.write("5")
+
+
+def memory_mb(field: str = "VmHWM") -> float:
+    """A memory figure of this process from ``/proc/self/status``, in MB: ``VmHWM`` (peak
+    resident memory since the last :func:`reset_peak_rss`) or ``VmPeak`` (peak address space)."""
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith(f"{field}:"):
+                return int(line.split()[1]) / 1024
+    return 0.0
+
+
+def probe(case: Case, corpus: Corpus, folder: Path) -> Outcome:
+    """A runner that checks the pool itself (tests/test_input_fuzz.py): ``case.command``
+    "segfault" kills the worker by SIGSEGV, "allocate" asks for ``case.argv[0]`` bytes (a
+    MemoryError under the cap: ``memory``), anything else is ``ok``."""
+    start = time.perf_counter()
+    status = "ok"
+    if case.command == "segfault":
+        import ctypes
+
+        ctypes.string_at(0)
+    elif case.command == "allocate":
+        try:
+            bytearray(int(case.argv[0]))
+        except MemoryError:
+            status = "memory"
+    return Outcome(case.command, status, 0, time.perf_counter() - start, [], "")
+
+
+def _serve(conn, corpus: Corpus, cap: int, limit: str, runner) -> None:
+    """A worker's loop: ``(case, folder)`` in, :class:`Outcome` out; None ends it."""
+    set_cap(cap, limit)
+    import mjx_arm.cli  # noqa: F401  (imported once, before the first case is timed)
+    from input_fuzz.harness import run_case
+
+    runner = runner or run_case
+    conn.send("ready")
+    while (job := conn.recv()) is not None:
+        case, folder = job
+        reset_peak_rss()
+        outcome = runner(case, corpus, folder)
+        outcome.peak_rss_mb, outcome.peak_vm_mb = memory_mb("VmHWM"), memory_mb("VmPeak")
+        conn.send(outcome)
+
+
+class _Worker:
+    """One worker process and the case it runs (``job``, started at ``since``)."""
+
+    def __init__(self, corpus: Corpus, cap: int, limit: str, runner=None):
+        context = multiprocessing.get_context("spawn")
+        self.conn, child = context.Pipe()
+        args = (child, corpus, cap, limit, runner)
+        self.process = context.Process(target=_serve, args=args, daemon=True)
+        self.process.start()
+        child.close()
+        self.conn.recv()  # "ready": imports done
+        self.job: tuple[Case, Path] | None = None
+        self.since = 0.0
+
+    def start(self, job: tuple[Case, Path]) -> None:
+        self.job, self.since = job, time.perf_counter()
+        self.conn.send(job)
+
+    def stop(self) -> None:
+        with contextlib.suppress(OSError):
+            self.conn.send(None)
+        self.process.join(5)
+        if self.process.is_alive():
+            self.process.kill()
+            self.process.join()
+
+
+def _lost(job: tuple[Case, Path], seconds: float, status: str, detail: str) -> Outcome:
+    case, _ = job
+    argv = [str(t) for t in case.argv]
+    return Outcome(case.command, status, None, seconds, argv, detail)
+
+
+class Pool:
+    """``workers`` worker processes under a memory cap (see the module docstring).
+
+    Args:
+        corpus: the good inputs, built by the caller.
+        workers: how many cases run at once (1 or 2 on a small machine).
+        cap: the cap in bytes on each worker's ``limit`` (``RLIMIT_AS`` or ``RLIMIT_DATA``).
+        runner: what runs a case in a worker, ``(case, corpus, folder) -> Outcome`` (a
+            module-level function; None: :func:`input_fuzz.harness.run_case`).
+    """
+
+    def __init__(
+        self,
+        corpus: Corpus,
+        workers: int = 2,
+        cap: int = CAP_BYTES,
+        limit: str = CAP_LIMIT,
+        runner=None,
+    ):
+        self.corpus, self.cap, self.limit, self.runner = corpus, cap, limit, runner
+        self.workers = [self._start() for _ in range(workers)]
+        self.restarts = 0
+
+    def _start(self) -> _Worker:
+        return _Worker(self.corpus, self.cap, self.limit, self.runner)
+
+    def __enter__(self) -> Pool:
+        return self
+
+    def __exit__(self, *_exc) -> None:
+        for worker in self.workers:
+            worker.stop()
+
+    def run(self, jobs: Iterable[tuple[Case, Path]]) -> Iterator[Outcome]:
+        """The outcome of every ``(case, folder)`` job, in the order they finish."""
+        pending = iter(jobs)
+        idle = list(range(len(self.workers)))
+        busy: dict[int, _Worker] = {}
+        while True:
+            while idle and (job := next(pending, None)) is not None:
+                i = idle.pop()
+                self.workers[i].start(job)
+                busy[i] = self.workers[i]
+            if not busy:
+                return
+            yield from self._collect(busy, idle)
+
+    def _collect(self, busy: dict[int, _Worker], idle: list[int]) -> Iterator[Outcome]:
+        """Wait for a worker to answer, die or run out of time; free it (or replace it)."""
+        waitables = {w.conn: i for i, w in busy.items()}
+        waitables.update({w.process.sentinel: i for i, w in busy.items()})
+        ready = wait(list(waitables), timeout=1.0)
+        now = time.perf_counter()
+        for i, worker in list(busy.items()):
+            answered = worker.conn in ready and worker.conn.poll()
+            outcome = self._answer(worker) if answered else None
+            if outcome is None and worker.process.is_alive():
+                if now - worker.since < KILL_SECONDS:
+                    continue
+                worker.process.kill()
+                worker.process.join()
+                outcome = _lost(worker.job, now - worker.since, "hang", "worker killed")
+            elif outcome is None:
+                outcome = self._died(worker, now)
+            if not worker.process.is_alive():
+                self.workers[i] = self._start()
+                self.restarts += 1
+            del busy[i]
+            idle.append(i)
+            yield outcome
+
+    @staticmethod
+    def _answer(worker: _Worker) -> Outcome | None:
+        try:
+            return worker.conn.recv()
+        except (EOFError, OSError):
+            return None
+
+    @staticmethod
+    def _died(worker: _Worker, now: float) -> Outcome:
+        worker.process.join()
+        code = worker.process.exitcode or 0
+        if code < 0:
+            name = signal.Signals(-code).name
+            status = "memory" if -code == signal.SIGKILL else "crash"
+            return _lost(worker.job, now - worker.since, status, f"worker killed by {name}")
+        detail = f"worker exited with code {code}"
+        return _lost(worker.job, now - worker.since, "crash", detail)
