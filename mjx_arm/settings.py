@@ -85,9 +85,9 @@ def set_path(
 ) -> Any:
     """A copy of the dataclass ``config`` with the field at ``path`` set from ``text``.
 
-    ``group`` is the dotted path of ``config`` inside the outer config (for messages: an
-    unknown field is named by its whole path, ``physics.timestepp``, with the closest known
-    field of its own group as a suggestion).
+    ``group`` is the dotted path of ``config`` inside the outer config, ending in ``.``: an
+    unknown field's message names its group, with the closest known field of that group as a
+    suggestion (``'impll' (did you mean 'impl'?) in 'physics'``).
 
     Raises:
         ConfigError: an unknown field (the message lists the known ones), a group set as a
@@ -95,9 +95,11 @@ def set_path(
     """
     hints = field_types(type(config))
     if path[0] not in hints:
-        name, known = group + path[0], [group + field for field in sorted(hints)]
-        hint = did_you_mean(name, known)
-        raise ConfigError(f"unknown {label} {name!r}{hint}; choose one of {known}")
+        where = f" in {group.rstrip('.')!r}" if group else ""
+        hint = did_you_mean(path[0], hints)
+        raise ConfigError(
+            f"unknown {label} {path[0]!r}{hint}{where}; choose one of {sorted(hints)}"
+        )
     current = getattr(config, path[0])
     if dataclasses.is_dataclass(current):
         if len(path) == 1:

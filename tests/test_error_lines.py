@@ -97,7 +97,7 @@ def test_a_mistyped_setting_is_named_with_its_likely_meaning(capsys):
     line = _one_error_line(["train", "--set", "num_env=64"], capsys)
     assert "'num_env'" in line and "did you mean 'num_envs'?" in line
     line = _one_error_line(["train", "--set", "physics.impll=jax"], capsys)
-    assert "did you mean 'physics.impl'?" in line
+    assert "'impll' (did you mean 'impl'?) in 'physics'" in line
 
 
 def test_a_missing_urdf_is_one_error_line(capsys):

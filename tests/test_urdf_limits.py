@@ -21,6 +21,7 @@ from mjx_arm.urdf.findings import (
     MAX_LINKS,
     MAX_MESH_BYTES,
     MAX_MESH_FACES,
+    MAX_MESH_PATH_BYTES,
     MAX_MESH_VERTICES,
 )
 from mjx_arm.urdf.mesh_convert import MeshConvertError, load_mesh
@@ -152,6 +153,46 @@ def test_a_mesh_file_over_the_size_limit_is_refused_before_it_is_read(tmp_path):
     assert mesh_problem(over) == "is 32.0 MiB, above the 32 MiB a mesh file may have"
     (error,) = _static(mesh_urdf(tmp_path / "over.urdf", "over.stl")).errors
     assert "above the 32 MiB a mesh file may have" in error.problem
+
+
+def mesh_at_path_length(root: Path, length: int) -> Path:
+    """A small binary STL whose absolute path has ``length`` bytes, under ``root``."""
+    root = root.resolve()
+    rel = ""
+    while length - len(str(root)) - 1 - len(rel) - 4 > 200:
+        rel += "d" * 150 + "/"
+    rel += "m" * (length - len(str(root)) - 1 - len(rel) - 4) + ".stl"
+    path = root / rel
+    path.parent.mkdir(parents=True, exist_ok=True)
+    binary_stl(path, 4)
+    assert len(str(path)) == length
+    return path
+
+
+def test_a_mesh_path_at_the_limit_passes_one_byte_more_is_an_error_for_pybullet(tmp_path):
+    for length, ok in ((MAX_MESH_PATH_BYTES, True), (MAX_MESH_PATH_BYTES + 1, False)):
+        folder = tmp_path / str(length)
+        mesh = mesh_at_path_length(folder, length)
+        urdf = mesh_urdf(folder / "arm.urdf", str(mesh.relative_to(folder.resolve())))
+        report = _static(urdf, engine="pybullet")
+        assert report.ok == ok, report.format()
+        assert _static(urdf, engine="mujoco").ok  # MuJoCo reads long paths
+    (error,) = report.errors
+    assert f"a path of {MAX_MESH_PATH_BYTES + 1:,} bytes, more than the" in error.problem
+
+
+def test_pybullet_crashes_on_a_mesh_path_of_1032_bytes(tmp_path):
+    """The failure point behind MAX_MESH_PATH_BYTES, in a child process: PyBullet loads a mesh
+    whose absolute path has 1,031 bytes and dies of SIGSEGV at 1,032."""
+    code = "import sys, pybullet as p; p.connect(p.DIRECT); p.loadURDF(sys.argv[1])"
+    codes = []
+    for length in (1031, 1032):
+        folder = tmp_path / str(length)
+        mesh = mesh_at_path_length(folder, length)
+        urdf = mesh_urdf(folder / "arm.urdf", str(mesh.relative_to(folder.resolve())))
+        run = subprocess.run([sys.executable, "-c", code, str(urdf)], capture_output=True)
+        codes.append(run.returncode)
+    assert codes == [0, -11]  # -11: SIGSEGV
 
 
 def test_obj_faces_and_vertices_are_counted_by_their_lines(tmp_path):

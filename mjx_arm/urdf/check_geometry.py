@@ -32,7 +32,7 @@ from mjx_arm.urdf.mesh_convert import (
     mesh_bounds,
     missing_packages,
 )
-from mjx_arm.urdf.mesh_limits import mesh_problem
+from mjx_arm.urdf.mesh_limits import mesh_problem, path_problem
 from mjx_arm.urdf.meshes import (
     MUJOCO_MESH_FORMATS,
     PYBULLET_MESH_FORMATS,
@@ -190,6 +190,15 @@ def _check_mesh(
         )
         return None
     if resolved is None:
+        return None
+    too_long = path_problem(resolved) if "pybullet" in engines else None
+    if too_long:
+        out.error(
+            2,
+            _link(link),
+            f"has <{role}> mesh {filename[-60:]!r}, which {too_long}",
+            "move the meshes to a folder with a shorter path",
+        )
         return None
     too_large = mesh_problem(resolved)
     if too_large:

@@ -40,6 +40,10 @@ MAX_CHAIN_LINKS = 256
 # inside a tag ends the load with XML_ERROR_PARSING_ATTRIBUTE. 8,000 is a round figure below
 # that (a CRLF line ending counts one byte more).
 MAX_LINE_BYTES = 8000
+# Bytes of a mesh file's absolute path that PyBullet is given. PyBullet 3.2 crashes the process
+# (SIGSEGV) loading a URDF whose mesh path has 1,032 or more bytes; 1,031 load (measured with the
+# URDF in folders of 15 and 196 bytes: the same point). MuJoCo reads a mesh path of 3,915 bytes.
+MAX_MESH_PATH_BYTES = 1000
 # Triangles of one mesh file. MuJoCo's STL reader refuses a binary STL of more than 200,000
 # faces ("number of faces should be between 1 and 200000"; 200,000 random faces load in 12 s
 # on a 2-core CPU, mostly for the convex hull). Every format (OBJ, and the meshes trimesh

@@ -12,9 +12,14 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from mjx_arm.urdf.findings import MAX_MESH_BYTES, MAX_MESH_FACES, MAX_MESH_VERTICES
+from mjx_arm.urdf.findings import (
+    MAX_MESH_BYTES,
+    MAX_MESH_FACES,
+    MAX_MESH_PATH_BYTES,
+    MAX_MESH_VERTICES,
+)
 
-__all__ = ["count_problem", "mesh_problem"]
+__all__ = ["count_problem", "mesh_problem", "path_problem"]
 
 _OBJ_FACE = re.compile(rb"^[ \t]*f[ \t]", re.MULTILINE)
 _OBJ_VERTEX = re.compile(rb"^[ \t]*v[ \t]", re.MULTILINE)
@@ -42,6 +47,17 @@ def mesh_problem(path: Path) -> str | None:
             return count_problem(len(_OBJ_FACE.findall(data)), len(_OBJ_VERTEX.findall(data)))
     except OSError:
         return None
+    return None
+
+
+def path_problem(path: Path) -> str | None:
+    """What makes the absolute ``path`` of a mesh too long for PyBullet, or None."""
+    size = len(str(path).encode("utf-8", "surrogateescape"))
+    if size > MAX_MESH_PATH_BYTES:
+        return (
+            f"resolves to a path of {size:,} bytes, more than the {MAX_MESH_PATH_BYTES:,} "
+            "PyBullet reads (it crashes on longer ones)"
+        )
     return None
 
 
