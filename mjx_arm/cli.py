@@ -4,17 +4,18 @@ module assembles them and owns ``demo``, the whole product in one command.
 Every bad input ends the same way, here in :func:`main`: a named error
 (:class:`~mjx_arm.inputs.InputError`, or a policy file's
 :class:`~mjx_arm.policy.PolicyFileError`) becomes one ``error:`` line on stderr and exit code
-:data:`~mjx_arm.names.EXIT_INVALID` (2); argparse reports bad arguments with the same code. Any
-other exception is a bug: its traceback shows and the exit code is 1. An argparse error is one
-line too (:class:`OneLineParser`), and a line that would be longer than 300
-characters is shortened, the whole text going to an error-report file it names
-(:func:`report_folders` says where).
+:data:`~mjx_arm.names.EXIT_INVALID` (2). Bad arguments are one such line too, from
+:class:`OneLineParser`. No line is longer than :data:`MAX_LINE_CHARS` (300): a longer message
+is shortened, cause first and fix kept, and its whole text goes to an error-report file that the
+line names (:func:`report_folders` says where). Any other exception is a bug: its traceback
+shows and the exit code is 1.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import shlex
 import sys
 import tempfile
 import time
@@ -43,6 +44,8 @@ _FIX_CHARS = 110
 # Attributes of a command's arguments that name the folder it writes into: its error reports go
 # there when the folder exists.
 _OUT_FOLDERS = ("out", "run", "run_dir", "out_dir")
+# Longest folder path an error report is written to: the line must still hold cause and fix.
+_FOLDER_CHARS = 150
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -158,7 +161,7 @@ def error_line(err: Exception, args: argparse.Namespace, argv: list[str]) -> str
     line = f"error: {headline or text}"
     if not headline and len(line) <= MAX_LINE_CHARS:
         return line
-    command = " ".join(["mjx-arm", *argv])
+    command = shlex.join(["mjx-arm", *argv])
     body = f"{command}\n\n{type(err).__name__}:\n{err}\n"
     path = _write_report(body, report_folders(args))
     if path is None:  # nowhere to write: the line alone, shortened
@@ -200,12 +203,15 @@ def report_folders(args: argparse.Namespace) -> list[Path]:
 
 
 def _write_report(body: str, folders: list[Path]) -> Path | None:
-    """Write ``body`` atomically to ``error-TIME-PID.txt`` in the first folder that takes it;
-    its absolute path, or None when none does."""
+    """Write ``body`` atomically to ``error-TIME-PID.txt`` in the first folder that takes it
+    (passing over a folder whose path is too long to name on the line); its absolute path, or
+    None when none does."""
     from mjx_arm.inputs import OutputWriteError, write_atomic
 
     name = f"error-{time.strftime('%Y%m%d-%H%M%S', time.gmtime())}-{os.getpid()}.txt"
     for folder in folders:
+        if len(str(folder.resolve())) > _FOLDER_CHARS:
+            continue
         try:
             write_atomic(body.encode("utf-8", "replace"), folder / name)
         except (OutputWriteError, OSError):

@@ -152,3 +152,12 @@ def test_a_failed_validation_at_a_long_path_is_one_short_line(tmp_path, capsys):
     urdf = chain_urdf(folder / "deep.urdf", 300)
     line = _one_error_line(["validate", str(urdf), "--engine", "mujoco"], capsys)
     assert line.startswith("error: .../deep.urdf: 1 error (link 'l300': is 301 links down")
+
+
+def test_a_long_output_folder_is_passed_over_for_the_report(tmp_path, _state_home):
+    folder = tmp_path / ("o" * 200)
+    folder.mkdir()
+    line = error_line(InputError("y" * 400 + "; fix it"), argparse.Namespace(out=str(folder)), [])
+    assert len(line) <= MAX_LINE_CHARS and line.endswith(".txt)")
+    report = Path(line.rsplit("(full report: ", 1)[1].rstrip(")"))
+    assert report.parent == _state_home / "mjx_arm" / "errors"
