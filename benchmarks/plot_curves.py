@@ -1,6 +1,8 @@
 """Learning curves (eval success and reward vs env steps and wall time) from run metrics CSVs.
 
-python benchmarks/plot_curves.py benchmarks/results/train/curves/*.csv -o curves.png
+python benchmarks/plot_curves.py RUN_DIR/metrics.csv [...] -o curves.png
+
+(The docs draw the curves that ``benchmarks/results/train/*.json`` keep under ``curve``.)
 """
 
 from __future__ import annotations

@@ -246,8 +246,9 @@ HEADLINES: tuple[Headline, ...] = (
 )  # fmt: skip
 
 
-def headline_table(results: Path, link_prefix: str = "") -> list[str]:
-    """The headline table; sources are linked with ``link_prefix`` (the README) or named."""
+def _rows(results: Path, link_prefix: str) -> list[list[str]]:
+    """Each headline's figure, value, device, date and sources (linked with ``link_prefix``,
+    else named)."""
 
     def load(rel: str) -> Json:
         return json.loads((results / rel).read_text())
@@ -262,9 +263,24 @@ def headline_table(results: Path, link_prefix: str = "") -> list[str]:
         source = ", ".join(_source(rel, link_prefix) for rel in rels[:1])
         more = f" (+{len(rels) - 1})" if len(rels) > 1 else ""
         rows.append([figure, value, device(meta), date(meta), source + more])
+    return rows
+
+
+def headline_table(results: Path, link_prefix: str = "") -> list[str]:
+    """The headline table (the README's); sources are linked with ``link_prefix`` or named."""
     header = ["figure", "value", "device", "date", "source"]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    rows = _rows(results, link_prefix)
     return [*lines, *("| " + " | ".join(str(c) for c in row) + " |" for row in rows), ""]
+
+
+def headline_list(results: Path) -> list[str]:
+    """The headline figures as a definition list (the results index): the same rows as
+    :func:`headline_table`, each source on its own line, so nothing runs off a narrow page."""
+    lines = []
+    for figure, value, dev, day, source in _rows(results, ""):
+        lines += [figure, f": {value}", "", f"  *{dev}, {day}*; source {source}", ""]
+    return lines
 
 
 def _source(rel: str, link_prefix: str) -> str:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 Json = dict[str, Any]
@@ -23,7 +24,9 @@ def fmt(value: Any, digits: int = 3) -> str:
     if isinstance(value, int):
         return f"{value:,}"
     if isinstance(value, float):
-        if math.isnan(value) or math.isinf(value):
+        if math.isnan(value):
+            return "—"  # a figure the run could not make (no episode reached the goal, ...)
+        if math.isinf(value):
             return str(value)
         if value != 0 and (abs(value) < 1e-3 or abs(value) >= 1e7):
             return f"{value:.{digits - 1}e}"
@@ -38,7 +41,8 @@ def fmt(value: Any, digits: int = 3) -> str:
 
 
 def _is_num(value: Any) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool)
+    """A real, finite-or-infinite number (not a bool, not NaN)."""
+    return isinstance(value, int | float) and not isinstance(value, bool) and value == value
 
 
 def table(header: list[str], rows: list[list[Any]]) -> list[str]:
@@ -291,11 +295,11 @@ def render_grasp(data: Json) -> list[str]:
     ]
     rows = [
         [start, engine, e.get("lift_m"), _mm(e.get("slip_m")), _mm(e.get("opening_m")),
-         "held" if e.get("met") else "dropped", e.get("video") or ""]
+         "held" if e.get("met") else "dropped"]
         for start, s in data["starts"].items()
         for engine, e in s["engines"].items()
     ]  # fmt: skip
-    header = ["start", "engine", "lift (m)", "slip (mm)", "opening (mm)", "", "video"]
+    header = ["start", "engine", "lift (m)", "slip (mm)", "opening (mm)", ""]
     return lines + table(header, rows)
 
 
@@ -306,6 +310,51 @@ def _mm(value: Any) -> Any:
 def rate(value: Any) -> str:
     """A success rate with three decimals (``1.000``, ``0.953``)."""
     return f"{value:.3f}" if _is_num(value) else fmt(value)
+
+
+def render_robustness(data: Json) -> list[str]:
+    """``mjx-arm bench robustness``: per perturbation, the worst point inside its stated range."""
+    s = data["summary"]
+    pool = s.get("nominal_pooled") or {}
+    lines = [
+        f"Policy `{Path(str(data.get('policy', '?'))).name}`, task {data.get('task', '?')}, "
+        f"engine {data.get('engine', '?')}; goal {fmt(s.get('goal_point'))} at every point, "
+        f"{fmt(s.get('goal_joint'))} for the joint draw. Nominal success "
+        f"{rate(pool.get('success_rate'))} over {fmt(pool.get('episodes'))} episodes; joint draw "
+        f"{rate(s.get('joint_success'))}.",
+        "",
+    ]
+    stated = {p["name"]: (p.get("stated"), p.get("unit")) for p in data.get("perturbations", [])}
+    rows = [
+        [name, fmt(stated.get(name, (None,))[0]), stated.get(name, (None, ""))[1],
+         rate(v.get("worst_inside")), v.get("worst_value"),
+         ", ".join(fmt(x) for x in v.get("below_goal_at") or []) or "none",
+         "met" if v.get("goal_met") else "missed"]
+        for name, v in s["per_perturbation"].items()
+    ]  # fmt: skip
+    header = ["perturbation", "stated range", "unit", "worst success inside", "at",
+              "below the goal at", ""]  # fmt: skip
+    return lines + table(header, rows)
+
+
+def render_failures(data: Json) -> list[str]:
+    """``benchmarks/robustness_failures.py``: one perturbation's failures, strikes apart."""
+    rows = data["rows"]
+    lines = [
+        f"Policy `{Path(str(data.get('policy', '?'))).name}`, perturbation "
+        f"**{rows[0].get('perturbation', '?') if rows else '?'}**. A strike is a failure whose "
+        "peak contact force is above the successes' (the cube or box hit, not missed).",
+        "",
+    ]
+    body = [
+        [r.get("value"), rate(r.get("success_rate")), r.get("episodes"), r.get("failures"),
+         r.get("strikes"), r.get("median_peak_success"),
+         ", ".join(f"{x:.0f}" for x in r.get("peaks_of_other_failures") or []) or "none"]
+        for r in rows
+    ]  # fmt: skip
+    header = ["value", "success", "episodes", "failures", "of them strikes",
+              "median peak of successes (N)", "peaks of the other failures (N)"]  # fmt: skip
+    return lines + table(header, body)
 
 
 def render_eval(data: Json) -> list[str]:
@@ -350,6 +399,8 @@ def _scalar(value: Any) -> bool:
 
 RENDERERS: tuple[Renderer, ...] = (
     Renderer("seeds", _has("seeds", "summary", "settings"), render_seeds),
+    Renderer("robustness", _has("perturbations", "rows", "summary"), render_robustness),
+    Renderer("failures", lambda d: "strikes" in _first_row(d), render_failures),
     Renderer("transfer", _has("rows", "policy"), render_transfer),
     Renderer("throughput", lambda d: "env_control_steps_per_s" in _first_row(d), render_throughput),
     Renderer("parity", _has("figures", "goals", "engines"), render_parity),
@@ -357,6 +408,7 @@ RENDERERS: tuple[Renderer, ...] = (
     Renderer("fuzz", lambda d: "by_kind" in d or "by_command" in d, render_fuzz),
     Renderer("eval", _has("engine", "episodes", "success_rate"), render_eval),
     Renderer("grasp", _has("starts", "cube"), render_grasp),
+    Renderer("train", lambda d: "curve" in _first_row(d), render_generic),
     Renderer("generic", lambda d: True, render_generic),
 )
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import re
 import shutil
 import subprocess
 import sys
@@ -56,7 +57,8 @@ def test_changing_one_json_value_changes_the_page_and_the_readme(tmp_path):
     out = tmp_path / "pages"
     readme = tmp_path / "README.md"
     readme.write_text(f"intro\n{gen.BEGIN}\n{gen.END}\nrest\n")
-    assert gen.main(["--results", str(results), "--out", str(out), "--readme", str(readme)]) == 0
+    argv = ["--results", str(results), "--out", str(out), "--readme", str(readme), "--no-plots"]
+    assert gen.main(argv) == 0
     page, block = (out / "seeds.md").read_text(), readme.read_text()
     assert "10 of 10 seeds at 0.95; median 42.7 s warm" in block
     assert "| 10 of 10 |" in page
@@ -66,7 +68,7 @@ def test_changing_one_json_value_changes_the_page_and_the_readme(tmp_path):
     data["summary"]["solved"] = 7
     data["summary"]["time_to_threshold_warm"]["median"] = 51.25
     file.write_text(json.dumps(data))
-    assert gen.main(["--results", str(results), "--out", str(out), "--readme", str(readme)]) == 0
+    assert gen.main(argv) == 0
     assert "7 of 10 seeds at 0.95; median 51.2 s warm" in readme.read_text()
     assert "| 7 of 10 | 51.2 s (" in (out / "seeds.md").read_text()
     assert readme.read_text().startswith("intro\n") and readme.read_text().endswith("rest\n")
@@ -75,9 +77,9 @@ def test_changing_one_json_value_changes_the_page_and_the_readme(tmp_path):
 
 def test_every_figure_names_its_date_device_and_versions(tmp_path):
     results = _results_copy(tmp_path)
-    gen.generate(results, tmp_path / "pages")
+    gen.generate(results, tmp_path / "pages", draw_plots=False)
     page = (tmp_path / "pages" / "seeds.md").read_text()
-    assert "## `seeds/seeds_touch_fast.json`" in page
+    assert "## Touch, `--preset fast`, 10 seeds\n\n`seeds/seeds_touch_fast.json`" in page
     assert "Measured **2026-11-23** · NVIDIA H200" in page
     assert "mujoco-mjx 3.17.0" in page and "jax 0.11.2" in page
 
@@ -92,21 +94,58 @@ def test_unknown_and_broken_files_are_skipped_gracefully(tmp_path):
     (results / "brand_new" / "x.json").write_text(json.dumps({"meta": meta, "odd": {"a": 1}}))
     (results / "broken.json").write_text("{not json")
     (results / "a_list.json").write_text("[1, 2]")
-    written = gen.generate(results, tmp_path / "pages")
+    written = gen.generate(results, tmp_path / "pages", draw_plots=False)
     names = {p.name for p in written}
     assert {"index.md", "robustness.md", "other.md", "seeds.md"} <= names
     assert "| a | 1.5 |" in (tmp_path / "pages" / "robustness.md").read_text()
-    assert "## `brand_new/x.json`" in (tmp_path / "pages" / "other.md").read_text()
+    assert "`brand_new/x.json`" in (tmp_path / "pages" / "other.md").read_text()
     index = (tmp_path / "pages" / "index.md").read_text()
     assert "`broken.json`: not readable JSON" in index
     assert "`a_list.json`: not a JSON object" in index
 
 
 def test_every_committed_result_file_is_rendered_or_listed(tmp_path):
-    written = gen.generate(gen.RESULTS, tmp_path / "pages")
+    written = gen.generate(gen.RESULTS, tmp_path / "pages", draw_plots=False)
     text = "\n".join(p.read_text() for p in written)
     for path in gen.RESULTS.rglob("*.json"):
         assert f"`{path.relative_to(gen.RESULTS).as_posix()}`" in text
+
+
+def test_each_plot_is_drawn_from_its_one_result(tmp_path):
+    """Every plot on a page is drawn from the JSON under whose heading it sits: the seeds runs
+    named alike (``seeds_touch_fast`` and ``seeds_touch_fast_cold_seed10``) get one plot each."""
+    src, results = gen.RESULTS, tmp_path / "results"
+    shutil.copytree(src / "seeds", results / "seeds")
+    out = tmp_path / "pages"
+    gen.generate(results, out)
+    page = (out / "seeds.md").read_text()
+    links = re.findall(r"!\[Plot of ([^\]]+)\]\((plots/[^)]+)\)", page)
+    assert {rel for rel, _ in links} == {p.relative_to(results).as_posix()
+                                         for p in results.rglob("*.json")}  # fmt: skip
+    assert len({link for _, link in links}) == len(links)  # no plot shown twice
+    assert sorted(p.name for p in (out / "plots").iterdir()) == sorted(
+        Path(link).name for _, link in links
+    )
+    for section in page.split("\n## ")[1:]:  # each plot under its own file's heading
+        (rel,) = re.findall(r"^`([^`]+\.json)`", section, flags=re.M)
+        assert re.findall(r"!\[Plot of ([^\]]+)\]", section) == [rel]
+
+
+def test_pages_read_as_results(tmp_path):
+    """Failure counts get their own table, a figure the run could not make reads as a dash,
+    and the index lists the headline figures with their sources."""
+    results = _results_copy(tmp_path)
+    (results / "robustness").mkdir()
+    for path in gen.RESULTS.glob("robustness/failures_*.json"):
+        shutil.copy(path, results / "robustness" / path.name)
+    written = gen.generate(results, tmp_path / "pages", draw_plots=False)
+    robustness = (tmp_path / "pages" / "robustness.md").read_text()
+    assert "| value | success | episodes | failures | of them strikes |" in robustness
+    assert "95% CI" not in robustness and "task ?." not in robustness
+    for page in written:
+        assert "| nan |" not in page.read_text() and " nan |" not in page.read_text()
+    index = (tmp_path / "pages" / "index.md").read_text()
+    assert "source `seeds/seeds_touch_fast.json`" in index
 
 
 @pytest.mark.slow
