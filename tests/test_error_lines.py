@@ -85,6 +85,8 @@ BAD_ARGVS = [
     ["train", "--set", "num_env=64"],
     ["train", "--set", "n" * 500 + "=1"],
     ["eval", "/no/such/policy.npz"],
+    ["bench", "nosuch"],
+    ["bench", "transfer", "policy.npz", "--no-such-option"],
 ]
 
 
@@ -161,3 +163,21 @@ def test_a_long_output_folder_is_passed_over_for_the_report(tmp_path, _state_hom
     assert len(line) <= MAX_LINE_CHARS and line.endswith(".txt)")
     report = Path(line.rsplit("(full report: ", 1)[1].rstrip(")"))
     assert report.parent == _state_home / "mjx_arm" / "errors"
+
+
+def test_many_errors_with_long_names_are_one_short_line(tmp_path, capsys):
+    """60 joints without <limit>, every name 250 characters long: the count and the first two,
+    cut to fit."""
+    name = "n" * 250
+    inertial = '<inertial><mass value="1"/><inertia ixx="1" iyy="1" izz="1"/></inertial>'
+    lines = ['<robot name="r">', f'<link name="{name}0">{inertial}</link>']
+    for i in range(1, 61):
+        lines.append(f'<link name="{name}{i}">{inertial}</link>')
+        lines.append(
+            f'<joint name="{name}j{i}" type="revolute"><parent link="{name}0"/>'
+            f'<child link="{name}{i}"/><axis xyz="0 0 1"/></joint>'
+        )
+    urdf = tmp_path / "many.urdf"
+    urdf.write_text("\n".join([*lines, "</robot>"]))
+    line = _one_error_line(["validate", str(urdf), "--engine", "mujoco"], capsys)
+    assert ": 60 errors (joint 'nnn" in line and "; and 58 more)" in line

@@ -40,8 +40,11 @@ def _invalid(urdf: str, report) -> int:
     tail = "; each with its fix in the report above"
     shown = urdf if len(urdf) <= 100 else f".../{Path(urdf).name[:90]}"
     head = f"error: {shown}: "
-    room = LINE_CHARS - len(head) - len(tail) - 20  # 20: the count and brackets
-    print(f"{head}{report.summary(room)}{tail}", file=sys.stderr)
+    room = LINE_CHARS - len(head) - len(tail)
+    line = f"{head}{report.summary(room)}{tail}"
+    if len(line) > LINE_CHARS:  # the count and "and N more" took their share: fit it exactly
+        line = f"{head}{report.summary(room - (len(line) - LINE_CHARS))}{tail}"
+    print(line, file=sys.stderr)
     return EXIT_INVALID
 
 
