@@ -29,7 +29,7 @@ from input_fuzz.corpus import Corpus, build
 from input_fuzz.harness import MAX_ERROR_CHARS, Outcome, run_case, tally
 from input_fuzz.pool import CAP_BYTES, Pool, probe
 
-FUZZ_EXAMPLES = 3  # of each command
+FUZZ_EXAMPLES = 2  # of each command
 MUST_BE_ZERO = ("traceback", "crash", "memory", "lost", "unnamed", "hang")
 _COUNTER = itertools.count()
 
