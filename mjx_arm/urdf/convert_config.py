@@ -61,7 +61,7 @@ class ConvertConfig:
             finger pads of a gripper): the sum of the normal contact forces on the link (N).
         solver_iterations: constraint solver iterations (few, for MJX speed). On an H200 the
             Touch scene steps 1.6M physics steps/s at 4 iterations (line search 8), 3.2M at
-            2 (4) and 5.0M at 1 (2), 32k envs (benchmarks/results/sweep/*.json).
+            2 (4) and 5.0M at 1 (2), 32k envs (``benchmarks/results/sweep/*.json``).
         ls_iterations: line-search iterations of the Newton solver.
         scene: "none", "reach" or "touch": the task scene added around the arm.
         package_dirs: ``package://NAME`` -> directory; unnamed packages are searched for upwards
