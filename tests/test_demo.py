@@ -29,7 +29,8 @@ def test_demo_quick_end_to_end(tmp_path: Path, capsys):
         assert result["episodes"] == 20
         assert Path(result["json"]).is_file()
     assert json.loads((out / "eval_mjx.json").read_text())["engine"] == "mjx"
-    assert "mjx (backend mujoco)" in printed  # one name for the engine and its backend
+    backend = summary["eval"]["mjx"]["backend"]  # mujoco on a CPU, mjx on a GPU
+    assert f"mjx (backend {backend})" in printed  # one name for the engine and its backend
     if "onnx" in summary["export"]:
         assert summary["export"]["npz_vs_onnx_max_abs_diff"] < 1e-5
     video = summary["eval"]["mujoco"]["video"]
