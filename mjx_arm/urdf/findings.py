@@ -1,5 +1,9 @@
 """The validator's vocabulary: findings and reports, the limits it checks against, and the lenient
 parse tree every check reads.
+
+Every limit on what a URDF may hold is here, each with the failure point it was measured
+against (MuJoCo 3.x, PyBullet 3.2): the XML's size and shape, names, links, chain depth, line
+length, and mesh paths, sizes and face counts.
 """
 
 from __future__ import annotations
@@ -51,14 +55,21 @@ MAX_MESH_PATH_BYTES = 1000
 MAX_MESH_FACES = 200_000
 MAX_MESH_VERTICES = 3 * MAX_MESH_FACES
 # Bytes of one mesh file, checked before any reader opens it: a binary STL at MAX_MESH_FACES is
-# 10,000,084 bytes; an OBJ with normals and texture coordinates for as many faces stays under
-# 32 MiB.
+# 10,000,084 bytes; an OBJ of as many faces with 100,000 vertices, normals and texture
+# coordinates, as trimesh writes it, is 19.8 MiB.
 MAX_MESH_BYTES = 32 * 2**20
 # Longest name (robot, link, joint, material, ...) a URDF may use. PyBullet 3.2 segfaults while
 # loading a URDF whose joint name has 1,264 or more characters, or whose link name has 2,288
 # or more (robot names crash from 42,184; material names up to 70,000 do not). 256 leaves a
 # margin of about 5x below the lowest of these and is far above any real name.
 MAX_NAME_CHARS = 256
+# The XML itself (mjx_arm.urdf.safe_xml): a file above MAX_BYTES is not read; a tree deeper than
+# MAX_DEPTH (Python's serialiser recurses per level), with more than MAX_ELEMENTS elements or an
+# attribute longer than MAX_ATTRIBUTE_CHARS (a path's limit on Linux) is refused.
+MAX_BYTES = 8 * 2**20
+MAX_DEPTH = 64
+MAX_ELEMENTS = 50_000
+MAX_ATTRIBUTE_CHARS = 4096
 # Largest ratio of two sizes of one primitive shape that survives MuJoCo's MJCF writer.
 MAX_SIZE_RATIO = 1e5
 # Largest origin offset (m): a robot is metres across; beyond this, float rounding eats its shapes.

@@ -23,11 +23,18 @@ from xml.parsers import expat
 
 from mjx_arm.urdf.errors import UrdfError
 
-MAX_BYTES = 8 * 2**20
-MAX_DEPTH = 64
-MAX_ELEMENTS = 50_000
-# Longest attribute value (a path's limit on Linux); names have a lower limit (MAX_NAME_CHARS).
-MAX_ATTRIBUTE_CHARS = 4096
+# The limits live with the validator's others (names have a lower limit, MAX_NAME_CHARS).
+from mjx_arm.urdf.findings import MAX_ATTRIBUTE_CHARS, MAX_BYTES, MAX_DEPTH, MAX_ELEMENTS
+
+__all__ = [
+    "MAX_ATTRIBUTE_CHARS",
+    "MAX_BYTES",
+    "MAX_DEPTH",
+    "MAX_ELEMENTS",
+    "XmlError",
+    "parse_xml",
+    "read_xml",
+]
 
 
 class XmlError(UrdfError):
