@@ -24,19 +24,19 @@ from mjx_arm.inputs import InputError
 from mjx_arm.names import EXIT_INVALID
 
 # The RSS a batch adds (peak, after reset and 5 steps, beside a 1-env batch that compiled the
-# same programs) over the estimate of that batch: measured 1.10 (64 envs), 1.17 (1,024) and
-# 1.36 (8,192) on a 2-core x86 host. A run is refused only above the available memory, so an
+# same programs) over the estimate of that batch: measured 1.14 (64 envs), 1.17 (1,024) and
+# 1.25 (8,192) on a 2-core x86 host. A run is refused only above the available memory, so an
 # estimate low by up to 2x, or high by up to 2x, is the stated tolerance.
 RSS_OVER_ESTIMATE = (0.5, 2.0)
 PROBE = """
-import json, resource, sys
+import json, sys
 import numpy as np
 from mjx_arm.envs.vector import ArmVectorEnv
 from mjx_arm.task import task_config
 
-def rss():
+def status(key):
     for line in open("/proc/self/status"):
-        if line.startswith("VmRSS"):
+        if line.startswith(key):
             return int(line.split()[1]) * 1024
 
 n = int(sys.argv[1])
@@ -44,13 +44,15 @@ small = ArmVectorEnv(task_config("reach"), 1, backend="mujoco")
 small.reset(seed=0)
 for _ in range(3):
     small.step(np.zeros((1, 6)))
-base = rss()
+base = status("VmRSS")
+with open("/proc/self/clear_refs", "w") as f:
+    f.write("5")  # the peak (VmHWM) restarts from the RSS now
 env = ArmVectorEnv(task_config("reach"), n, backend="mujoco")
 estimate = env.memory_estimate().total(n)
 env.reset(seed=0)
 for _ in range(5):
     env.step(np.random.default_rng(0).uniform(-1, 1, (n, 6)))
-peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+peak = max(status("VmHWM"), status("VmRSS"))
 print(json.dumps({"grown": peak - base, "estimate": estimate}))
 """
 

@@ -1,4 +1,5 @@
-"""Which physics steps the batched JAX env: MJX (JAX or Warp) or C MuJoCo behind a host callback."""
+"""Which physics steps the batched JAX env (MJX, JAX or Warp, or C MuJoCo behind a host callback),
+and the host memory a batch of it needs, estimated before the batch is allocated."""
 
 from __future__ import annotations
 
@@ -140,6 +141,13 @@ def estimate_env_memory(env, randomized: bool = False) -> MemoryEstimate:
         data = mujoco.MjData(model)
         fixed = physics.stepper.nthread * (data.nbuffer + data.narena)
     return MemoryEstimate(fixed, per_env)
+
+
+def state_on_host(env) -> bool:
+    """Whether a batch of ``env`` keeps its state in host memory: the C MuJoCo backend, or any
+    backend where JAX runs on the CPU (on an accelerator the state is in device memory, whose
+    allocations XLA checks itself)."""
+    return getattr(env.physics, "impl", "") == "c" or jax.default_backend() == "cpu"
 
 
 def check_memory(

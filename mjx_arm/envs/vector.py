@@ -26,6 +26,7 @@ from mjx_arm.envs.backend import (
     check_memory,
     estimate_env_memory,
     make_batched_env,
+    state_on_host,
 )
 from mjx_arm.envs.base import InvalidActionError, check_action
 from mjx_arm.envs.mjx_physics import batched_where
@@ -66,7 +67,8 @@ class ArmVectorEnv(VectorEnv):
         self.num_envs = num_envs
         self.env = make_batched_env(task, backend, physics, batch_size=num_envs, arm=arm)
         self.task, n = self.env.task, self.env.action_size
-        check_memory(self.memory_estimate(), num_envs, "num_envs")
+        if state_on_host(self.env):
+            check_memory(self.memory_estimate(), num_envs, "num_envs")
         joints, extra = self.env.arm.n_joints, self.env.task_spec.extra_obs
         coding = self.env.arm.joint_coding(self.task)
         self.single_observation_space = obs_lib.observation_space(

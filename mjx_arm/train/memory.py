@@ -11,13 +11,12 @@ from __future__ import annotations
 
 from typing import Any
 
-import jax
-
 from mjx_arm.envs.backend import (
     InsufficientMemoryError,
     MemoryEstimate,
     available_memory,
     estimate_env_memory,
+    state_on_host,
 )
 from mjx_arm.train.config import TrainConfig
 
@@ -53,20 +52,15 @@ def training_estimate(config: TrainConfig, env: Any) -> tuple[MemoryEstimate, in
     return envs, envs.fixed + buffers + activations + evaluation
 
 
-def _on_host() -> bool:
-    """Whether the run's arrays live in host memory (a CPU-only JAX)."""
-    return jax.default_backend() == "cpu"
-
-
 def check_training_memory(config: TrainConfig, env: Any, available: int | None = None) -> None:
-    """Refuse a run whose estimated host memory exceeds the available memory (CPU-only JAX; on an
-    accelerator the batch lives in device memory, which XLA checks itself).
+    """Refuse a run whose estimated host memory exceeds the available memory, where the envs'
+    state lives in host memory (:func:`~mjx_arm.envs.backend.state_on_host`).
 
     Raises:
         InsufficientMemoryError: the estimate, the available figure and the largest num_envs
             that fits (with the other settings unchanged).
     """
-    if available is None and not _on_host():
+    if available is None and not state_on_host(env):
         return
     available = available_memory() if available is None else available
     envs, rest = training_estimate(config, env)
