@@ -69,3 +69,17 @@ def test_a_diverging_run_ends_in_one_error_line_and_no_checkpoint(tmp_path: Path
     assert RunDir(run_dir).latest_checkpoint() is None
     checkpoints = run_dir / "checkpoints"
     assert not checkpoints.exists() or not any(checkpoints.iterdir())
+
+
+def test_a_nan_action_in_the_checkpoints_rollout_is_a_divergence():
+    """The env's own check of a NaN action (what the checkpoint's rollout calls) inside the
+    guard becomes the named error; another invalid action stays what it was."""
+    from mjx_arm.envs.base import InvalidActionError, check_action
+    from mjx_arm.train.divergence import rollout_guard
+
+    config = TrainConfig(learning_rate=0.9)
+    diverged = pytest.raises(TrainingDivergedError, match=r"step 64: the policy acted NaN or inf")
+    with diverged, rollout_guard(config, 64):
+        check_action(np.full(6, np.nan))
+    with pytest.raises(InvalidActionError, match="must have shape"), rollout_guard(config, 64):
+        check_action(np.zeros(5))

@@ -10,13 +10,16 @@ change; nothing of the diverged epoch is saved.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+from collections.abc import Iterator
 from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from mjx_arm.envs.base import InvalidActionError
 from mjx_arm.inputs import ConfigError
 from mjx_arm.train.config import TrainConfig
 
@@ -72,6 +75,26 @@ def non_finite_metrics(metrics: dict[str, Any]) -> list[str]:
         if values.dtype.kind == "f" and not np.all(np.isfinite(values)):
             bad.append(name)
     return sorted(bad)
+
+
+@contextlib.contextmanager
+def rollout_guard(config: TrainConfig, step: int) -> Iterator[None]:
+    """Turn a non-finite action of the policy in a checkpoint's rollout (the env's
+    :class:`~mjx_arm.envs.base.InvalidActionError`, raised before anything is written) into a
+    :class:`TrainingDivergedError` that names the setting to change.
+
+    Raises:
+        TrainingDivergedError: the policy of ``step`` acted NaN or inf.
+    """
+    try:
+        yield
+    except InvalidActionError as err:
+        if "NaN or inf" not in str(err):
+            raise
+        raise TrainingDivergedError(
+            f"training diverged at step {step}: the policy acted NaN or inf in the checkpoint's "
+            f"rollout; no checkpoint of this epoch was written. {advice(config)}"
+        ) from err
 
 
 def check_epoch(config: TrainConfig, step: int, state: Any, metrics: dict[str, Any]) -> None:

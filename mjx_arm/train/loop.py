@@ -25,7 +25,7 @@ from mjx_arm.envs.wrappers import wrap_for_training
 from mjx_arm.train.compile_report import CompileReport
 from mjx_arm.train.config import TrainConfig
 from mjx_arm.train.distributed import gather, is_leader, share
-from mjx_arm.train.divergence import check_epoch
+from mjx_arm.train.divergence import check_epoch, rollout_guard
 from mjx_arm.train.evaluation import Evaluator
 from mjx_arm.train.learner import (
     ENV_AXIS,
@@ -279,7 +279,8 @@ def run_ppo(
         taken = (state, env_state, local_key)
         callbacks.snapshot(step, functools.partial(run.snapshot, *taken))
         training = _training_metrics(metrics, run.sizes.env_steps_per_epoch / seconds, walltime)
-        callbacks.progress(step, _evaluate(run.evaluate, params, training))
+        with rollout_guard(config, step):  # the checkpoint's rollout acts with the policy
+            callbacks.progress(step, _evaluate(run.evaluate, params, training))
     return {"devices": [str(d) for d in run.devices], "partition": run.partition}
 
 
