@@ -23,8 +23,8 @@ from pathlib import Path
 import numpy as np
 
 from input_fuzz.hostile_npz import NPZ_MUTATIONS, pick
+from mjx_arm.urdf.findings import MAX_NAME_CHARS  # the limit the lengths probe, either side
 
-MAX_NAME_CHARS = 256  # mjx_arm.urdf.findings.MAX_NAME_CHARS, the limit the lengths probe
 NAME_LENGTHS = (MAX_NAME_CHARS - 1, MAX_NAME_CHARS, MAX_NAME_CHARS + 1, 1000, 100_000)
 CHAIN_LENGTHS = (500, 511, 512, 513, 600, 2000)
 NESTING = (100, 1000, 5000, 100_000)

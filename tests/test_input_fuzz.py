@@ -317,7 +317,8 @@ def test_urdf_names_of_the_limit_lengths_and_big_chains(corpus, tmp_path) -> Non
         assert any(len(n) == length for n in names), what
         lengths.add(length)
         chains.add(hostile.deep_chain(text, rng)[0].count("<joint "))
-    assert {255, 256, 257, 100_000} <= lengths
+    limit = hostile.MAX_NAME_CHARS
+    assert {limit - 1, limit, limit + 1, 100_000} <= lengths
     assert min(chains) > 500 and max(chains) > 2000
     mutated, what = hostile.non_ascii_name(text, np.random.default_rng(1))
     assert not mutated.isascii()
