@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import multiprocessing
+import os
 import resource
 import signal
 import time
@@ -79,8 +80,10 @@ def probe(case: Case, corpus: Corpus, folder: Path) -> Outcome:
 
 
 def _serve(conn, corpus: Corpus, cap: int, limit: str, runner) -> None:
-    """A worker's loop: ``(case, folder)`` in, :class:`Outcome` out; None ends it."""
+    """A worker's loop: ``(case, folder)`` in, :class:`Outcome` out; None ends it. The
+    error-report files the commands write go beside the corpus, not into the user's home."""
     set_cap(cap, limit)
+    os.environ["XDG_STATE_HOME"] = str(corpus.folder.parent / "state")
     import mjx_arm.cli  # noqa: F401  (imported once, before the first case is timed)
     from input_fuzz.harness import run_case
 
