@@ -223,9 +223,11 @@ def plot_trajectory(
 
 def force_axis_limits(force: np.ndarray, span: float = FORCE_AXIS_MIN_N) -> tuple[float, float]:
     """The y range of a contact-force axis for ``force`` ``(T,)`` or ``(T, k)`` (N): from 0 (or
-    the lowest value, if below) to the highest value plus 5 %, and at least ``span`` N tall."""
+    the lowest value, if below) to the highest value plus 5 %, at least ``span`` N tall, and 2 %
+    of that below the lowest value so that a line at zero stays clear of the axis."""
     low, high = min(0.0, float(np.min(force))), float(np.max(force))
-    return low, max(high + 0.05 * (high - low), low + span)
+    high = max(high + 0.05 * (high - low), low + span)
+    return low - 0.02 * (high - low), high
 
 
 def _plot_force(ax, steps: np.ndarray, force: np.ndarray) -> None:

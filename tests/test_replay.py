@@ -57,10 +57,10 @@ def _synthetic(steps: int = 12) -> dict[str, np.ndarray]:
 @pytest.mark.parametrize(
     ("force", "limits"),
     [
-        (np.array([2.5e-12, 4e-13, 3e-13, 6e-13]), (0.0, 5.0)),  # noise in free space: flat
-        (np.zeros(5), (0.0, 5.0)),
-        (np.array([0.0, 10.0, 30.0, 20.0]), (0.0, 31.5)),  # a press: the data and 5 %
-        (np.array([[0.0, 1.0], [2.0, 8.0]]), (0.0, 8.4)),  # one column per finger pad
+        (np.array([2.5e-12, 4e-13, 3e-13, 6e-13]), (-0.1, 5.0)),  # noise in free space: flat
+        (np.zeros(5), (-0.1, 5.0)),
+        (np.array([0.0, 10.0, 30.0, 20.0]), (-0.63, 31.5)),  # a press: the data and 5 %
+        (np.array([[0.0, 1.0], [2.0, 8.0]]), (-0.168, 8.4)),  # one column per finger pad
     ],
 )
 def test_a_force_axis_spans_at_least_a_few_newtons(force: np.ndarray, limits: tuple) -> None:
