@@ -111,3 +111,14 @@ def test_the_bar_says_it_compiles_until_the_first_program_runs() -> None:
     finally:
         clock.stop()
         bar.close()
+
+
+def test_a_setup_names_the_backend_the_run_resolves() -> None:
+    """``auto`` and the backend it picks on this device share one remembered compile time."""
+    from mjx_arm.envs.backend import resolve_backend
+    from mjx_arm.train.progress import compile_setup
+
+    auto = load_config("cpu", None, ["backend=auto"])
+    picked = load_config("cpu", None, [f"backend={resolve_backend('auto')}"])
+    assert compile_setup(auto) == compile_setup(picked)
+    assert compile_setup(auto).startswith(f"reach {resolve_backend('auto')} 64/64 envs ur5e.urdf")

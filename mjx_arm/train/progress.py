@@ -96,10 +96,12 @@ def compile_setup(config: TrainConfig) -> str:
     """The setup a compile time is remembered for: task, backend, env counts, arm, device."""
     import jax
 
+    from mjx_arm.envs.backend import resolve_backend
+
     device = jax.devices()[0].device_kind
     arm = config.arm.urdf_path.name
     envs = f"{config.num_envs}/{config.num_eval_envs} envs"
-    return f"{config.task} {config.backend} {envs} {arm} {device}"
+    return f"{config.task} {resolve_backend(config.backend)} {envs} {arm} {device}"
 
 
 class _Progress:
