@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import os
+import tempfile
 from pathlib import Path
 
 import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
+# mjx-arm's error-report files (mjx_arm.cli) go to a folder of this run, not the user's.
+os.environ["XDG_STATE_HOME"] = tempfile.mkdtemp(prefix="mjx_arm-test-state-")
 _REPO = Path(__file__).resolve().parents[1]
 _CACHE = Path(os.environ.get("MJX_ARM_JAX_CACHE", _REPO / ".jax_cache"))
 
