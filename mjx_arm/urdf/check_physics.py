@@ -1,5 +1,5 @@
 """Validation layer 3: masses and inertia tensors, then the engines' own loaders (MuJoCo through
-the converter, PyBullet in a child process).
+the converter, PyBullet in this process, after the static checks that keep it from crashing).
 """
 
 from __future__ import annotations
