@@ -19,7 +19,7 @@ Variants (``--variants``, comma separated):
 Run from the repository root::
 
     python benchmarks/bench_deploy_chain.py --engine mujoco --episodes 100 \\
-        --policies benchmarks/results/lift/policies/lift-fast-seed*.npz
+        --policies benchmarks/results/policies/lift-fast-seed0.npz
 
 Results: ``benchmarks/results/sim2real/deploy_chain_<name>.{json,md}``.
 """

@@ -16,7 +16,7 @@ and 10); ``noslip`` (as trained plus 5 noslip iterations).
 Run from the repository root::
 
     python benchmarks/bench_lift_transfer.py --engine mujoco --episodes 100 \\
-        --policies benchmarks/results/lift/policies/lift-fast-seed*.npz
+        --policies benchmarks/results/policies/lift-fast-seed0.npz
 
 Results: ``benchmarks/results/sim2real/lift_transfer_<engine>.{json,md}``.
 """

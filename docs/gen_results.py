@@ -228,7 +228,20 @@ def generate(results: Path, out: Path, draw_plots: bool = True) -> list[Path]:
     skipped = [r for r in found if r.data is None]
     index = out / "index.md"
     _write(index, render_index(pages, skipped, results))
+    _remove_stale(out, [index, *written], draw_plots)
     return [index, *written]
+
+
+def _remove_stale(out: Path, pages: list[Path], plots_too: bool) -> None:
+    """Delete pages of sections that have no file any more (Sphinx would warn that no toctree
+    holds them) and, when plots were drawn, plots that no page links."""
+    for page in set(out.glob("*.md")) - set(pages):
+        page.unlink()
+    if plots_too and (out / "plots").is_dir():
+        text = "\n".join(p.read_text() for p in pages)
+        for plot in (out / "plots").glob("*.png"):
+            if f"(plots/{plot.name})" not in text:
+                plot.unlink()
 
 
 def _write(path: Path, text: str) -> None:

@@ -343,7 +343,8 @@ def render_failures(data: Json) -> list[str]:
     lines = [
         f"Policy `{Path(str(data.get('policy', '?'))).name}`, perturbation "
         f"**{rows[0].get('perturbation', '?') if rows else '?'}**. A strike is a failure whose "
-        "peak contact force is above the successes' (the cube or box hit, not missed).",
+        "wrist peak reached the task's strike limit, which ends the episode; the other "
+        "failures are drops, slips or time running out.",
         "",
     ]
     body = [

@@ -3,7 +3,7 @@
 A plot shows only what its one JSON holds; :data:`DRAWINGS` has one drawing per kind of result
 (the kinds of ``result_kinds.RENDERERS``). Kinds with nothing to draw (fuzz counts, a single
 evaluation) get none. Plots go to ``<pages>/plots/`` and are drawn again only when their JSON or
-this module changed, so a docs build redraws what is new.
+the drawing or titles changed, so a docs build redraws only what is new.
 """
 
 from __future__ import annotations
@@ -214,7 +214,8 @@ def draw(rel: str, source: Path, data: Json, kind: str, title: str, plots: Path)
     if drawing is None:
         return None
     path = plot_path(rel, plots)
-    newest = max(source.stat().st_mtime, Path(__file__).stat().st_mtime)
+    code = (Path(__file__), Path(__file__).with_name("result_titles.py"))
+    newest = max(source.stat().st_mtime, *(p.stat().st_mtime for p in code))
     if path.is_file() and path.stat().st_mtime >= newest:
         return path
     try:

@@ -65,8 +65,8 @@ TITLES: dict[str, Callable[[Json], str]] = {
     "fuzz": _fuzz,
     "eval": lambda d: f"Evaluation in {d.get('engine', '?')}",
     "grasp": lambda d: "The gripper's pick in every engine",
-    "train": lambda d: "Training runs: " + ", ".join(
-        str(r.get("task", "?")) for r in d.get("rows") or []),
+    "train": lambda d: "Training: " + ", ".join(
+        f"{r.get('task', '?')} `--preset {r.get('preset', '?')}`" for r in d.get("rows") or []),
 }  # fmt: skip
 
 

@@ -148,6 +148,20 @@ def test_pages_read_as_results(tmp_path):
     assert "source `seeds/seeds_touch_fast.json`" in index
 
 
+def test_a_page_whose_files_are_gone_is_removed(tmp_path):
+    """A section left without files loses its page (no toctree would hold it)."""
+    results = _results_copy(tmp_path)
+    meta = json.loads((results / "cpu" / "cpu_envs.json").read_text())["meta"]
+    (results / "brand_new").mkdir()
+    (results / "brand_new" / "x.json").write_text(json.dumps({"meta": meta, "odd": {"a": 1}}))
+    pages = tmp_path / "pages"
+    assert pages / "other.md" in gen.generate(results, pages, draw_plots=False)
+    shutil.rmtree(results / "brand_new")
+    written = gen.generate(results, pages, draw_plots=False)
+    assert not (pages / "other.md").exists()
+    assert sorted(pages.glob("*.md")) == sorted(written)
+
+
 @pytest.mark.slow
 def test_docs_build_with_warnings_as_errors(tmp_path):
     """The whole site, offline, warnings as errors (a broken link or a missing page fails)."""
