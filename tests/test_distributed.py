@@ -365,3 +365,40 @@ def test_no_cuda_plugin_means_no_gpu(monkeypatch) -> None:
     monkeypatch.delenv("JAX_PLATFORMS", raising=False)
     monkeypatch.setattr(launch, "CUDA_PLUGINS", ("no_such_plugin", "no_such_package.plugin"))
     assert launch.visible_gpus() == []
+
+
+def test_several_gpus_on_warp_start_a_process_each_and_jax_physics_keeps_one(monkeypatch) -> None:
+    monkeypatch.delenv(launch.PROCESS_PER_GPU, raising=False)
+    monkeypatch.setattr(launch, "_installed", lambda name: name == "warp")
+    assert launch.per_gpu_wanted(2, "auto", "auto")
+    assert launch.per_gpu_wanted(4, "mjx", "warp")
+    assert not launch.per_gpu_wanted(2, "auto", "jax")  # XLA splits the batch in one process
+    assert not launch.per_gpu_wanted(2, "mujoco", "auto")  # the C MuJoCo batch: CPUs
+    assert not launch.per_gpu_wanted(None, "auto", "auto")  # Warp's default: one GPU
+    assert not launch.per_gpu_wanted(1, "auto", "auto")
+    monkeypatch.setattr(launch, "_installed", lambda name: False)
+    assert not launch.per_gpu_wanted(2, "auto", "auto")  # no warp-lang: MJX on JAX
+    monkeypatch.setenv(launch.PROCESS_PER_GPU, "0")
+    monkeypatch.setattr(launch, "_installed", lambda name: name == "warp")
+    assert not launch.per_gpu_wanted(2, "auto", "auto")
+    monkeypatch.setenv(launch.PROCESS_PER_GPU, "1")
+    assert launch.per_gpu_wanted(2, "auto", "jax")
+
+
+def test_joined_warp_processes_are_refused_on_the_jax_whose_compiler_crashed(monkeypatch) -> None:
+    import jax
+
+    from mjx_arm.train.config import TrainConfig
+
+    monkeypatch.delenv(launch.PROCESS_PER_GPU, raising=False)
+    monkeypatch.setattr(jax, "process_count", lambda: 2)
+    monkeypatch.setattr("mjx_arm.envs.physics_config.resolve_impl", lambda impl: impl)
+    warp = TrainConfig(backend="mjx").replace(physics=TrainConfig().physics.__class__(impl="warp"))
+    monkeypatch.setattr(jax, "__version__", "0.11.2")
+    with pytest.raises(ConfigError, match=r"crashes XLA's compiler on jax 0\.11\.2.*0\.10\.2"):
+        launch.devices_for_physics(warp)
+    monkeypatch.setenv(launch.PROCESS_PER_GPU, "1")  # tried anyway, as asked
+    assert launch.devices_for_physics(warp) == warp
+    monkeypatch.delenv(launch.PROCESS_PER_GPU)
+    monkeypatch.setattr(jax, "__version__", "0.10.2")  # the tested set
+    assert launch.devices_for_physics(warp) == warp

@@ -21,8 +21,8 @@ def cmd_train(args: argparse.Namespace) -> int:
 
     On several hosts, the same command on each with --coordinator, --hosts and --host-rank
     (or MJX_ARM_COORDINATOR, MJX_ARM_HOSTS / SLURM_NNODES and MJX_ARM_HOST_RANK /
-    SLURM_NODEID), joined by jax.distributed; with MJX_ARM_PROCESS_PER_GPU=1, one process per
-    GPU of a host (docs/training.md, "Several devices").
+    SLURM_NODEID), joined by jax.distributed. On MuJoCo Warp, --devices N starts a process per
+    GPU of this host (docs/training.md, "Several devices").
     """
     import sys
 
@@ -37,7 +37,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     named = args.resume or args.run_dir
     if not group.joined:
         hosts = Hosts.from_args(args.coordinator, args.hosts, args.host_rank, args.join_timeout)
-        plan = launch.plan(hosts, args.devices)
+        plan = launch.plan(hosts, args.devices, per_gpu=_per_gpu(args))
         if plan.spawns:  # one run directory, named, for every process
             run_dir = Path(named) if named else _default_run_dir(args)
             print(f"run directory: {run_dir}")
@@ -98,6 +98,24 @@ def _default_run_dir(args: argparse.Namespace, task: str | None = None) -> Path:
 
     task = task or args.task or preset_config(args.preset or DEFAULT_PRESET).task
     return Path("runs") / f"{task}-{time.strftime('%Y%m%d-%H%M%S')}"
+
+
+def _per_gpu(args: argparse.Namespace) -> bool:
+    """Whether ``--devices`` GPUs train in a process each (the physics from the flags alone,
+    without loading the arm: :func:`~mjx_arm.train.launch.per_gpu_wanted`)."""
+    from mjx_arm.train import launch
+    from mjx_arm.train.config import load_config, saved_config
+
+    if args.devices is None or args.devices < 2:
+        return launch.process_per_gpu()
+    if args.resume:
+        config = saved_config(args.resume)
+    else:
+        overrides = [f"task={args.task.lower()}"] if args.task else []
+        overrides += [f"backend={args.backend}"] if args.backend else []
+        overrides += list(args.set or [])
+        config = load_config(args.preset or DEFAULT_PRESET, args.config, overrides)
+    return launch.per_gpu_wanted(args.devices, config.backend, config.physics.impl)
 
 
 def _child_argv(argv: list[str], run_dir: Path, named: bool) -> list[str]:

@@ -30,11 +30,14 @@ from mjx_arm.train.distributed import Hosts, ProcessGroup
 
 NVIDIA_GPUS = Path("/proc/driver/nvidia/gpus")
 STOP_GRACE_S = 10.0  # seconds a stopped process gets before it is killed
-# Opt-in: on jax 0.11.2 with mujoco-mjx 3.17 and warp-lang 1.19 on H100s, XLA's compiler crashed
-# (SIGSEGV) compiling the training programs of MJX on MuJoCo Warp in every process joined by
-# jax.distributed, with one program compiled at a time and with XLA's caches off
-# (docs/training.md). Kept to be tried again on newer versions; CPU processes work (CI).
+# "1": several GPUs of a host always train in a process each; "0": never (one process, XLA
+# splits the batch over its devices). Unset: a process each for MuJoCo Warp asked for several
+# GPUs (:func:`per_gpu_wanted`).
 PROCESS_PER_GPU = "MJX_ARM_PROCESS_PER_GPU"
+# jax versions on which XLA's compiler crashed (SIGSEGV in backend_compile_and_load) in every
+# process of a per-GPU training of MJX on MuJoCo Warp: 0.11.2 on H100s, 8 of 8 runs. The
+# pinned 0.10.2 trained on 1, 2 and 4 H100s (benchmarks/results/scaling/).
+CRASHING_JAX = ("0.11.",)
 CUDA_PLUGINS = (
     "jax_cuda13_plugin",
     "jax_cuda12_plugin",
@@ -93,8 +96,24 @@ class Plan:
 
 
 def process_per_gpu() -> bool:
-    """Whether several GPUs of a host train in one process each (``MJX_ARM_PROCESS_PER_GPU=1``)."""
+    """Whether ``MJX_ARM_PROCESS_PER_GPU=1`` asks for a process per GPU whatever the physics."""
     return os.environ.get(PROCESS_PER_GPU) == "1"
+
+
+def per_gpu_wanted(devices: int | None, backend: str, impl: str) -> bool:
+    """Whether ``--devices`` GPUs of this host train in a process each.
+
+    MuJoCo Warp steps one GPU per process (two in one process crash at its first call), so
+    ``--devices N`` (N > 1) on MJX with Warp (``impl`` auto or warp, warp-lang installed)
+    starts N processes joined by jax.distributed. MJX's JAX physics keeps one process, whose
+    XLA program splits the batch over the devices. ``MJX_ARM_PROCESS_PER_GPU`` overrides
+    ("1": always, "0": never).
+    """
+    chosen = os.environ.get(PROCESS_PER_GPU)
+    if chosen in ("0", "1"):
+        return chosen == "1"
+    on_warp = backend in ("auto", "mjx") and impl in ("auto", "warp") and _installed("warp")
+    return bool(devices and devices > 1) and on_warp
 
 
 def plan(
@@ -224,13 +243,14 @@ def devices_for_physics(config: Any) -> Any:
     """``config`` with the device count its physics can train on in this process.
 
     MuJoCo Warp steps one GPU per process: two devices in one process crash at its first
-    call (its foreign call assumes the first device), and processes joined by jax.distributed
-    crash XLA's compiler (``PROCESS_PER_GPU``). So on Warp the default (``devices=0``) is one
-    GPU, more is a named error that says what works, and MJX's JAX physics or the C MuJoCo
-    batch keep every device asked for.
+    call (its foreign call assumes the first device), so several GPUs train in processes
+    joined by jax.distributed (:func:`per_gpu_wanted`), each on its own GPU. In one process
+    on Warp the default (``devices=0``) is one GPU and more is a named error that says what
+    works; MJX's JAX physics or the C MuJoCo batch keep every device asked for.
 
     Raises:
-        ConfigError: several GPUs, or several processes, on MuJoCo Warp.
+        ConfigError: several GPUs in one process on MuJoCo Warp, or joined processes on a jax
+            version whose compiler crashed on them (:data:`CRASHING_JAX`).
     """
     import jax
 
@@ -239,18 +259,20 @@ def devices_for_physics(config: Any) -> Any:
 
     if resolve_backend(config.backend) != "mjx" or resolve_impl(config.physics.impl) != "warp":
         return config
-    if jax.process_count() > 1:
+    if jax.process_count() > 1 and jax.__version__.startswith(CRASHING_JAX):
         if process_per_gpu():
             return config
         raise ConfigError(
-            "MuJoCo Warp cannot train in processes joined by jax.distributed yet (XLA's "
-            "compiler crashes on it): use --set physics.impl=jax for several hosts, or one host"
+            f"MuJoCo Warp in processes joined by jax.distributed crashes XLA's compiler on jax "
+            f"{jax.__version__}: install the tested set (pip install -e '.[gpu]' brings jax "
+            "0.10.2), or use --set physics.impl=jax, or MJX_ARM_PROCESS_PER_GPU=1 to try anyway"
         )
+    if jax.process_count() > 1:
+        return config
     if config.devices > 1 and jax.local_device_count() > 1:
         raise ConfigError(
-            f"MuJoCo Warp trains on one GPU per process (asked for {config.devices}): use "
-            "--devices 1; for several GPUs use --set physics.impl=jax (XLA splits the batch, "
-            "about half Warp's speed per GPU), or `mjx-arm bench seeds`, which trains one seed "
-            "per GPU"
+            f"MuJoCo Warp trains on one GPU per process (asked for {config.devices} in one): "
+            f"unset {PROCESS_PER_GPU} so that --devices starts a process per GPU, or use "
+            "--set physics.impl=jax (XLA splits the batch over the devices of one process)"
         )
     return config.replace(devices=1) if jax.local_device_count() > 1 else config
