@@ -95,7 +95,7 @@ def cmd_throughput(args: argparse.Namespace) -> int:
         run_dir = args.runs / f"throughput_{d}gpu"
         wall, code, start = train(d, sets, run_dir, args.task, "fast", args.limit)
         records[d] = {"sets": sets, **run_record(run_dir, start, wall, code)}
-    base = records[args.devices[0]]["steps_per_s"] / args.devices[0]
+    base = records[1]["steps_per_s"] if 1 in records else math.nan  # no 1-GPU run: no ratio
     for d, r in records.items():
         rows.append(
             [

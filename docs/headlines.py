@@ -222,6 +222,37 @@ def _gpu_seeds_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
     return "Touch `--preset fast` seeds, one process per GPU", value, list(GPU_SEEDS)
 
 
+GPU_SCALING = (
+    "scaling/throughput_touch_1_2_4gpu_h100x4.json",
+    "scaling/solve_touch_1_2gpu_h100x2.json",
+    "scaling/solve_touch_4gpu_h100x4.json",
+)
+
+
+def _gpu_scaling_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
+    """Training steps/s at 8,192 envs per GPU on 1, 2 and 4 GPUs (a process per GPU), and
+    Touch's time to its threshold with the fast preset's global batch split over them."""
+    runs = load(GPU_SCALING[0])["runs"]
+    one = runs["1"]["steps_per_s"]
+    speeds = ", ".join(
+        f"{d} GPU{'s' if d != '1' else ''} {fmt(r['steps_per_s'])} ({r['steps_per_s'] / one:.2f}x)"
+        for d, r in sorted(runs.items(), key=lambda item: int(item[0]))
+    )
+    solve = {}
+    for rel in GPU_SCALING[1:]:
+        data = load(rel)
+        for d, s in data["summary"].items():
+            solve[d] = {**s, "limit_s": data["settings"]["limit"]}
+    times = "; ".join(
+        f"{d} GPU{'s' if d != '1' else ''} {s['solved']} of {s['seeds']} seeds"
+        + (f", median {secs(s['median_s'])}" if s["median_s"] is not None else "")
+        + (f" (runs stopped at {secs(s['limit_s'])})" if s["solved"] < s["seeds"] else "")
+        for d, s in sorted(solve.items(), key=lambda item: int(item[0]))
+    )
+    value = f"env steps/s at 8,192 envs per GPU: {speeds}. Touch to 0.95: {times}"
+    return "Training on several GPUs, a process per GPU", value, list(GPU_SCALING)
+
+
 HEADLINES: tuple[Headline, ...] = (
     _seeds_row("Touch", "seeds/seeds_touch_fast.json", "`--preset fast`, time to threshold"),
     _seeds_row("Reach", "seeds/seeds_reach_fast.json", "`--preset fast`, time to threshold"),
@@ -239,6 +270,7 @@ HEADLINES: tuple[Headline, ...] = (
     Headline(_robustness_row),
     Headline(_cold_row),
     Headline(_gpu_seeds_row),
+    Headline(_gpu_scaling_row),
     Headline(_throughput_row),
     Headline(_parity_row),
     Headline(_cpu_row),
