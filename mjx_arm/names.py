@@ -1,8 +1,9 @@
 """The project's vocabulary: the names of tasks, engines, backends, MJX implementations and
 presets, defined once and used by the configs, the envs and the command line's choices.
 
-- engine: where one policy runs. ``mujoco`` and ``pybullet`` are the Gymnasium envs on a CPU
-  (:data:`CPU_ENGINES`); ``mjx`` is the batched JAX env, whatever steps its physics.
+- engine: where one policy runs, one row each in :mod:`mjx_arm.engines` (the registry): the
+  Gymnasium envs on a CPU (``engine_names("env")``: MuJoCo, the PyBullet reference), and ``mjx``,
+  the batched JAX env, whatever steps its physics.
 - backend: what steps the batched JAX env's physics (:data:`BACKENDS`): ``mjx`` (MuJoCo's MJX)
   or ``mujoco`` (C MuJoCo behind a host callback, the CPU path); ``auto`` picks by device.
   Only the ``mjx`` engine has a backend; reports name the two together with
@@ -14,6 +15,8 @@ presets, defined once and used by the configs, the envs and the command line's c
 
 from __future__ import annotations
 
+from mjx_arm import engines
+
 # The built-in tasks, one file each (mjx_arm/task/NAME.py); mjx_arm.task.registry adds others.
 TASKS = ("reach", "touch", "lift")
 
@@ -24,10 +27,6 @@ def env_id(task: str) -> str:
 
 
 TASK_IDS = {task: env_id(task) for task in TASKS}
-
-CPU_ENGINES = ("mujoco", "pybullet")
-EVAL_ENGINES = (*CPU_ENGINES, "mjx")
-PARITY_ENGINES = ("mujoco", "mjx", "pybullet")
 
 BACKENDS = ("auto", "mjx", "mujoco")
 
@@ -41,9 +40,10 @@ EXIT_OK, EXIT_INVALID = 0, 2
 def engine_label(engine: str, backend: str | None = None) -> str:
     """How output names where a policy ran: the engine, and for the ``mjx`` engine its backend.
 
-    ``engine_label("pybullet")`` -> ``pybullet``; ``engine_label("mjx", "mujoco")`` ->
-    ``mjx (backend mujoco)``. A backend given with a CPU engine is ignored (they have none).
+    A CPU engine's label is its name; ``engine_label("mjx", "mujoco")`` ->
+    ``mjx (backend mujoco)``. A backend given with an engine without backends (a CPU engine)
+    is ignored.
     """
-    if engine != "mjx" or not backend:
+    if not backend or engine not in engines.batch_engines():
         return engine
     return f"{engine} (backend {backend})"

@@ -13,9 +13,10 @@ import os
 import time
 from pathlib import Path
 
+from mjx_arm import engines
 from mjx_arm.bench.settings import add_arguments, from_arguments
 from mjx_arm.inputs import ConfigError, check_folder
-from mjx_arm.names import EXIT_OK, PARITY_ENGINES
+from mjx_arm.names import EXIT_OK
 from mjx_arm.settings import add_set_argument
 
 PARITY_OUT = Path("benchmarks/results/parity")
@@ -296,7 +297,8 @@ def register(sub) -> None:
         "grasp", help="the gripper's scripted pick in every engine", description=cmd_grasp.__doc__
     )
     p.set_defaults(func=cmd_grasp)
-    p.add_argument("--engines", nargs="+", choices=PARITY_ENGINES, default=list(PARITY_ENGINES))
+    parity = engines.engine_names("parity")
+    p.add_argument("--engines", nargs="+", choices=parity, default=list(parity))
     p.add_argument("--video", action="store_true", help="film the pick from the table per engine")
     p.add_argument("--out", type=Path, default=GRASP_OUT, help=f"output folder ({GRASP_OUT})")
 

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Protocol
 import mujoco
 import numpy as np
 
+from mjx_arm import engines
 from mjx_arm.bench.parity_config import ENGINES
 from mjx_arm.envs.arm import ArmInfo, arm_info
 from mjx_arm.envs.base import BaseRobotEnv, PhysicsReading
@@ -291,24 +292,32 @@ def make_engine(
     batch_size: int = 1,
     arm: ArmInfo | None = None,
 ) -> Engine:
-    """The engine ``name`` (see :data:`ENGINES`) on ``task``'s scene.
+    """The engine ``name`` (see :data:`ENGINES`) on ``task``'s scene: its registry row's
+    ``parity`` factory (:mod:`mjx_arm.engines`).
 
     Args:
-        name: "mujoco", "mjx" or "pybullet".
+        name: an engine with parity hooks: "mujoco", "mjx" or "pybullet".
         task: the task (scene and time step).
         impl: MJX implementation ("auto", "jax", "warp"); ignored by the CPU engines.
         batch_size: the largest batch (MJX on Warp sizes its contact pool with it).
         arm: the arm (default: the shipped one).
     """
-    config = arm.config if arm is not None else None
-    if name == "mujoco":
-        from mjx_arm.envs.mujoco_env import MujocoArmEnv
+    if name not in ENGINES:
+        raise ValueError(f"engine must be one of {ENGINES}, got {name!r}")
+    return engines.load(engines.engine(name).parity)(task, impl, batch_size, arm)
 
-        return MujocoEngine(MujocoArmEnv(task, config))
-    if name == "pybullet":
-        from pybullet_ref import PybulletArmEnv
 
-        return BulletEngine(PybulletArmEnv(task, config))
-    if name == "mjx":
-        return MjxEngine(task, impl, batch_size, arm)
-    raise ValueError(f"engine must be one of {ENGINES}, got {name!r}")
+def mujoco_engine(task: TaskConfig, impl: str, batch_size: int, arm: ArmInfo | None) -> Engine:
+    """The MuJoCo row's parity hook: CPU MuJoCo's env on ``task`` (``impl`` and ``batch_size``
+    concern MJX only)."""
+    from mjx_arm.envs.mujoco_env import MujocoArmEnv
+
+    return MujocoEngine(MujocoArmEnv(task, arm.config if arm is not None else None))
+
+
+def bullet_engine(task: TaskConfig, impl: str, batch_size: int, arm: ArmInfo | None) -> Engine:
+    """The PyBullet row's parity hook: the reference env on ``task`` (``impl`` and
+    ``batch_size`` concern MJX only)."""
+    from pybullet_ref import PybulletArmEnv
+
+    return BulletEngine(PybulletArmEnv(task, arm.config if arm is not None else None))

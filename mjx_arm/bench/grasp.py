@@ -33,6 +33,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from mjx_arm.engines import engine as engine_row
+from mjx_arm.engines import engine_names, load
 from mjx_arm.envs.arm import ArmInfo, arm_info
 from mjx_arm.paths import asset
 from mjx_arm.task.grip import ObjectStart
@@ -320,16 +322,14 @@ class _Film:
             self.frames.append(self.renderer.render().copy())
 
 
-RUNNERS = {"mujoco": run_mujoco, "pybullet": run_pybullet, "mjx": run_mjx}
-
-
 def grasp_check(
-    engines: tuple[str, ...] = ("mujoco", "pybullet"),
+    engines: tuple[str, ...] | None = None,
     log=print,
     video_dir: Path | None = None,
     starts: tuple[str, ...] = STARTS,
 ) -> dict[str, Any]:
-    """The scripted pick from each of ``starts`` in each of ``engines``.
+    """The scripted pick from each of ``starts`` in each of ``engines`` (None: the Gymnasium
+    env engines of :mod:`mjx_arm.engines` with a scripted pick, MuJoCo and PyBullet).
 
     Returns:
         Per start: the cube's start and, per engine, the lift (m), the slip over the hold (m),
@@ -337,6 +337,8 @@ def grasp_check(
         ``video_dir``, ``table`` start) the path of its video ``grasp_ENGINE.mp4`` (one frame per
         control step, real time).
     """
+    if engines is None:
+        engines = tuple(n for n in engine_names("env") if n in engine_names("grasp"))
     arm = gripper_arm()
     model = grasp_model(arm)
     result: dict[str, Any] = {
@@ -366,7 +368,8 @@ def run_engine(name, model, arm, script, video_dir: Path | None = None) -> dict[
     from mjx_arm.replay import write_video
 
     frames = [] if video_dir is not None else None
-    row = {**RUNNERS[name](model, arm, script, frames), "slip_goal_m": SLIP_GOAL}
+    run = load(engine_row(name, "grasp").grasp)
+    row = {**run(model, arm, script, frames), "slip_goal_m": SLIP_GOAL}
     row["met"] = row["held"] and row["slip_m"] <= SLIP_GOAL
     if frames:
         path = Path(video_dir) / f"grasp_{name}.mp4"

@@ -37,6 +37,8 @@ from mjx_arm.bench.parity_config import (
     REFERENCE,
     ParityConfig,
 )
+from mjx_arm.engines import engine as engine_row
+from mjx_arm.engines import engine_names
 from mjx_arm.envs.arm import ArmInfo, arm_info
 from mjx_arm.envs.base import task_for_arm
 from mjx_arm.envs.physics_config import resolve_impl
@@ -412,8 +414,12 @@ def run_parity(config: ParityConfig, log=print) -> dict[str, Any]:
 
 
 def divergence_goal(pair: tuple[str, str], config: ParityConfig) -> float:
-    """The median divergence goal (rad) of a pair: PyBullet's where it takes part, else MJX's."""
-    return config.goal_pybullet_rad if "pybullet" in pair else config.goal_mjx_rad
+    """The median divergence goal (rad) of a pair: that of the first engine in it whose registry
+    row names one (``parity_goal``: PyBullet's), else MJX's."""
+    for name in pair:
+        if name in engine_names("parity_goal"):
+            return getattr(config, engine_row(name).parity_goal)
+    return config.goal_mjx_rad
 
 
 def check_goals(

@@ -11,10 +11,13 @@ from dataclasses import dataclass
 from typing import Any
 
 from mjx_arm.bench.settings import setting
+from mjx_arm.engines import engine_names
 from mjx_arm.envs.physics_config import IMPLS
 from mjx_arm.inputs import MAX_SEED
-from mjx_arm.names import PARITY_ENGINES as ENGINES
 from mjx_arm.settings import check_range
+
+# The engines with parity hooks, in registry order (mujoco, mjx, pybullet).
+ENGINES = engine_names("parity")
 
 # Bottom-face centres (m) of the box in the pressing check, the first ``press_boxes`` are used.
 BOX_POSITIONS = (

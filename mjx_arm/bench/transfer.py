@@ -19,6 +19,7 @@ from typing import Any
 
 from mjx_arm.bench.results import fmt, markdown_table, save_results, verdict
 from mjx_arm.bench.settings import setting
+from mjx_arm.engines import engine, engine_names
 from mjx_arm.envs.physics_config import IMPLS
 from mjx_arm.inputs import MAX_SEED
 from mjx_arm.names import TASK_IDS
@@ -39,8 +40,8 @@ class TransferEngine:
 TRANSFER_ENGINES = {
     "mjx": TransferEngine("MJX", "mjx", "mjx"),
     "batch": TransferEngine("C MuJoCo batch", "mjx", "mujoco"),
-    "mujoco": TransferEngine("CPU MuJoCo (Gymnasium)", "mujoco"),
-    "pybullet": TransferEngine("PyBullet (Gymnasium)", "pybullet"),
+    # the Gymnasium env engines of the registry, labelled by their rows
+    **{name: TransferEngine(engine(name).label, name) for name in engine_names("env")},
 }
 
 
@@ -49,7 +50,7 @@ class TransferConfig:
     """Settings of the transfer matrix. Saved in the result JSON; the CLI flags come from here."""
 
     engines: tuple[str, ...] = setting(
-        ("mjx", "mujoco", "pybullet"), "engines (rows)", tuple(TRANSFER_ENGINES)
+        ("mjx", *engine_names("env")), "engines (rows)", tuple(TRANSFER_ENGINES)
     )
     task: str = setting("", "task to evaluate in: reach or touch (default: the policy's own)")
     episodes: int = setting(200, "episodes per engine")

@@ -1,6 +1,7 @@
 """Gymnasium ids of the tasks, registered on ``import mjx_arm``, and the one CPU env factory.
 
-``gymnasium.make("mjx_arm/Touch-v0", engine="mujoco" | "pybullet")`` builds a CPU env;
+``gymnasium.make("mjx_arm/Touch-v0", engine=NAME)`` builds a CPU env of a registered engine
+(:mod:`mjx_arm.engines`);
 ``gymnasium.make_vec(id, num_envs=N, vectorization_mode="vector_entry_point")`` the MJX batch;
 :func:`make_async_vec` Gymnasium's AsyncVectorEnv of CPU envs, whose workers are not forked.
 A task added with :func:`mjx_arm.task.registry.register_task` gets its id from
@@ -14,7 +15,7 @@ from typing import Any
 
 import gymnasium as gym
 
-from mjx_arm.names import CPU_ENGINES as ENGINES
+from mjx_arm import engines
 from mjx_arm.names import env_id
 from mjx_arm.task.config import TaskConfig, task_config
 from mjx_arm.task.registry import task_names
@@ -26,18 +27,12 @@ def _task(name: str, task: TaskConfig | dict | None) -> TaskConfig:
     return task_config(name, **(task or {}))
 
 
-# The env class of each CPU engine, as an entry-point string: the PyBullet reference env lives
-# in its own top-level package, which is imported only when a PyBullet env is made.
-ENGINE_ENTRY_POINTS = {
-    "mujoco": "mjx_arm.envs.mujoco_env:MujocoArmEnv",
-    "pybullet": "pybullet_ref.env:PybulletArmEnv",
-}
-
-
 def make_env(
     task_name: str, engine: str = "mujoco", task: TaskConfig | dict | None = None, **kwargs: Any
 ) -> gym.Env:
-    """Build one env of ``task_name`` on ``engine`` ("mujoco" or "pybullet").
+    """Build one env of ``task_name`` on ``engine``, a registered engine with a Gymnasium env
+    (:func:`mjx_arm.engines.engine_names` ``("env")``); its class is imported only now (the
+    PyBullet reference env lives in its own top-level package).
 
     Args:
         task_name: a registered task name.
@@ -46,11 +41,13 @@ def make_env(
         kwargs: passed to the env class (``arm``: a URDF, an arm file or an ArmConfig;
             ``render_mode``, ...).
     """
-    if engine not in ENGINE_ENTRY_POINTS:
-        raise ValueError(f"unknown engine {engine!r}; choose one of {ENGINES}")
+    choices = engines.engine_names("env")
+    if engine not in choices:
+        raise ValueError(f"unknown engine {engine!r}; choose one of {choices}")
     from gymnasium.envs.registration import load_env_creator
 
-    return load_env_creator(ENGINE_ENTRY_POINTS[engine])(_task(task_name, task), **kwargs)
+    entry_point = engines.engine(engine).env
+    return load_env_creator(entry_point)(_task(task_name, task), **kwargs)
 
 
 def make_timed_env(task_name: str, **kwargs: Any) -> gym.Env:

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from mjx_arm import names
+from mjx_arm import engines, names
 from mjx_arm.inputs import (
     ConfigError,
     check_output,
@@ -131,7 +131,7 @@ def _add_eval(sub: argparse._SubParsersAction) -> None:
     p.add_argument("policy", help="policy file (.npz/.onnx) or run directory (newest checkpoint)")
     p.add_argument(
         "--engine",
-        choices=names.EVAL_ENGINES,
+        choices=engines.eval_engines(),
         default="mujoco",
         help="mujoco or pybullet (Gymnasium env, CPU) or mjx (the batched MJX env; "
         "on a CPU it still runs MJX, only slowly: minutes to compile, about "

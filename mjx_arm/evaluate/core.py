@@ -12,10 +12,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mjx_arm import engines
 from mjx_arm.evaluate.runners import Policy, check_policy_arm, run_batched, run_episodes
 from mjx_arm.evaluate.stats import EvalRun, summarize
 from mjx_arm.inputs import ConfigError, MissingInputError
-from mjx_arm.names import EVAL_ENGINES as ENGINES
 from mjx_arm.names import engine_label, env_id
 from mjx_arm.task.config import TaskConfig, task_config
 
@@ -86,19 +86,19 @@ def make_eval_env(
     arm: Any = None,
     contact: str | None = None,
 ) -> gym.Env:
-    """A Gymnasium env of ``task`` on a CPU engine ("mujoco" or "pybullet"), made through its
+    """A Gymnasium env of ``task`` on a CPU engine (``engine_names("env")``), made through its
     registered id (:func:`mjx_arm.envs.registration.make_env` behind Gymnasium's wrappers: the
     time limit and the checks), with an ``rgb_array`` renderer when ``render``, for ``arm`` (a
     URDF, an arm file or an ArmConfig; default: the shipped arm). ``contact``: PyBullet's scene
     contact ("soft", "rigid" or ``FIXED/CUBE``, :mod:`pybullet_ref.contact`; None: the env's
-    default); MuJoCo ignores it."""
+    default); an engine whose row lists no ``contact`` option ignores it."""
     import gymnasium as gym
 
     from mjx_arm.envs.registration import register_envs
 
     register_envs()  # idempotent; also registers tasks added since import
     kwargs = {"render_mode": "rgb_array", "width": width, "height": height} if render else {}
-    if contact is not None and engine == "pybullet":
+    if contact is not None and "contact" in engines.engine(engine).env_options:
         kwargs["contact"] = contact
     return gym.make(env_id(task.task), engine=engine, task=task, arm=arm, **kwargs)
 
@@ -154,7 +154,8 @@ def evaluate(
 
     Args:
         policy: observation -> action (single or batched).
-        engine: "mujoco", "pybullet" (Gymnasium envs) or "mjx" (the batched env).
+        engine: a Gymnasium env on a CPU or ``mjx`` (the batched env):
+            :func:`mjx_arm.engines.eval_engines`.
         task: the task configuration.
         episodes, seed: how many episodes; the first one's seed (CPU) or the batch key's (mjx).
         video: a video (.mp4 or .gif) of the first ``video_episodes`` episodes, or None
@@ -171,11 +172,10 @@ def evaluate(
     """
     from mjx_arm.envs.arm import arm_info
 
-    if engine not in ENGINES:
-        raise ConfigError(f"engine must be one of {ENGINES}, got {engine!r}")
+    _check_engine(engine)
     check_policy_fits(policy, task, arm_info(arm))  # before the task meets the arm
     start = time.monotonic()
-    if engine == "mjx":
+    if engine in engines.batch_engines():
         run = run_batched(policy, task, episodes, seed, backend or "mjx", impl, arm)
         if video is not None:
             run.frames, note = _replay_video(run.trajectory, task, video, width, height, arm)
@@ -187,7 +187,7 @@ def evaluate(
             run = run_episodes(policy, env, episodes, seed, video, video_episodes)
         finally:
             env.close()
-        physics = {"contact": str(env.unwrapped.contact)} if engine == "pybullet" else {}
+        physics = _env_physics(env.unwrapped, engine)
     result = {"engine": engine, "task": task.task, "seed": seed, **summarize(run.episodes)}
     result.update(physics)
     result["wall_seconds"] = time.monotonic() - start
@@ -219,6 +219,19 @@ def check_policy_fits(policy: Any, task: TaskConfig, arm: Any) -> None:
             f"on {arm.urdf.name} has {want[0]} and {want[1]}: pass the task (--task) and arm "
             "(--arm) it was trained on"
         )
+
+
+def _check_engine(engine: str) -> None:
+    choices = engines.eval_engines()
+    if engine not in choices:
+        raise ConfigError(f"engine must be one of {choices}, got {engine!r}")
+
+
+def _env_physics(env: Any, engine: str) -> dict[str, str]:
+    """The engine-only settings (``env_options`` of its registry row) a CPU evaluation ran
+    with, for its summary: ``{"contact": ...}`` on the PyBullet reference, else ``{}``."""
+    options = engines.engine(engine).env_options
+    return {name: str(getattr(env, name)) for name in options}
 
 
 def _batch_physics(backend: str | None, impl: str) -> dict[str, str]:

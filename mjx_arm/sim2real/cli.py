@@ -7,8 +7,9 @@ import json
 from pathlib import Path
 from typing import Any
 
+from mjx_arm import engines
 from mjx_arm.inputs import check_output, int_in, seed_int, write_atomic
-from mjx_arm.names import CPU_ENGINES, EXIT_OK
+from mjx_arm.names import EXIT_OK
 from mjx_arm.settings import add_set_argument, apply_settings, describe
 
 
@@ -110,7 +111,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("policy", help="policy file (.npz/.onnx) or run directory (newest checkpoint)")
     p.add_argument(
         "--engine",
-        choices=CPU_ENGINES,
+        choices=engines.engine_names("position_env"),
         default="mujoco",
         help="physics engine (default: mujoco)",
     )

@@ -51,10 +51,10 @@ import gymnasium as gym
 import mujoco
 import numpy as np
 
+from mjx_arm import engines
 from mjx_arm.envs.arm import ArmInfo
 from mjx_arm.envs.base import DEFAULT_HEIGHT, DEFAULT_WIDTH
 from mjx_arm.envs.mujoco_env import MujocoArmEnv
-from mjx_arm.names import CPU_ENGINES as ENGINES
 from mjx_arm.sim2real.adapter import VelocityToPositionAdapter
 from mjx_arm.sim2real.gripper import GripperPassthrough
 from mjx_arm.sim2real.limiter import JointLimits, SafetyLimiter
@@ -362,17 +362,18 @@ class PybulletPositionArmEnv(_ChainActuation, PybulletArmEnv):
 
 
 def make_position_env(task: TaskConfig, engine: str, config: ChainConfig | None = None, **kwargs):
-    """A position-controlled env of ``task`` on ``engine`` ("mujoco" or "pybullet"), truncated
-    at its task's ``episode_steps`` (as the arm's setup fills them in) like the registered envs.
+    """A position-controlled env of ``task`` on ``engine`` (a registered engine with a position
+    env: :func:`mjx_arm.engines.engine_names` ``("position_env")``), truncated at its task's
+    ``episode_steps`` (as the arm's setup fills them in) like the registered envs.
 
     Args:
         task: the task configuration.
-        engine: "mujoco" or "pybullet".
+        engine: the CPU engine.
         config: the chain and the servo.
         kwargs: ``arm``, ``render_mode``, ``width``, ``height``.
     """
-    classes = {"mujoco": MujocoPositionArmEnv, "pybullet": PybulletPositionArmEnv}
-    if engine not in classes:
-        raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
-    env = classes[engine](task, config=config, **kwargs)
+    choices = engines.engine_names("position_env")
+    if engine not in choices:
+        raise ValueError(f"engine must be one of {choices}, got {engine!r}")
+    env = engines.load(engines.engine(engine).position_env)(task, config=config, **kwargs)
     return gym.wrappers.TimeLimit(env, env.task.episode_steps)

@@ -256,6 +256,29 @@ def _absolute_mesh_copy(tree: _Tree, package_dirs: Mapping[str, str], folder: st
     return copy
 
 
+def check_mujoco_load(
+    tree: _Tree,
+    package_dirs: Mapping[str, str],
+    repair: bool,
+    out: _Findings,
+    limits: Mapping[str, float] | None = None,
+) -> None:
+    """The MuJoCo row's URDF load check (:mod:`mjx_arm.engines`): :func:`_load_mujoco`."""
+    _load_mujoco(tree, package_dirs, repair, out, limits)
+
+
+def check_pybullet_load(
+    tree: _Tree,
+    package_dirs: Mapping[str, str],
+    repair: bool,
+    out: _Findings,
+    limits: Mapping[str, float] | None = None,
+) -> None:
+    """The PyBullet row's URDF load check (:mod:`mjx_arm.engines`): :func:`_load_pybullet`
+    (``repair`` and ``limits`` concern the MuJoCo conversion only)."""
+    _load_pybullet(tree, package_dirs, out)
+
+
 def _load_pybullet(tree: _Tree, package_dirs: Mapping[str, str], out: _Findings) -> None:
     """Load into a private DIRECT PyBullet client with its C output captured; report problems.
 

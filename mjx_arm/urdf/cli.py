@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from mjx_arm.engines import engine_names
 from mjx_arm.inputs import InputError, check_output, float_in, require_file, write_atomic
 from mjx_arm.names import EXIT_INVALID, EXIT_OK
 from mjx_arm.urdf.scene_shapes import SCENES
@@ -115,7 +116,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("urdf", help="path of the URDF file")
     p.add_argument(
         "--engine",
-        choices=["mujoco", "pybullet", "all"],
+        choices=[*engine_names("urdf_check"), "all"],
         default="all",
         help="engine(s) to check compatibility with and load into (default: all)",
     )

@@ -14,10 +14,13 @@ from pathlib import Path
 
 import numpy as np
 
+from mjx_arm.engines import engine_names
+
+# What ``validate(engine=...)`` checks: one engine with a URDF load check in the registry
+# (mjx_arm.engines), or "all" of them.
 ENGINES: dict[str, tuple[str, ...]] = {
-    "mujoco": ("mujoco",),
-    "pybullet": ("pybullet",),
-    "all": ("mujoco", "pybullet"),
+    **{name: (name,) for name in engine_names("urdf_check")},
+    "all": engine_names("urdf_check"),
 }
 JOINT_TYPES = frozenset({"revolute", "continuous", "prismatic", "fixed", "floating", "planar"})
 MOVABLE_TYPES = frozenset({"revolute", "continuous", "prismatic"})

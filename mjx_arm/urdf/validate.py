@@ -21,9 +21,10 @@ import functools
 from collections.abc import Callable, Mapping
 from pathlib import Path
 
+from mjx_arm.engines import engine, engine_names, load
 from mjx_arm.urdf.check_geometry import _check_geometry
 from mjx_arm.urdf.check_joints import _check_joints
-from mjx_arm.urdf.check_physics import _check_inertials, _load_mujoco, _load_pybullet
+from mjx_arm.urdf.check_physics import _check_inertials
 from mjx_arm.urdf.check_tree import _check_line_lengths, _check_tree, _read_xml
 from mjx_arm.urdf.errors import UrdfError, one_line, report_error
 from mjx_arm.urdf.findings import ENGINES, Finding, ValidationReport, _Findings, _Tree
@@ -91,10 +92,10 @@ def _native(
     out: _Findings,
     limits: Mapping[str, float],
 ) -> None:
-    if "mujoco" in engines:
-        _guarded(out, 3, lambda: _load_mujoco(tree, dirs, repair, out, limits))
-    if "pybullet" in engines:
-        _guarded(out, 3, lambda: _load_pybullet(tree, dirs, out))
+    for name in engine_names("urdf_check"):  # registry order: MuJoCo first
+        if name in engines:
+            check = load(engine(name).urdf_check)
+            _guarded(out, 3, lambda check=check: check(tree, dirs, repair, out, limits))
 
 
 def _guarded(out: _Findings, layer: int, check: Callable[[], _Tree | None]) -> _Tree | None:

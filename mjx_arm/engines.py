@@ -1,0 +1,209 @@
+"""The engine registry: one row per physics engine, naming what the engine provides.
+
+A row (:class:`EngineSpec`) holds the engine's name (what a user types: ``--engine NAME``,
+``gym.make(id, engine=NAME)``), a label for reports, and each thing the engine provides as an
+import path string ``"package.module:attribute"``, loaded with :func:`load` only when used (the
+registry sits at the bottom of the import layers, so it never imports an engine itself):
+
+- ``env``: the Gymnasium env class, called ``cls(task, **kwargs)`` (a CPU engine);
+- ``batch_physics``: per backend, the batch physics class of the batched JAX env (each one
+  satisfies :class:`BatchPhysics`);
+- ``position_env``: the position-controlled env of sim-to-real, ``cls(task, config=, **kwargs)``;
+- ``parity``: the parity benchmark's engine factory, ``f(task, impl, batch_size, arm)``, with
+  ``parity_goal`` (its divergence goal's setting) and ``grasp`` (its scripted pick);
+- ``urdf_check``: the URDF load check, ``f(tree, package_dirs, repair, findings, limits)``.
+
+Each is None (or empty) where the engine does not provide it. The built-in rows are below; an
+engine that lives in its own top-level package (the PyBullet reference, ``pybullet_ref``)
+registers its row from a module named in :data:`ENGINE_MODULES`, imported on first lookup.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, Protocol, runtime_checkable
+
+from mjx_arm.inputs import InputError
+
+__all__ = [
+    "BatchPhysics",
+    "EngineSpec",
+    "UnknownEngineError",
+    "batch_engines",
+    "engine",
+    "engine_names",
+    "eval_engines",
+    "load",
+    "register_engine",
+    "unregister_engine",
+]
+
+
+class UnknownEngineError(InputError, ValueError):
+    """An engine name that no row of the registry has."""
+
+
+@dataclass(frozen=True)
+class EngineSpec:
+    """One engine's row. Import paths are ``"module:attribute"`` strings (see the module doc).
+
+    Attributes:
+        name: what a user types.
+        label: how reports and tables name it.
+        env: the Gymnasium env class (a CPU engine), or None.
+        env_options: keyword settings only this engine's env takes (``contact``), passed on
+            when given and ignored by the other engines.
+        batch_physics: backend name -> batch physics class; empty where there is no batch.
+        position_env: the position-controlled env class of sim-to-real, or None.
+        parity: the parity benchmark's engine factory, or None.
+        parity_goal: the :class:`~mjx_arm.bench.parity_config.ParityConfig` field that holds
+            the joint divergence goal of a pair this engine takes part in (None: MJX's goal).
+        grasp: the grasp benchmark's scripted pick, ``f(model, arm, script, frames) -> dict``.
+        urdf_check: the URDF load check, or None.
+        requires: the optional module the engine imports (None: always installed).
+        install_hint: what to run when ``requires`` is missing.
+    """
+
+    name: str
+    label: str
+    env: str | None = None
+    env_options: tuple[str, ...] = ()
+    batch_physics: Mapping[str, str] = field(default_factory=dict)
+    position_env: str | None = None
+    parity: str | None = None
+    parity_goal: str | None = None
+    grasp: str | None = None
+    urdf_check: str | None = None
+    requires: str | None = None
+    install_hint: str | None = None
+
+    def provides(self, what: str) -> bool:
+        """Whether the row fills the field ``what`` (``"env"``, ``"parity"``, ...)."""
+        return bool(getattr(self, what))
+
+
+@runtime_checkable
+class BatchPhysics(Protocol):
+    """What the batched JAX env asks of its physics (MJX, or C MuJoCo behind a host callback).
+
+    ``data`` is one backend's state of a batch of B envs (a pytree); ``ctrl`` is ``(B, n)``
+    (vmapped where the backend steps one env at a time), ``done`` is ``(B,)``.
+    """
+
+    def init(self, qpos: Any, target_body: Any, obj: Any = None) -> Any:
+        """The state at joint positions ``qpos (n_q,)`` with the target at ``target_body``."""
+
+    def set_target(self, data: Any, target_body: Any, obj: Any = None) -> Any:
+        """``data`` with the target (and a gripper task's cube ``obj``) moved."""
+
+    def step(self, data: Any, ctrl: Any, dynamics: Any = None, object_params: Any = None) -> Any:
+        """One control step holding ``ctrl``."""
+
+    def read(self, data: Any) -> Any:
+        """The observation contract's read-out (a ``Reading``)."""
+
+    def overflow(self, data: Any) -> Any:
+        """Whether a buffer overflowed (a bool array)."""
+
+    def check_overflow(self, flags: Any) -> None:
+        """Raise a named error when ``flags`` say a buffer overflowed."""
+
+    def where(self, done: Any, new: Any, old: Any) -> Any:
+        """Per env: ``new`` where ``done`` else ``old``."""
+
+    def splits(self, path: tuple) -> bool:
+        """Whether the state leaf at ``path`` has the batch axis first."""
+
+    def wait_precompiled(self) -> dict[str, float]:
+        """Wait for kernels compiled ahead; their compile seconds by name."""
+
+    def describe(self) -> dict:
+        """Implementation facts, for run configs and benchmark JSON."""
+
+
+_ROWS: dict[str, EngineSpec] = {}
+
+# Modules that register an engine living outside mjx_arm, imported on first lookup.
+ENGINE_MODULES = ("pybullet_ref.engine",)
+_loaded = False
+
+
+def register_engine(spec: EngineSpec) -> EngineSpec:
+    """Add ``spec`` (replacing a row of the same name); returns it."""
+    _ROWS[spec.name] = spec
+    return spec
+
+
+def unregister_engine(name: str) -> None:
+    """Remove the row ``name`` (no error when there is none)."""
+    _ROWS.pop(name, None)
+
+
+def _rows() -> dict[str, EngineSpec]:
+    global _loaded
+    if not _loaded:
+        _loaded = True
+        for module in ENGINE_MODULES:
+            importlib.import_module(module)
+    return _ROWS
+
+
+def engine_names(provides: str | None = None) -> tuple[str, ...]:
+    """The registered names in registry order; with ``provides``, those that fill that field."""
+    rows = _rows().values()
+    return tuple(r.name for r in rows if provides is None or r.provides(provides))
+
+
+def batch_engines() -> tuple[str, ...]:
+    """Engines that are a batch and no Gymnasium env (``mjx``)."""
+    return tuple(r.name for r in _rows().values() if r.batch_physics and not r.env)
+
+
+def eval_engines() -> tuple[str, ...]:
+    """Where a policy can be evaluated: the Gymnasium env engines, then the batch engines."""
+    return (*engine_names("env"), *batch_engines())
+
+
+def engine(name: str, provides: str | None = None) -> EngineSpec:
+    """The row ``name``; with ``provides``, it must fill that field.
+
+    Raises:
+        UnknownEngineError: no such row (or none that provides ``provides``).
+    """
+    choices = engine_names(provides)
+    if name not in choices:
+        raise UnknownEngineError(f"unknown engine {name!r}; choose one of {choices}")
+    return _ROWS[name]
+
+
+def load(path: str) -> Any:
+    """The attribute that ``"package.module:attribute"`` names, importing its module."""
+    module, _, attribute = path.partition(":")
+    return getattr(importlib.import_module(module), attribute)
+
+
+register_engine(
+    EngineSpec(
+        name="mujoco",
+        label="CPU MuJoCo (Gymnasium)",
+        env="mjx_arm.envs.mujoco_env:MujocoArmEnv",
+        position_env="mjx_arm.sim2real.position_env:MujocoPositionArmEnv",
+        parity="mjx_arm.bench.engines:mujoco_engine",
+        grasp="mjx_arm.bench.grasp:run_mujoco",
+        urdf_check="mjx_arm.urdf.check_physics:check_mujoco_load",
+    )
+)
+register_engine(
+    EngineSpec(
+        name="mjx",
+        label="MJX",
+        batch_physics={
+            "mjx": "mjx_arm.envs.mjx_physics:MjxPhysics",
+            "mujoco": "mjx_arm.envs.mujoco_batch:MujocoCallbackPhysics",
+        },
+        parity="mjx_arm.bench.engines:MjxEngine",
+        grasp="mjx_arm.bench.grasp:run_mjx",
+    )
+)

@@ -1,0 +1,161 @@
+"""The engine registry: its rows, the batch physics protocol, a toy engine added and removed
+through the same path a real engine uses, and where engine names may be spelled out."""
+
+from __future__ import annotations
+
+import ast
+import inspect
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from mjx_arm import engines
+from mjx_arm.cli import build_parser
+from mjx_arm.envs.registration import make_env
+from mjx_arm.names import engine_label, env_id
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_rows_list_the_engines_in_the_orders_the_commands_show() -> None:
+    assert engines.engine_names() == ("mujoco", "mjx", "pybullet")
+    assert engines.engine_names("env") == ("mujoco", "pybullet")
+    assert engines.eval_engines() == ("mujoco", "pybullet", "mjx")
+    assert engines.engine_names("parity") == ("mujoco", "mjx", "pybullet")
+    assert engines.engine_names("position_env") == ("mujoco", "pybullet")
+    assert engines.engine("pybullet").requires == "pybullet"
+    assert engines.engine("mujoco").requires is None
+    assert engine_label("mjx", "mujoco") == "mjx (backend mujoco)"
+    assert engine_label("pybullet", "mujoco") == "pybullet"
+
+
+def test_every_import_path_of_every_row_loads() -> None:
+    fields = ("env", "position_env", "parity", "grasp", "urdf_check")
+    for name in engines.engine_names():
+        row = engines.engine(name)
+        paths = [getattr(row, f) for f in fields if getattr(row, f)]
+        for path in [*paths, *row.batch_physics.values()]:
+            assert callable(engines.load(path)), path
+
+
+def test_an_unknown_engine_is_a_named_input_error() -> None:
+    from mjx_arm.inputs import InputError
+
+    with pytest.raises(InputError, match="unknown engine 'nope'"):
+        engines.engine("nope")
+    with pytest.raises(engines.UnknownEngineError, match="choose one of"):
+        engines.engine("mjx", "env")  # the batched engine has no Gymnasium env
+
+
+def test_both_batch_physics_satisfy_the_protocol() -> None:
+    declared = {
+        name: inspect.signature(member)
+        for name, member in vars(engines.BatchPhysics).items()
+        if callable(member) and not name.startswith("_")
+    }
+    assert len(declared) == 10
+    for backend, path in engines.engine("mjx").batch_physics.items():
+        cls = engines.load(path)
+        assert issubclass(cls, engines.BatchPhysics), backend
+        for name, signature in declared.items():
+            own = list(inspect.signature(getattr(cls, name)).parameters)
+            assert own[: len(signature.parameters)] == list(signature.parameters), (cls, name)
+
+
+class ToyArmEnv(gym.Env):
+    """A toy engine: a point in 3-D that an action ``(3,)`` pushes, observed as ``(3,)``."""
+
+    def __init__(self, task, arm=None, render_mode=None, **kwargs) -> None:
+        self.task = task
+        self.observation_space = gym.spaces.Box(-1.0, 1.0, (3,), np.float32)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (3,), np.float32)
+        self._x = np.zeros(3, np.float32)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self._x = self.np_random.uniform(-0.5, 0.5, 3).astype(np.float32)
+        return self._x.copy(), {}
+
+    def step(self, action):
+        self._x = np.clip(self._x + 0.1 * np.asarray(action, np.float32), -1.0, 1.0)
+        return self._x.copy(), -float(np.linalg.norm(self._x)), False, False, {}
+
+
+@pytest.fixture
+def toy_engine():
+    row = engines.EngineSpec(name="toy", label="Toy point", env=f"{__name__}:ToyArmEnv")
+    engines.register_engine(row)
+    try:
+        yield row
+    finally:
+        engines.unregister_engine("toy")
+
+
+def _eval_help(capsys) -> str:
+    """What ``mjx-arm eval --help`` prints."""
+    with pytest.raises(SystemExit) as exit_:
+        build_parser().parse_args(["eval", "--help"])
+    assert exit_.value.code == 0
+    return capsys.readouterr().out
+
+
+def test_a_toy_engine_is_listed_and_made_like_a_real_one(toy_engine, capsys) -> None:
+    assert engines.engine_names("env") == ("mujoco", "pybullet", "toy")
+    assert engines.eval_engines() == ("mujoco", "pybullet", "toy", "mjx")
+    assert "--engine {mujoco,pybullet,toy,mjx}" in _eval_help(capsys)
+    assert build_parser().parse_args(["eval", "p.npz", "--engine", "toy"]).engine == "toy"
+    env = gym.make(env_id("reach"), engine="toy")
+    assert isinstance(env.unwrapped, ToyArmEnv)
+    obs, _ = env.reset(seed=3)
+    assert obs.shape == (3,)
+    limit = env.unwrapped.task.episode_steps
+    for step in range(limit):
+        obs, reward, terminated, truncated, _ = env.step(-obs)  # push towards the origin
+        assert not terminated
+        assert truncated == (step == limit - 1)  # the registered id's time limit holds
+    assert abs(reward) < 1e-6  # x - 0.1 x, 150 times: 0.9**150 * 0.87 ~ 1e-7
+    env.close()
+
+
+def test_a_removed_engine_is_gone_everywhere(toy_engine, capsys) -> None:
+    engines.unregister_engine("toy")
+    assert engines.eval_engines() == ("mujoco", "pybullet", "mjx")
+    assert "--engine {mujoco,pybullet,mjx}" in _eval_help(capsys)
+    with pytest.raises(SystemExit) as exit_:
+        build_parser().parse_args(["eval", "p.npz", "--engine", "toy"])
+    assert exit_.value.code == 2
+    with pytest.raises(ValueError, match="unknown engine 'toy'"):
+        make_env("reach", engine="toy")
+
+
+# Where the reference engine's name may still be written outside the registry and its own
+# package: checks of what that engine reads in a URDF (mesh formats, path lengths, damping),
+# a package name in a benchmark's version list, and a word of a parity report's causes.
+ALLOWED = {
+    "mjx_arm/bench/parity.py": 1,
+    "mjx_arm/bench/results.py": 1,
+    "mjx_arm/urdf/check_geometry.py": 3,
+    "mjx_arm/urdf/check_joints.py": 2,
+    "mjx_arm/urdf/check_physics.py": 1,
+    "mjx_arm/urdf/validate.py": 1,
+}
+
+
+def _name_strings(name: str) -> dict[str, int]:
+    counts: dict[str, int] = {}
+    for path in sorted((ROOT / "mjx_arm").rglob("*.py")):
+        if path == ROOT / "mjx_arm" / "engines.py":
+            continue
+        tree = ast.parse(path.read_text(), str(path))
+        n = sum(isinstance(c, ast.Constant) and c.value == name for c in ast.walk(tree))
+        if n:
+            counts[str(path.relative_to(ROOT))] = n
+    return counts
+
+
+def test_the_reference_engine_is_named_only_in_its_row_and_its_package() -> None:
+    # "mujoco" and "mjx" are backend and module names too, so the count covers the engine that
+    # lives in a package of its own, as any added engine would.
+    assert _name_strings("pybullet") == ALLOWED
