@@ -21,6 +21,7 @@ registers its row from a module named in :data:`ENGINE_MODULES`, imported on fir
 from __future__ import annotations
 
 import importlib
+import importlib.util
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
@@ -30,8 +31,10 @@ from mjx_arm.inputs import InputError
 __all__ = [
     "BatchPhysics",
     "EngineSpec",
+    "EngineUnavailableError",
     "UnknownEngineError",
     "batch_engines",
+    "check_installed",
     "engine",
     "engine_names",
     "eval_engines",
@@ -43,6 +46,10 @@ __all__ = [
 
 class UnknownEngineError(InputError, ValueError):
     """An engine name that no row of the registry has."""
+
+
+class EngineUnavailableError(InputError):
+    """An engine whose optional package (its row's ``requires``) is not installed."""
 
 
 @dataclass(frozen=True)
@@ -176,6 +183,17 @@ def engine(name: str, provides: str | None = None) -> EngineSpec:
     if name not in choices:
         raise UnknownEngineError(f"unknown engine {name!r}; choose one of {choices}")
     return _ROWS[name]
+
+
+def check_installed(name: str) -> None:
+    """Raise :class:`EngineUnavailableError`, with the row's install hint, when the package
+    the engine ``name`` requires cannot be imported."""
+    spec = engine(name)
+    if spec.requires and importlib.util.find_spec(spec.requires) is None:
+        raise EngineUnavailableError(
+            f"engine {name!r} needs the {spec.requires} package, which is not installed: "
+            f"{spec.install_hint or 'install it'}"
+        )
 
 
 def load(path: str) -> Any:

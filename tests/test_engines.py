@@ -119,6 +119,20 @@ def test_a_toy_engine_is_listed_and_made_like_a_real_one(toy_engine, capsys) -> 
     env.close()
 
 
+def test_an_engine_without_its_package_says_how_to_install_it() -> None:
+    row = engines.EngineSpec(
+        name="toy", label="Toy point", env=f"{__name__}:ToyArmEnv",
+        requires="mjx_arm_no_such_package", install_hint="pip install toy-physics",
+    )  # fmt: skip
+    engines.register_engine(row)
+    try:
+        with pytest.raises(engines.EngineUnavailableError, match="pip install toy-physics"):
+            gym.make(env_id("reach"), engine="toy")
+    finally:
+        engines.unregister_engine("toy")
+    engines.check_installed("pybullet")  # the reference engine's package is a dependency
+
+
 def test_a_removed_engine_is_gone_everywhere(toy_engine, capsys) -> None:
     engines.unregister_engine("toy")
     assert engines.eval_engines() == ("mujoco", "pybullet", "mjx")

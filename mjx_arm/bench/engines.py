@@ -304,6 +304,7 @@ def make_engine(
     """
     if name not in ENGINES:
         raise ValueError(f"engine must be one of {ENGINES}, got {name!r}")
+    engines.check_installed(name)
     return engines.load(engines.engine(name).parity)(task, impl, batch_size, arm)
 
 

@@ -46,6 +46,7 @@ def make_env(
         raise ValueError(f"unknown engine {engine!r}; choose one of {choices}")
     from gymnasium.envs.registration import load_env_creator
 
+    engines.check_installed(engine)
     entry_point = engines.engine(engine).env
     return load_env_creator(entry_point)(_task(task_name, task), **kwargs)
 
