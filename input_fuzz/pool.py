@@ -8,8 +8,8 @@ address space (:data:`CAP_BYTES`, :data:`CAP_LIMIT`) before it imports anything,
 (``/proc/self/clear_refs``), after it reads ``VmHWM``: the case's own peak resident memory.
 
 A worker that dies during a case (a signal, or an exit) makes that case ``crash`` (``memory``
-when the kernel killed it, SIGKILL) and is replaced; one that runs past :data:`KILL_SECONDS`
-is killed and its case is a ``hang``.
+when the kernel killed it, SIGKILL) and is replaced, as is one whose case ran out of memory;
+one that runs past :data:`KILL_SECONDS` is killed and its case is a ``hang``.
 
 The cap was chosen by measurement (benchmarks/bench_input_fuzz.py reports it with each case's
 peak RSS): a worker that has imported ``mjx_arm.cli`` and run every command maps about 2.2 GB
@@ -194,6 +194,8 @@ class Pool:
                 outcome = _lost(worker.job, now - worker.since, "hang", "worker killed")
             elif outcome is None:
                 outcome = self._died(worker, now)
+            if outcome.status == "memory":  # a fresh worker: its peak address space is its own
+                worker.stop()
             if not worker.process.is_alive():
                 self.workers[i] = self._start()
                 self.restarts += 1
