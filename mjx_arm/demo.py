@@ -6,7 +6,7 @@
 2. train Reach with Brax PPO (preset ``cpu``, backend ``auto``);
 3. export the policy to ``.npz`` (and ``.onnx`` when onnxruntime is installed) and check that
    the exports agree with each other;
-4. evaluate it on the three engines (:data:`mjx_arm.names.EVAL_ENGINES`): CPU MuJoCo, PyBullet
+4. evaluate it on the three engines (:func:`mjx_arm.engines.eval_engines`): CPU MuJoCo, PyBullet
    and ``mjx``, the batched JAX env (backend ``mjx`` on an accelerator, ``mujoco`` on a CPU),
    filming the first MuJoCo episodes (skipped, with a note, where MuJoCo cannot render);
 5. plot the longest MuJoCo episode;
@@ -25,8 +25,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mjx_arm.engines import eval_engines
 from mjx_arm.inputs import InputError
-from mjx_arm.names import EVAL_ENGINES, engine_label
+from mjx_arm.names import engine_label
 
 if TYPE_CHECKING:
     from mjx_arm.evaluate import EvalRun
@@ -210,7 +211,7 @@ def evaluate_engines(
     backend = resolve_backend("auto")
     runs: dict[str, dict] = {}
     mujoco_run = None
-    for engine in EVAL_ENGINES:
+    for engine in eval_engines():
         video = out / "episodes_mujoco.mp4" if engine == "mujoco" else None
         result, run = evaluate(
             policy,

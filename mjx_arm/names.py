@@ -28,6 +28,13 @@ def env_id(task: str) -> str:
 
 TASK_IDS = {task: env_id(task) for task in TASKS}
 
+# The registry's lists (mjx_arm.engines) as this module loads them: the built-in engines, in the
+# orders the commands show. The commands read the registry itself, so they also list an engine
+# registered later.
+CPU_ENGINES = engines.engine_names("env")
+EVAL_ENGINES = engines.eval_engines()
+PARITY_ENGINES = engines.engine_names("parity")
+
 BACKENDS = ("auto", "mjx", "mujoco")
 
 IMPLS = ("auto", "jax", "warp")
