@@ -30,6 +30,7 @@ import mujoco
 from brax.envs.base import Env, State
 from flax import struct
 
+from mjx_arm.engines import BatchPhysics
 from mjx_arm.envs.arm import validated_arm_info
 from mjx_arm.envs.base import action_size, default_arm, gripper_speed, task_for_arm
 from mjx_arm.envs.mjx_physics import MjxPhysics, Reading
@@ -100,8 +101,8 @@ class MjxArmEnv(Env):
             come from the arm.
         arm: the arm (a URDF, an arm file or an ArmConfig; default: the shipped arm); its URDF
             is validated before use.
-        physics_factory: builds the physics from (mj_model, arm, task); default: MJX with
-            ``physics`` and ``batch_size``.
+        physics_factory: builds the physics (a :class:`mjx_arm.engines.BatchPhysics`) from
+            (mj_model, arm, task); default: MJX with ``physics`` and ``batch_size``.
         mj_model: a task model converted with other settings (benchmark sweeps); default: the
             task's model from :func:`mjx_arm.envs.model_io.arm_model`.
         physics: MJX implementation and buffers (default: ``impl="auto"``).
@@ -128,6 +129,7 @@ class MjxArmEnv(Env):
         self.task = task_for_arm(task, self.arm)
         self.mj_model = mj_model if mj_model is not None else arm_model(self.arm, self.task)
         converted = time.monotonic()
+        self.physics: BatchPhysics
         if physics_factory is None:
             self.physics = MjxPhysics(
                 self.mj_model, self.arm, self.task, physics, batch_size, background_compile
