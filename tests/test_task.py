@@ -19,7 +19,13 @@ from mjx_arm.task import reach_config, sampling, touch_config
 from mjx_arm.task import reward as reward_lib
 from mjx_arm.task import touch as touch_lib
 from mjx_arm.task.config import HOME_QPOS, REWARD_TERMS, RewardConfig, TaskConfig
-from mjx_arm.task.wrench import ToolInertia, external_wrench, tool_inertia
+from mjx_arm.task.wrench import (
+    SENSOR_BLOCK_SIZE,
+    ToolInertia,
+    external_wrench,
+    sensor_wrench,
+    tool_inertia,
+)
 from mjx_arm.urdf.scene import box_top_offset
 
 GRAVITY = np.array([0.0, 0.0, -9.81])
@@ -576,6 +582,30 @@ def test_same_code_under_jax_numpy() -> None:
     w_jx = external_wrench(jnp, *[jnp.asarray(a) for a in args], tool)
     np.testing.assert_allclose(np.asarray(w_jx), w_np, atol=1e-4)
     np.testing.assert_allclose(w_np[:3], rot_z(0.4) @ np.array([1.0, 2.0, 3.0]), atol=1e-12)
+
+
+def test_tare_asks_jax_for_full_float32_precision() -> None:
+    """Under JAX the tare's matrix product asks for full float32 precision: JAX's default lets
+    a GPU round float32 operands to TF32, which left a tared free-motion reading of 2.4 to
+    4.5 mN on an H100 and an H200 (1e-6 N in float32). A CPU computes float32 either way, so
+    the request is checked in the lowered program, and the values against numpy's float64."""
+    import jax
+    import jax.numpy as jnp
+
+    tool = hand_tool(ee_rot=rot_z(0.4))
+    rng = np.random.default_rng(0)
+    block = rng.uniform(-10.0, 10.0, (4, SENSOR_BLOCK_SIZE))
+    block[:, -4:] /= np.linalg.norm(block[:, -4:], axis=1, keepdims=True)  # unit quaternion
+    lowered = {
+        "sensor": jax.jit(lambda b: sensor_wrench(jnp, b, tool)).lower(jnp.asarray(block)),
+        "parts": jax.jit(lambda *a: external_wrench(jnp, *a, tool)).lower(*[jnp.ones(3)] * 5),
+    }
+    for name, program in lowered.items():
+        dots = [line for line in program.as_text().splitlines() if "dot_general" in line]
+        assert dots and all("precision = [HIGHEST, HIGHEST]" in d for d in dots), (name, dots)
+    w_jx = jax.jit(lambda b: sensor_wrench(jnp, b, tool))(jnp.asarray(block, jnp.float32))
+    want = sensor_wrench(np, block, tool)  # up to 22 N
+    np.testing.assert_allclose(np.asarray(w_jx), want, atol=1e-4)  # measured 1.7e-6
 
 
 @pytest.mark.parametrize(("hold", "expected"), [(0, 0.0), (1, 0.0), (2, 0.5), (3, 1.0), (7, 1.0)])
