@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import shlex
 import sys
 import tempfile
@@ -171,9 +172,17 @@ def error_line(err: Exception, args: argparse.Namespace, argv: list[str]) -> str
     return f"error: {_shorten(headline or text, budget)}{tail}"
 
 
+# an absolute path of four or more folders (shortened to its last two parts on a long line)
+_PATH = re.compile(r"(?:/[^\s'\"/;:,()\[\]]+){4,}")
+
+
 def _shorten(text: str, budget: int) -> str:
-    """``text`` in at most ``budget`` characters: the cause (before the first ``"; "``) cut to
-    fit, then the fix (after the last ``"; "``) cut to :data:`_FIX_CHARS`."""
+    """``text`` in at most ``budget`` characters: long paths first cut to their last two parts
+    (the report keeps them whole), then the cause (before the first ``"; "``) cut to fit, then
+    the fix (after the last ``"; "``) cut to :data:`_FIX_CHARS`."""
+    if len(text) <= budget:
+        return text
+    text = _PATH.sub(lambda m: ".../" + "/".join(m.group(0).split("/")[-2:]), text)
     if len(text) <= budget:
         return text
     cause, _, rest = text.partition("; ")

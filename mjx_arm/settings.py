@@ -180,7 +180,10 @@ def config_fields(
     out, wrong = {}, []
     for key, value in data.items():
         value = tuple(value) if isinstance(value, list) else value
-        if not isinstance(value, dict):  # a nested section: its own from_dict checks it
+        if isinstance(value, dict) and not takes_table(hints[key]):
+            kind = getattr(hints[key], "__name__", hints[key])
+            wrong.append(f"{key} must be {kind}, not a table")
+        elif not isinstance(value, dict):  # a nested section: its own from_dict checks it
             try:
                 check_value(value, hints[key], key)
             except ConfigError as err:
@@ -192,6 +195,16 @@ def config_fields(
 
 
 # --------------------------------------------------------------------------- type checks
+
+
+def takes_table(hint: Any) -> bool:
+    """Whether a field of type ``hint`` may hold a table (a dict): a nested config (a
+    dataclass), a dict type or Any, alone or in a union."""
+    if hint is Any or hint is dict or dataclasses.is_dataclass(hint):
+        return True
+    if typing.get_origin(hint) is dict:
+        return True
+    return any(takes_table(arg) for arg in typing.get_args(hint) if arg is not type(None))
 
 
 @functools.cache

@@ -90,6 +90,49 @@ def test_a_urdf_without_links_is_an_arm_config_error(tmp_path: Path) -> None:
         resolve_arm(ArmConfig(urdf=str(empty)))
 
 
+@pytest.mark.parametrize(
+    ("body", "message"),
+    [
+        ('urdf = "URDF"\nee_link = {a = 1}\n', "ee_link must be str, not a table"),
+        ('urdf = "URDF"\njoints = {a = 1}\n', "joints must be"),
+        ("urdf = {a = {b = [1, 2]}}\n", "urdf must be str, not a table"),
+        ('urdf = "' + "x" * 100_000 + '"\n', "cannot be a path (File name too long)"),
+    ],
+)
+def test_arm_file_values_of_the_wrong_kind_are_one_error_line(
+    tmp_path: Path, capsys, body: str, message: str
+) -> None:
+    """A table where a name or list belongs, or a path longer than the filesystem takes, is an
+    error line (was: TypeError, AttributeError, OSError)."""
+    from mjx_arm.paths import asset
+
+    arm = tmp_path / "arm.toml"
+    arm.write_text(body.replace("URDF", str(asset("ur5e.urdf"))))
+    line = _fails(["arm", str(arm), "--check"], capsys)
+    assert message in line and len(line) <= 300, line
+
+
+def test_a_chain_of_2000_joints_is_an_error_line_not_a_recursion_error(tmp_path: Path, capsys):
+    """The URDF model walks its tree with a stack: deploy-sim on a 2,000-joint chain names the
+    joint count instead of exhausting Python's recursion limit."""
+    n = 2000
+    inertia = '<inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/>'
+    links = "".join(
+        f'<link name="l{i}"><inertial><mass value="1"/>{inertia}</inertial></link>'
+        for i in range(n + 1)
+    )
+    joints = "".join(
+        f'<joint name="j{i}" type="revolute"><parent link="l{i}"/><child link="l{i + 1}"/>'
+        '<axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="10" velocity="1"/></joint>'
+        for i in range(n)
+    )
+    urdf = tmp_path / "chain.urdf"
+    urdf.write_text(f'<robot name="c">{links}{joints}</robot>')
+    policy = Path(__file__).parents[1] / "benchmarks/results/policies/touch_fast_seed0.npz"
+    line = _fails(["deploy-sim", str(policy), "--arm", str(urdf)], capsys)
+    assert "has 1999" in line and len(line) <= 300, line
+
+
 # --------------------------------------------------------------------------- typed configs
 
 
@@ -219,6 +262,24 @@ def test_a_damaged_checkpoint_is_a_named_error(corpus: Corpus, tmp_path: Path, c
     assert "cannot be read: params/d/" in line and "has changed since it was saved" in line
     line = _fails(["export", str(run_dir), "-o", str(tmp_path / "p.npz")], capsys)
     assert "cannot be read" in line and not (tmp_path / "p.npz").exists()
+
+
+def test_a_huge_params_file_is_named_without_being_read(corpus: Corpus, tmp_path: Path, capsys):
+    """A params file made 3 GiB (sparse) differs in size from its record: named from its size
+    alone, never read whole (peak memory of the check stays under 200 MB more than before)."""
+    import resource
+    import shutil
+
+    run_dir = tmp_path / "run"
+    shutil.copytree(corpus.run_dir, run_dir)
+    data = next(p for p in (run_dir / "checkpoints").rglob("*") if p.parent.name == "d")
+    with data.open("r+b") as f:
+        f.truncate(3 * 2**30)
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    line = _fails(["export", str(run_dir), "-o", str(tmp_path / "p.npz")], capsys)
+    assert "has changed since it was saved (3221225472 bytes)" in line
+    grown_mb = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024
+    assert grown_mb < 200, grown_mb
 
 
 def test_a_same_step_save_killed_between_its_renames_is_recovered(tmp_path: Path) -> None:

@@ -150,6 +150,23 @@ def test_a_damaged_resume_file_is_a_named_error(stopped: Path, tmp_path, damage:
     assert isinstance(caught.value, InputError)
 
 
+@pytest.mark.parametrize("hostile", ["huge_header", "zip_bomb"])
+def test_a_resume_file_that_declares_more_than_the_state_is_refused_unread(
+    stopped: Path, tmp_path, hostile: str
+) -> None:
+    """A member whose header declares 2^40 floats, or 3 GiB of zeros compressed to 3 MB, is
+    refused from its declared size, before anything is allocated."""
+    from input_fuzz import hostile_npz
+
+    run_dir = _copy(stopped, tmp_path)
+    path = _checkpoint(run_dir, FIRST) / RESUME_FILE
+    good = tmp_path / "good.npz"
+    good.write_bytes(path.read_bytes())
+    getattr(hostile_npz, hostile)(good, path, np.random.default_rng(0))
+    with pytest.raises(ResumeStateError, match="declares more than this run's state holds"):
+        train(CONFIG, run_dir, resume=True, quiet=True)
+
+
 def test_flags_that_would_change_a_resumed_run_are_an_error(tmp_path: Path, capsys) -> None:
     """--resume keeps the run's config: --task, --arm, --set ... are named, not dropped."""
     code = main(["train", "--resume", str(tmp_path), "--task", "lift", "--set", "no_such_key=1"])

@@ -126,13 +126,22 @@ def checkpointer() -> Any:
     return ocp.Checkpointer(handler, multiprocessing_options=alone)
 
 
-def params_files(params: Path) -> dict[str, list]:
-    """``{relative path: [bytes, sha256]}`` of every file orbax wrote under ``params``."""
-    return {
-        str(p.relative_to(params)): [p.stat().st_size, hashlib.sha256(p.read_bytes()).hexdigest()]
-        for p in sorted(params.rglob("*"))
-        if p.is_file()
-    }
+def params_files(params: Path, sizes: dict[str, int] | None = None) -> dict[str, list]:
+    """``{relative path: [bytes, sha256]}`` of every file orbax wrote under ``params``.
+
+    Files are hashed in chunks (memory stays small whatever their size); with ``sizes``, a
+    file whose size differs from its entry there is not hashed (its hash is "")."""
+    found = {}
+    for p in sorted(params.rglob("*")):
+        if not p.is_file():
+            continue
+        name, size = str(p.relative_to(params)), p.stat().st_size
+        if sizes is not None and sizes.get(name) != size:
+            found[name] = [size, ""]
+            continue
+        with p.open("rb") as f:
+            found[name] = [size, hashlib.file_digest(f, "sha256").hexdigest()]
+    return found
 
 
 def _damage(folder: Path) -> str:
@@ -141,7 +150,8 @@ def _damage(folder: Path) -> str:
     recorded = load_meta(folder).get(PARAMS_FILES)
     if not isinstance(recorded, dict):
         return ""
-    found = params_files(folder / "params")
+    sizes = {n: e[0] for n, e in recorded.items() if isinstance(e, list) and e}
+    found = params_files(folder / "params", sizes)
     for name, entry in recorded.items():
         if name not in found:
             return f"params/{name} is missing"

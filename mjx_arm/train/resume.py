@@ -17,7 +17,6 @@ named error, never a wrong run. None of them is pickled.
 from __future__ import annotations
 
 import warnings
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -25,7 +24,7 @@ from typing import Any
 import jax
 import numpy as np
 
-from mjx_arm.inputs import InputFileError
+from mjx_arm.inputs import InputFileError, MiB, OversizedInputError, read_npz_members
 
 RESUME_FILE = "resume.npz"
 ENV_STATE_FILE = "env_state.npz"
@@ -128,8 +127,8 @@ def load_resume_state(
     Raises:
         ResumeStateError: the training state is unreadable or does not fit ``template``.
     """
-    arrays = _read_npz(folder / RESUME_FILE)
     leaves, treedef = jax.tree.flatten(template)
+    arrays = _read_npz(folder / RESUME_FILE, _nbytes([*leaves, *[key_template] * len(KEY_NAMES)]))
     stored = [arrays.get(f"state_{i:04d}") for i in range(len(leaves))]
     problem = _mismatch(stored, leaves) or (
         f"{len(arrays)} arrays, expected {len(leaves) + len(KEY_NAMES)}"
@@ -159,7 +158,7 @@ def _env_leaves(folder: Path, template: list[Any] | None) -> list[np.ndarray] | 
             stacklevel=3,
         )
         return None
-    arrays = _read_npz(path)
+    arrays = _read_npz(path, _nbytes(template))
     stored = [arrays.get(f"env_{i:04d}") for i in range(len(template))]
     problem = _mismatch(stored, template) or (
         f"{len(arrays)} arrays, expected {len(template)}" if len(arrays) != len(template) else ""
@@ -174,20 +173,38 @@ def _env_leaves(folder: Path, template: list[Any] | None) -> list[np.ndarray] | 
     return stored
 
 
-def _read_npz(path: Path) -> dict[str, np.ndarray]:
-    """Every array of an ``.npz`` (no pickles).
+def _nbytes(template: list[Any]) -> int:
+    """The bytes the arrays of ``template`` hold (what a file that fits them may declare)."""
+    return sum(
+        int(np.prod(np.shape(leaf))) * np.dtype(getattr(leaf, "dtype", np.float32)).itemsize
+        for leaf in template
+    )
+
+
+def _read_npz(path: Path, expected_bytes: int) -> dict[str, np.ndarray]:
+    """Every array of an ``.npz`` (no pickles), none larger, and all together no larger, than
+    the ``expected_bytes`` its template holds (plus 1 MiB): sizes are checked before anything
+    is allocated (:func:`~mjx_arm.inputs.read_npz_members`).
 
     Raises:
-        ResumeStateError: missing, not an npz (a file cut short included), or holding
-            pickled objects.
+        ResumeStateError: missing, not an npz (a file cut short included), holding pickled
+            objects, or declaring more bytes than its template holds.
     """
+    limit = expected_bytes + MiB
     try:
-        with np.load(path, allow_pickle=False) as data:
-            return {name: data[name] for name in data.files}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:  # cut short: BadZipFile
+        return read_npz_members(
+            path, "resume state", max_member_bytes=limit, max_total_bytes=limit,
+            error=ResumeStateError,
+        )  # fmt: skip
+    except OversizedInputError as err:
         raise ResumeStateError(
-            f"{path} cannot be read ({type(err).__name__}: {str(err)[:200]}); delete the "
+            f"{path} declares more than this run's state holds ({str(err)[:160]}); delete the "
             "checkpoint to resume from the one before"
+        ) from err
+    except ResumeStateError as err:
+        raise ResumeStateError(
+            f"{path} cannot be read ({str(err)[:200]}); delete the checkpoint to resume from "
+            "the one before"
         ) from err
 
 

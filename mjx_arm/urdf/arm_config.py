@@ -218,7 +218,14 @@ def _arm_file_urdf(urdf: str, arm_file: Path) -> str:
         resolved = Path(urdf).expanduser()
     else:
         resolved = (arm_file.parent / urdf).resolve()
-    if not resolved.is_file():
+    try:
+        found = resolved.is_file()
+    except OSError as err:  # a name too long for the filesystem, among others
+        raise ArmConfigError(
+            f"{arm_file}: urdf {urdf[:80]!r}... cannot be a path ({err.strerror}); give the "
+            "URDF's path, relative to the arm file's folder or absolute"
+        ) from err
+    if not found:
         raise ArmConfigError(
             f"{arm_file}: urdf {urdf!r} ({resolved}) is not a file; give the URDF's path, "
             "relative to the arm file's folder or absolute"

@@ -135,10 +135,18 @@ class RobotModel:
 
 
 def _depth_first(root: str, by_parent: dict[str, list[Joint]]) -> list[Joint]:
+    """The joints below ``root`` in depth-first pre-order (each joint, then its subtree), with
+    a stack rather than recursion, so a chain of any depth cannot exhaust Python's stack."""
     out: list[Joint] = []
-    for j in by_parent.get(root, []):
+    stack = list(reversed(by_parent.get(root, [])))
+    seen: set[str] = set()
+    while stack:
+        j = stack.pop()
+        if j.child in seen:  # a loop: each link is entered once
+            continue
+        seen.add(j.child)
         out.append(j)
-        out.extend(_depth_first(j.child, by_parent))
+        stack.extend(reversed(by_parent.get(j.child, [])))
     return out
 
 
