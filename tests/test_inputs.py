@@ -7,6 +7,7 @@ import errno
 import json
 import os
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -356,3 +357,31 @@ def test_every_named_error_is_an_input_error_or_mapped() -> None:
         assert issubclass(error, InputError)
     assert PolicyFileError in named_errors()
     json.dumps([e.__name__ for e in named_errors()])
+
+
+def test_mujoco_data_that_cannot_be_allocated_is_a_config_error() -> None:
+    """Under a 2 GiB address-space cap, a model asking for a 3 GiB arena: MuJoCo's FatalError
+    becomes a ConfigError naming the arena (run in a child: the cap would hold this process)."""
+    code = (
+        "import resource, mujoco\n"
+        "from mjx_arm.envs.mujoco_batch import new_data\n"
+        "m = mujoco.MjModel.from_xml_string('<mujoco><size memory=\"3G\"/><worldbody/></mujoco>')\n"
+        "resource.setrlimit(resource.RLIMIT_AS, (2 * 2**30, 2 * 2**30))\n"
+        "try:\n    new_data(m)\nexcept Exception as e:\n    print(type(e).__name__, e)\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120
+    ).stdout
+    assert out.startswith("ConfigError MuJoCo could not allocate its data"), out
+    assert "3072 MiB of arena" in out
+
+
+@pytest.mark.parametrize("task", [{"a": 1}, ["touch"], 3])
+def test_a_config_file_task_of_the_wrong_kind_is_a_config_error(tmp_path: Path, task) -> None:
+    from mjx_arm.inputs import ConfigError
+    from mjx_arm.train.config import load_config
+
+    path = tmp_path / "config.json"
+    path.write_text(json.dumps({"task": task}))
+    with pytest.raises(ConfigError, match="task must be a task's name"):
+        load_config("cpu", path)

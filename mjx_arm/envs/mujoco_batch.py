@@ -32,6 +32,7 @@ from mujoco import rollout as mj_rollout
 from mjx_arm.envs.arm import ArmInfo
 from mjx_arm.envs.mjx_physics import Dynamics, Reading, batched_where
 from mjx_arm.envs.model_io import GripReader, SensorReader
+from mjx_arm.inputs import ConfigError
 from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.urdf.scene import TARGET_BODY
@@ -111,13 +112,30 @@ class _ModelCopies:
             self.grip.dress(m, row[4 + 4 * n], row[5 + 4 * n])
 
 
+def new_data(model: mujoco.MjModel) -> mujoco.MjData:
+    """``mujoco.MjData(model)``, its allocation failure a named error.
+
+    Raises:
+        ConfigError: MuJoCo could not allocate the data (the process is out of memory or of
+            address space).
+    """
+    try:
+        return mujoco.MjData(model)
+    except mujoco.FatalError as err:
+        raise ConfigError(
+            f"MuJoCo could not allocate its data ({err}; the model asks for "
+            f"{model.narena / 2**20:.0f} MiB of arena per copy): free memory, lower num_envs "
+            "or the threads (nthread), or raise the process's memory limit"
+        ) from err
+
+
 class _Stepper:
     """Host side: a thread pool of MjData stepping batches with ``mujoco.rollout``."""
 
     def __init__(self, model: mujoco.MjModel, nthread: int, copies: _ModelCopies) -> None:
         self.model = model
         self.nthread = nthread
-        self.datas = [mujoco.MjData(model) for _ in range(nthread)]
+        self.datas = [new_data(model) for _ in range(nthread)]
         self.rollout = mj_rollout.Rollout(nthread=nthread)
         self.copies = copies
         self.lock = threading.Lock()
@@ -188,7 +206,7 @@ class MujocoCallbackPhysics:
         copies = _ModelCopies(mj_model, self.ids, self.grip)
         self.stepper = _Stepper(mj_model, nthread or os.cpu_count() or 1, copies)
         self.impl = "c"
-        data = mujoco.MjData(mj_model)
+        data = new_data(mj_model)
         template = np.zeros(mujoco.mj_stateSize(mj_model, STATE_SPEC))
         mujoco.mj_getState(mj_model, data, template, STATE_SPEC)
         self._template = template

@@ -355,6 +355,8 @@ def _task_named(data: dict[str, Any], overrides: list[str]) -> str | None:
         key, _, value = item.partition("=")
         if key.strip() == "task":
             task = value.strip()
+    if task is not None and not isinstance(task, str):
+        raise ConfigError(f"task must be a task's name (a string), not {type(task).__name__}")
     return task
 
 
