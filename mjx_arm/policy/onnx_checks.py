@@ -63,6 +63,26 @@ def _dims(shape: Any) -> list[int | str | None]:
     return out
 
 
+def _first_misfit(inputs: list, outputs: dict, declared: dict, obs: int, act: int) -> str:
+    """The first input or output that breaks the contract, described ("" when none does)."""
+    if len(inputs) != 1:
+        return f"the graph has {len(inputs)} inputs"
+    for name in (ACTION, PARAMS):
+        if name not in outputs:
+            return f"the graph has no output {name!r}"
+    name = inputs[0].name
+    kind, dims = declared[name]
+    if kind != "float32" or dims is None or len(dims) not in (1, 2) or dims[-1] != obs:
+        return f"input {name!r} is {kind} {dims}"
+    for out, size in ((ACTION, act), (PARAMS, 2 * act)):
+        out_kind, out_dims = declared[out]
+        if out_kind != "float32" or out_dims is None or out_dims[-1] != size:
+            return f"output {out!r} is {out_kind} {out_dims}"
+        if len(out_dims) != len(dims):
+            return f"output {out!r} has rank {len(out_dims)}, the input {len(dims)}"
+    return ""
+
+
 def _declared(onnx: Any, value: Any) -> tuple[str, list | None]:
     """(element type name, dims or None) of a graph input or output."""
     tensor = value.type.tensor_type if value.type.HasField("tensor_type") else None
@@ -110,18 +130,16 @@ def check_contract(onnx: Any, model: Any, metadata: dict[str, Any], source: str)
     )
     declared = {v.name: _declared(onnx, v) for v in [*inputs, *outputs.values()]}
     shown = ", ".join(f"{k}: {t} {d}" for k, (t, d) in declared.items())
-    problem = OnnxContractError(f"{source}: the graph declares {shown or 'nothing'}; {expected}")
-    if len(inputs) != 1 or ACTION not in outputs or PARAMS not in outputs:
+    wrong = _first_misfit(inputs, outputs, declared, obs, act)
+    if wrong:
+        report = f"{source}: the graph declares {shown or 'nothing'}; {expected}"
+        problem = OnnxContractError(report)
+        problem.headline = (
+            f"{source}: {wrong}, expected one float32 input (batch, {obs}) and float32 "
+            f"{ACTION!r} (.., {act}); export the policy again"
+        )
         raise problem
-    kind, dims = declared[inputs[0].name]
-    if kind != "float32" or dims is None or len(dims) not in (1, 2) or dims[-1] != obs:
-        raise problem
-    for name, size in ((ACTION, act), (PARAMS, 2 * act)):
-        out_kind, out_dims = declared[name]
-        if out_kind != "float32" or out_dims is None or out_dims[-1] != size:
-            raise problem
-        if len(out_dims) != len(dims):
-            raise problem
+    dims = declared[inputs[0].name][1]
     return inputs[0].name, len(dims)
 
 
