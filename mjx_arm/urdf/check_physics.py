@@ -164,14 +164,16 @@ def _link_of_mesh(tree: _Tree, stem: str) -> str | None:
     return None
 
 
-def _load_mujoco(
+def check_mujoco_load(
     tree: _Tree,
     package_dirs: Mapping[str, str],
     repair: bool,
     out: _Findings,
     limits: Mapping[str, float] | None = None,
 ) -> None:
-    """Convert with :func:`mjx_arm.urdf.convert.build_checked_spec` (with the default effort and
+    """The MuJoCo row's URDF load check (:mod:`mjx_arm.engines`).
+
+    Convert with :func:`mjx_arm.urdf.convert.build_checked_spec` (with the default effort and
     velocity ``limits`` the converter will use), compile and write the MJCF
     (:func:`~mjx_arm.urdf.convert.mjcf_text`); report any failure.
 
@@ -254,17 +256,6 @@ def _absolute_mesh_copy(tree: _Tree, package_dirs: Mapping[str, str], folder: st
     copy = Path(folder) / tree.path.name
     copy.write_bytes(ET.tostring(root, encoding="utf-8"))
     return copy
-
-
-def check_mujoco_load(
-    tree: _Tree,
-    package_dirs: Mapping[str, str],
-    repair: bool,
-    out: _Findings,
-    limits: Mapping[str, float] | None = None,
-) -> None:
-    """The MuJoCo row's URDF load check (:mod:`mjx_arm.engines`): :func:`_load_mujoco`."""
-    _load_mujoco(tree, package_dirs, repair, out, limits)
 
 
 def check_pybullet_load(
