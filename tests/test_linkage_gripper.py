@@ -1,0 +1,120 @@
+"""Linkage grippers (assets/ur5e_2f85.urdf, four-bar knuckles of the 2F-85 kind;
+assets/ur5e_xarm_gripper.urdf, revolute fingers of the xArm gripper kind): found from the URDF,
+driven by one command in CPU MuJoCo, MJX and PyBullet with every ``<mimic>`` joint following,
+the pads where the URDF's kinematics put them, and the Lift pick holding the cube.
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+from lift_script import run_scripted_lift
+
+from mjx_arm.envs.arm import arm_info
+from mjx_arm.envs.model_io import arm_model
+from mjx_arm.envs.mujoco_env import MujocoArmEnv
+from mjx_arm.paths import asset
+from mjx_arm.task.lift import LIFT_HEIGHT, lift_config
+from mjx_arm.task.touch import touch_config
+from mjx_arm.urdf.arm_config import ArmConfig, resolve_arm
+from mjx_arm.urdf.grippers import find_layout, pad_gap
+from mjx_arm.urdf.validate import validate
+
+ARMS = {"2f85": asset("ur5e_2f85.urdf"), "xarm": asset("ur5e_xarm_gripper.urdf")}
+# published strokes (m): the 2F-85's 85 mm, the xArm gripper's 86 mm
+STROKES = {"2f85": 0.085, "xarm": 0.086}
+GAP_TOL = 1e-3  # m: the pad gap an engine reaches against the URDF's kinematics
+FOLLOW_TOL = 2e-3  # rad: a <mimic> joint against multiplier * driven + offset, settled
+
+
+def _layout(name: str):
+    resolved = resolve_arm(ArmConfig(urdf=str(ARMS[name])))
+    return resolved.model, find_layout(resolved.model, set(resolved.joint_names))
+
+
+@pytest.mark.parametrize("name", list(ARMS))
+def test_the_linkage_is_found_with_its_published_stroke(name: str) -> None:
+    assert validate(ARMS[name], engine="all").ok
+    model, layout = _layout(name)
+    assert layout.kind == "linkage" and len(layout.followers) == 5
+    assert abs(layout.opening - STROKES[name]) < 1e-3  # m
+    assert pad_gap(model, layout, layout.closed_q) == pytest.approx(0.0, abs=1e-12)
+    assert 0.018 <= layout.pad_width <= 0.024  # m
+    gripper = arm_info(ARMS[name]).gripper
+    assert gripper.linkage and gripper.opening == pytest.approx(layout.opening)
+    assert {f.multiplier for f in gripper.followers} <= {-1.0, 1.0}
+
+
+def test_the_parallel_gripper_is_found_as_before() -> None:
+    gripper = arm_info(asset("ur5e_gripper.urdf")).gripper
+    assert not gripper.linkage and gripper.opening == pytest.approx(0.085, abs=1e-12)
+    assert (gripper.joint, gripper.open_q, gripper.closed_q) == ("left_finger_joint", 0.0, 0.0425)
+    assert gripper.pad_links == ("left_finger", "right_finger")
+
+
+def _mujoco_closes(model, gripper, command: float, steps: int = 720) -> mujoco.MjData:
+    data = mujoco.MjData(model)
+    for name, q in gripper.positions(gripper.open_q).items():
+        data.qpos[model.joint(name).qposadr[0]] = q
+    for _ in range(steps):
+        data.ctrl[model.actuator(gripper.joint).id] = command
+        mujoco.mj_step(model, data)
+    return data
+
+
+@pytest.mark.parametrize("name", list(ARMS))
+def test_one_command_closes_every_joint_in_mujoco(name: str) -> None:
+    arm = arm_info(ARMS[name])
+    gripper, (model_urdf, layout) = arm.gripper, _layout(name)
+    model = arm_model(arm, lift_config())
+    data = _mujoco_closes(model, gripper, gripper.v_max * gripper.closing_sign)
+    q = float(data.qpos[model.joint(gripper.joint).qposadr[0]])
+    assert abs(q - gripper.closed_q) < 0.01  # rad: at its limit
+    for name_, want in gripper.positions(q).items():
+        assert abs(data.qpos[model.joint(name_).qposadr[0]] - want) < FOLLOW_TOL, name_
+    pads = [data.xpos[model.body(p).id] for p in gripper.pad_links[:2]]
+    closed = np.linalg.norm(pads[0] - pads[1])
+    data = _mujoco_closes(model, gripper, -gripper.v_max * gripper.closing_sign)
+    pads = [data.xpos[model.body(p).id] for p in gripper.pad_links[:2]]
+    opened = np.linalg.norm(pads[0] - pads[1]) - closed
+    assert abs(opened - layout.opening) < GAP_TOL
+
+
+@pytest.mark.parametrize("name", list(ARMS))
+def test_touch_and_reach_models_start_with_the_linkage_closed(name: str) -> None:
+    arm = arm_info(ARMS[name])
+    model = arm_model(arm, touch_config())
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    pads = [data.xpos[model.body(p).id] for p in arm.gripper.pad_links[:2]]
+    model_urdf, layout = _layout(name)
+    gap = pad_gap(model_urdf, layout, layout.open_q)
+    open_frames = np.linalg.norm(pads[0] - pads[1])
+    # closed: the pad frames stand ``opening`` nearer than open
+    assert open_frames < gap  # m: the frames' distance closed is below the open gap
+    for joint, q in arm.gripper.positions(arm.gripper.closed_q).items():
+        assert data.qpos[model.joint(joint).qposadr[0]] == pytest.approx(q)
+
+
+def _env(engine: str, name: str):
+    if engine == "mujoco":
+        return MujocoArmEnv(lift_config(), ARMS[name])
+    from pybullet_ref.env import PybulletArmEnv
+
+    return PybulletArmEnv(lift_config(), ARMS[name])
+
+
+@pytest.mark.parametrize("engine", ["mujoco", "pybullet"])
+@pytest.mark.parametrize("name", list(ARMS))
+def test_scripted_pick_lifts_the_cube(engine: str, name: str) -> None:
+    """Over the cube, down, close, lift (tests/lift_script.py): the cube ends LIFT_HEIGHT up,
+    held by both pads."""
+    env = _env(engine, name)
+    try:
+        result = run_scripted_lift(env, 0)
+        info = result["info"]
+        assert result["success"], (engine, name, info)
+        assert info["height"] >= LIFT_HEIGHT and info["grasp"] == 1.0
+    finally:
+        env.close()
