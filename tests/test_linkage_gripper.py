@@ -26,6 +26,7 @@ ARMS = {"2f85": asset("ur5e_2f85.urdf"), "xarm": asset("ur5e_xarm_gripper.urdf")
 STROKES = {"2f85": 0.085, "xarm": 0.086}
 GAP_TOL = 1e-3  # m: the pad gap an engine reaches against the URDF's kinematics
 FOLLOW_TOL = 2e-3  # rad: a <mimic> joint against multiplier * driven + offset, settled
+PRESSED_TOL = 0.015  # rad: the same in PyBullet with the closed pads pressing each other
 
 
 def _layout(name: str):
@@ -118,3 +119,68 @@ def test_scripted_pick_lifts_the_cube(engine: str, name: str) -> None:
         assert info["height"] >= LIFT_HEIGHT and info["grasp"] == 1.0
     finally:
         env.close()
+
+
+@pytest.mark.parametrize("name", list(ARMS))
+def test_one_command_closes_every_joint_in_pybullet(name: str) -> None:
+    """Gear constraints hold the followers; the pads close by the URDF's opening."""
+    env = _env("pybullet", name)
+    gripper, (_, layout) = env.arm.gripper, _layout(name)
+    try:
+        env.reset(seed=0)
+        c, body = env.client, env.body
+        joint = {c.getJointInfo(body, j)[1].decode(): j for j in range(c.getNumJoints(body))}
+        pads = env.ids.pads
+
+        def gap() -> float:
+            a, b = (np.array(c.getLinkState(body, p)[4]) for p in pads)
+            return float(np.linalg.norm(a - b))
+
+        def error() -> float:
+            q = c.getJointState(body, joint[gripper.joint])[0]
+            want = gripper.positions(q)
+            return max(abs(c.getJointState(body, joint[n])[0] - v) for n, v in want.items())
+
+        opened = gap()
+        action = np.zeros(env.arm.n_joints + 1, np.float32)
+        action[-1] = 1.0
+        for _ in range(5):
+            env.step(action)
+        assert error() < FOLLOW_TOL  # moving: measured 1e-5 rad
+        for _ in range(35):
+            env.step(action)
+        q = c.getJointState(body, joint[gripper.joint])[0]
+        assert abs(q - gripper.closed_q) < 0.01  # rad
+        # closed, the pads press on each other and the gear constraints give: 0.011 rad
+        assert error() < PRESSED_TOL
+        assert abs(opened - gap() - layout.opening) < GAP_TOL
+    finally:
+        env.close()
+
+
+@pytest.mark.slow
+def test_mjx_closes_the_linkage_as_cpu_mujoco() -> None:
+    """MJX (JAX on the CPU) steps the 2F-85 arm's model with one command: the followers track
+    (closed on its limit with the pads pressing each other: 0.0064 rad measured) and the pads
+    end where CPU MuJoCo puts them."""
+    import jax
+    from mujoco import mjx
+
+    arm = arm_info(ARMS["2f85"])
+    gripper = arm.gripper
+    model = arm_model(arm, lift_config())
+    command = gripper.v_max * gripper.closing_sign
+    cpu = _mujoco_closes(model, gripper, command, steps=240)
+    start = mujoco.MjData(model)
+    for name, q in gripper.positions(gripper.open_q).items():
+        start.qpos[model.joint(name).qposadr[0]] = q
+    start.ctrl[model.actuator(gripper.joint).id] = command
+    mx, dx = mjx.put_model(model), mjx.put_data(model, start)
+    dx = jax.jit(lambda d: jax.lax.fori_loop(0, 240, lambda _, d: mjx.step(mx, d), d))(dx)
+    qpos = np.asarray(dx.qpos)
+    for name, want in gripper.positions(qpos[model.joint(gripper.joint).qposadr[0]]).items():
+        assert abs(qpos[model.joint(name).qposadr[0]] - want) < PRESSED_TOL, name
+    xpos = np.asarray(dx.xpos)
+    for pad in gripper.pad_links[:2]:
+        body = model.body(pad).id
+        np.testing.assert_allclose(xpos[body], cpu.xpos[body], atol=GAP_TOL)
