@@ -67,7 +67,7 @@ def _mujoco_closes(model, gripper, command: float, steps: int = 720) -> mujoco.M
 @pytest.mark.parametrize("name", list(ARMS))
 def test_one_command_closes_every_joint_in_mujoco(name: str) -> None:
     arm = arm_info(ARMS[name])
-    gripper, (model_urdf, layout) = arm.gripper, _layout(name)
+    gripper, (_, layout) = arm.gripper, _layout(name)
     model = arm_model(arm, lift_config())
     data = _mujoco_closes(model, gripper, gripper.v_max * gripper.closing_sign)
     q = float(data.qpos[model.joint(gripper.joint).qposadr[0]])
