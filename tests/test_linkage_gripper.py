@@ -184,3 +184,46 @@ def test_mjx_closes_the_linkage_as_cpu_mujoco() -> None:
     for pad in gripper.pad_links[:2]:
         body = model.body(pad).id
         np.testing.assert_allclose(xpos[body], cpu.xpos[body], atol=GAP_TOL)
+
+
+@pytest.mark.parametrize("engine", ["mujoco", "pybullet"])
+def test_touch_runs_with_the_linkage_closed(engine: str) -> None:
+    """Touch on the 2F-85 arm: the gripper starts closed in both engines and stays closed
+    while the arm moves (the pads' frames at their closed distance, within GAP_TOL)."""
+    arm = arm_info(ARMS["2f85"])
+    model_urdf, layout = _layout("2f85")
+    closed = pad_gap(model_urdf, layout, layout.open_q)  # open minus closed
+    if engine == "mujoco":
+        env = MujocoArmEnv(touch_config(), ARMS["2f85"])
+    else:
+        from pybullet_ref.env import PybulletArmEnv
+
+        env = PybulletArmEnv(touch_config(), ARMS["2f85"])
+    try:
+        env.reset(seed=0)
+        rng = np.random.default_rng(0)
+        for _ in range(30):
+            _, reward, *_ = env.step(rng.uniform(-0.3, 0.3, arm.n_joints).astype(np.float32))
+            assert np.isfinite(reward)
+        if engine == "mujoco":
+            pads = [env.data.xpos[env.model.body(p).id] for p in arm.gripper.pad_links[:2]]
+        else:
+            c, body = env.client, env.body
+            link = {c.getJointInfo(body, j)[12].decode(): j for j in range(c.getNumJoints(body))}
+            pads = [np.array(c.getLinkState(body, link[p])[4]) for p in arm.gripper.pad_links[:2]]
+        frames_open = np.linalg.norm(pads[0] - pads[1]) + closed
+        opened = _open_frame_distance(model_urdf, layout)
+        assert abs(frames_open - opened) < GAP_TOL
+    finally:
+        env.close()
+
+
+def _open_frame_distance(model, layout) -> float:
+    """The pads' frame distance (m) with the gripper open, from the URDF's kinematics."""
+    from mjx_arm.urdf.kinematics import link_frames
+
+    positions = {j.name: 0.0 for j in model.actuated_joints if j.mimic is None}
+    positions.update(layout.positions(layout.open_q))
+    frames = link_frames(model, positions)
+    a, b = layout.pads[:2]
+    return float(np.linalg.norm(frames[a][:3, 3] - frames[b][:3, 3]))
