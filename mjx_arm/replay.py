@@ -348,15 +348,14 @@ def render_frames(
 def _pose_gripper_task(env: Any, obs: np.ndarray, s: dict[str, slice]) -> None:
     """A gripper task's fingers (from the closure) and object (its centre, and its orientation
     relative to the ee turned into the world frame) into the env's ``qpos``."""
-    import mujoco
 
     from mjx_arm.task.grip import quat_mul
 
     grip, data, model = env.grip, env.data, env.model
     gripper = grip.gripper
     finger = gripper.open_q + float(obs[s["gripper"]][0]) * (gripper.closed_q - gripper.open_q)
-    slides = np.flatnonzero(model.jnt_type == mujoco.mjtJoint.mjJNT_SLIDE)
-    data.qpos[model.jnt_qposadr[slides]] = finger  # the driven finger and its mimic
+    for name, value in gripper.positions(finger).items():  # the driven finger and its mimics
+        data.qpos[model.joint(name).qposadr[0]] = value
     ee_quat = obs[s["ee_pose"]][3:]
     quat = quat_mul(np, ee_quat, obs[s["object_rel"]][3:])
     grip.place(data.qpos, obs[s["target_rel"]], quat / np.linalg.norm(quat))

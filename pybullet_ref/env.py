@@ -88,6 +88,7 @@ from pybullet_ref.arm_model import (
     subtree_links,
 )
 from pybullet_ref.contact import SOFT, SceneContact, scene_contact
+from pybullet_ref.gripper import gripper_ids
 from pybullet_ref.hulls import bullet_urdf
 from pybullet_ref.mimic import add_mimic_constraints
 from pybullet_ref.vec3 import add, cross, rate, rotate, rotate_back
@@ -124,8 +125,7 @@ class ArmIds:
         inertia: principal inertia (kg m^2) of each actuated joint's child link with the
             joint's armature added, 6 triples.
         self_collision_off: arm link pairs whose contacts are disabled (empty: no self-collision).
-        finger: the driven finger joint of a gripper (-1 without one); finger_lower: its lower
-            limit (m); pads: the finger links, whose contacts make the pad forces.
+        finger, finger_lower, pads, gripper_start: see :func:`pybullet_ref.gripper.gripper_ids`.
     """
 
     joints: tuple[int, ...]
@@ -141,6 +141,7 @@ class ArmIds:
     finger: int = -1
     finger_lower: float = 0.0
     pads: tuple[int, ...] = ()
+    gripper_start: tuple[tuple[int, float], ...] = ()
 
 
 class PybulletArmEnv(BaseRobotEnv):
@@ -239,17 +240,8 @@ class PybulletArmEnv(BaseRobotEnv):
                 for j, a in zip(joints, self.servo.armature, strict=True)
             ),
             self_collision_off=excluded_pairs(c, arm) if self.self_collision else (),
-            **self._gripper_ids(joint, link, infos),
+            **gripper_ids(self.arm.gripper, self.task.spec.gripper, joint, link, infos),
         )
-
-    def _gripper_ids(self, joint: dict, link: dict, infos: list) -> dict:
-        """The gripper's ``finger``, ``finger_lower`` and ``pads`` (none without a gripper)."""
-        gripper = self.arm.gripper
-        if gripper is None:
-            return {}
-        finger = joint[gripper.joint]
-        pads = tuple(link[name] for name in gripper.pad_links[:2])
-        return {"finger": finger, "finger_lower": float(infos[finger][8]), "pads": pads}
 
     def _build_world(self, qpos: np.ndarray, target_body_pos: np.ndarray) -> None:
         """Rebuild the whole world: arm at ``qpos`` (rad, at rest), table, target."""
@@ -309,9 +301,8 @@ class PybulletArmEnv(BaseRobotEnv):
         c.setJointMotorControlArray(arm, ids.joints, pybullet.VELOCITY_CONTROL, forces=self._zeros)
         for j, q in zip(ids.joints, qpos, strict=True):
             c.resetJointState(arm, j, float(q), 0.0)
-        if self.gripper is not None:  # open (the driven finger and its mimic, multiplier 1)
-            for j in ids.pads:
-                c.resetJointState(arm, j, self.gripper.open_q, 0.0)
+        for j, q in ids.gripper_start:  # a gripper task's open, a linkage closed in the others
+            c.resetJointState(arm, j, q, 0.0)
         c.enableJointForceTorqueSensor(arm, ids.ft, True)
 
     def _add_target_marker(self, position: list[float]) -> None:

@@ -24,6 +24,7 @@ from mjx_arm.urdf.arm_config import (
     resolve_arm,
 )
 from mjx_arm.urdf.convert_config import ConvertConfig
+from mjx_arm.urdf.grippers import Follower, find_layout, grasp_centre
 
 # Poses drawn to measure an arm's reach (seeded: the same arm always gets the same scale).
 REACH_SAMPLES = 4096
@@ -32,17 +33,23 @@ REACH_QUANTILE = 0.99
 
 @dataclass(frozen=True)
 class Gripper:
-    """A parallel gripper: prismatic fingers off the arm's chain, one driven, the others its
-    ``<mimic>`` copies.
+    """A gripper moved by one command: one driven joint, the others its ``<mimic>`` copies
+    (:mod:`mjx_arm.urdf.grippers`): prismatic fingers, or a linkage of revolute knuckles.
 
     Attributes:
-        joint: the driven finger joint (its actuator takes the gripper command).
-        pad_links: every finger link (each gets a touch sensor in the task model).
-        v_max: the driven finger's speed limit (m/s).
-        stroke: the driven finger's travel (m): its upper limit minus its lower.
-        open_q, closed_q: the driven finger's position (m) with the gripper open and closed:
+        joint: the driven joint (its actuator takes the gripper command).
+        pad_links: the finger links that get a touch sensor in the task model (the first two
+            close on each other).
+        v_max: the driven joint's speed limit (m/s, or rad/s for a linkage).
+        stroke: the driven joint's travel (m or rad): its upper limit minus its lower.
+        open_q, closed_q: the driven joint's position with the gripper open and closed:
             its lower and upper limit, or the other way round (the Panda's fingers close
             towards 0), whichever puts the pads farther apart open.
+        followers: the ``<mimic>`` joints with their multiplier and offset.
+        linkage: a linkage gripper (revolute driven joint), not prismatic fingers.
+        pad_opening: the pads' gap open minus closed (m), from the URDF's kinematics.
+        pad_width: the pad's width across the closing direction (m).
+        grasp_offset: where the pads hold an object, in the ee link's frame (m), ``(3,)``.
     """
 
     joint: str
@@ -51,6 +58,11 @@ class Gripper:
     stroke: float
     open_q: float = 0.0
     closed_q: float = 0.0
+    followers: tuple[Follower, ...] = ()
+    linkage: bool = False
+    pad_opening: float = 0.0
+    pad_width: float = 0.0
+    grasp_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     @property
     def closing_sign(self) -> float:
@@ -63,42 +75,44 @@ class Gripper:
 
     @property
     def opening(self) -> float:
-        """The widest gap (m) the two fingers open between them: each moves by the stroke."""
-        return 2.0 * self.stroke
+        """The widest gap (m) the two fingers open between them: each prismatic finger moves
+        by the stroke; a linkage's pads by what its kinematics give."""
+        return self.pad_opening if self.linkage else 2.0 * self.stroke
+
+    @property
+    def pad_speed(self) -> float:
+        """The mean speed (m/s) the pads close at with the driven joint at ``v_max``."""
+        return self.opening * self.v_max / self.stroke if self.stroke > 0 else 0.0
+
+    def positions(self, q: float) -> dict[str, float]:
+        """Every gripper joint's position (driven and followers) with the driven one at ``q``."""
+        out = {self.joint: float(q)}
+        out.update({f.joint: f.multiplier * float(q) + f.offset for f in self.followers})
+        return out
 
 
 def find_gripper(resolved: ResolvedArm) -> Gripper | None:
-    """The arm's parallel gripper: the prismatic joints off the arm chain whose child is a leaf
-    (fingers); None without two such fingers or without one that is driven (no ``<mimic>``)."""
-    model, arm = resolved.model, set(resolved.joint_names)
-    parents = {j.parent for j in model.joints.values()}
-    fingers = [
-        j
-        for j in model.actuated_joints
-        if j.type == "prismatic" and j.name not in arm and j.child not in parents
-    ]
-    driven = [j for j in fingers if j.mimic is None]
-    if len(fingers) < 2 or len(driven) != 1 or driven[0].limit is None:
+    """The arm's gripper (:func:`mjx_arm.urdf.grippers.find_layout`): parallel prismatic
+    fingers or a linkage, one joint driven; None where there is neither."""
+    layout = find_layout(resolved.model, set(resolved.joint_names))
+    if layout is None:
         return None
-    lim = driven[0].limit
-    speed = lim.velocity or resolved.config.default_velocity
-    pads = tuple(j.child for j in fingers)
-    gap = functools.partial(_pad_gap, model, pads[:2], driven[0].name)
-    open_q, closed_q = (
-        (lim.upper, lim.lower) if gap(lim.upper) > gap(lim.lower) else (lim.lower, lim.upper)
+    lim = resolved.model.joints[layout.driven].limit
+    return Gripper(
+        joint=layout.driven,
+        pad_links=layout.pads,
+        v_max=lim.velocity or resolved.config.default_velocity,
+        stroke=lim.upper - lim.lower,
+        open_q=layout.open_q,
+        closed_q=layout.closed_q,
+        followers=layout.followers,
+        linkage=layout.kind == "linkage",
+        pad_opening=layout.opening,
+        pad_width=layout.pad_width,
+        grasp_offset=tuple(
+            float(v) for v in grasp_centre(resolved.model, layout, resolved.ee_link)
+        ),
     )
-    return Gripper(driven[0].name, pads, speed, lim.upper - lim.lower, open_q, closed_q)
-
-
-def _pad_gap(model, pads: tuple[str, str], finger: str, q: float) -> float:
-    """Distance (m) between two pad links' frames with the driven ``finger`` at ``q`` (its
-    ``<mimic>`` fingers following), every other joint at 0."""
-    from mjx_arm.urdf.kinematics import link_frames
-
-    positions = {j.name: 0.0 for j in model.actuated_joints if j.mimic is None}
-    positions[finger] = q
-    frames = link_frames(model, positions)
-    return float(np.linalg.norm(frames[pads[0]][:3, 3] - frames[pads[1]][:3, 3]))
 
 
 @dataclass(frozen=True, eq=False)
@@ -152,9 +166,12 @@ class ArmInfo:
 
     def convert_config(self, **fields) -> ConvertConfig:
         """Conversion settings that put the ee site and F/T sensors where this arm says, with
-        its servo gain."""
+        its servo gain; a linkage gripper starts closed (a gripper task opens it)."""
         fields.setdefault("kv_factor", self.kv_factor)
         fields.setdefault("ee_offset", tuple(float(v) for v in self.ee_offset))
+        if self.gripper is not None and self.gripper.linkage:  # Touch and Reach: held closed
+            closed = self.gripper.positions(self.gripper.closed_q)
+            fields.setdefault("rest_qpos", tuple(closed.items()))
         return self.config.convert_config(self.ee_link, self.ft_joint, **fields)
 
     def joint_coding(self, task: TaskConfig) -> JointCoding:
@@ -226,7 +243,9 @@ def derive_ee_offset(arm: ArmInfo) -> np.ndarray:
     surface pressed against it (:meth:`~mjx_arm.envs.ik.ToolDownSolver.tool_protrusion` over
     the Touch box's top face), so the ee point is where the tool touches (a jaw's tips, the
     palm of an open hand). An arm with a parallel gripper keeps the link's origin (between the
-    pads: what Lift grasps around); so does a tool that meets the surface within
+    pads: what Lift grasps around); a linkage gripper's is its grasp centre (between the pads
+    halfway closed); the link's origin stays where either is within :data:`MIN_EE_OFFSET`, as
+    does a tool that meets the surface within
     :data:`MIN_EE_OFFSET` of it, or one with no shape near its axis. Rounded to 1 um: the
     axis comes out of floating-point kinematics whose last bits differ between CPUs (a 1e-17
     m component would change the model hash that policy files check).
@@ -235,7 +254,8 @@ def derive_ee_offset(arm: ArmInfo) -> np.ndarray:
 
     zero = np.zeros(3)
     if arm.gripper is not None:
-        return zero
+        grasp = np.asarray(arm.gripper.grasp_offset) * arm.gripper.linkage
+        return np.round(grasp, 6) + 0.0 if np.linalg.norm(grasp) >= MIN_EE_OFFSET else zero
     solver = tool_down_solver(arm)
     reach = solver.tool_protrusion(solver.middle, box_half_width())
     if reach is None or abs(reach) < MIN_EE_OFFSET:

@@ -39,6 +39,8 @@ def describe(arm: ArmInfo) -> str:
             f"{arm.gripper.opening * 100:.1f} cm"
         )
     )
+    if arm.gripper is not None and arm.gripper.linkage:
+        gripper = _linkage_lines(arm.gripper)
     lines += [
         f"F/T         {ft}; tool {arm.tool.mass:.3f} kg",
         f"gripper     {gripper}",
@@ -47,6 +49,18 @@ def describe(arm: ArmInfo) -> str:
         f"collision   {arm.config.collision}",
     ]
     return "\n".join(lines)
+
+
+def _linkage_lines(gripper) -> str:
+    """What ``--check`` says of a linkage gripper: driven joint, followers, pads and sizes."""
+    followers = ", ".join(f"{f.joint} x{f.multiplier:+g}" for f in gripper.followers)
+    return (
+        f"linkage: {gripper.joint} driven ({gripper.open_q:g} open to {gripper.closed_q:g} "
+        f"closed), pads {' and '.join(gripper.pad_links[:2])}: stroke "
+        f"{gripper.opening * 100:.1f} cm, pad width {gripper.pad_width * 100:.1f} cm, closes at "
+        f"{gripper.pad_speed * 100:.0f} cm/s\n            followers ({len(gripper.followers)}, "
+        f"<mimic>): {followers}"
+    )
 
 
 def check_lines(arm: ArmInfo, tasks: list[TaskConfig]) -> str:

@@ -157,7 +157,8 @@ class GripReader:
 
     Attributes:
         finger_qpos: qpos address of the driven finger; finger_act: its actuator id.
-        fingers_qpos: qpos addresses of every finger (the driven one and its mimics).
+        fingers_qpos: qpos addresses of every gripper joint (the driven one and its mimics);
+            open_qpos: their positions open.
         lower, stroke: the finger's lower limit and travel (m).
         gripper: the arm's :class:`~mjx_arm.envs.arm.Gripper` (open and closed positions).
         cube_qpos: qpos address of the cube's free joint (position, then quaternion).
@@ -170,17 +171,17 @@ class GripReader:
     def __init__(self, model: mujoco.MjModel, arm: ArmInfo) -> None:
         gripper = arm.gripper
         if gripper is None:
-            raise ValueError(f"{arm.urdf} has no parallel gripper")
+            raise ValueError(f"{arm.urdf} has no gripper")
         joint = model.joint(gripper.joint)
         self.finger_qpos = int(joint.qposadr[0])
         self.finger_act = int(model.actuator(gripper.joint).id)
         self.lower, self.stroke = float(joint.range[0]), gripper.stroke
         self.gripper = gripper
-        # every finger's qpos (the driven one and its mimics, multiplier 1): where opening puts
+        # every gripper joint's qpos (the driven one and its mimics) and where opening puts
         # them (a reset's qpos0 has them at the URDF's 0, closed on some grippers)
-        self.fingers_qpos = np.array(
-            [int(model.jnt_qposadr[model.body(link).jntadr[0]]) for link in gripper.pad_links]
-        )
+        opened = gripper.positions(gripper.open_q)
+        self.fingers_qpos = np.array([int(model.joint(name).qposadr[0]) for name in opened])
+        self.open_qpos = np.array(list(opened.values()))
         cube = model.joint(CUBE_BODY)
         self.cube_qpos, self.cube_dof = int(cube.qposadr[0]), int(cube.dofadr[0])
         self.pad_index = np.array(
@@ -239,9 +240,9 @@ class GripReader:
         """``qpos`` with the fingers open: a numpy array in place (returned), or a JAX array's
         updated copy."""
         if isinstance(qpos, np.ndarray):
-            qpos[self.fingers_qpos] = self.gripper.open_q
+            qpos[self.fingers_qpos] = self.open_qpos
             return qpos
-        return qpos.at[self.fingers_qpos].set(self.gripper.open_q)
+        return qpos.at[self.fingers_qpos].set(self.open_qpos)
 
     def place(self, qpos, pos, quat) -> None:
         """Write the cube's pose into a numpy ``qpos`` (in place)."""

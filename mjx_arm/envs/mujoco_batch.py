@@ -251,7 +251,7 @@ class MujocoCallbackPhysics:
         grip, q0, v0 = self.grip, self._qpos_slice.start, self._qvel_slice.start
         start, dof = q0 + grip.cube_qpos, v0 + grip.cube_dof
         state = state.at[start : start + 3].set(pos).at[start + 3 : start + 7].set(obj.quat)
-        state = state.at[q0 + grip.fingers_qpos].set(grip.gripper.open_q)
+        state = state.at[q0 + grip.fingers_qpos].set(grip.open_qpos)
         return state.at[dof : dof + 6].set(0.0)
 
     def step(

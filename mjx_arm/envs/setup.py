@@ -356,7 +356,8 @@ def gripper_problem(arm: ArmInfo) -> str:
     if arm.gripper is None:
         return (
             "no parallel gripper (two prismatic fingers, one driven and the other its <mimic>, "
-            "or a mirrored pair)"
+            "or a mirrored pair) and no linkage (one driven revolute joint, the knuckles and "
+            "fingers its <mimic>)"
         )
     opening = arm.gripper.opening
     if opening < 2 * CUBE_HALF + CUBE_CLEARANCE:

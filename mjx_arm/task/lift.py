@@ -1,7 +1,8 @@
-"""Lift: pick the cube off the table with the parallel gripper and hold it 10 cm up.
+"""Lift: pick the cube off the table with the gripper and hold it 10 cm up.
 
-The arm needs a parallel gripper (``assets/ur5e_gripper.urdf``). The action is the arm's joint
-velocities plus one entry for the driven finger (positive closes). A free 4.5 cm cube rests on the
+The arm needs a gripper, parallel (``assets/ur5e_gripper.urdf``) or linkage
+(``assets/ur5e_2f85.urdf``). The action is the arm's joint velocities plus one entry for the
+driven finger or knuckle (positive closes). A free 4.5 cm cube rests on the
 table at a random spot and yaw; success is the cube at least :data:`LIFT_HEIGHT` above its resting
 height and held by both pads, for 10 control steps running. The gentle rules of Touch apply to the
 wrist reading: one above 100 N (the tool struck the table) ends the episode.

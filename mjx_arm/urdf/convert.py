@@ -11,6 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import mujoco
+import numpy as np
 
 from mjx_arm.urdf.convert_config import (
     ARM_CONAFFINITY,
@@ -107,6 +108,55 @@ def to_mjcf(urdf: str | Path, config: ConvertConfig | None = None, **overrides) 
 def load_model(
     urdf: str | Path, config: ConvertConfig | None = None, **overrides
 ) -> mujoco.MjModel:
-    """Convert a URDF and compile it into a ``mujoco.MjModel`` (errors as :func:`to_mjcf`)."""
+    """Convert a URDF and compile it into a ``mujoco.MjModel`` (errors as :func:`to_mjcf`),
+    starting at ``config.rest_qpos``."""
     config = (config or ConvertConfig()).replace(**overrides)
-    return compile_spec(build_spec(urdf, config), urdf)
+    model = compile_spec(build_spec(urdf, config), urdf)
+    if config.rest_qpos:
+        set_rest_qpos(model, dict(config.rest_qpos))
+    return model
+
+
+def set_rest_qpos(model: mujoco.MjModel, rest: dict[str, float]) -> None:
+    """Start ``model`` (in place) with hinge or slide joints ``rest`` (name -> rad or m) at
+    those positions, as a joint's ``ref`` would: each joint's body is turned (or moved) by its
+    value and its ``qpos0`` set to it, so a position means what it meant before and a reset
+    puts the joint there; MuJoCo's constants at ``qpos0`` are derived again.
+
+    A joint equality holds ``q1 - q1_0 = c0 + c1 (q2 - q2_0)`` about ``qpos0``: its ``c0`` is
+    moved so that an equality between two moved joints keeps ``q1 = c0 + c1 q2`` as imported.
+    """
+    before = model.qpos0.copy()
+    for name, value in rest.items():
+        joint = model.joint(name)
+        body, adr = int(joint.bodyid[0]), int(joint.qposadr[0])
+        _move_body(model, body, joint, float(value) - float(model.qpos0[adr]))
+        model.qpos0[adr] = value
+    for i in range(model.neq):
+        if model.eq_type[i] != mujoco.mjtEq.mjEQ_JOINT or model.eq_obj2id[i] < 0:
+            continue
+        one, two = (model.jnt_qposadr[model.eq_obj1id[i]], model.jnt_qposadr[model.eq_obj2id[i]])
+        shift = (model.qpos0[one] - before[one]) - model.eq_data[i][1] * (
+            model.qpos0[two] - before[two]
+        )
+        model.eq_data[i][0] -= shift
+    mujoco.mj_setConst(model, mujoco.MjData(model))
+
+
+def _move_body(model: mujoco.MjModel, body: int, joint, value: float) -> None:
+    """Turn ``body`` by ``value`` (rad) about its hinge ``joint`` (axis through the joint's
+    position, both in the body's frame), or move it by ``value`` (m) along its slide."""
+    axis, quat = np.asarray(joint.axis, float), model.body_quat[body].copy()
+    rotation = np.zeros(9)
+    mujoco.mju_quat2Mat(rotation, quat)
+    rotation = rotation.reshape(3, 3)
+    if int(joint.type[0]) == mujoco.mjtJoint.mjJNT_SLIDE:
+        model.body_pos[body] += rotation @ (axis * value)
+        return
+    turn = np.zeros(4)
+    mujoco.mju_axisAngle2Quat(turn, axis, value)
+    turned = np.zeros(9)
+    mujoco.mju_quat2Mat(turned, turn)
+    pivot = np.asarray(joint.pos, float)
+    model.body_pos[body] += rotation @ (pivot - turned.reshape(3, 3) @ pivot)
+    mujoco.mju_mulQuat(model.body_quat[body], quat, turn)

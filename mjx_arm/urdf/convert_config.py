@@ -59,6 +59,8 @@ class ConvertConfig:
             keeps the 240 Hz gains) sets it, so a finer step changes the integration only.
         pad_links: links that get a touch sensor ``LINK_touch`` over their collision box (the
             finger pads of a gripper): the sum of the normal contact forces on the link (N).
+        rest_qpos: joints the model starts at other than 0 (``qpos0``), ``(name, position)``
+            pairs: a linkage gripper held closed (:func:`mjx_arm.urdf.convert.load_model`).
         solver_iterations: constraint solver iterations (few, for MJX speed). On an H200 the
             Touch scene steps 1.6M physics steps/s at 4 iterations (line search 8), 3.2M at
             2 (4) and 5.0M at 1 (2), 32k envs (``benchmarks/results/sweep/*.json``).
@@ -93,6 +95,7 @@ class ConvertConfig:
     sim_dt: float = 1.0 / 240.0
     servo_dt: float = 0.0
     pad_links: tuple[str, ...] = ()
+    rest_qpos: tuple[tuple[str, float], ...] = ()
     solver_iterations: int = 2
     ls_iterations: int = 4
     scene: str = "none"

@@ -74,7 +74,8 @@ class Limit:
 
 @dataclass(frozen=True)
 class Joint:
-    """A URDF joint. ``mimic`` names the joint a ``<mimic>`` joint copies, else None."""
+    """A URDF joint. ``mimic`` names the joint a ``<mimic>`` joint copies, else None;
+    ``mimic_multiplier`` and ``mimic_offset`` are its ``q = multiplier * q_leader + offset``."""
 
     name: str
     type: str
@@ -86,6 +87,8 @@ class Joint:
     damping: float | None = None
     friction: float | None = None
     mimic: str | None = None
+    mimic_multiplier: float = 1.0
+    mimic_offset: float = 0.0
 
     @property
     def movable(self) -> bool:
@@ -246,7 +249,18 @@ def _joint(elem: ET.Element) -> Joint:
         damping=damping,
         friction=friction,
         mimic=mimic.get("joint") if mimic is not None else None,
+        mimic_multiplier=_number(mimic, "multiplier", 1.0),
+        mimic_offset=_number(mimic, "offset", 0.0),
     )
+
+
+def _number(elem: ET.Element | None, name: str, default: float) -> float:
+    """Attribute ``name`` of ``elem`` as a float; ``default`` where it is absent or no number
+    (the validator reports a malformed ``<mimic>``)."""
+    try:
+        return float(elem.get(name, default)) if elem is not None else default
+    except ValueError:
+        return default
 
 
 def parse_urdf(source: str | Path) -> RobotModel:
