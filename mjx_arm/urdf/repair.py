@@ -50,20 +50,15 @@ LIMIT_ATTRS = ("effort", "velocity")
 
 # The fix a finding names for a broken inertia: the flag of every command that loads an arm
 # (convert, validate, arm, train, warmup, eval) and the arm-file key of every command's --arm.
-# Short enough (at most 110 characters) to end a command's one error line whole.
-INERTIA_FIX = (
-    "correct <inertia>, or repair it in every engine: --repair-inertia, or "
-    "repair_inertia = true in an arm file"
-)
+# Short enough (under 100 characters) to end a command's one error line whole.
+INERTIA_FIX = "correct <inertia>, or --repair-inertia, or repair_inertia = true in an arm file"
 
 
 def limit_fix(attr: str, unit: str) -> str:
     """The fix a finding names for a moving joint without an ``attr`` (effort or velocity)
-    limit: its value, or the flag and the arm-file key that give every such joint one."""
-    return (
-        f"set {attr} ({unit}), or one for all: --default-{attr} VALUE, or default_{attr} = VALUE "
-        "(arm file)"
-    )
+    limit: its value, or the flag and the arm-file key that give every such joint one (under
+    100 characters)."""
+    return f"set it ({unit}), or --default-{attr} VALUE, or default_{attr} = VALUE in an arm file"
 
 
 @dataclass(frozen=True)
