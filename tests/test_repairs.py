@@ -22,7 +22,7 @@ from mjx_arm.urdf.inertia import principal_moments, repair_inertia
 from mjx_arm.urdf.repair import link_tensor
 from mjx_arm.urdf.repair_args import with_repair_arguments
 from mjx_arm.urdf.validate import validate
-from pybullet_ref.env import PybulletArmEnv, pybullet
+from pybullet_ref.env import BulletClient, PybulletArmEnv, pybullet
 
 # The links given broken tensors: one a joint moves (its rotor inertia is added in PyBullet),
 # and the tool below the F/T joint (PyBullet steps it as loaded).
@@ -68,7 +68,8 @@ def test_arm_check_names_a_fix_the_command_takes(tmp_path: Path, capsys) -> None
         assert _takes(command, "--repair-inertia"), command
         assert _takes(command, "--default-effort") and _takes(command, "--default-velocity")
     assert main(["arm", str(urdf), "--check", "--repair-inertia"]) == EXIT_OK
-    assert "touch  yes" in capsys.readouterr().out
+    shown = capsys.readouterr().out
+    assert "repairs     inertia (in MuJoCo and PyBullet alike)" in shown and "touch  yes" in shown
     # the arm file it writes keeps the repair
     out = tmp_path / "arm.toml"
     assert main(["arm", str(urdf), "--repair-inertia", "-o", str(out)]) == EXIT_OK
@@ -107,32 +108,27 @@ def test_the_repaired_arm_steps_in_both_engines_with_the_same_inertia(
     bullet = envs["pybullet"]
     # PyBullet's copy lives in the cache, not beside the user's file
     assert bullet._urdf.is_relative_to(tmp_path / "cache") and bullet._urdf != urdf
-    fresh = pybullet.connect(pybullet.DIRECT)
-    try:
-        body = pybullet.loadURDF(
-            str(bullet._urdf), flags=pybullet.URDF_USE_INERTIA_FROM_FILE, physicsClientId=fresh
-        )
-        for name in BROKEN:
-            repaired = _repaired_moments(urdf, name)
-            link = _link_index(fresh, body, name)
-            loaded = pybullet.getDynamicsInfo(body, link, physicsClientId=fresh)[2]
-            np.testing.assert_allclose(np.sort(loaded), repaired, rtol=RTOL)
-            model = envs["mujoco"].model
-            np.testing.assert_allclose(np.sort(model.body(name).inertia), repaired, rtol=RTOL)
-    finally:
-        pybullet.disconnect(fresh)
+    fresh = BulletClient(pybullet.DIRECT)  # the copy as loaded, before the env's rotor discs
+    body = fresh.loadURDF(str(bullet._urdf), flags=pybullet.URDF_USE_INERTIA_FROM_FILE)
+    for name in BROKEN:
+        repaired = _repaired_moments(urdf, name)
+        loaded = fresh.getDynamicsInfo(body, _link_index(fresh, body, name))[2]
+        np.testing.assert_allclose(np.sort(loaded), repaired, rtol=RTOL)
+        model = envs["mujoco"].model
+        np.testing.assert_allclose(np.sort(model.body(name).inertia), repaired, rtol=RTOL)
+    fresh.disconnect()
     # the tool link (no rotor inertia added) steps with the repaired tensor in the env itself
-    tool = _link_index(bullet.client._client, bullet.body, "tool_link")
+    tool = _link_index(bullet.client, bullet.body, "tool_link")
     stepped = bullet.client.getDynamicsInfo(bullet.body, tool)[2]
     np.testing.assert_allclose(np.sort(stepped), _repaired_moments(urdf, "tool_link"), rtol=RTOL)
     for env in envs.values():
         env.close()
 
 
-def _link_index(client: int, body: int, name: str) -> int:
+def _link_index(client: BulletClient, body: int, name: str) -> int:
     """PyBullet's index of link ``name`` (link index = joint index)."""
-    for j in range(pybullet.getNumJoints(body, physicsClientId=client)):
-        if pybullet.getJointInfo(body, j, physicsClientId=client)[12].decode() == name:
+    for j in range(client.getNumJoints(body)):
+        if client.getJointInfo(body, j)[12].decode() == name:
             return j
     raise KeyError(name)
 
@@ -179,3 +175,38 @@ def test_a_policy_trained_on_a_repaired_arm_is_evaluated_in_pybullet(tmp_path: P
     out = tmp_path / "eval.json"
     assert main(["eval", str(run), "--engine", "pybullet", "--episodes", "2", "-o", str(out)]) == 0
     assert json.loads(out.read_text())["episodes"] == 2
+
+
+def test_a_published_arm_with_broken_tensors_loads_repaired_in_pybullet(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """pybullet_data's xArm6: package:// collision meshes, and two links whose tensors (with
+    products of inertia) break the triangle inequality."""
+    import pybullet_data
+
+    from mjx_arm.task import reach_config
+    from mjx_arm.urdf.inertia import inertia_problem
+    from mjx_arm.urdf.repair import inertial_links
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    xarm = Path(pybullet_data.getDataPath()) / "xarm/xarm6_with_gripper.urdf"
+    (tmp_path / "xarm.toml").write_text(f'urdf = "{xarm}"\nrepair_inertia = true\n')
+    env = PybulletArmEnv(reach_config(), load_arm(tmp_path / "xarm.toml"))
+    env.reset(seed=0)
+    obs, reward, *_ = env.step(np.zeros(6, np.float32))
+    assert np.isfinite(reward) and np.all(np.isfinite(obs["joint_angles"]))
+    # every mesh of the copy names an existing file by its absolute path
+    meshes = [Path(m.get("filename")) for m in ET.parse(env._urdf).getroot().iter("mesh")]
+    assert meshes and all(m.is_absolute() and m.is_file() for m in meshes)
+    broken = [
+        link.get("name")
+        for link in inertial_links(ET.parse(xarm).getroot())
+        if inertia_problem(link_tensor(link))
+    ]
+    assert broken == ["link2", "link3"]
+    client = env.client
+    body = client.loadURDF(str(env._urdf), flags=pybullet.URDF_USE_INERTIA_FROM_FILE)
+    for name in broken:
+        loaded = client.getDynamicsInfo(body, _link_index(client, body, name))[2]
+        np.testing.assert_allclose(np.sort(loaded), _repaired_moments(xarm, name), rtol=RTOL)
+    env.close()

@@ -48,6 +48,9 @@ def describe(arm: ArmInfo) -> str:
         f"reach scale {arm.reach_scale:.3f} (the shipped arm's reach is 1)",
         f"collision   {arm.config.collision}",
     ]
+    repairs = UrdfRepairs.of(arm.config)
+    if repairs.any:
+        lines.append(f"repairs     {repairs.describe()} (in MuJoCo and PyBullet alike)")
     return "\n".join(lines)
 
 

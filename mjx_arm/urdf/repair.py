@@ -100,6 +100,12 @@ class UrdfRepairs:
         """Whether anything is to be repaired."""
         return self.repair_inertia or self.default_effort > 0 or self.default_velocity > 0
 
+    def describe(self) -> str:
+        """The repairs in words, e.g. ``inertia; effort 80 where none``; "none"."""
+        parts = ["inertia"] if self.repair_inertia else []
+        parts += [f"{attr} {value:g} where none" for attr, value in self.limits().items() if value]
+        return "; ".join(parts) or "none"
+
     def key(self) -> bytes:
         """The options as bytes, for the name of a cached repaired copy."""
         return repr((self.repair_inertia, *self.limits().values())).encode()
