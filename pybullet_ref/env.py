@@ -78,6 +78,7 @@ from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.grip import ObjectStart
 from mjx_arm.task.wrench import external_wrench_features
 from mjx_arm.urdf.arm_config import ArmConfig
+from mjx_arm.urdf.repair import UrdfRepairs
 from mjx_arm.urdf.scene import CAMERA_EYE, CAMERA_FOVY, CAMERA_TARGET
 from mjx_arm.urdf.scene_shapes import CUBE_HALF, CUBE_MASS
 from pybullet_ref.arm_model import (
@@ -174,7 +175,7 @@ class PybulletArmEnv(BaseRobotEnv):
     ) -> None:
         super().__init__(task, arm, render_mode, width, height)
         self.contact = scene_contact(contact)
-        self._urdf = bullet_urdf(self.arm.urdf)
+        self._urdf = bullet_urdf(self.arm.urdf, repairs=UrdfRepairs.of(self.arm.config))
         self._ee_offset = self.arm.ee_offset.copy() if np.any(self.arm.ee_offset) else None
         self.servo = joint_servo(self.arm, self.task.spec.servo_dt or self.task.sim_dt)
         self.self_collision = task_convert_config(self.task, self.arm).self_collision

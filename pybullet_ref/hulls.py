@@ -14,9 +14,10 @@ convex hulls shrunk by the margin (every face plane moved inward by 1 mm, the pl
 intersected again). Bullet's padding puts the faces back where MuJoCo has them; only edges and
 corners come out rounded with a 1 mm radius. Visual meshes are untouched (their paths made
 absolute). A URDF without collision meshes (the shipped arms: primitives only) is loaded as it
-is. Copies live in :func:`mjx_arm.urdf.mesh_convert.default_cache_dir`, named by a hash of the
-URDF's and the meshes' bytes and of the URDF's folder, so an edited or moved file gets a fresh
-copy (the copy names its visual meshes by absolute path).
+is, unless its arm config repairs it: the repairs go into the same copy (:mod:`mjx_arm.urdf.repair`
+says why a copy). Copies live in :func:`mjx_arm.urdf.mesh_convert.default_cache_dir`, named by
+a hash of the URDF's and the meshes' bytes, of the URDF's folder and of the repairs, so an
+edited or moved file gets a fresh copy (the copy names its visual meshes by absolute path).
 """
 
 from __future__ import annotations
@@ -31,10 +32,12 @@ import numpy as np
 from mjx_arm.urdf.errors import ConversionError
 from mjx_arm.urdf.mesh_convert import default_cache_dir, load_mesh, write_atomic
 from mjx_arm.urdf.meshes import existing_mesh, resolve_asset
+from mjx_arm.urdf.repair import UrdfRepairs, repair_tree
 from mjx_arm.urdf.safe_xml import read_xml
 
 BULLET_URDF_MARGIN = 0.001  # m: the padding Bullet's URDF importer gives every convex mesh
 _VERSION = b"eroded-hull-v1"  # part of the cache key: bump when the output changes
+NO_REPAIRS = UrdfRepairs()
 
 
 def eroded_hull(vertices: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray]:
@@ -79,16 +82,21 @@ def _hull_mesh(hull) -> tuple[np.ndarray, np.ndarray]:
     return hull.points[used], faces.reshape(-1, 3)
 
 
-def bullet_urdf(urdf: Path, cache_dir: Path | None = None) -> Path:
-    """The URDF PyBullet should load for ``urdf``: itself without collision meshes, else a
-    cached copy with eroded collision hulls (module docstring).
+def bullet_urdf(
+    urdf: Path, cache_dir: Path | None = None, repairs: UrdfRepairs = NO_REPAIRS
+) -> Path:
+    """The URDF PyBullet should load for ``urdf``: itself when it has no collision meshes and
+    ``repairs`` change nothing, else a cached copy with the repaired inertias and limits
+    (:mod:`mjx_arm.urdf.repair`, the text MuJoCo's conversion reads) and eroded collision hulls
+    (module docstring), named by a hash of the source's bytes and of the repairs.
 
     Raises:
         ConversionError: a mesh that cannot be found or read (the converter's message).
     """
     root = read_xml(urdf)
+    repaired = repair_tree(root, repairs)
     collisions = root.findall("./link/collision/geometry/mesh")
-    if not collisions:
+    if not collisions and not repaired:
         return urdf
     sources = {  # collision meshes must resolve; the rest (drawing only) where they can
         id(mesh): existing_mesh(mesh.get("filename", ""), urdf, link.get("name", "?"), {})
@@ -98,6 +106,8 @@ def bullet_urdf(urdf: Path, cache_dir: Path | None = None) -> Path:
     key = hashlib.sha256(_VERSION + urdf.read_bytes())
     # the copy names its visual meshes by absolute path: a URDF moved elsewhere gets its own
     key.update(str(urdf.resolve().parent).encode())
+    if repaired:  # (an unrepaired copy keeps its name)
+        key.update(repairs.key())
     for path in sorted({str(p) for p in sources.values()}):
         key.update(Path(path).read_bytes())
     folder = (cache_dir or default_cache_dir()).expanduser().resolve()
@@ -112,8 +122,8 @@ def bullet_urdf(urdf: Path, cache_dir: Path | None = None) -> Path:
         write_atomic(ET.tostring(root, encoding="unicode").encode(), target)
     except OSError as exc:
         raise ConversionError(
-            f"{urdf}: PyBullet's copy with shrunk collision hulls cannot be written to {folder} "
-            f"({exc}); set XDG_CACHE_HOME to a writable folder"
+            f"{urdf}: PyBullet's copy (shrunk collision hulls, repairs) cannot be written to "
+            f"{folder} ({exc}); set XDG_CACHE_HOME to a writable folder"
         ) from exc
     return target
 

@@ -574,13 +574,17 @@ def test_finding_and_report_format():
     )
 
 
-def test_repair_inertia_turns_the_error_into_a_warning_for_mujoco(tmp_path: Path):
+def test_repair_inertia_turns_the_error_into_a_warning_in_every_engine(tmp_path: Path):
     case = next(c for c in CASES if c.id == "inertia_triangle_inequality")
     path = _broken(case, tmp_path)
-    repaired = validate(path, engine="mujoco", repair_inertia=True)
-    assert repaired.ok and "converter will repair it" in repaired.warnings[0].problem
-    # PyBullet gets the file as written, so the repair does not help there
-    assert not validate(path, engine="all", repair_inertia=True).ok
+    broken = validate(path, engine="all")
+    assert "--repair-inertia" in broken.errors[0].fix
+    assert "repair_inertia = true in an arm file" in broken.errors[0].fix
+    # PyBullet loads the repaired copy too, and its native load checks that copy
+    for engine in ("mujoco", "pybullet", "all"):
+        repaired = validate(path, engine=engine, repair_inertia=True)
+        assert repaired.ok, repaired.format()
+        assert "nearest valid tensor in every engine" in repaired.warnings[0].problem
     assert main(["convert", str(path), "-o", str(tmp_path / "arm.xml"), "--repair-inertia"]) == 0
 
 
@@ -595,7 +599,10 @@ def test_a_zero_effort_with_a_default_effort_passes_every_layer(tmp_path: Path):
     assert not validate(path, engine="mujoco").ok
     report = validate(path, engine="mujoco", default_limits={"effort": 50.0})
     assert report.ok, report.format()
-    assert any("the converter uses 50" in w.problem for w in report.warnings)
+    assert any("the repair gives it 50" in w.problem for w in report.warnings)
+    # PyBullet loads a copy with the same default: its checks take it too
+    report = validate(path, engine="all", default_limits={"effort": 50.0})
+    assert report.ok, report.format()
 
 
 def test_require_valid(tmp_path: Path):

@@ -3,6 +3,7 @@ each task, and a picture of its home pose over the task area."""
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
 from pathlib import Path
@@ -13,6 +14,7 @@ from mjx_arm.envs.arm import ArmInfo, tool_down_solver
 from mjx_arm.envs.setup import ArmSetup, arm_setup, gripper_problem, task_verdict
 from mjx_arm.inputs import write_atomic
 from mjx_arm.task.config import TaskConfig
+from mjx_arm.urdf.repair import UrdfRepairs
 from mjx_arm.urdf.scene_shapes import table_top_extent
 
 
@@ -48,6 +50,9 @@ def describe(arm: ArmInfo) -> str:
         f"reach scale {arm.reach_scale:.3f} (the shipped arm's reach is 1)",
         f"collision   {arm.config.collision}",
     ]
+    repairs = UrdfRepairs.of(arm.config)
+    if repairs.any:
+        lines.append(f"repairs     {repairs.describe()} (in MuJoCo and PyBullet alike)")
     return "\n".join(lines)
 
 
@@ -96,6 +101,8 @@ def arm_file_text(arm: ArmInfo, touch: ArmSetup | None = None) -> str:
         "kv_factor": round(float(arm.kv_factor), 6),
         "ee_offset": [round(float(v), 6) for v in arm.ee_offset],
     }
+    repairs = UrdfRepairs.of(arm.config)  # written where set: the arm needs them to load
+    values |= {key: value for key, value in dataclasses.asdict(repairs).items() if value}
     body = [f"{key} = {json.dumps(value)}" for key, value in values.items()]
     if arm.config.home_qpos:
         body.append(f"home_qpos = {json.dumps([round(float(q), 6) for q in arm.home_qpos])}")

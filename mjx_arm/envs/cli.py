@@ -25,13 +25,14 @@ def cmd_arm(args: argparse.Namespace) -> int:
     from mjx_arm.names import TASKS
     from mjx_arm.task.config import task_config
     from mjx_arm.urdf.arm_config import load_arm
+    from mjx_arm.urdf.repair_args import with_repair_arguments
 
     if args.output:  # named errors (bad files, bad arm) go to mjx_arm.cli.main
         check_output(args.output, "-o", (".toml",))
     picture = args.picture
     if picture:
         check_output(picture, "--picture", (".png",))
-    config = load_arm(args.arm)
+    config = with_repair_arguments(load_arm(args.arm), args)
     if args.ee_link:
         config = config.replace(ee_link=args.ee_link, joints=())
     arm = validated_arm_info(config, "mujoco")
@@ -53,11 +54,14 @@ def cmd_arm(args: argparse.Namespace) -> int:
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``arm`` to ``sub``."""
+    from mjx_arm.urdf.repair_args import add_repair_arguments
+
     p = sub.add_parser(
         "arm", help="show what an arm config resolves to", description=cmd_arm.__doc__
     )
     p.add_argument("arm", help="a URDF or an arm file (.toml/.json)")
     p.add_argument("--ee-link", help="end-effector link (default: from the URDF)")
+    add_repair_arguments(p, "the arm, written with -o")
     p.add_argument("-o", "--output", help="write the resolved config as an arm file (.toml)")
     p.add_argument(
         "--check",

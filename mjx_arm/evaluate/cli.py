@@ -19,6 +19,7 @@ from mjx_arm.inputs import (
 from mjx_arm.jax_cache import enable_compilation_cache
 from mjx_arm.names import EXIT_OK
 from mjx_arm.task.registry import task_names
+from mjx_arm.urdf.repair_args import add_repair_arguments
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
 MAX_EPISODES = 100_000
@@ -35,6 +36,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
     from mjx_arm.evaluate import eval_arm, eval_task, evaluate, format_summary, resolve_policy
     from mjx_arm.replay import save_trajectory
+    from mjx_arm.urdf.repair_args import with_repair_arguments
 
     _check_eval_outputs(args)
     if args.pybullet_contact is not None:
@@ -46,7 +48,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
             raise ConfigError(f"--pybullet-contact: {err}") from err
     policy, source = resolve_policy(args.policy, args.step)
     task, notes = eval_task(policy, args.task)
-    arm = eval_arm(policy, args.arm)
+    arm = with_repair_arguments(eval_arm(policy, args.arm), args)
     if args.engine == "mjx":
         enable_compilation_cache()
         _warn_mjx_on_cpu()
@@ -163,6 +165,7 @@ def _add_eval(sub: argparse._SubParsersAction) -> None:
         help="the arm: a URDF or an arm file (.toml/.json) (default: the arm the policy was "
         "trained on; a policy run on another arm is an error)",
     )
+    add_repair_arguments(p, "the arm (a policy trained with repairs records them)")
     p.add_argument(
         "--pybullet-contact",
         help="PyBullet's scene contact: soft (compliant, calibrated on MuJoCo; the default), "

@@ -12,6 +12,7 @@ from mjx_arm.jax_cache import enable_compilation_cache
 from mjx_arm.names import EXIT_OK
 from mjx_arm.settings import add_set_argument
 from mjx_arm.task.registry import task_names
+from mjx_arm.urdf.repair_args import add_repair_arguments, with_repair_arguments
 
 DEFAULT_PRESET = "seed"
 
@@ -69,9 +70,11 @@ def _check_resume_flags(args: argparse.Namespace) -> None:
     an error, not silently dropped.
 
     Raises:
-        ConfigError: ``--resume`` with --task, --preset, --backend, --arm, --ee-link, --config
-            or --set.
+        ConfigError: ``--resume`` with --task, --preset, --backend, --arm, --ee-link, --config,
+            --set or a repair flag.
     """
+    from mjx_arm.urdf.repair_args import given_repair_flags
+
     flags = {
         "--task": args.task,
         "--preset": args.preset,
@@ -81,7 +84,7 @@ def _check_resume_flags(args: argparse.Namespace) -> None:
         "--config": args.config,
         "--set": args.set,
     }
-    given = [flag for flag, value in flags.items() if value]
+    given = [flag for flag, value in flags.items() if value] + given_repair_flags(args)
     if given:
         raise ConfigError(
             f"--resume continues a run with the config it was started with, so {', '.join(given)} "
@@ -125,7 +128,8 @@ def _child_argv(argv: list[str], run_dir: Path, named: bool) -> list[str]:
 
 def config_from_args(args: argparse.Namespace):
     """The training config of ``train``'s (or ``warmup``'s) flags: the preset for the task,
-    then ``--config``, ``--set``, ``--devices``, ``--backend``, ``--arm`` and ``--ee-link``."""
+    then ``--config``, ``--set``, ``--devices``, ``--backend``, ``--arm``, ``--ee-link`` and the
+    repair flags (``--repair-inertia``, ...: the arm config's fields, saved with the run)."""
     from mjx_arm.train.config import load_config
 
     overrides = list(args.set or [])
@@ -136,7 +140,8 @@ def config_from_args(args: argparse.Namespace):
     if args.backend:
         overrides.insert(0, f"backend={args.backend}")
     config = load_config(args.preset or DEFAULT_PRESET, args.config, overrides)
-    return _with_arm(config, args.arm, args.ee_link)
+    config = _with_arm(config, args.arm, args.ee_link)
+    return config.replace(arm=with_repair_arguments(config.arm, args))
 
 
 def cmd_warmup(args: argparse.Namespace) -> int:
@@ -228,6 +233,7 @@ def _add_config_arguments(p: argparse.ArgumentParser) -> None:
         help="end-effector link of the arm (default: ee_link, else the tip of the longest "
         "chain of revolute joints)",
     )
+    add_repair_arguments(p, "the arm, saved with the run")
     p.add_argument("--config", help="JSON file with training config fields")
     add_set_argument(
         p,

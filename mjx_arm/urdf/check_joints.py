@@ -18,6 +18,7 @@ from mjx_arm.urdf.findings import (
     _numbers,
     _Tree,
 )
+from mjx_arm.urdf.repair import limit_fix
 
 # --------------------------------------------------------------------------- layer 2: joints
 
@@ -29,9 +30,9 @@ def _check_joints(
     out: _Findings,
     default_limits: Mapping[str, float] | None = None,
 ) -> None:
-    """Joint checks; ``default_limits`` (``effort``/``velocity`` -> value) are what the converter
-    puts where a joint gives none (MuJoCo only)."""
-    defaults = dict(default_limits or {}) if engines == ("mujoco",) else {}
+    """Joint checks; ``default_limits`` (``effort``/``velocity`` -> value) are what the repair
+    puts where a joint gives none, in every engine (:mod:`mjx_arm.urdf.repair`)."""
+    defaults = dict(default_limits or {})
     for j in tree.joints.values():
         if j.type in ("floating", "planar"):
             _check_free_joint(j, engines, out)
@@ -134,8 +135,8 @@ def _check_effort_velocity(
             out.warning(
                 2,
                 _joint(j.name),
-                f"has <limit {attr}> {shown}: the converter uses {defaults[attr]:g} "
-                f"(--default-{attr})",
+                f"has <limit {attr}> {shown}: the repair gives it {defaults[attr]:g} in every "
+                f"engine (--default-{attr})",
                 f"set {attr} to the joint's positive maximum ({unit})",
             )
             continue
@@ -143,9 +144,7 @@ def _check_effort_velocity(
             2,
             _joint(j.name),
             f"has <limit {attr}> {shown}, not > 0{why}",
-            f"set {attr} to the joint's positive maximum ({unit}), or convert with "
-            f"--default-{attr} VALUE (ConvertConfig.default_{attr}) to use one value for "
-            "every joint without it",
+            limit_fix(attr, unit),
         )
 
 

@@ -15,6 +15,8 @@ import xml.etree.ElementTree as ET
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 
+import numpy as np
+
 from mjx_arm.urdf.errors import one_line
 from mjx_arm.urdf.findings import _Findings, _joint, _link, _number, _Tree
 from mjx_arm.urdf.inertia import inertia_problem, inertia_tensor, is_frame
@@ -22,6 +24,7 @@ from mjx_arm.urdf.meshes import (
     AssetPathError,
     resolve_asset,
 )
+from mjx_arm.urdf.repair import INERTIA_FIX, UrdfRepairs, repair_tree
 
 # --------------------------------------------------------------------------- layer 3: physics
 
@@ -46,7 +49,7 @@ def _check_inertials(tree: _Tree, engines: tuple[str, ...], repair: bool, out: _
             continue  # a massless frame on a fixed joint: nothing to check, see is_frame
         # The converter checks every <inertia>; PyBullet uses those of massive or moving links.
         if (mass or 0.0) > 0 or name in moving or "mujoco" in engines:
-            _check_tensor(name, inertial, engines, repair, needed=(mass or 0.0) > 0, out=out)
+            _check_tensor(name, inertial, repair, needed=(mass or 0.0) > 0, out=out)
 
 
 def _check_moving_mass(
@@ -89,7 +92,6 @@ def _check_moving_mass(
 def _check_tensor(
     name: str,
     inertial: ET.Element,
-    engines: tuple[str, ...],
     repair: bool,
     needed: bool,
     out: _Findings,
@@ -115,22 +117,16 @@ def _check_tensor(
     problem = inertia_problem(tensor)
     if problem is None:
         return
-    if repair and engines == ("mujoco",):
+    if repair and np.all(np.isfinite(tensor)):
         out.warning(
             3,
             _link(name),
-            f"inertia {problem}; the converter will repair it",
+            f"inertia {problem}; the repair replaces it by the nearest valid tensor in every "
+            "engine",
             "correct the <inertia> values to keep the link's real dynamics",
         )
     else:
-        note = "; PyBullet loads it as written and zeroes it" if "pybullet" in engines else ""
-        out.error(
-            3,
-            _link(name),
-            f"inertia {problem}{note}",
-            "correct the <inertia> values (for MuJoCo alone, convert with repair_inertia="
-            "True / --repair-inertia to use the nearest valid tensor)",
-        )
+        out.error(3, _link(name), f"inertia {problem}", INERTIA_FIX)
 
 
 # --------------------------------------------------------------------------- layer 3: native
@@ -238,13 +234,17 @@ def _flush_all() -> None:
         ctypes.CDLL(None).fflush(None)
 
 
-def _absolute_mesh_copy(tree: _Tree, package_dirs: Mapping[str, str], folder: str) -> Path:
-    """Write the URDF with absolute mesh and texture paths (PyBullet knows no package_dirs).
+def _absolute_mesh_copy(
+    tree: _Tree, package_dirs: Mapping[str, str], folder: str, repairs: UrdfRepairs
+) -> Path:
+    """Write the URDF with absolute mesh and texture paths (PyBullet knows no package_dirs) and
+    ``repairs`` applied (:mod:`mjx_arm.urdf.repair`: what the PyBullet env loads).
 
     A filename that does not resolve inside its folder loses its ``filename`` (PyBullet then
     opens nothing for it); the static checks report such meshes and textures before this runs.
     """
     root = ET.fromstring(ET.tostring(tree.root))
+    repair_tree(root, repairs)
     for elem in [*root.iter("mesh"), *root.iter("texture")]:
         filename = elem.get("filename")
         if filename is None:
@@ -265,19 +265,22 @@ def check_pybullet_load(
     out: _Findings,
     limits: Mapping[str, float] | None = None,
 ) -> None:
-    """The PyBullet row's URDF load check (:mod:`mjx_arm.engines`): :func:`_load_pybullet`
-    (``repair`` and ``limits`` concern the MuJoCo conversion only)."""
-    _load_pybullet(tree, package_dirs, out)
+    """The PyBullet row's URDF load check (:mod:`mjx_arm.engines`): :func:`_load_pybullet` of
+    the URDF with the repairs of ``repair`` and ``limits`` (the default effort and velocity),
+    as the PyBullet env loads it."""
+    _load_pybullet(tree, package_dirs, out, UrdfRepairs.from_limits(repair, limits))
 
 
-def _load_pybullet(tree: _Tree, package_dirs: Mapping[str, str], out: _Findings) -> None:
+def _load_pybullet(
+    tree: _Tree, package_dirs: Mapping[str, str], out: _Findings, repairs: UrdfRepairs
+) -> None:
     """Load into a private DIRECT PyBullet client with its C output captured; report problems.
 
     PyBullet runs in this process (it segfaults on some broken trees, which is why this layer only
     runs after the static checks passed). Its ``b3Warning`` messages become warnings.
     """
     with tempfile.TemporaryDirectory() as folder:
-        copy = _absolute_mesh_copy(tree, package_dirs, folder)
+        copy = _absolute_mesh_copy(tree, package_dirs, folder, repairs)
         failure = None
         with _captured_fds() as captured:
             failure = _pybullet_load_file(str(copy))

@@ -7,8 +7,9 @@ import sys
 from pathlib import Path
 
 from mjx_arm.engines import engine_names
-from mjx_arm.inputs import InputError, check_output, float_in, require_file, write_atomic
+from mjx_arm.inputs import InputError, check_output, require_file, write_atomic
 from mjx_arm.names import EXIT_INVALID, EXIT_OK
+from mjx_arm.urdf.repair_args import add_repair_arguments, repairs_of
 from mjx_arm.urdf.scene_shapes import SCENES
 
 
@@ -50,11 +51,19 @@ def _invalid(urdf: str, report) -> int:
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
-    """Validate a URDF in three layers and print every finding."""
+    """Validate a URDF in three layers and print every finding (with the repair flags: of the
+    URDF as each engine loads it repaired)."""
     from mjx_arm.urdf.validate import validate
 
     require_file(args.urdf, "URDF")  # a missing file is one error line, not a report
-    report = validate(args.urdf, engine=args.engine, package_dirs=_package_dirs(args.package))
+    repairs = repairs_of(args)
+    report = validate(
+        args.urdf,
+        engine=args.engine,
+        package_dirs=_package_dirs(args.package),
+        repair_inertia=repairs.repair_inertia,
+        default_limits=repairs.limits(),
+    )
     print(report.format())
     return EXIT_OK if report.ok else _invalid(args.urdf, report)
 
@@ -67,12 +76,13 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
     check_output(args.output, "-o", (".xml",))
     package_dirs = _package_dirs(args.package)
+    repairs = repairs_of(args)
     config = ConvertConfig(
         scene=args.scene,
         package_dirs=package_dirs,
-        repair_inertia=args.repair_inertia,
-        default_effort=args.default_effort,
-        default_velocity=args.default_velocity,
+        repair_inertia=repairs.repair_inertia,
+        default_effort=repairs.default_effort,
+        default_velocity=repairs.default_velocity,
         mesh_cache_dir=str(cache_dir_for(args.output)),  # meshes_converted/ beside the MJCF
     )
     report = validate(
@@ -80,7 +90,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
         engine="mujoco",
         package_dirs=package_dirs,
         native=False,
-        repair_inertia=args.repair_inertia,
+        repair_inertia=repairs.repair_inertia,
         default_limits=config.default_limits(),
     )
     if not report.ok:
@@ -126,6 +136,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="NAME=DIR",
         help="directory of a package:// name (repeatable)",
     )
+    add_repair_arguments(p, "the check")
     p.set_defaults(func=cmd_validate)
 
     p = sub.add_parser(
@@ -145,18 +156,5 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="NAME=DIR",
         help="directory of a package:// name (repeatable)",
     )
-    p.add_argument(
-        "--repair-inertia",
-        action="store_true",
-        help="replace inertia tensors that break the triangle inequality",
-    )
-    for attr, unit in (("effort", "N m or N"), ("velocity", "rad/s or m/s")):
-        p.add_argument(
-            f"--default-{attr}",
-            type=float_in(0.0),
-            default=0.0,
-            metavar="VALUE",
-            help=f"{attr} limit ({unit}) of every moving joint whose URDF gives none "
-            "(default: none, such a joint is an error)",
-        )
+    add_repair_arguments(p, "the conversion")
     p.set_defaults(func=cmd_convert)

@@ -25,7 +25,10 @@ def one_line(text: object) -> str:
 def report_error(kind: type[_E], report) -> _E:
     """A ``kind`` error whose message is a failed validation's whole report and whose
     :attr:`~mjx_arm.inputs.InputError.headline` is its one-line summary (path, error count,
-    the first errors)."""
+    the first errors) and the errors' fix where they share one (two links whose inertia needs
+    the same repair), else where every fix is."""
     err = kind(report.format())
-    err.headline = f"{report.path}: {report.summary()}; mjx-arm validate gives every fix"
+    fixes = {finding.fix for finding in report.errors}
+    fix = fixes.pop() if len(fixes) == 1 else "mjx-arm validate gives every fix"
+    err.headline = f"{report.path}: {report.summary()}; {fix}"
     return err

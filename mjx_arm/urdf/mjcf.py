@@ -12,13 +12,7 @@ import numpy as np
 
 from mjx_arm.urdf.convert_config import ConvertConfig
 from mjx_arm.urdf.errors import ConversionError, one_line
-from mjx_arm.urdf.inertia import (
-    inertia_problem,
-    inertia_tensor,
-    is_frame,
-    on_triangle_edge,
-    repair_inertia,
-)
+from mjx_arm.urdf.inertia import inertia_problem
 from mjx_arm.urdf.mesh_convert import CONVERTIBLE_FORMATS, MeshConvertError, convert_mesh
 from mjx_arm.urdf.meshes import (
     MUJOCO_MESH_FORMATS,
@@ -26,6 +20,7 @@ from mjx_arm.urdf.meshes import (
     resolve_mesh_filename,
 )
 from mjx_arm.urdf.model import RobotModel, parse_urdf
+from mjx_arm.urdf.repair import INERTIA_FIX, UrdfRepairs, inertial_links, link_tensor, repair_tree
 from mjx_arm.urdf.safe_xml import read_xml
 from mjx_arm.urdf.scene import add_scene
 from mjx_arm.urdf.scene_shapes import SCENES
@@ -169,15 +164,12 @@ def _prepare_urdf_text(path: Path, config: ConvertConfig) -> str:
     tell the importer to keep every link apart."""
     root = read_xml(path)
     _drop_unreadable_visuals(root)
-    _fill_limits(root, config.default_limits())
+    repair_tree(root, UrdfRepairs.of(config))  # the same edits PyBullet's copy gets
     for mesh in root.iter("mesh"):
         link = _enclosing_link_name(root, mesh)
         mesh.set("filename", str(_mesh_path(mesh.get("filename", ""), path, link, config)))
-    moved = {c.get("link") for j in root.findall("joint") if _moves(j) for c in j.findall("child")}
-    for link in root.findall("link"):
-        if link.get("name") not in moved and is_frame(link):
-            continue  # a massless frame welded to its parent (the validator warns)
-        _check_or_repair_inertia(link, path, config.repair_inertia)
+    for link in inertial_links(root):  # massless frames welded to a parent are left out
+        _check_inertia(link, path)
     for old in root.findall("mujoco"):
         root.remove(old)
     extension = ET.Element("mujoco")
@@ -194,29 +186,6 @@ def _prepare_urdf_text(path: Path, config: ConvertConfig) -> str:
     )
     root.insert(0, extension)
     return ET.tostring(root, encoding="unicode")
-
-
-def _fill_limits(root: ET.Element, defaults: dict[str, float]) -> None:
-    """Give moving joints without an effort or velocity limit the configured default (> 0)."""
-    for joint in root.findall("joint"):
-        if not _moves(joint):
-            continue
-        limit = joint.find("limit")
-        for attr, value in defaults.items():
-            if value <= 0:
-                continue
-            if limit is None:
-                limit = ET.SubElement(joint, "limit")
-            try:
-                missing = float(limit.get(attr, "0")) <= 0
-            except ValueError:
-                missing = False  # not a number: the validator has already said so
-            if missing:
-                limit.set(attr, repr(float(value)))
-
-
-def _moves(joint: ET.Element) -> bool:
-    return joint.get("type", "") not in ("fixed", "")
 
 
 def _drop_unreadable_visuals(root: ET.Element) -> None:
@@ -258,23 +227,10 @@ def _enclosing_link_name(root: ET.Element, node: ET.Element) -> str:
     return "?"
 
 
-def _check_or_repair_inertia(link: ET.Element, path: Path, repair: bool) -> None:
-    inertia = link.find("inertial/inertia")
-    if inertia is None:
-        return
-    keys = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
-    v = {k: float(inertia.get(k, "0")) for k in keys}
-    tensor = inertia_tensor(v)
-    problem = inertia_problem(tensor)
-    if problem is None and not (repair and on_triangle_edge(tensor)):
-        return
-    name = link.get("name", "?")
-    if not repair:
+def _check_inertia(link: ET.Element, path: Path) -> None:
+    """Raise a ConversionError for a link whose (repaired, where asked) inertia is not valid."""
+    problem = inertia_problem(link_tensor(link))
+    if problem is not None:
         raise ConversionError(
-            f"{path}: link {name!r}: inertia {problem}. Fix the <inertia> values, or convert "
-            "with repair_inertia=True (CLI: --repair-inertia) to raise the smaller principal "
-            "moments to the nearest valid tensor."
+            f"{path}: link {link.get('name', '?')!r}: inertia {problem}. Fix: {INERTIA_FIX}."
         )
-    fixed = repair_inertia(tensor)
-    for key, (i, j) in zip(keys, [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)], strict=True):
-        inertia.set(key, repr(float(fixed[i, j])))

@@ -50,12 +50,13 @@ def validate(
         engine: "mujoco", "pybullet" or "all": the engine(s) the file must work in.
         package_dirs: ``package://NAME`` -> directory, for meshes outside the URDF's folder tree.
         native: run the engines' own loaders (layer 3) when the static checks find no error.
-        repair_inertia: report invalid inertia tensors as warnings, since the converter repairs
-            them (MuJoCo only; PyBullet loads the file as written).
+        repair_inertia: report invalid inertia tensors as warnings: the repair
+            (:mod:`mjx_arm.urdf.repair`) replaces them in MuJoCo's conversion and in the copy
+            PyBullet loads, and the native loads check the repaired text.
         min_damping_pybullet: joint damping below which PyBullet is expected to jitter.
-        default_limits: ``effort``/``velocity`` values the converter supplies to joints that
-            give none (``ConvertConfig.default_limits``); with ``engine="mujoco"`` a missing
-            limit with a default is a warning.
+        default_limits: ``effort``/``velocity`` values the repair gives joints that give none
+            (``ConvertConfig.default_limits``), in every engine; a missing limit with a default
+            is a warning.
 
     Raises:
         ValueError: ``engine`` is not one of the three names.
