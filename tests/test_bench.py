@@ -17,8 +17,8 @@ import pytest
 from test_policy import trained_run_dir
 
 from mjx_arm.bench.engines import Trace
-from mjx_arm.bench.parity import (
-    ParityConfig,
+from mjx_arm.bench.parity import ParityConfig
+from mjx_arm.bench.parity_figures import (
     check_goals,
     curve_stats,
     jitter_figures,

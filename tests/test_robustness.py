@@ -13,14 +13,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from mjx_arm.bench.robustness import (
+from mjx_arm.bench.robustness import point_result, summarize
+from mjx_arm.bench.robustness_config import (
     JOINT,
     PERTURBATIONS,
     Perturbation,
     joint_config,
     perturbations_for,
-    point_result,
-    summarize,
     sweep_points,
 )
 from mjx_arm.cli import EXIT_INVALID, main

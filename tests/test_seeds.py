@@ -8,16 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from mjx_arm.bench.seeds import (
-    SeedRun,
-    SeedsConfig,
-    first_at,
-    parse_seeds,
-    quartiles,
-    run_seeds,
-    summarize,
-    write_report,
-)
+from mjx_arm.bench.seeds import first_at, run_seeds, write_report
+from mjx_arm.bench.seeds_config import SeedRun, SeedsConfig, parse_seeds
+from mjx_arm.bench.seeds_summary import quartiles, summarize
 
 
 def _run(seed: int, time_to: float | None, final: float = 0.97) -> SeedRun:

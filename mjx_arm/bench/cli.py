@@ -252,7 +252,7 @@ def _command(commands, func, help_text: str, config: type) -> argparse.ArgumentP
 
 def _add_robustness(commands) -> None:
     """The ``robustness`` subcommand's parser."""
-    from mjx_arm.bench.robustness import RobustnessConfig
+    from mjx_arm.bench.robustness_config import RobustnessConfig
 
     p = _command(
         commands, cmd_robustness, "one policy under perturbations: success, peak force",
@@ -271,7 +271,7 @@ def register(sub) -> None:
     """Add ``bench`` with its ``parity``, ``grasp``, ``transfer``, ``robustness`` and ``seeds``
     subcommands to ``sub``."""
     from mjx_arm.bench.parity_config import ParityConfig
-    from mjx_arm.bench.seeds import SeedsConfig
+    from mjx_arm.bench.seeds_config import SeedsConfig
     from mjx_arm.bench.transfer import TransferConfig
 
     bench = sub.add_parser(
