@@ -223,8 +223,8 @@ def nominal_pool(rows: list[dict[str, Any]], perturbations: tuple[Perturbation, 
 # --------------------------------------------------------------------------- report
 
 
-def markdown(result: dict[str, Any], source: str) -> str:
-    """The report: one row per point, the goals, and where each range comes from."""
+def _point_rows(result: dict[str, Any]) -> list[list[Any]]:
+    """One table row per sweep point."""
     rows = []
     for r in result["rows"]:
         low, high = r["success_ci95"]
@@ -234,19 +234,29 @@ def markdown(result: dict[str, Any], source: str) -> str:
             f"{r['success_rate']:.3f}", f"[{low:.2f}, {high:.2f}]", r["episodes"],
             fmt(r["mean_peak_force"]), fmt(r["median_peak_force"]),
         ])  # fmt: skip
-    headers = ["perturbation", "value", "in stated range", "success", "95% Wilson CI",
-               "episodes", "mean peak wrist force (N)", "median peak (N)"]  # fmt: skip
-    summary = result["summary"]
-    goal_rows = [
+    return rows
+
+
+def _goal_rows(summary: dict[str, Any]) -> list[list[Any]]:
+    """One table row per perturbation's goal, then the joint draw's."""
+    rows = [
         [name, f"{v['worst_inside']:.3f} at {v['worst_value']:g}",
          ", ".join(f"{x:g}" for x in v["below_goal_at"]) or "none",
          "pass" if v["goal_met"] else "MISS"]
         for name, v in summary["per_perturbation"].items()
     ]  # fmt: skip
-    goal_rows.append(
+    rows.append(
         [JOINT, f"{summary['joint_success']:.3f}", "",
          "pass" if summary["joint_goal_met"] else "MISS"]
     )  # fmt: skip
+    return rows
+
+
+def markdown(result: dict[str, Any], source: str) -> str:
+    """The report: one row per point, the goals, and where each range comes from."""
+    headers = ["perturbation", "value", "in stated range", "success", "95% Wilson CI",
+               "episodes", "mean peak wrist force (N)", "median peak (N)"]  # fmt: skip
+    summary = result["summary"]
     sources = [
         [p["name"], p["unit"], f"{p['stated'][0]:g} to {p['stated'][1]:g}", p["source"]]
         for p in result["perturbations"]
@@ -255,13 +265,13 @@ def markdown(result: dict[str, Any], source: str) -> str:
         f"Robustness of {source} on {result['task']}, engine {result['engine']} "
         f"({result['physics'].get('impl')}), {result['episodes_total']} episodes in "
         f"{result['run_seconds']:.0f} s.\n",
-        markdown_table(headers, rows),
+        markdown_table(headers, _point_rows(result)),
         _nominal_line(summary["nominal_pooled"]),
         f"\nGoals: success >= {GOAL_POINT} at every point of each stated range, "
         f">= {GOAL_JOINT} under the joint draw.\n",
         markdown_table(
             ["perturbation", "worst success in stated range", f"values below {GOAL_POINT}", "goal"],
-            goal_rows,
+            _goal_rows(summary),
         ),
         "\nRanges and their sources:\n",
         markdown_table(["perturbation", "unit", "stated range", "source"], sources),

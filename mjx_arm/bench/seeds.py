@@ -161,6 +161,40 @@ def failed_seed(seed: int, gpu: str, wall: float, error: str) -> SeedRun:
     return SeedRun(seed, nan, nan, None, None, 0, wall, nan, nan, [], {}, gpu, error)
 
 
+def _start_seed(
+    config: SeedsConfig, seed: int, runs_dir: Path, gpu: str, overrides: tuple[str, ...]
+) -> subprocess.Popen:
+    """Start ``seed``'s training on ``gpu`` in a process of its own, its output to
+    ``runs_dir/seedN.log``."""
+    env = {k: v for k, v in os.environ.items() if k != "XLA_PYTHON_CLIENT_PREALLOCATE"}
+    run_dir = seed_run_dir(config, seed, runs_dir)
+    with (runs_dir / f"seed{seed}.log").open("wb") as out:
+        return subprocess.Popen(
+            seed_command(config, seed, run_dir, overrides),
+            env={**env, "CUDA_VISIBLE_DEVICES": gpu},
+            stdout=out,
+            stderr=subprocess.STDOUT,
+        )
+
+
+def _finished_seed(
+    config: SeedsConfig, seed: int, runs_dir: Path, proc: subprocess.Popen, gpu: str, start: float
+) -> tuple[SeedRun, dict[str, Any]]:
+    """The result and saved config of a seed whose process has ended (a failed one: not
+    solved, with the end of its log)."""
+    from mjx_arm.train.rundir import RunDir
+
+    end = time.time()
+    if proc.returncode != 0:
+        tail = (runs_dir / f"seed{seed}.log").read_text(errors="replace")
+        error = f"exit code {proc.returncode}: " + " | ".join(tail.splitlines()[-3:])
+        return failed_seed(seed, gpu, end - start, error), {}
+    run_dir = seed_run_dir(config, seed, runs_dir)
+    run = read_seed_run(config, seed, run_dir, start, end)
+    run.gpu = gpu
+    return run, RunDir(run_dir).load_config()
+
+
 def run_seeds_on_gpus(
     config: SeedsConfig,
     runs_dir: Path,
@@ -174,42 +208,24 @@ def run_seeds_on_gpus(
     compilation included). A seed whose process fails is reported as not solved, with the
     end of its log, and the others go on.
     """
-    from mjx_arm.train.rundir import RunDir
-
     queue, free = list(parse_seeds(config.seeds)), list(gpus)
-    running: dict[int, tuple[subprocess.Popen, str, float, Path]] = {}
+    running: dict[int, tuple[subprocess.Popen, str, float]] = {}
     done: dict[int, tuple[SeedRun, dict[str, Any]]] = {}
     runs_dir.mkdir(parents=True, exist_ok=True)
-    env = {k: v for k, v in os.environ.items() if k != "XLA_PYTHON_CLIENT_PREALLOCATE"}
     while queue or running:
         while queue and free:
             seed, gpu = queue.pop(0), free.pop(0)
-            run_dir = seed_run_dir(config, seed, runs_dir)
-            with (runs_dir / f"seed{seed}.log").open("wb") as out:
-                proc = subprocess.Popen(
-                    seed_command(config, seed, run_dir, overrides),
-                    env={**env, "CUDA_VISIBLE_DEVICES": gpu},
-                    stdout=out,
-                    stderr=subprocess.STDOUT,
-                )
-            running[seed] = (proc, gpu, time.time(), run_dir)
+            running[seed] = (_start_seed(config, seed, runs_dir, gpu, overrides), gpu, time.time())
             log(f"seed {seed}: training {config.task} / {config.preset} on GPU {gpu}")
-        for seed, (proc, gpu, start, run_dir) in list(running.items()):
+        for seed, (proc, gpu, start) in list(running.items()):
             if proc.poll() is None:
                 continue
             del running[seed]
             free.append(gpu)
-            end = time.time()
-            if proc.returncode != 0:
-                tail = (runs_dir / f"seed{seed}.log").read_text(errors="replace")
-                error = f"exit code {proc.returncode}: " + " | ".join(tail.splitlines()[-3:])
-                log(f"seed {seed}: its process failed ({error[:400]})")
-                done[seed] = (failed_seed(seed, gpu, end - start, error), {})
-                continue
-            run = read_seed_run(config, seed, run_dir, start, end)
-            run.gpu = gpu
-            done[seed] = (run, RunDir(run_dir).load_config())
-            log(seed_line(config, run))
+            done[seed] = _finished_seed(config, seed, runs_dir, proc, gpu, start)
+            run = done[seed][0]
+            failed = f"seed {seed}: its process failed ({run.error[:400]})"
+            log(failed if run.error else seed_line(config, run))
         time.sleep(0.5)
     ordered = [done[s] for s in parse_seeds(config.seeds)]
     return [r for r, _ in ordered], [c for _, c in ordered]
