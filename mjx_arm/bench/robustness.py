@@ -332,10 +332,17 @@ def plot(result: dict[str, Any], path: Path) -> Path:
 
 
 def write_report(
-    result: dict[str, Any], meta: dict[str, Any], folder: str | Path, name: str, source: str
+    result: dict[str, Any],
+    meta: dict[str, Any],
+    folder: str | Path,
+    name: str,
+    source: str,
+    png: bool = False,
 ) -> list[Path]:
-    """Write ``<name>.md``, ``<name>.json`` and ``<name>.png`` into ``folder``."""
+    """Write ``<name>.md`` and ``<name>.json`` (and with ``png``, ``<name>.png``) into
+    ``folder``."""
     payload = {"meta": meta, "policy": source, **result}
     paths = list(save_results(name, payload, markdown(result, source), folder))
-    paths.append(plot(result, Path(folder) / f"{name}.png"))
+    if png:
+        paths.append(plot(result, Path(folder) / f"{name}.png"))
     return paths

@@ -15,8 +15,8 @@ after another in this process (the compilation caches are warm after the first s
   slow, so a median over a minority of solved seeds reads "not reached") and over the warm
   seeds (all but the first).
 
-It writes ``NAME.md``, ``NAME.json`` (with the resolved config of every seed and the machine)
-and ``NAME.png`` (each seed's success against wall time and against env steps).
+It writes ``NAME.md`` and ``NAME.json`` (with the resolved config of every seed and the
+machine); asked for, ``NAME.png`` (each seed's success against wall time and against env steps).
 """
 
 from __future__ import annotations
@@ -314,8 +314,9 @@ def write_report(
     name: str,
     overrides: tuple[str, ...] = (),
     wall_s: float | None = None,
+    png: bool = False,
 ) -> list[Path]:
-    """Write NAME.json, NAME.md and NAME.png into ``out``; return their paths.
+    """Write NAME.json and NAME.md (and with ``png``, NAME.png) into ``out``; return their paths.
 
     ``wall_s``: the whole benchmark's wall time (recorded with the GPUs the seeds ran on)."""
     summary = summarize(runs, config.threshold)
@@ -333,6 +334,7 @@ def write_report(
         "seeds": [dataclasses.asdict(r) for r in runs],
         "configs": configs,
     }
-    json_path, md_path = save_results(name, payload, f"# Seeds: {title}\n\n{table}", out)
-    png = plot_curves(runs, config.threshold, title, out / f"{name}.png")
-    return [json_path, md_path, png]
+    paths = list(save_results(name, payload, f"# Seeds: {title}\n\n{table}", out))
+    if png:
+        paths.append(plot_curves(runs, config.threshold, title, out / f"{name}.png"))
+    return paths
