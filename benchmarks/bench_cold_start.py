@@ -44,13 +44,14 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.common import (
+    RESULTS_DIR,
     empty_cache_env,
     environment_metadata,
     markdown_table,
     save_results,
 )
 
-RESULTS = Path(__file__).resolve().parent / "results" / "cold_start"
+RESULTS = RESULTS_DIR / "cold_start"
 # The CPU preset cut down so that a start is mostly compilation: 16 envs, short rollouts.
 TINY = (
     "num_envs=16",

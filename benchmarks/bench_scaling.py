@@ -32,8 +32,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.common import environment_metadata, markdown_table
-from mjx_arm.bench.results import save_results
+from benchmarks.common import RESULTS_DIR, environment_metadata, markdown_table, save_results
 from mjx_arm.bench.seeds import parse_seeds
 from mjx_arm.train.rundir import RunDir
 
@@ -213,7 +212,7 @@ def main() -> int:
         p.add_argument("--devices", type=int, nargs="+", default=[1, 2, 4])
         p.add_argument("--task", default="touch")
         p.add_argument("--set", nargs="*", default=[])
-        p.add_argument("--out", type=Path, default=Path("benchmarks/results/scaling"))
+        p.add_argument("--out", type=Path, default=RESULTS_DIR / "scaling")
         p.add_argument("--runs", type=Path, default=Path("runs/scaling"))
         p.add_argument("--name", required=True)
         p.add_argument("--limit", type=float, default=400.0, help="seconds per run at most")

@@ -27,9 +27,15 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.common import empty_cache_env, environment_metadata, markdown_table, save_results
+from benchmarks.common import (
+    RESULTS_DIR,
+    empty_cache_env,
+    environment_metadata,
+    markdown_table,
+    save_results,
+)
 
-RESULTS = Path(__file__).resolve().parent / "results" / "cold_start"
+RESULTS = RESULTS_DIR / "cold_start"
 
 
 def _in_scope(name: str, scope: str) -> bool:

@@ -20,22 +20,24 @@
 #   bash benchmarks/gpu_suite.sh scaling-gpus # 1, 2, 4 GPUs: steps/s per GPU, Touch time to 0.95
 #   bash benchmarks/gpu_suite.sh seeds-gpus   # Touch seeds one per GPU against one after another
 #
-# Results go to $OUT (default: benchmarks/results/gpu); the trained policies are exported to
-# $OUT/policies as .npz. Single-GPU stages use GPU 0 only.
+# Results (JSON and markdown) go to $OUT (default: benchmarks/results/gpu); the runs, their logs
+# and the exported policies (.npz) to $WORK (default: runs/gpu_suite), never under
+# benchmarks/results (benchmarks/README.md). Single-GPU stages use GPU 0 only.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 OUT="${OUT:-benchmarks/results/gpu}"
+WORK="${WORK:-runs/gpu_suite}"
 SITE="${SITE:-/tmp/site}"
-mkdir -p "$OUT"
+mkdir -p "$OUT" "$WORK"
 export PYTHONPATH="$SITE:$PWD" PYTHONUNBUFFERED=1 MUJOCO_GL="${MUJOCO_GL:-}"
 [ -z "$MUJOCO_GL" ] && unset MUJOCO_GL
 one_gpu() { CUDA_VISIBLE_DEVICES=0 "$@"; }
-# export_runs DIR PREFIX: each run under DIR (with a checkpoint) to $OUT/policies/PREFIX_RUN.npz
+# export_runs DIR PREFIX: each run under DIR (with a checkpoint) to $WORK/policies/PREFIX_RUN.npz
 export_runs() {
-  mkdir -p "$OUT/policies"
+  mkdir -p "$WORK/policies"
   for run in "$1"/*/; do
     [ -d "$run/checkpoints" ] || continue
-    python3 -m mjx_arm.cli export "$run" -o "$OUT/policies/$2_$(basename "$run").npz" || true
+    python3 -m mjx_arm.cli export "$run" -o "$WORK/policies/$2_$(basename "$run").npz" || true
   done
 }
 
@@ -63,10 +65,10 @@ solve)
   for task in reach touch; do
     one_gpu python3 benchmarks/bench_train.py --tasks "$task" --preset fast --cold \
       --set "physics.impl=${IMPL:-warp}" task.variant=seed stop_at_success=0.99 num_evals=21 \
-      ${EXTRA_SETS:-} --devices 1 --out "$OUT/runs" --results-dir "$OUT" \
+      ${EXTRA_SETS:-} --devices 1 --out "$WORK/runs" --results-dir "$OUT" \
       --name "train_fast_${IMPL:-warp}_cold_$task${SUFFIX:-}"
   done
-  export_runs "$OUT/runs" "solve_${IMPL:-warp}"
+  export_runs "$WORK/runs" "solve_${IMPL:-warp}"
   ;;
 gentle)
   # Gentle Touch (the default variant) at the given action scales, each run capped in time.
@@ -74,8 +76,8 @@ gentle)
     one_gpu timeout "${RUN_LIMIT:-280}" python3 benchmarks/bench_train.py --tasks touch \
       --preset fast --set "physics.impl=${IMPL:-warp}" "task.action_scale=$scale" \
       num_timesteps="${STEPS:-150000000}" num_evals=16 stop_at_success=0.98 --devices 1 \
-      --out "$OUT/gentle_$scale" --results-dir "$OUT" --name "gentle_touch_scale_$scale"
-    export_runs "$OUT/gentle_$scale" "gentle_$scale"
+      --out "$WORK/gentle_$scale" --results-dir "$OUT" --name "gentle_touch_scale_$scale"
+    export_runs "$WORK/gentle_$scale" "gentle_$scale"
   done
   ;;
 scaling)
@@ -84,7 +86,7 @@ scaling)
         num_evals=6 stop_at_success=0)
   for devices in 1 2; do
     python3 benchmarks/bench_train.py --tasks touch --preset fast --devices "$devices" \
-      --set "physics.impl=${IMPL:-warp}" "${sets[@]}" --out "$OUT/runs" --results-dir "$OUT" \
+      --set "physics.impl=${IMPL:-warp}" "${sets[@]}" --out "$WORK/runs" --results-dir "$OUT" \
       --name "scaling_touch_${IMPL:-warp}_${devices}gpu"
   done
   ;;
@@ -94,13 +96,13 @@ cold-touch)
   # process's start after it. About 4-5 minutes.
   one_gpu python3 benchmarks/bench_cold_start.py --preset fast --tasks touch --to-threshold \
     --threshold 0.95 --warmup-task touch --child-timeout 200 --results-dir "$OUT" \
-    --name cold_start_fast_touch 2>&1 | tee "$OUT/log_cold_touch.txt"
+    --name cold_start_fast_touch 2>&1 | tee "$WORK/log_cold_touch.txt"
   ;;
 cold-lift)
   # Lift on the shipped gripper arm (the preset's), cold then warm, each to 0.9. At most 8 min.
   one_gpu python3 benchmarks/bench_cold_start.py --preset fast --tasks lift --to-threshold \
     --threshold 0.9 --child-timeout 230 --results-dir "$OUT" --name cold_start_fast_lift \
-    2>&1 | tee "$OUT/log_cold_lift.txt"
+    2>&1 | tee "$WORK/log_cold_lift.txt"
   ;;
 warp-kernels)
   # MuJoCo Warp's kernel compiles module by module at Warp's optimisation levels (LEVELS), and
@@ -121,7 +123,7 @@ cold-arm)
   one_gpu python3 benchmarks/bench_cold_start.py --preset fast --tasks \
     --arm "$ROBOTS/${ARM:-ur_description/urdf/ur5_robot.urdf}" --arm-tasks reach touch \
     --child-timeout 170 --results-dir "$OUT" --name cold_start_fast_arm \
-    2>&1 | tee "$OUT/log_cold_arm.txt"
+    2>&1 | tee "$WORK/log_cold_arm.txt"
   ;;
 sweep)
   # Candidate changes to the fast preset, each trained on SWEEP_SEEDS (exploration: the
@@ -133,15 +135,15 @@ sweep)
     # shellcheck disable=SC2086
     one_gpu python3 -m mjx_arm.cli bench seeds --task "${TASK:-touch}" --preset fast \
       --seeds "${SWEEP_SEEDS:-0-2}" --set $sets --name "sweep_${TASK:-touch}_$n" \
-      --runs "$OUT/sweep_runs_$n" --out "$OUT"
+      --runs "$WORK/sweep_runs_$n" --out "$OUT"
   done <<< "${CANDIDATES:?one --set list per line}"
   ;;
 seeds)
   # The fast preset exactly as shipped, seeds one after another in one process per task.
   for task in ${TASKS:-touch reach}; do
     one_gpu python3 -m mjx_arm.cli bench seeds --task "$task" --preset fast \
-      --seeds "${SEEDS:-0-9}" --runs "$OUT/seeds_runs_$task" --out "$OUT"
-    export_runs "$OUT/seeds_runs_$task" "seeds_$task"
+      --seeds "${SEEDS:-0-9}" --runs "$WORK/seeds_runs_$task" --out "$OUT"
+    export_runs "$WORK/seeds_runs_$task" "seeds_$task"
   done
   ;;
 coldseed)
@@ -149,7 +151,7 @@ coldseed)
   MJX_ARM_JAX_CACHE="$(mktemp -d)" WARP_CACHE_PATH="$(mktemp -d)" CUDA_CACHE_PATH="$(mktemp -d)" \
     one_gpu python3 -m mjx_arm.cli bench seeds --task "${TASK:-touch}" --preset fast \
     --seeds "${COLD_SEED:-10}" --name "seeds_${TASK:-touch}_fast_cold_seed${COLD_SEED:-10}" \
-    --runs "$OUT/cold_runs" --out "$OUT"
+    --runs "$WORK/cold_runs" --out "$OUT"
   ;;
 transfer)
   # MJX rows of the transfer matrix (both implementations) for the exported Touch policies of
@@ -157,7 +159,7 @@ transfer)
   for seed in ${TRANSFER_SEEDS:-0 1 2}; do
     for impl in warp jax; do
       one_gpu python3 -m mjx_arm.cli bench transfer \
-        "$OUT/policies/seeds_touch_touch-fast-seed$seed.npz" --engines mjx --impl "$impl" \
+        "$WORK/policies/seeds_touch_touch-fast-seed$seed.npz" --engines mjx --impl "$impl" \
         --trained-on "MJX on Warp, H200, fast preset, seed $seed" \
         --name "transfer_touch_fast_seed${seed}_mjx_$impl" --out "$OUT/transfer"
     done
@@ -177,9 +179,9 @@ arms)
     name=$(basename "$urdf" .urdf)
     one_gpu timeout "${RUN_LIMIT:-580}" python3 -m mjx_arm.cli bench seeds --task "$task" \
       --preset fast --seeds "${SEEDS:-0-1}" --arm "$ROBOTS/$urdf" \
-      --name "seeds_${task}_fast_${name}$tag" --runs "$OUT/runs_${name}_$task" --out "$OUT" \
-      > "$OUT/log_${name}_$task.txt" 2>&1
-    export_runs "$OUT/runs_${name}_$task" "$name"
+      --name "seeds_${task}_fast_${name}$tag" --runs "$WORK/runs_${name}_$task" --out "$OUT" \
+      > "$WORK/log_${name}_$task.txt" 2>&1
+    export_runs "$WORK/runs_${name}_$task" "$name"
   }
   for urdf in ${ARMS:?URDF paths}; do
     for task in ${TASKS:-reach touch}; do
@@ -209,9 +211,9 @@ jobs)
     one_gpu timeout "${RUN_LIMIT:-580}" python3 -m mjx_arm.cli bench seeds --task "$task" \
       --preset "${PRESET:-fast}" --seeds "${seed//+/,}" "${args[@]}" "${sets[@]}" \
       --name "seeds_${task}_${PRESET:-fast}_${name}${tag}_seed${seed//+/_}" \
-      --runs "$OUT/runs_${name}_${task}${TAG:-}_$seed" --out "$OUT" \
-      > "$OUT/log_${name}_${task}${TAG:-}_seed$seed.txt" 2>&1
-    export_runs "$OUT/runs_${name}_${task}${TAG:-}_$seed" "${name}_${task}${TAG:-}"
+      --runs "$WORK/runs_${name}_${task}${TAG:-}_$seed" --out "$OUT" \
+      > "$WORK/log_${name}_${task}${TAG:-}_seed$seed.txt" 2>&1
+    export_runs "$WORK/runs_${name}_${task}${TAG:-}_$seed" "${name}_${task}${TAG:-}"
   }
   for item in ${JOBS:?ARM:TASK:SEED items}; do
     while [ "$(jobs -rp | wc -l)" -ge "${PARALLEL:-1}" ]; do sleep 1; done

@@ -16,8 +16,8 @@ import json
 from pathlib import Path
 from typing import Any
 
+from benchmarks.common import environment_metadata
 from benchmarks.summarize_seeds import own_policy
-from mjx_arm.bench.results import environment_metadata
 from mjx_arm.bench.transfer import TransferConfig, transfer_matrix, write_report
 
 

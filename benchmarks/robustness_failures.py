@@ -14,15 +14,14 @@ Results: ``benchmarks/results/robustness/NAME.{json,md}``.
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from benchmarks.common import RESULTS_DIR, environment_metadata, markdown_table, save_results
 from mjx_arm.bench import robustness as rb
-from mjx_arm.bench.results import environment_metadata, markdown_table, save_results
 
-OUT = Path("benchmarks/results/robustness")
+OUT = RESULTS_DIR / "robustness"
 
 
 def point_failures(success: np.ndarray, peak: np.ndarray, strike: float) -> dict[str, Any]:

@@ -1,7 +1,7 @@
 """One table over saved ``mjx-arm bench robustness`` results: per policy, the pooled nominal
 success, the joint draw, and per perturbation the worst success inside its stated range.
 
-Usage: python benchmarks/robustness_summary.py [RESULT.json ...]
+Usage: python -m benchmarks.robustness_summary [RESULT.json ...]
 (default: every benchmarks/results/robustness/robustness_*.json); writes summary.md and
 summary.json beside them.
 """
@@ -12,9 +12,11 @@ import json
 import sys
 from pathlib import Path
 
-from mjx_arm.bench.results import markdown_table, save_results
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-FOLDER = Path("benchmarks/results/robustness")
+from benchmarks.common import RESULTS_DIR, markdown_table, save_results
+
+FOLDER = RESULTS_DIR / "robustness"
 
 
 def policy_label(path: Path) -> str:

@@ -17,8 +17,8 @@ import pytest
 from test_policy import trained_run_dir
 
 from mjx_arm.bench.engines import Trace
-from mjx_arm.bench.parity import (
-    ParityConfig,
+from mjx_arm.bench.parity import ParityConfig
+from mjx_arm.bench.parity_figures import (
     check_goals,
     curve_stats,
     jitter_figures,
@@ -28,11 +28,8 @@ from mjx_arm.bench.settings import add_arguments, from_arguments
 from mjx_arm.bench.transfer import TransferConfig, plan_engines
 from mjx_arm.cli import EXIT_INVALID, EXIT_OK, main
 
-PARITY_FILES = (
-    "parity.md",
-    "parity.json",
-    *(f"parity_{p}.png" for p in ("divergence", "press", "jitter")),
-)
+ROOT = Path(__file__).resolve().parents[1]
+PARITY_PLOTS = tuple(f"parity_{p}.png" for p in ("divergence", "press", "jitter"))
 SIM_DT = 1.0 / 240.0
 
 
@@ -132,10 +129,20 @@ def test_transfer_plan_without_a_gpu():
 
 
 def _run_parity(folder: Path, *extra: str) -> dict:
+    """A quick parity run into ``folder``: the JSON and markdown there, and with ``--plot`` the
+    three PNGs, and nothing else."""
     assert main(["bench", "parity", "--quick", "--out", str(folder), *extra]) == EXIT_OK
-    for name in PARITY_FILES:
+    plots = PARITY_PLOTS if "--plot" in extra else ()
+    assert sorted(p.name for p in folder.iterdir()) == sorted(["parity.md", "parity.json", *plots])
+    for name in plots:
         assert (folder / name).stat().st_size > 0, name
     return json.loads((folder / "parity.json").read_text())
+
+
+def _results_pictures() -> set[Path]:
+    """Every picture, video or log under the repository's ``benchmarks/results``."""
+    kinds = ("*.png", "*.mp4", "*.gif", "*.log")
+    return {p for kind in kinds for p in (ROOT / "benchmarks" / "results").rglob(kind)}
 
 
 def _check_shapes(result: dict, config: ParityConfig) -> None:
@@ -151,7 +158,10 @@ def _check_shapes(result: dict, config: ParityConfig) -> None:
 
 @pytest.mark.pybullet
 def test_quick_parity_mujoco_and_pybullet(tmp_path: Path):
-    result = _run_parity(tmp_path, "--engines", "mujoco", "pybullet")
+    """Its plots go to the folder given, never under ``benchmarks/results``."""
+    before = _results_pictures()
+    result = _run_parity(tmp_path, "--engines", "mujoco", "pybullet", "--plot")
+    assert _results_pictures() == before
     config = ParityConfig.quick(engines=("mujoco", "pybullet"))
     assert result["config"] == json.loads(json.dumps(config.to_dict()))
     _check_shapes(result, config)
@@ -168,16 +178,18 @@ def test_quick_parity_mujoco_and_pybullet(tmp_path: Path):
         for damping in ("converted", "zeroed"):  # measured 0.007 / 0.019 rad/s^2
             assert scenarios["press"][damping]["acc_std_max"] < 0.2, name
     assert all(g["met"] for g in result["goals"])
-    assert (
-        "| forward kinematics, max | mujoco vs pybullet |" in (tmp_path / "parity.md").read_text()
-    )
+    report = (tmp_path / "parity.md").read_text()
+    assert "| forward kinematics, max | mujoco vs pybullet |" in report
+    assert all(f"({name})" in report for name in PARITY_PLOTS)
 
 
 @pytest.mark.slow
 @pytest.mark.pybullet
 def test_quick_parity_with_mjx(tmp_path: Path):
-    """All three engines; MJX on JAX compiles for minutes on a CPU."""
+    """All three engines; MJX on JAX compiles for minutes on a CPU. No --plot: the JSON and the
+    markdown only, which links no picture."""
     result = _run_parity(tmp_path, "--impls", "jax")
+    assert ".png" not in (tmp_path / "parity.md").read_text()
     assert result["engines"] == ["mujoco", "mjx-jax", "pybullet"]
     _check_shapes(result, ParityConfig.quick())
     figures = result["figures"]
@@ -190,6 +202,40 @@ def test_parity_rejects_bad_flags(tmp_path: Path, capsys):
     argv = ["bench", "parity", "--quick", "--goal-time", "3", "--out", str(tmp_path)]
     assert main(argv) == EXIT_INVALID
     assert "goal_time" in capsys.readouterr().err
+
+
+POLICY = ROOT / "benchmarks/results/policies/touch_fast_seed0.npz"
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["parity", "--quick", "--plot"],
+        ["parity", "--quick", "--grasp", "--grasp-video"],
+        ["grasp", "--video"],
+        ["transfer", str(POLICY), "--plot"],
+        ["robustness", str(POLICY), "--quick", "--plot"],
+        ["seeds", "--seeds", "0", "--plot"],
+    ],
+    ids=lambda argv: " ".join(a for a in argv if not a.endswith(".npz")),
+)
+def test_pictures_never_go_into_benchmarks_results(argv, tmp_path: Path, capsys):
+    """A plot or video asked for into an --out under ``benchmarks/results`` is refused before
+    any work, naming --out; nothing is written."""
+    out = tmp_path / "benchmarks" / "results" / "topic"
+    assert main(["bench", *argv, "--out", str(out)]) == EXIT_INVALID
+    err = capsys.readouterr().err
+    assert "keeps JSON and Markdown only" in err and "give --out a folder outside it" in err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_seed_runs_never_go_into_benchmarks_results(tmp_path: Path, capsys):
+    """The seeds' runs and their logs are refused under ``benchmarks/results`` too."""
+    runs = tmp_path / "benchmarks" / "results" / "runs"
+    argv = ["bench", "seeds", "--seeds", "0", "--runs", str(runs), "--out", str(tmp_path)]
+    assert main(argv) == EXIT_INVALID
+    assert "give --runs a folder outside it" in capsys.readouterr().err
+    assert not runs.exists()
 
 
 # --------------------------------------------------------------------------- transfer

@@ -13,14 +13,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from mjx_arm.bench.robustness import (
+from mjx_arm.bench.robustness import point_result, summarize
+from mjx_arm.bench.robustness_config import (
     JOINT,
     PERTURBATIONS,
     Perturbation,
     joint_config,
     perturbations_for,
-    point_result,
-    summarize,
     sweep_points,
 )
 from mjx_arm.cli import EXIT_INVALID, main
@@ -278,7 +277,7 @@ def test_cli_rejects_bad_input(tmp_path: Path, capsys):
 
 @pytest.mark.slow
 def test_quick_run_writes_the_report(tmp_path: Path):
-    """End to end on the C batch: one episode per point, the three files."""
+    """End to end on the C batch: one episode per point, the three files (--plot: the PNG)."""
     policy = Path(__file__).parents[1] / "benchmarks/results/policies/touch_fast_seed0.npz"
     argv = [
         "bench",
@@ -290,7 +289,8 @@ def test_quick_run_writes_the_report(tmp_path: Path):
         "--out",
         str(tmp_path),
     ]
-    assert main([*argv, "--joint-episodes", "2", "--name", "r"]) == 0
+    assert main([*argv, "--joint-episodes", "2", "--name", "r", "--plot"]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json", "r.md", "r.png"]
     for suffix in ("md", "json", "png"):
         assert (tmp_path / f"r.{suffix}").stat().st_size > 0
 

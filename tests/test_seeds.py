@@ -8,16 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from mjx_arm.bench.seeds import (
-    SeedRun,
-    SeedsConfig,
-    first_at,
-    parse_seeds,
-    quartiles,
-    run_seeds,
-    summarize,
-    write_report,
-)
+from mjx_arm.bench.seeds import first_at, run_seeds, write_report
+from mjx_arm.bench.seeds_config import SeedRun, SeedsConfig, parse_seeds
+from mjx_arm.bench.seeds_summary import quartiles, summarize
 
 
 def _run(seed: int, time_to: float | None, final: float = 0.97) -> SeedRun:
@@ -81,12 +74,15 @@ def test_summary_counts_solved_seeds_and_warm_times() -> None:
 def test_report_files(tmp_path: Path) -> None:
     runs = [_run(0, 12.0), _run(1, None, final=0.1)]
     meta = {"device": {"kind": "cpu"}}
-    paths = write_report(SeedsConfig(seeds="0-1"), runs, [{}, {}], meta, tmp_path, "s", ("a=1",))
+    config = SeedsConfig(seeds="0-1")
+    paths = write_report(config, runs, [{}, {}], meta, tmp_path, "s", ("a=1",))
+    assert [p.name for p in paths] == ["s.json", "s.md"]  # a picture only when asked for
     data = json.loads(paths[0].read_text())
     assert data["summary"]["solved"] == 1 and data["overrides"] == ["a=1"]
     text = paths[1].read_text()
     assert "not reached" in text and "1 of 2 seeds" in text and "with a=1" in text
-    assert paths[2].stat().st_size > 1000  # a PNG was drawn
+    paths = write_report(config, runs, [{}, {}], meta, tmp_path, "s", ("a=1",), png=True)
+    assert paths[2] == tmp_path / "s.png" and paths[2].stat().st_size > 1000  # a PNG drawn
 
 
 @pytest.mark.slow

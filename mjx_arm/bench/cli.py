@@ -12,12 +12,17 @@ import functools
 import os
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from mjx_arm import engines
+from mjx_arm.bench.results import check_outside_results
 from mjx_arm.bench.settings import add_arguments, from_arguments
 from mjx_arm.inputs import ConfigError, check_folder
 from mjx_arm.names import EXIT_OK
 from mjx_arm.settings import add_set_argument
+
+if TYPE_CHECKING:
+    from mjx_arm.bench.seeds_config import SeedsConfig
 
 PARITY_OUT = Path("benchmarks/results/parity")
 TRANSFER_OUT = Path("benchmarks/results/transfer")
@@ -49,17 +54,30 @@ def _print_paths(paths: list[Path]) -> None:
         print(f"wrote {path}")
 
 
+def _check_pictures(args: argparse.Namespace, *flags: str) -> None:
+    """Refuse, before any work, the pictures or videos that ``flags`` ask for (``--plot``,
+    ``--video``) where ``--out`` lies under ``benchmarks/results`` (JSON and Markdown only).
+
+    Raises:
+        ConfigError: such a flag is given and ``--out`` lies under ``benchmarks/results``.
+    """
+    for flag in flags:
+        if getattr(args, flag.removeprefix("--").replace("-", "_")):
+            check_outside_results(args.out, f"the files of {flag}", "--out")
+
+
 def cmd_parity(args: argparse.Namespace) -> int:
     """Engine parity: C MuJoCo, MJX and PyBullet on the same states and actions.
 
     Forward kinematics at random joint angles; open-loop joint divergence over time (median and
     95th percentile over the sequences); the tared F/T reading while pressing the box; jitter
     while holding still, under a constant command and pressing, with the joint damping as
-    converted and zeroed. Writes parity.md, parity.json and three PNG plots into --out, with
-    each goal met or missed. MJX on a CPU takes several minutes (compilation); --quick is a
-    small run. --grasp adds the grasp check on the gripper arm (grasp.md, grasp.json): the same
-    scripted pick of a cube in each engine, off the table and in the air, and its slip in the
-    fingers over 2 s; --grasp-video films the pick off the table in each engine.
+    converted and zeroed. Writes parity.md and parity.json into --out, with each goal met or
+    missed (--plot: three PNG plots too, into an --out outside benchmarks/results). MJX on a
+    CPU takes several minutes (compilation); --quick is a small run. --grasp adds the grasp
+    check on the gripper arm (grasp.md, grasp.json): the same scripted pick of a cube in each
+    engine, off the table and in the air, and its slip in the fingers over 2 s; --grasp-video
+    films the pick off the table in each engine.
     """
     from mjx_arm.bench.parity import ParityConfig, run_parity
     from mjx_arm.bench.parity_report import goals_table, write_report
@@ -67,13 +85,14 @@ def cmd_parity(args: argparse.Namespace) -> int:
 
     config = from_arguments(ParityConfig.quick() if args.quick else ParityConfig(), args)
     check_folder(args.out, "--out")
+    _check_pictures(args, "--plot", "--grasp-video")
     _check_arm(config.arm)
     if "mjx" in config.engines:
         _enable_jax_cache()
     meta = environment_metadata(accelerator="mjx" in config.engines)
     result = run_parity(config)
     print(goals_table(result))
-    _print_paths(write_report(result, meta, args.out))
+    _print_paths(write_report(result, meta, args.out, args.plot))
     if args.grasp:
         _print_paths(_grasp_report(config.engines, meta, args.out, args.grasp_video))
     return EXIT_OK
@@ -103,11 +122,13 @@ def cmd_grasp(args: argparse.Namespace) -> int:
     """Grasp check on the gripper arm alone: the same scripted pick of a cube in each engine,
     off the table and in the air, with the cube's lift and its slip in the fingers over a 2 s
     hold. Writes grasp.md and grasp.json into --out; --video films the pick from the table in
-    each engine (grasp_ENGINE.mp4). MJX on a CPU compiles for about a minute.
+    each engine (grasp_ENGINE.mp4, into an --out outside benchmarks/results). MJX on a CPU
+    compiles for about a minute.
     """
     from mjx_arm.bench.results import environment_metadata
 
     check_folder(args.out, "--out")
+    _check_pictures(args, "--video")
     _enable_jax_cache()
     meta = environment_metadata(accelerator="mjx" in args.engines)
     _print_paths(_grasp_report(tuple(args.engines), meta, args.out, args.video))
@@ -121,7 +142,7 @@ def cmd_transfer(args: argparse.Namespace) -> int:
     contact force per engine; goals: success >= 0.95 in every engine and, for Touch, a mean
     peak force <= 50 N. Without a GPU, MJX is skipped with a note and the C MuJoCo batch runs
     as the batched engine (--mjx-on-cpu runs MJX anyway). Writes NAME.md and NAME.json (and
-    NAME.png with --plot) into --out.
+    NAME.png with --plot, into an --out outside benchmarks/results) into --out.
     """
     import jax
 
@@ -131,6 +152,7 @@ def cmd_transfer(args: argparse.Namespace) -> int:
 
     config = from_arguments(TransferConfig(), args)
     check_folder(args.out, "--out")
+    _check_pictures(args, "--plot")
     _check_arm(config.arm)
     policy, source = resolve_policy(args.policy)
     _enable_jax_cache()
@@ -153,8 +175,8 @@ def cmd_seeds(args: argparse.Namespace) -> int:
     start, compilation included) to the first evaluation at --threshold, or "not reached".
     Overall: the fraction of seeds solved and the median and interquartile range of the time
     to the threshold, over all seeds and over the warm ones (all but the first, which pays
-    for any empty compilation cache). Writes NAME.md, NAME.json and NAME.png (success curves)
-    into --out; the runs go to --runs.
+    for any empty compilation cache). Writes NAME.md and NAME.json into --out (and NAME.png,
+    the success curves, with --plot); the runs and their logs go to --runs.
     """
     start = time.time()
     from mjx_arm.bench.results import environment_metadata
@@ -169,16 +191,14 @@ def cmd_seeds(args: argparse.Namespace) -> int:
 
     config = from_arguments(SeedsConfig(), args)
     check_folder(args.out, "--out")
-    if args.runs:
-        check_folder(args.runs, "--runs")
+    _check_pictures(args, "--plot")
+    runs_dir = _runs_folder(args.runs, config)
     gpus = _seed_gpus(visible_gpus(), config.devices)
     if gpus:  # this process leaves each GPU's memory to the seed trained on it
         os.environ["XLA_PYTHON_CLIENT_PREALLOCATE"] = "false"
     check_seed_settings(config, tuple(args.set or ()), 1 if gpus else None)
     _enable_jax_cache()
     meta = environment_metadata(accelerator=True)
-    stamp = time.strftime("%Y%m%d-%H%M%S")
-    runs_dir = args.runs or Path("runs") / f"seeds-{config.task}-{config.preset}-{stamp}"
     overrides = tuple(args.set or ())
     log = functools.partial(print, flush=True)
     if gpus:
@@ -187,10 +207,25 @@ def cmd_seeds(args: argparse.Namespace) -> int:
         runs, configs = run_seeds(config, runs_dir, overrides, start, log)
     name = args.name or f"seeds_{config.task}_{config.preset}"
     wall = time.time() - start
-    paths = write_report(config, runs, configs, meta, args.out, name, overrides, wall)
+    paths = write_report(config, runs, configs, meta, args.out, name, overrides, wall, args.plot)
     print(paths[1].read_text())
     _print_paths(paths)
     return EXIT_OK
+
+
+def _runs_folder(runs: Path | None, config: SeedsConfig) -> Path:
+    """The folder of the seeds' runs: ``runs``, or ``runs/seeds-TASK-PRESET-STAMP``.
+
+    Raises:
+        InputError: ``runs`` is not a usable folder, or the folder lies under
+            ``benchmarks/results`` (which keeps no runs or logs).
+    """
+    if runs:
+        check_folder(runs, "--runs")
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    folder = runs or Path("runs") / f"seeds-{config.task}-{config.preset}-{stamp}"
+    check_outside_results(folder, "the runs and their logs", "--runs")
+    return folder
 
 
 def _seed_gpus(gpus: list[str], devices: int) -> list[str]:
@@ -213,8 +248,8 @@ def cmd_robustness(args: argparse.Namespace) -> int:
     and F/T readings, control-period jitter, the table's height and the box or cube pose,
     each over several values of its stated range (and a little beyond), then draws all of
     them at once. Per point: success with its 95% Wilson interval and the mean and median peak
-    wrist force. Runs in the C MuJoCo batch (CPU) or the MJX batch (GPU). Writes NAME.md,
-    NAME.json and NAME.png into --out.
+    wrist force. Runs in the C MuJoCo batch (CPU) or the MJX batch (GPU). Writes NAME.md and
+    NAME.json into --out (and NAME.png with --plot, into an --out outside benchmarks/results).
     """
     from mjx_arm.bench.results import environment_metadata
     from mjx_arm.bench.robustness import RobustnessConfig, run_robustness, write_report
@@ -224,6 +259,7 @@ def cmd_robustness(args: argparse.Namespace) -> int:
     base = RobustnessConfig.quick() if args.quick else RobustnessConfig()
     config = from_arguments(base, args)
     check_folder(args.out, "--out")
+    _check_pictures(args, "--plot")
     policy, source = resolve_policy(args.policy)
     arm = eval_arm(policy, args.arm or None)
     _enable_jax_cache()
@@ -234,7 +270,7 @@ def cmd_robustness(args: argparse.Namespace) -> int:
     meta = environment_metadata(accelerator=config.engine == "mjx")
     result = run_robustness(policy, task, config, arm, log=lambda t: print(t, flush=True))
     name = args.name or f"robustness_{task.task}"
-    paths = write_report(result, meta, args.out, name, source)
+    paths = write_report(result, meta, args.out, name, source, args.plot)
     print(paths[1].read_text())
     _print_paths(paths)
     return EXIT_OK
@@ -252,7 +288,7 @@ def _command(commands, func, help_text: str, config: type) -> argparse.ArgumentP
 
 def _add_robustness(commands) -> None:
     """The ``robustness`` subcommand's parser."""
-    from mjx_arm.bench.robustness import RobustnessConfig
+    from mjx_arm.bench.robustness_config import RobustnessConfig
 
     p = _command(
         commands, cmd_robustness, "one policy under perturbations: success, peak force",
@@ -262,24 +298,15 @@ def _add_robustness(commands) -> None:
     p.add_argument("--quick", action="store_true", help="a small run (8 episodes per point)")
     p.add_argument("--arm", default="", help="the arm file or URDF (default: the policy's)")
     p.add_argument("--name", help="file stem (default: robustness_TASK)")
+    p.add_argument("--plot", action="store_true", help="also write NAME.png (success per point)")
     p.add_argument(
         "--out", type=Path, default=ROBUSTNESS_OUT, help=f"output folder ({ROBUSTNESS_OUT})"
     )
 
 
-def register(sub) -> None:
-    """Add ``bench`` with its ``parity``, ``grasp``, ``transfer``, ``robustness`` and ``seeds``
-    subcommands to ``sub``."""
+def _add_parity(commands) -> None:
+    """The ``parity`` subcommand's parser."""
     from mjx_arm.bench.parity_config import ParityConfig
-    from mjx_arm.bench.seeds import SeedsConfig
-    from mjx_arm.bench.transfer import TransferConfig
-
-    bench = sub.add_parser(
-        "bench",
-        help="benchmarks: engine parity, policy transfer, training over seeds",
-        description="Engine benchmarks that write a markdown table, JSON and PNG plots.",
-    )
-    commands = bench.add_subparsers(dest="bench_command", required=True, metavar="BENCH")
 
     p = _command(commands, cmd_parity, "engine parity: FK, divergence, force, jitter", ParityConfig)
     p.add_argument("--quick", action="store_true", help="a small run (tests, a first look)")
@@ -291,8 +318,12 @@ def register(sub) -> None:
         action="store_true",
         help="with --grasp: one video of the pick from the table per engine (grasp_ENGINE.mp4)",
     )
+    p.add_argument("--plot", action="store_true", help="also write the three PNG plots")
     p.add_argument("--out", type=Path, default=PARITY_OUT, help=f"output folder ({PARITY_OUT})")
 
+
+def _add_grasp(commands) -> None:
+    """The ``grasp`` subcommand's parser."""
     p = commands.add_parser(
         "grasp", help="the gripper's scripted pick in every engine", description=cmd_grasp.__doc__
     )
@@ -301,6 +332,23 @@ def register(sub) -> None:
     p.add_argument("--engines", nargs="+", choices=parity, default=list(parity))
     p.add_argument("--video", action="store_true", help="film the pick from the table per engine")
     p.add_argument("--out", type=Path, default=GRASP_OUT, help=f"output folder ({GRASP_OUT})")
+
+
+def register(sub) -> None:
+    """Add ``bench`` with its ``parity``, ``grasp``, ``transfer``, ``robustness`` and ``seeds``
+    subcommands to ``sub``."""
+    from mjx_arm.bench.seeds_config import SeedsConfig
+    from mjx_arm.bench.transfer import TransferConfig
+
+    bench = sub.add_parser(
+        "bench",
+        help="benchmarks: engine parity, policy transfer, training over seeds",
+        description="Engine benchmarks that write a markdown table and JSON (PNG plots with "
+        "--plot, into a folder outside benchmarks/results).",
+    )
+    commands = bench.add_subparsers(dest="bench_command", required=True, metavar="BENCH")
+    _add_parity(commands)
+    _add_grasp(commands)
 
     p = _command(commands, cmd_transfer, "one policy in every engine, with goals", TransferConfig)
     p.add_argument("policy", help="policy file (.npz/.onnx) or run directory (newest checkpoint)")
@@ -316,5 +364,6 @@ def register(sub) -> None:
         p, "change the preset (exploration; the report then says so, never 'as shipped')"
     )
     p.add_argument("--name", help="file stem (default: seeds_TASK_PRESET)")
+    p.add_argument("--plot", action="store_true", help="also write NAME.png (success curves)")
     p.add_argument("--runs", type=Path, help="where the runs go (default: runs/seeds-...)")
     p.add_argument("--out", type=Path, default=SEEDS_OUT, help=f"output folder ({SEEDS_OUT})")

@@ -1,4 +1,4 @@
-"""The parity result as files: a markdown report, the JSON and three PNG plots."""
+"""The parity result as files: a markdown report and the JSON (and, asked for, three PNG plots)."""
 
 from __future__ import annotations
 
@@ -96,8 +96,8 @@ def jitter_table(result: dict[str, Any], key: str = "acc_std_max") -> str:
     return markdown_table(["engine", *JITTER_SCENARIOS], rows)
 
 
-def markdown(result: dict[str, Any], meta: dict[str, Any]) -> str:
-    """The whole report."""
+def markdown(result: dict[str, Any], meta: dict[str, Any], plots: bool = False) -> str:
+    """The whole report (with ``plots``, linking the three PNGs beside it)."""
     config, figures = result["config"], result["figures"]
     ol = figures["open_loop"]
     device = meta["device"]
@@ -129,8 +129,9 @@ def markdown(result: dict[str, Any], meta: dict[str, Any]) -> str:
         jitter_table(result, "acc_std_max"),
         "RMS of the joint velocity above the control rate (rad/s), largest joint:\n",
         jitter_table(result, "hf_vel_rms_max"),
-        "\n".join(f"![{p}]({NAME}_{p}.png)" for p in PLOTS) + "\n",
     ]
+    if plots:
+        parts.append("\n".join(f"![{p}]({NAME}_{p}.png)" for p in PLOTS) + "\n")
     return "\n".join(parts)
 
 
@@ -205,9 +206,12 @@ def save_plots(result: dict[str, Any], folder: Path) -> list[Path]:
     return paths
 
 
-def write_report(result: dict[str, Any], meta: dict[str, Any], folder: str | Path) -> list[Path]:
-    """Write ``parity.md``, ``parity.json`` and the plots into ``folder``; returns the paths."""
+def write_report(
+    result: dict[str, Any], meta: dict[str, Any], folder: str | Path, png: bool = False
+) -> list[Path]:
+    """Write ``parity.md`` and ``parity.json`` (with ``png``, the three PNGs too) into
+    ``folder``; returns the paths."""
     folder = Path(folder)
-    text = markdown(result, meta)
+    text = markdown(result, meta, png)
     paths = list(save_results(NAME, {"meta": meta, **result}, text, folder))
-    return paths + save_plots(result, folder)
+    return paths + (save_plots(result, folder) if png else [])

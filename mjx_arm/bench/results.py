@@ -2,8 +2,9 @@
 
 A result is two files in a topic folder (``benchmarks/results/<topic>/``): ``<name>.json`` (the
 numbers and :func:`environment_metadata`, which holds the date and commit) and ``<name>.md`` (the
-table printed). No plots beside them: the docs build draws them from the JSON
-(``benchmarks/README.md`` states the rule).
+table printed). No plots, videos or logs beside them: the docs build draws the plots from the
+JSON (``benchmarks/README.md`` states the rule), and :func:`check_outside_results` refuses a
+picture, a video or a run's log whose folder lies under ``benchmarks/results``.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from mjx_arm.inputs import write_atomic
+from mjx_arm.inputs import ConfigError, write_atomic
 
 DEFAULT_PACKAGES = (
     "mujoco",
@@ -30,6 +31,7 @@ DEFAULT_PACKAGES = (
     "jax",
     "brax",
 )
+RESULTS_PARTS = ("benchmarks", "results")  # the folder that keeps JSON and Markdown only
 
 
 def cpu_model() -> str:
@@ -164,6 +166,26 @@ def _json_default(value: Any) -> Any:
     if isinstance(value, Path):
         return str(value)
     raise TypeError(f"not JSON serialisable: {type(value).__name__}")
+
+
+def in_results(folder: str | Path) -> bool:
+    """Whether ``folder`` is, or lies inside, a ``benchmarks/results`` folder."""
+    parts = Path(folder).resolve().parts
+    return any(parts[i : i + 2] == RESULTS_PARTS for i in range(len(parts) - 1))
+
+
+def check_outside_results(folder: str | Path, what: str, flag: str) -> None:
+    """Refuse to write ``what`` (pictures, videos, runs and their logs) into ``folder`` where it
+    lies under ``benchmarks/results``, which keeps JSON and Markdown only.
+
+    Raises:
+        ConfigError: ``folder`` lies under ``benchmarks/results``; names ``flag``, the fix.
+    """
+    if in_results(folder):
+        raise ConfigError(
+            f"{what} would go into {folder}, but benchmarks/results keeps JSON and Markdown only "
+            f"(the docs draw the plots from the JSON): give {flag} a folder outside it"
+        )
 
 
 def fmt(value: float | None, spec: str = ".1f") -> str:

@@ -15,8 +15,8 @@ after another in this process (the compilation caches are warm after the first s
   slow, so a median over a minority of solved seeds reads "not reached") and over the warm
   seeds (all but the first).
 
-It writes ``NAME.md``, ``NAME.json`` (with the resolved config of every seed and the machine)
-and ``NAME.png`` (each seed's success against wall time and against env steps).
+It writes ``NAME.md`` and ``NAME.json`` (with the resolved config of every seed and the
+machine); asked for, ``NAME.png`` (each seed's success against wall time and against env steps).
 """
 
 from __future__ import annotations
@@ -27,90 +27,16 @@ import os
 import subprocess
 import sys
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from mjx_arm.bench.results import fmt, markdown_table, save_results
-from mjx_arm.bench.settings import setting
-from mjx_arm.inputs import MAX_SEED, ConfigError
-from mjx_arm.names import BACKENDS, PRESET_NAMES
-from mjx_arm.settings import check_range
-from mjx_arm.task.registry import task_names
+from mjx_arm.bench.results import save_results
+from mjx_arm.bench.seeds_config import SeedRun, SeedsConfig, parse_seeds
+from mjx_arm.bench.seeds_summary import seed_line, seeds_table, start_up_line, summarize
 
 SUCCESS_KEY = "eval/episode_success"
-
-
-def parse_seeds(text: str) -> tuple[int, ...]:
-    """Seeds from ``"0-9"``, ``"0,3,7"`` or a mix (``"0-2,5"``); ranges are inclusive.
-
-    Raises:
-        ConfigError: an empty list (or over 1000 seeds), a negative seed, a reversed range or
-            a repeated seed.
-    """
-    seeds: list[int] = []
-    for part in filter(None, (p.strip() for p in text.split(","))):
-        low, dash, high = part.partition("-")
-        try:
-            first, last = int(low), int(high) if dash else int(low)
-        except ValueError:
-            raise ConfigError(f"not a seed or range: {part!r} (use e.g. 0-9 or 0,3,7)") from None
-        if first < 0 or last < first or last > MAX_SEED:
-            raise ConfigError(f"bad seed range {part!r}: seeds are >= 0, low-high with low <= high")
-        seeds.extend(range(first, last + 1))
-    if not seeds or len(seeds) > 1000:
-        raise ConfigError(f"give 1 to 1000 seeds, got {len(seeds)} ({text!r})")
-    if len(set(seeds)) != len(seeds):
-        raise ConfigError(f"a seed is listed twice: {text!r}")
-    return tuple(seeds)
-
-
-@dataclass(frozen=True)
-class SeedsConfig:
-    """Settings of ``mjx-arm bench seeds`` (each field is a flag)."""
-
-    task: str = setting("touch", "task to train", task_names())
-    preset: str = setting("fast", "training preset, as shipped", PRESET_NAMES)
-    seeds: str = setting("0-9", "seeds: a range 0-9, a list 0,3,7 or both")
-    backend: str = setting("auto", "physics backend", BACKENDS)
-    threshold: float = setting(0.95, "evaluation success that counts as solved")
-    devices: int = setting(
-        0,
-        "GPUs to train on, one seed per GPU at a time, each in its own process (0: all); "
-        "on a CPU: local devices of each seed's run",
-    )
-    arm: str = setting("", "the arm: a URDF or an arm file (.toml/.json); '' is the shipped arm")
-
-    def __post_init__(self) -> None:
-        check_range(self, "threshold", low=0, high=1)
-        check_range(self, "devices", low=0)
-        parse_seeds(self.seeds)
-
-
-@dataclass
-class SeedRun:
-    """One seed's result (times in seconds from that seed's own start)."""
-
-    seed: int
-    final_success: float
-    best_success: float
-    steps_to_threshold: int | None
-    time_to_threshold: float | None
-    total_steps: int
-    wall_s: float
-    compile_s: float
-    training_steps_per_s: float
-    curve: list[tuple[float, int, float]]  # (seconds, step, success) at each evaluation
-    # where the start-up's seconds went (mjx_arm.train.compile_report: stages, JAX counts)
-    compile_report: dict[str, Any] = dataclasses.field(default_factory=dict)
-    gpu: str = ""  # the GPU of the seed's process ("" where it trained in this process)
-    error: str = ""  # why the seed's process failed ("" where it ran to its end)
-
-    @property
-    def solved(self) -> bool:
-        return self.time_to_threshold is not None
 
 
 def read_curve(run_dir: Path, start: float) -> list[tuple[float, int, float]]:
@@ -235,6 +161,40 @@ def failed_seed(seed: int, gpu: str, wall: float, error: str) -> SeedRun:
     return SeedRun(seed, nan, nan, None, None, 0, wall, nan, nan, [], {}, gpu, error)
 
 
+def _start_seed(
+    config: SeedsConfig, seed: int, runs_dir: Path, gpu: str, overrides: tuple[str, ...]
+) -> subprocess.Popen:
+    """Start ``seed``'s training on ``gpu`` in a process of its own, its output to
+    ``runs_dir/seedN.log``."""
+    env = {k: v for k, v in os.environ.items() if k != "XLA_PYTHON_CLIENT_PREALLOCATE"}
+    run_dir = seed_run_dir(config, seed, runs_dir)
+    with (runs_dir / f"seed{seed}.log").open("wb") as out:
+        return subprocess.Popen(
+            seed_command(config, seed, run_dir, overrides),
+            env={**env, "CUDA_VISIBLE_DEVICES": gpu},
+            stdout=out,
+            stderr=subprocess.STDOUT,
+        )
+
+
+def _finished_seed(
+    config: SeedsConfig, seed: int, runs_dir: Path, proc: subprocess.Popen, gpu: str, start: float
+) -> tuple[SeedRun, dict[str, Any]]:
+    """The result and saved config of a seed whose process has ended (a failed one: not
+    solved, with the end of its log)."""
+    from mjx_arm.train.rundir import RunDir
+
+    end = time.time()
+    if proc.returncode != 0:
+        tail = (runs_dir / f"seed{seed}.log").read_text(errors="replace")
+        error = f"exit code {proc.returncode}: " + " | ".join(tail.splitlines()[-3:])
+        return failed_seed(seed, gpu, end - start, error), {}
+    run_dir = seed_run_dir(config, seed, runs_dir)
+    run = read_seed_run(config, seed, run_dir, start, end)
+    run.gpu = gpu
+    return run, RunDir(run_dir).load_config()
+
+
 def run_seeds_on_gpus(
     config: SeedsConfig,
     runs_dir: Path,
@@ -248,148 +208,27 @@ def run_seeds_on_gpus(
     compilation included). A seed whose process fails is reported as not solved, with the
     end of its log, and the others go on.
     """
-    from mjx_arm.train.rundir import RunDir
-
     queue, free = list(parse_seeds(config.seeds)), list(gpus)
-    running: dict[int, tuple[subprocess.Popen, str, float, Path]] = {}
+    running: dict[int, tuple[subprocess.Popen, str, float]] = {}
     done: dict[int, tuple[SeedRun, dict[str, Any]]] = {}
     runs_dir.mkdir(parents=True, exist_ok=True)
-    env = {k: v for k, v in os.environ.items() if k != "XLA_PYTHON_CLIENT_PREALLOCATE"}
     while queue or running:
         while queue and free:
             seed, gpu = queue.pop(0), free.pop(0)
-            run_dir = seed_run_dir(config, seed, runs_dir)
-            with (runs_dir / f"seed{seed}.log").open("wb") as out:
-                proc = subprocess.Popen(
-                    seed_command(config, seed, run_dir, overrides),
-                    env={**env, "CUDA_VISIBLE_DEVICES": gpu},
-                    stdout=out,
-                    stderr=subprocess.STDOUT,
-                )
-            running[seed] = (proc, gpu, time.time(), run_dir)
+            running[seed] = (_start_seed(config, seed, runs_dir, gpu, overrides), gpu, time.time())
             log(f"seed {seed}: training {config.task} / {config.preset} on GPU {gpu}")
-        for seed, (proc, gpu, start, run_dir) in list(running.items()):
+        for seed, (proc, gpu, start) in list(running.items()):
             if proc.poll() is None:
                 continue
             del running[seed]
             free.append(gpu)
-            end = time.time()
-            if proc.returncode != 0:
-                tail = (runs_dir / f"seed{seed}.log").read_text(errors="replace")
-                error = f"exit code {proc.returncode}: " + " | ".join(tail.splitlines()[-3:])
-                log(f"seed {seed}: its process failed ({error[:400]})")
-                done[seed] = (failed_seed(seed, gpu, end - start, error), {})
-                continue
-            run = read_seed_run(config, seed, run_dir, start, end)
-            run.gpu = gpu
-            done[seed] = (run, RunDir(run_dir).load_config())
-            log(_seed_line(config, run))
+            done[seed] = _finished_seed(config, seed, runs_dir, proc, gpu, start)
+            run = done[seed][0]
+            failed = f"seed {seed}: its process failed ({run.error[:400]})"
+            log(failed if run.error else seed_line(config, run))
         time.sleep(0.5)
     ordered = [done[s] for s in parse_seeds(config.seeds)]
     return [r for r, _ in ordered], [c for _, c in ordered]
-
-
-def _seed_line(config: SeedsConfig, run: SeedRun) -> str:
-    reached = fmt(run.time_to_threshold) + " s" if run.solved else "not reached"
-    return (
-        f"seed {run.seed}: final {run.final_success:.3f}, best {run.best_success:.3f}, "
-        f"{config.threshold:.2f} at {reached}, wall {run.wall_s:.1f} s, "
-        f"compile {fmt(run.compile_s)} s"
-    )
-
-
-def start_up_line(report: dict[str, Any]) -> str:
-    """A seed's start-up stages and JAX cache hits, one line (from its compile report)."""
-    stages = ", ".join(f"{k} {v:.1f}" for k, v in report.get("stages", {}).items())
-    counts = report.get("jax_counts", {})
-    hits = f"{counts.get('cache_hits', 0)} of {counts.get('cache_requests', 0)}"
-    return f"start-up (s): {stages}; JAX cache hits {hits}"
-
-
-def quartiles(times: list[float | None]) -> dict[str, float | None]:
-    """Median and interquartile range of times, a missing time counting as infinite.
-
-    Returns:
-        ``median``, ``q25``, ``q75`` (None where the quantile falls on an unsolved seed) and
-        ``n``.
-    """
-    if not times:
-        return {"median": None, "q25": None, "q75": None, "n": 0}
-    values = np.sort([math.inf if t is None else t for t in times])
-    # the median averages the middle pair (inf if either is unsolved); the quartiles take a
-    # sample ("lower"/"higher"), so an infinity never enters an interpolation as inf * 0
-    q = {
-        "median": float(np.median(values)),
-        "q25": float(np.quantile(values, 0.25, method="lower")),
-        "q75": float(np.quantile(values, 0.75, method="higher")),
-    }
-    out: dict[str, float | None] = {k: (v if math.isfinite(v) else None) for k, v in q.items()}
-    out["n"] = len(times)
-    return out
-
-
-def summarize(runs: list[SeedRun], threshold: float) -> dict[str, Any]:
-    """Fraction of seeds solved, time quartiles over all seeds and over the warm ones."""
-    times = [r.time_to_threshold for r in runs]
-    steps = [r.steps_to_threshold for r in runs if r.steps_to_threshold is not None]
-    return {
-        "threshold": threshold,
-        "seeds": len(runs),
-        "solved": sum(r.solved for r in runs),
-        "fraction_solved": sum(r.solved for r in runs) / len(runs) if runs else math.nan,
-        "time_to_threshold_all": quartiles(times),
-        "time_to_threshold_warm": quartiles(times[1:]),
-        "median_steps_to_threshold": float(np.median(steps)) if steps else None,
-        "median_training_steps_per_s": float(np.median([r.training_steps_per_s for r in runs])),
-    }
-
-
-def seeds_table(runs: list[SeedRun], summary: dict[str, Any]) -> str:
-    """The markdown table of every seed, then the summary lines."""
-    pct = f"{summary['threshold']:.2f}"
-    headers = [
-        "seed",
-        "final policy success",
-        "best success",
-        f"steps to {pct}",
-        f"time to {pct} (s)",
-        "wall (s)",
-        "compile (s)",
-        "training steps/s",
-    ]
-    rows = [
-        [
-            r.seed,
-            f"{r.final_success:.3f}",
-            f"{r.best_success:.3f}",
-            f"{r.steps_to_threshold:,}" if r.solved else "not reached",
-            fmt(r.time_to_threshold) if r.solved else "not reached",
-            f"{r.wall_s:.1f}",
-            fmt(r.compile_s),
-            f"{r.training_steps_per_s:,.0f}",
-        ]
-        for r in runs
-    ]
-    return markdown_table(headers, rows) + "\n" + summary_lines(summary)
-
-
-def _quartile_text(q: dict[str, float | None]) -> str:
-    def show(v: float | None) -> str:
-        return "not reached" if v is None else f"{v:.1f} s"
-
-    return f"median {show(q['median'])} (IQR {show(q['q25'])} to {show(q['q75'])}, n={q['n']})"
-
-
-def summary_lines(summary: dict[str, Any]) -> str:
-    """The summary as markdown list lines."""
-    return (
-        f"- solved (evaluation success >= {summary['threshold']:.2f}): "
-        f"{summary['solved']} of {summary['seeds']} seeds\n"
-        f"- time to {summary['threshold']:.2f}, all seeds: "
-        f"{_quartile_text(summary['time_to_threshold_all'])}\n"
-        f"- time to {summary['threshold']:.2f}, warm seeds (all but the first): "
-        f"{_quartile_text(summary['time_to_threshold_warm'])}\n"
-    )
 
 
 def plot_curves(runs: list[SeedRun], threshold: float, title: str, path: Path) -> Path:
@@ -461,7 +300,7 @@ def run_seeds(
         run, saved = train_seed(config, seed, runs_dir, overrides, start)
         runs.append(run)
         configs.append(saved)
-        log(_seed_line(config, run))
+        log(seed_line(config, run))
         log(f"seed {seed} {start_up_line(run.compile_report)}")
     return runs, configs
 
@@ -475,8 +314,9 @@ def write_report(
     name: str,
     overrides: tuple[str, ...] = (),
     wall_s: float | None = None,
+    png: bool = False,
 ) -> list[Path]:
-    """Write NAME.json, NAME.md and NAME.png into ``out``; return their paths.
+    """Write NAME.json and NAME.md (and with ``png``, NAME.png) into ``out``; return their paths.
 
     ``wall_s``: the whole benchmark's wall time (recorded with the GPUs the seeds ran on)."""
     summary = summarize(runs, config.threshold)
@@ -494,6 +334,7 @@ def write_report(
         "seeds": [dataclasses.asdict(r) for r in runs],
         "configs": configs,
     }
-    json_path, md_path = save_results(name, payload, f"# Seeds: {title}\n\n{table}", out)
-    png = plot_curves(runs, config.threshold, title, out / f"{name}.png")
-    return [json_path, md_path, png]
+    paths = list(save_results(name, payload, f"# Seeds: {title}\n\n{table}", out))
+    if png:
+        paths.append(plot_curves(runs, config.threshold, title, out / f"{name}.png"))
+    return paths

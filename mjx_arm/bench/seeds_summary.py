@@ -1,0 +1,117 @@
+"""What the seeds benchmark reports (:mod:`mjx_arm.bench.seeds`): the fraction of seeds solved,
+the quartiles of the time to the threshold, the table of every seed and its progress lines.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from mjx_arm.bench.results import fmt, markdown_table
+from mjx_arm.bench.seeds_config import SeedRun, SeedsConfig
+
+
+def seed_line(config: SeedsConfig, run: SeedRun) -> str:
+    """A seed's result, one line of the progress log."""
+    reached = fmt(run.time_to_threshold) + " s" if run.solved else "not reached"
+    return (
+        f"seed {run.seed}: final {run.final_success:.3f}, best {run.best_success:.3f}, "
+        f"{config.threshold:.2f} at {reached}, wall {run.wall_s:.1f} s, "
+        f"compile {fmt(run.compile_s)} s"
+    )
+
+
+def start_up_line(report: dict[str, Any]) -> str:
+    """A seed's start-up stages and JAX cache hits, one line (from its compile report)."""
+    stages = ", ".join(f"{k} {v:.1f}" for k, v in report.get("stages", {}).items())
+    counts = report.get("jax_counts", {})
+    hits = f"{counts.get('cache_hits', 0)} of {counts.get('cache_requests', 0)}"
+    return f"start-up (s): {stages}; JAX cache hits {hits}"
+
+
+def quartiles(times: list[float | None]) -> dict[str, float | None]:
+    """Median and interquartile range of times, a missing time counting as infinite.
+
+    Returns:
+        ``median``, ``q25``, ``q75`` (None where the quantile falls on an unsolved seed) and
+        ``n``.
+    """
+    if not times:
+        return {"median": None, "q25": None, "q75": None, "n": 0}
+    values = np.sort([math.inf if t is None else t for t in times])
+    # the median averages the middle pair (inf if either is unsolved); the quartiles take a
+    # sample ("lower"/"higher"), so an infinity never enters an interpolation as inf * 0
+    q = {
+        "median": float(np.median(values)),
+        "q25": float(np.quantile(values, 0.25, method="lower")),
+        "q75": float(np.quantile(values, 0.75, method="higher")),
+    }
+    out: dict[str, float | None] = {k: (v if math.isfinite(v) else None) for k, v in q.items()}
+    out["n"] = len(times)
+    return out
+
+
+def summarize(runs: list[SeedRun], threshold: float) -> dict[str, Any]:
+    """Fraction of seeds solved, time quartiles over all seeds and over the warm ones."""
+    times = [r.time_to_threshold for r in runs]
+    steps = [r.steps_to_threshold for r in runs if r.steps_to_threshold is not None]
+    return {
+        "threshold": threshold,
+        "seeds": len(runs),
+        "solved": sum(r.solved for r in runs),
+        "fraction_solved": sum(r.solved for r in runs) / len(runs) if runs else math.nan,
+        "time_to_threshold_all": quartiles(times),
+        "time_to_threshold_warm": quartiles(times[1:]),
+        "median_steps_to_threshold": float(np.median(steps)) if steps else None,
+        "median_training_steps_per_s": float(np.median([r.training_steps_per_s for r in runs])),
+    }
+
+
+def seeds_table(runs: list[SeedRun], summary: dict[str, Any]) -> str:
+    """The markdown table of every seed, then the summary lines."""
+    pct = f"{summary['threshold']:.2f}"
+    headers = [
+        "seed",
+        "final policy success",
+        "best success",
+        f"steps to {pct}",
+        f"time to {pct} (s)",
+        "wall (s)",
+        "compile (s)",
+        "training steps/s",
+    ]
+    rows = [
+        [
+            r.seed,
+            f"{r.final_success:.3f}",
+            f"{r.best_success:.3f}",
+            f"{r.steps_to_threshold:,}" if r.solved else "not reached",
+            fmt(r.time_to_threshold) if r.solved else "not reached",
+            f"{r.wall_s:.1f}",
+            fmt(r.compile_s),
+            f"{r.training_steps_per_s:,.0f}",
+        ]
+        for r in runs
+    ]
+    return markdown_table(headers, rows) + "\n" + summary_lines(summary)
+
+
+def _quartile_text(q: dict[str, float | None]) -> str:
+    def show(v: float | None) -> str:
+        return "not reached" if v is None else f"{v:.1f} s"
+
+    return f"median {show(q['median'])} (IQR {show(q['q25'])} to {show(q['q75'])}, n={q['n']})"
+
+
+def summary_lines(summary: dict[str, Any]) -> str:
+    """The summary as markdown list lines."""
+    return (
+        f"- solved (evaluation success >= {summary['threshold']:.2f}): "
+        f"{summary['solved']} of {summary['seeds']} seeds\n"
+        f"- time to {summary['threshold']:.2f}, all seeds: "
+        f"{_quartile_text(summary['time_to_threshold_all'])}\n"
+        f"- time to {summary['threshold']:.2f}, warm seeds (all but the first): "
+        f"{_quartile_text(summary['time_to_threshold_warm'])}\n"
+    )
