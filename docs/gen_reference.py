@@ -10,7 +10,7 @@ import dataclasses
 from pathlib import Path
 from typing import Any
 
-from mjx_arm.task import REWARD_TERMS, get_task, task_names
+from mjx_arm.task import get_task, task_names
 from mjx_arm.task.observation import obs_layout
 from mjx_arm.train.config import PRESETS, preset_config
 
@@ -38,12 +38,13 @@ def task_table(name: str, **overrides: Any) -> str:
     """The settings and nonzero reward weights of task ``name``'s preset, as markdown."""
     cfg = get_task(name).config(**overrides)
     rows = [f"| `{f}` | {_cell(getattr(cfg, f))} |" for f in TASK_FIELDS]
-    weights = [f"| `reward.{t}` | {_cell(getattr(cfg.reward, t))} |" for t in REWARD_TERMS
+    terms = cfg.reward.term_names()
+    weights = [f"| `reward.{t}` | {_cell(getattr(cfg.reward, t))} |" for t in terms
                if getattr(cfg.reward, t)]  # fmt: skip
     lengths = [
         f"| `reward.{f.name}` | {_cell(getattr(cfg.reward, f.name))} |"
         for f in dataclasses.fields(cfg.reward)
-        if f.name not in REWARD_TERMS
+        if f.name not in terms
     ]
     return "\n".join(["| setting | value |", "|---|---|", *rows, *weights, *lengths, ""])
 

@@ -50,7 +50,7 @@ from mjx_arm.envs.randomization import (
 from mjx_arm.task import observation as obs_lib
 from mjx_arm.task import reward as reward_lib
 from mjx_arm.task import rules, sampling
-from mjx_arm.task.config import REWARD_TERMS, TaskConfig
+from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.touch import touch_config
 from mjx_arm.urdf.arm_config import ArmConfig
 
@@ -196,7 +196,7 @@ class MjxArmEnv(Env):
         reading = self.physics.read(data)
         d, force = self._distance_and_force(reading)
         zero = jnp.zeros(())
-        metrics = {f"reward/{name}": zero for name in REWARD_TERMS}
+        metrics = {f"reward/{name}": zero for name in self.task.reward.term_names()}
         start = reward_lib.start_progress(jnp)
         metrics.update(self._measures(d, force, start, zero, zero, zero))
         metrics.update(self._task_metrics(self._task_measures(reading)))

@@ -7,7 +7,7 @@ from typing import Any
 from mjx_arm.task import reward as reward_lib
 from mjx_arm.task.config import RewardConfig, TaskConfig
 from mjx_arm.task.spec import Task
-from mjx_arm.urdf.scene_shapes import box_top_offset, table_top_extent
+from mjx_arm.urdf.scene_shapes import TOUCH_SCENE, box_top_offset, table_top_extent
 
 BOX_EDGE_MARGIN = 0.05  # m: the box keeps at least its own length from the table's edges
 
@@ -48,7 +48,7 @@ class Touch(Task):
     force inside ``force_band``, within ``success_distance`` of the face centre."""
 
     name = "touch"
-    scene = "touch"
+    scene = TOUCH_SCENE
     uses_contact = True
 
     def config(self, variant: str = "gentle", **overrides: Any) -> TaskConfig:

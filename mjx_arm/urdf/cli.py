@@ -68,7 +68,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
     check_output(args.output, "-o", (".xml",))
     package_dirs = _package_dirs(args.package)
     config = ConvertConfig(
-        scene=args.scene,
+        scene=SCENES[args.scene],
         package_dirs=package_dirs,
         repair_inertia=args.repair_inertia,
         default_effort=args.default_effort,
