@@ -322,21 +322,18 @@ class MjxArmEnv(Env):
         )  # fmt: skip
 
     def _task_measures(self, reading: Reading) -> dict[str, jax.Array] | None:
-        """A gripper task's measures of a reading (:meth:`mjx_arm.task.spec.Task.measures`)."""
-        if not self.task_spec.gripper:
-            return None
+        """The task's measures of a reading (:meth:`mjx_arm.task.spec.Task.measures`), or
+        None where it has none."""
         spec, r = self.task_spec, reading
-        return spec.measures(jnp, r.ee_pos, r.ee_quat, r.grip, self.task)
+        return spec.measures(jnp, r.ee_pos, r.ee_quat, r.grip, self.task) or None
 
-    @staticmethod
-    def _task_metrics(measures: dict[str, jax.Array] | None) -> dict[str, jax.Array]:
-        """The task's measures as float32 metrics (``lift_height``, ``grasp``); none else."""
+    def _task_metrics(self, measures: dict[str, jax.Array] | None) -> dict[str, jax.Array]:
+        """The measures the task reports as float32 metrics, under their metric names
+        (:attr:`~mjx_arm.task.spec.Task.metrics`; Lift: ``lift_height``, ``grasp``)."""
         if measures is None:
             return {}
-        return {
-            "lift_height": measures["height"].astype(jnp.float32),
-            "grasp": measures["grasp"].astype(jnp.float32),
-        }
+        names = self.task_spec.metrics
+        return {metric: measures[key].astype(jnp.float32) for key, metric in names.items()}
 
     def _distance_and_force(self, reading: Reading) -> tuple[jax.Array, jax.Array]:
         d = reward_lib.target_distance(jnp, reading.ee_pos, reading.target_pos)

@@ -301,8 +301,9 @@ def task_reward(task: str, reward: RewardConfig) -> RewardConfig:
     known = {f.name for f in dataclasses.fields(kind)}
     dropped = sorted(k for k, v in values.items() if k not in known and v != 0)
     if dropped:
-        raise ConfigError(f"task {task!r} has no reward terms {dropped}; its terms: "
-                          f"{list(kind.term_names())}")
+        raise ConfigError(
+            f"task {task!r} has no reward terms {dropped}; its terms: {list(kind.term_names())}"
+        )
     return kind(**{k: v for k, v in values.items() if k in known})
 
 

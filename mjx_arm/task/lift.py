@@ -10,13 +10,14 @@ wrist reading: one above 100 N (the tool struck the table) ends the episode.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from mjx_arm.task import grip as grip_lib
 from mjx_arm.task import reward as reward_lib
 from mjx_arm.task.config import RewardConfig, TaskConfig
-from mjx_arm.task.spec import Task
+from mjx_arm.task.spec import Budget, Task
 from mjx_arm.task.touch import Touch
 from mjx_arm.urdf.scene_shapes import CUBE_HALF, LIFT_SCENE, table_top_extent
 
@@ -35,6 +36,7 @@ CUBE_EDGE_MARGIN = 0.08  # m: the cube keeps this far from the table's edges
 # some starts; from 0.8 it held every corner of the range in both CPU engines.
 CUBE_MASS_RANGE = (0.05, 0.2)
 FRICTION_RANGE = (0.8, 1.0)
+
 
 # Lift's reward. The distance charge and the near-field pull bring the ee to the cube;
 # ``cradle`` pays for closing the fingers around it (a policy that reaches the cube with the
@@ -128,6 +130,14 @@ class Lift(Task):
     extra_obs = (("gripper", 1), ("object_rel", 7), ("pad_force", 2))
     object_uniforms = 2
     reward_type = LiftReward
+    default_arm = "ur5e_gripper.urdf"  # assets/: the UR5e with a parallel gripper
+    metrics: ClassVar[Mapping[str, str]] = {"height": "lift_height", "grasp": "grasp"}
+    # A longer task than Touch (reach, close, lift, hold 10 steps) at twice the physics steps;
+    # ``robust`` trains it under the SELECTED draw (mjx_arm.envs.physics_config).
+    budgets: ClassVar[Mapping[str, Budget]] = {
+        "fast": Budget(num_timesteps=40_000_000, num_evals=41),
+        "robust": Budget(num_timesteps=40_000_000, num_evals=41, randomization="selected"),
+    }
 
     def config(self, **overrides: Any) -> TaskConfig:
         """The Lift preset (its solver at :data:`LIFT_SOLVER_ITERATIONS`) with ``overrides``;

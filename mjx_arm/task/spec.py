@@ -14,11 +14,36 @@ overrides the force methods (see :mod:`mjx_arm.task.touch`). Every method works 
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
 from typing import Any, ClassVar
 
 from mjx_arm import names
 from mjx_arm.task.config import RewardConfig, TaskConfig
 from mjx_arm.urdf.scene_shapes import REACH_SCENE, SceneSpec
+
+
+@dataclass(frozen=True)
+class Budget:
+    """What a training preset changes for one task (:attr:`Task.budgets`); None keeps the
+    preset's value. The fields are those of ``mjx_arm.train.config.TrainConfig``.
+
+    Attributes:
+        num_timesteps, num_evals, num_envs, batch_size, stop_at_success: as in the preset.
+        randomization: the training draw by name (``mjx_arm.train.config.RANDOMIZATIONS``).
+    """
+
+    num_timesteps: int | None = None
+    num_evals: int | None = None
+    num_envs: int | None = None
+    batch_size: int | None = None
+    stop_at_success: float | None = None
+    randomization: str | None = None
+
+    def changes(self) -> dict[str, Any]:
+        """The fields this budget sets, name -> value."""
+        values = {f.name: getattr(self, f.name) for f in fields(self)}
+        return {name: value for name, value in values.items() if value is not None}
 
 
 class Task:
@@ -39,6 +64,12 @@ class Task:
             after the target's three.
         reward_type: the task's reward weights: :class:`RewardConfig`, or a subclass in the
             task's file that adds the task's own terms (:meth:`task_terms` computes them).
+        budgets: what each training preset changes for this task, preset name ->
+            :class:`Budget` (a preset not named trains the task as it stands).
+        default_arm: the arm the task's presets and envs take when none is given: an asset
+            file (``assets/``), or "" for the shipped arm.
+        metrics: the :meth:`measures` the batched envs report as training metrics, measure
+            name -> metric name.
     """
 
     name: ClassVar[str]
@@ -49,6 +80,9 @@ class Task:
     extra_obs: ClassVar[tuple[tuple[str, int], ...]] = ()
     object_uniforms: ClassVar[int] = 0
     reward_type: ClassVar[type[RewardConfig]] = RewardConfig
+    budgets: ClassVar[Mapping[str, Budget]] = {}
+    default_arm: ClassVar[str] = ""
+    metrics: ClassVar[Mapping[str, str]] = {}
 
     @property
     def env_id(self) -> str:

@@ -28,7 +28,6 @@ CUBE_BODY, CUBE_GEOM = "cube", "cube"
 CUBE_HALF, CUBE_MASS = 0.0225, 0.1
 
 
-
 @dataclass(frozen=True)
 class SceneSpec:
     """What a task's scene holds around the arm, as data: the MuJoCo scene builder
