@@ -11,7 +11,6 @@ per update in 128 minibatches). In the batched setting a rollout is ``num_envs``
 from __future__ import annotations
 
 import dataclasses
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -21,8 +20,9 @@ from mjx_arm.inputs import MAX_SEED, ConfigError, MissingInputError, read_json_o
 from mjx_arm.names import BACKENDS, PRESET_NAMES
 from mjx_arm.paths import asset
 from mjx_arm.settings import check_range, check_types, config_fields, set_path, split_setting
-from mjx_arm.task.config import RewardConfig, TaskConfig, task_config
+from mjx_arm.task.config import TaskConfig, task_config
 from mjx_arm.task.registry import get_task, is_task, task_names
+from mjx_arm.train.task_settings import set_task_field, task_changes
 from mjx_arm.urdf.arm_config import ArmConfig
 
 PARTITIONS = ("auto", "xla", "per_device")
@@ -323,53 +323,6 @@ def _randomization(name: str) -> RandomizationConfig:
     return RANDOMIZATIONS[name]
 
 
-def task_changes(task: str, settings: TaskConfig | None, changes: dict[str, Any]) -> TaskConfig:
-    """``settings`` (None: the task's preset) with ``changes`` to its fields; a ``variant``
-    among them other than the settings' starts from that variant's preset, and ``reward``
-    takes a dict of weights.
-
-    Raises:
-        ConfigError: a change that is not a task field, or of the wrong type or range; a
-            variant the task does not have.
-    """
-    changes = dict(changes)
-    variant = changes.pop("variant", None)
-    try:
-        if settings is None or settings.task != task or variant not in (None, settings.variant):
-            settings = task_config(task, **({"variant": variant} if variant else {}))
-        return settings.replace(**changes)
-    except ConfigError as err:
-        raise ConfigError(f"task settings: {err}") from err
-    except (TypeError, ValueError) as err:  # an unknown field, a bad variant
-        shown = {**({"variant": variant} if variant else {}), **changes}
-        raise ConfigError(f"task settings {shown}: {err}") from err
-
-
-def _set_task_field(task_changes: dict[str, Any], name: str, text: str, task: str) -> None:
-    """Put ``task.NAME=text`` into ``task_changes`` (``reward.TERM`` into its ``reward`` dict;
-    the terms are those of ``task``).
-
-    Raises:
-        ConfigError: NAME is not a field of the task config or of the task's reward.
-    """
-    try:
-        value = json.loads(text)
-    except json.JSONDecodeError:
-        value = text
-    head, dot, term = name.partition(".")
-    if dot and head == "reward":
-        kind = get_task(task).reward_type if is_task(task) else RewardConfig
-        terms = {f.name for f in dataclasses.fields(kind)}
-        if term not in terms:
-            raise ConfigError(f"unknown reward key 'task.{name}'; known: {sorted(terms)}")
-        task_changes["reward"] = {**task_changes.get("reward", {}), term: value}
-        return
-    fields = {f.name for f in dataclasses.fields(TaskConfig)}
-    if name not in fields:
-        raise ConfigError(f"unknown task key 'task.{name}'; known: {sorted(fields)}")
-    task_changes[name] = value
-
-
 def apply_overrides(config: TrainConfig, items: list[str]) -> TrainConfig:
     """Apply ``key=value`` overrides (:mod:`mjx_arm.settings`); ``task.KEY=value`` changes
     ``task_settings`` (:func:`task_changes`) and ``task.reward.TERM=value`` its reward
@@ -379,7 +332,7 @@ def apply_overrides(config: TrainConfig, items: list[str]) -> TrainConfig:
         path, text = split_setting(item)
         try:
             if path[0] == "task" and len(path) > 1:
-                _set_task_field(changes, ".".join(path[1:]), text, config.task)
+                set_task_field(changes, ".".join(path[1:]), text, config.task)
             else:
                 config = set_path(config, path, text, "config key")
         except ConfigError as err:
