@@ -122,3 +122,18 @@ def test_task_settings_refuse_what_the_task_lacks() -> None:
         load_config("fast", None, ["task.no_such=1"])
     with pytest.raises(ConfigError, match="unknown touch variant"):
         load_config("fast", None, ["task=touch", "task.variant=soft"])
+
+
+@pytest.mark.parametrize("case", ["fast/reach", "cpu/touch", "fast/lift"])
+def test_a_task_config_saved_with_every_terms_weight_loads(case: str) -> None:
+    """A run's or a policy's task config saved while every task carried Lift's four weights
+    (at 0 outside Lift) loads as the task's config of today."""
+    from mjx_arm.task.config import TaskConfig
+
+    preset, task = case.split("/")
+    saved = SNAPSHOT["task"][case]
+    assert TaskConfig.from_dict(saved) == preset_config(preset, task).task_config()
+    if task != "lift":
+        assert "lift" in saved["reward"]
+        with pytest.raises(ConfigError, match="unknown reward keys"):
+            TaskConfig.from_dict({**saved, "reward": {**saved["reward"], "lift": 1.0}})

@@ -281,30 +281,23 @@ class TaskConfig:
         kind = get_task(fields["task"]).reward_type if is_task(fields.get("task")) else RewardConfig
         if isinstance(weights, dict):  # before tasks declared their own terms, every config
             known = {f.name for f in dataclasses.fields(kind)}  # held Lift's at weight 0
-            weights = {k: v for k, v in weights.items() if k in known or v not in (0, 0.0)}
+            weights = {k: v for k, v in weights.items() if k in known or v != 0}
         reward = kind(**config_fields(kind, weights, "reward"))
         return cls(reward=reward, **fields)
 
 
 def task_reward(task: str, reward: RewardConfig) -> RewardConfig:
     """``reward`` as the weights of task ``task``'s reward type
-    (:attr:`~mjx_arm.task.spec.Task.reward_type`): the terms it shares with it kept, the
-    task's own terms at weight 0 where ``reward`` lacks them.
-
-    Raises:
-        ConfigError: ``reward`` weighs a term the task does not have.
+    (:attr:`~mjx_arm.task.spec.Task.reward_type`): the weights it shares with it kept, the
+    task's own terms at weight 0 where ``reward`` lacks them, and the weights of terms the task
+    does not have left out (they weighed terms that are 0 in that task: a config switched to
+    another task with ``replace(task=...)`` scores as before).
     """
     kind = get_task(task).reward_type
     if type(reward) is kind:
         return reward
-    values = dataclasses.asdict(reward)
     known = {f.name for f in dataclasses.fields(kind)}
-    dropped = sorted(k for k, v in values.items() if k not in known and v != 0)
-    if dropped:
-        raise ConfigError(
-            f"task {task!r} has no reward terms {dropped}; its terms: {list(kind.term_names())}"
-        )
-    return kind(**{k: v for k, v in values.items() if k in known})
+    return kind(**{k: v for k, v in dataclasses.asdict(reward).items() if k in known})
 
 
 def task_config(name: str, **overrides: Any) -> TaskConfig:
