@@ -234,7 +234,8 @@ MAX_BATCH = 2**20  # envs or sequences in one batch: beyond any accelerator's me
 MAX_LAYER = 2**14  # units in one hidden layer
 
 # The seed document's PPO settings mapped onto a GPU batch, on the seed document's task (Touch
-# succeeds on the first in-band step; no force or speed terms) and without randomisation.
+# succeeds on the first in-band step; no force or speed terms: PRESET_VARIANTS) and without
+# randomisation.
 SEED = TrainConfig()
 
 # Fastest to a solved task on one GPU. The physics steps 8192 envs at once (Warp's throughput
@@ -326,7 +327,7 @@ def _randomization(name: str) -> RandomizationConfig:
 def apply_overrides(config: TrainConfig, items: list[str]) -> TrainConfig:
     """Apply ``key=value`` overrides (:mod:`mjx_arm.settings`); ``task.KEY=value`` changes
     ``task_settings`` (:func:`task_changes`) and ``task.reward.TERM=value`` its reward
-    weights. A ``task=`` naming another task starts from that task's preset."""
+    weights. A ``task=`` naming another task starts from that task's default settings."""
     changes: dict[str, Any] = {}
     for item in items:
         path, text = split_setting(item)
