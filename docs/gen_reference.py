@@ -10,7 +10,8 @@ import dataclasses
 from pathlib import Path
 from typing import Any
 
-from mjx_arm.task import REWARD_TERMS, get_task, task_names
+from mjx_arm.inputs import ConfigError
+from mjx_arm.task import get_task, task_names
 from mjx_arm.task.observation import obs_layout
 from mjx_arm.train.config import PRESETS, preset_config
 
@@ -38,12 +39,13 @@ def task_table(name: str, **overrides: Any) -> str:
     """The settings and nonzero reward weights of task ``name``'s preset, as markdown."""
     cfg = get_task(name).config(**overrides)
     rows = [f"| `{f}` | {_cell(getattr(cfg, f))} |" for f in TASK_FIELDS]
-    weights = [f"| `reward.{t}` | {_cell(getattr(cfg.reward, t))} |" for t in REWARD_TERMS
+    terms = cfg.reward.term_names()
+    weights = [f"| `reward.{t}` | {_cell(getattr(cfg.reward, t))} |" for t in terms
                if getattr(cfg.reward, t)]  # fmt: skip
     lengths = [
         f"| `reward.{f.name}` | {_cell(getattr(cfg.reward, f.name))} |"
         for f in dataclasses.fields(cfg.reward)
-        if f.name not in REWARD_TERMS
+        if f.name not in terms
     ]
     return "\n".join(["| setting | value |", "|---|---|", *rows, *weights, *lengths, ""])
 
@@ -61,13 +63,18 @@ def obs_table(name: str, n_joints: int = 6) -> str:
 
 def preset_table(task: str) -> str:
     """Each training preset's settings for ``task``, as markdown."""
-    configs = {name: preset_config(name, task) for name in PRESETS}
+    configs = {}
+    for name in PRESETS:
+        try:
+            configs[name] = preset_config(name, task)
+        except ConfigError:  # a preset whose task variant the task lacks (seed: Lift)
+            continue
     head = "| setting | " + " | ".join(f"`{n}`" for n in configs) + " |"
     rows = [
         f"| `{f}` | " + " | ".join(_cell(getattr(c, f)) for c in configs.values()) + " |"
         for f in TRAIN_FIELDS
     ]
-    variants = [_cell(c.task_overrides.get("variant", "")) or "default" for c in configs.values()]
+    variants = [_cell(c.task_config().variant) for c in configs.values()]
     rows.append("| task variant | " + " | ".join(variants) + " |")
     return "\n".join([head, "|---|" + "---|" * len(configs), *rows, ""])
 

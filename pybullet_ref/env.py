@@ -257,7 +257,7 @@ class PybulletArmEnv(BaseRobotEnv):
         table = c.loadURDF(str(asset("table.urdf")), useFixedBase=True, flags=self._load_flags)
         c.changeDynamics(table, BASE, lateralFriction=FRICTION, **fixed)
         position = [float(v) for v in target_body_pos]
-        if self.task.spec.scene == "touch":  # the box stands on the table
+        if self.task.spec.scene.box:  # the box stands on the table
             box = c.loadURDF(
                 str(asset("target_box.urdf")),
                 basePosition=position,
@@ -265,7 +265,7 @@ class PybulletArmEnv(BaseRobotEnv):
                 flags=self._load_flags,
             )
             c.changeDynamics(box, BASE, lateralFriction=FRICTION, **fixed)
-        elif self.render_mode and self.gripper is None:
+        elif self.render_mode and self.task.spec.scene.marker:
             self._add_target_marker(position)
         if self.gripper is not None:
             self.cube = self._add_cube(position, self._object)

@@ -110,7 +110,6 @@ def test_same_seed_same_result_on_the_c_backend(tmp_path: Path) -> None:
 
 def test_task_and_reward_overrides_reach_the_task_config() -> None:
     """``task.FIELD=`` and ``task.reward.TERM=`` change the task; unknown names are errors."""
-    from mjx_arm.task.config import task_config
     from mjx_arm.task.touch import GENTLE_REWARD
 
     config = load_config(
@@ -118,7 +117,7 @@ def test_task_and_reward_overrides_reach_the_task_config() -> None:
         None,
         ["task=touch", "task.action_scale=0.2", "task.reward.approach_speed=-200"],
     )
-    task = task_config(config.task, **config.task_overrides)
+    task = config.task_config()
     assert task.action_scale == 0.2 and task.reward.approach_speed == -200
     assert task.reward.proximity == GENTLE_REWARD.proximity  # the other gentle weights stay
     with pytest.raises(ValueError, match=r"task\.reward\.nope"):
@@ -136,10 +135,11 @@ def test_a_list_override_sets_a_tuple_task_field() -> None:
 def test_presets_take_the_task_changes() -> None:
     """Touch gets its own budget in the fast and cpu presets; Reach keeps the preset's base;
     a later ``task=`` override decides which task's preset applies, and --set wins over both."""
-    from mjx_arm.train.config import CPU, FAST, TASK_PRESETS
+    from mjx_arm.task.touch import TOUCH
+    from mjx_arm.train.config import CPU, FAST
 
     touch = load_config("fast", None, ["task=touch"])
-    assert touch.num_timesteps == TASK_PRESETS[("fast", "touch")]["num_timesteps"]
+    assert touch.num_timesteps == TOUCH.budgets["fast"].num_timesteps
     assert touch.num_envs == FAST.num_envs and touch.stop_at_success == FAST.stop_at_success
     reach = load_config("fast", None, ["task=touch", "task=reach"])
     assert reach.task == "reach" and reach.num_timesteps == FAST.num_timesteps

@@ -291,12 +291,10 @@ class BaseRobotEnv(gym.Env):
         return self._flat.measure(ee_pos, ee_quat, qpos, target_pos, wrench, extra)
 
     def _measures(self, reading: PhysicsReading) -> dict[str, float] | None:
-        """The task's measures of a reading (gripper tasks), else None."""
-        if not self.task_spec.gripper:
-            return None
+        """The task's measures of a reading, or None where it has none."""
         spec, r = self.task_spec, reading
         values = spec.measures(SCALAR_XP, r.ee_pos, r.ee_quat, r.grip, self.task)
-        return {key: float(value) for key, value in values.items()}
+        return {key: float(value) for key, value in values.items()} or None
 
     def _scorers(self) -> tuple[Any, Any]:
         """The step rules of this env's task and arm as two functions of Python floats, for a
@@ -428,16 +426,14 @@ def task_for_arm(task: TaskConfig, arm: ArmInfo) -> TaskConfig:
 
 
 def default_arm(task: TaskConfig, arm: Any = None) -> Any:
-    """``arm``, or where it is None the arm a task runs on by default: the gripper arm
-    (``assets/ur5e_gripper.urdf``) for a gripper task, else the shipped arm (None)."""
-    if arm is None and task.spec.gripper:
+    """``arm``, or where it is None the arm the task declares
+    (:attr:`~mjx_arm.task.spec.Task.default_arm`; Lift: ``assets/ur5e_gripper.urdf``), else
+    the shipped arm (None)."""
+    if arm is None and task.spec.default_arm:
         from mjx_arm.paths import asset
 
-        return asset(GRIPPER_ARM)
+        return asset(task.spec.default_arm)
     return arm
-
-
-GRIPPER_ARM = "ur5e_gripper.urdf"  # assets/: the arm of the gripper tasks' presets
 
 
 def action_size(arm: ArmInfo, task: TaskConfig) -> int:

@@ -50,7 +50,7 @@ from mjx_arm.envs.randomization import (
 from mjx_arm.task import observation as obs_lib
 from mjx_arm.task import reward as reward_lib
 from mjx_arm.task import rules, sampling
-from mjx_arm.task.config import REWARD_TERMS, TaskConfig
+from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.touch import touch_config
 from mjx_arm.urdf.arm_config import ArmConfig
 
@@ -196,7 +196,7 @@ class MjxArmEnv(Env):
         reading = self.physics.read(data)
         d, force = self._distance_and_force(reading)
         zero = jnp.zeros(())
-        metrics = {f"reward/{name}": zero for name in REWARD_TERMS}
+        metrics = {f"reward/{name}": zero for name in self.task.reward.term_names()}
         start = reward_lib.start_progress(jnp)
         metrics.update(self._measures(d, force, start, zero, zero, zero))
         metrics.update(self._task_metrics(self._task_measures(reading)))
@@ -322,21 +322,18 @@ class MjxArmEnv(Env):
         )  # fmt: skip
 
     def _task_measures(self, reading: Reading) -> dict[str, jax.Array] | None:
-        """A gripper task's measures of a reading (:meth:`mjx_arm.task.spec.Task.measures`)."""
-        if not self.task_spec.gripper:
-            return None
+        """The task's measures of a reading (:meth:`mjx_arm.task.spec.Task.measures`), or
+        None where it has none."""
         spec, r = self.task_spec, reading
-        return spec.measures(jnp, r.ee_pos, r.ee_quat, r.grip, self.task)
+        return spec.measures(jnp, r.ee_pos, r.ee_quat, r.grip, self.task) or None
 
-    @staticmethod
-    def _task_metrics(measures: dict[str, jax.Array] | None) -> dict[str, jax.Array]:
-        """The task's measures as float32 metrics (``lift_height``, ``grasp``); none else."""
+    def _task_metrics(self, measures: dict[str, jax.Array] | None) -> dict[str, jax.Array]:
+        """The measures the task reports as float32 metrics, under their metric names
+        (:attr:`~mjx_arm.task.spec.Task.metrics`; Lift: ``lift_height``, ``grasp``)."""
         if measures is None:
             return {}
-        return {
-            "lift_height": measures["height"].astype(jnp.float32),
-            "grasp": measures["grasp"].astype(jnp.float32),
-        }
+        names = self.task_spec.metrics
+        return {metric: measures[key].astype(jnp.float32) for key, metric in names.items()}
 
     def _distance_and_force(self, reading: Reading) -> tuple[jax.Array, jax.Array]:
         d = reward_lib.target_distance(jnp, reading.ee_pos, reading.target_pos)

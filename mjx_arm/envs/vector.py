@@ -32,7 +32,7 @@ from mjx_arm.envs.base import InvalidActionError, check_action
 from mjx_arm.envs.mjx_physics import batched_where
 from mjx_arm.envs.physics_config import PhysicsConfig
 from mjx_arm.task import observation as obs_lib
-from mjx_arm.task.config import REWARD_TERMS, TaskConfig, task_config
+from mjx_arm.task.config import TaskConfig, task_config
 
 
 class ArmVectorEnv(VectorEnv):
@@ -182,7 +182,7 @@ class ArmVectorEnv(VectorEnv):
             "is_success": m["success"] > 0,
             "distance": m["distance"],
             "contact_force_norm": m["contact_force"],
-            "reward_terms": {name: m[f"reward/{name}"] for name in REWARD_TERMS},
+            "reward_terms": {k[7:]: v for k, v in m.items() if k.startswith("reward/")},
             "diverged": m["diverged"] > 0,
         }
         return info

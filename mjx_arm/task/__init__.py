@@ -1,7 +1,8 @@
 """The engine-neutral task contract: config, observation, reward, success, sampling, wrench.
 
-Each task is one file (:mod:`mjx_arm.task.reach`, :mod:`mjx_arm.task.touch`) holding a
-:class:`~mjx_arm.task.spec.Task`; :mod:`mjx_arm.task.registry` finds them by name.
+Each task is one file (:mod:`mjx_arm.task.reach`, :mod:`mjx_arm.task.touch`,
+:mod:`mjx_arm.task.lift`) holding a :class:`~mjx_arm.task.spec.Task` that declares its rules,
+reward terms, scene and training budgets; :mod:`mjx_arm.task.registry` finds them by name.
 """
 
 from mjx_arm.task.config import REWARD_TERMS, RewardConfig, TaskConfig, task_config
@@ -16,7 +17,7 @@ from mjx_arm.task.observation import (
     unflatten_obs,
 )
 from mjx_arm.task.reach import reach_config
-from mjx_arm.task.registry import get_task, register_task, task_names
+from mjx_arm.task.registry import get_task, register_task, task_names, unregister_task
 from mjx_arm.task.spec import Task
 from mjx_arm.task.touch import touch_config
 
@@ -39,4 +40,5 @@ __all__ = [
     "task_names",
     "touch_config",
     "unflatten_obs",
+    "unregister_task",
 ]

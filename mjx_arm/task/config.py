@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -45,13 +45,15 @@ class RewardConfig:
     ``proximity`` = exp(-d / proximity_length): 1 at the target, 0.37 one length away (a
     near-field pull that ``distance``'s longer length scale lacks),
     ``streak`` = how far a press inside the band has held on: 0 on a one-step tap, 1 once it
-    has held ``success_hold_steps`` steps running (:func:`mjx_arm.task.reward.streak`),
-    ``lift`` = how far a gripper task's object is up, as a fraction of the task's lift height
-    (0 to 1), ``grasp`` = 1 while both finger pads press the object, ``cradle`` = the
-    fingers' closure (0 open, 1 closed) while the object's centre sits between them, ``stray``
-    = 1 while a finger presses something (the object's top, the table) with the object's centre
-    not between the pads (gripper tasks; see :mod:`mjx_arm.task.lift`).
+    has held ``success_hold_steps`` steps running (:func:`mjx_arm.task.reward.streak`).
+
+    A task with terms of its own (Lift's ``lift``, ``grasp``, ...) declares them in its file:
+    a frozen subclass that adds one weight field per term and names them in
+    :attr:`task_terms` (:attr:`mjx_arm.task.spec.Task.reward_type`). Its terms follow these in
+    the sum.
     """
+
+    task_terms: ClassVar[tuple[str, ...]] = ()
 
     distance: float = -10.0
     contact: float = 500.0
@@ -65,20 +67,23 @@ class RewardConfig:
     overforce: float = 0.0
     proximity: float = 0.0
     streak: float = 0.0
-    lift: float = 0.0
-    grasp: float = 0.0
-    cradle: float = 0.0
-    stray: float = 0.0
     distance_length: float = 0.1
     proximity_length: float = 0.01
     soft_limit: float = 0.95
     approach_radius: float = 0.1
 
+    @classmethod
+    def term_names(cls) -> tuple[str, ...]:
+        """Every term of this reward in the order they are summed: :data:`REWARD_TERMS`, then
+        the task's own."""
+        return REWARD_TERMS + cls.task_terms
+
     def weights(self) -> dict[str, float]:
         """Weight of each named term."""
-        return {name: getattr(self, name) for name in REWARD_TERMS}
+        return {name: getattr(self, name) for name in self.term_names()}
 
 
+# The terms of every task's reward, in the order they are summed (a task's own follow).
 REWARD_TERMS = (
     "distance",
     "contact",
@@ -92,10 +97,6 @@ REWARD_TERMS = (
     "overforce",
     "proximity",
     "streak",
-    "lift",
-    "grasp",
-    "cradle",
-    "stray",
 )
 
 
@@ -179,9 +180,10 @@ class TaskConfig:
 
     def __post_init__(self) -> None:
         check_types(self)
-        check_types(self.reward)
         if not is_task(self.task):
             raise ConfigError(f"task must be one of {list(task_names())}, got {self.task!r}")
+        object.__setattr__(self, "reward", task_reward(self.task, self.reward))
+        check_types(self.reward)
         check_range(self, ("ctrl_dt", "sim_dt", "action_scale", "success_distance"), above=0)
         check_range(self, ("force_clip", "divergence_speed_factor"), above=0)
         check_range(self, ("init_noise", "strike_force"), low=0)
@@ -274,8 +276,28 @@ class TaskConfig:
         """Inverse of :meth:`to_dict`; a config recorded before ``joint_encoding`` existed
         reads as ``wrapped``, the encoding it was trained with."""
         data = {"joint_encoding": "wrapped", **data}
-        reward = RewardConfig(**config_fields(RewardConfig, data.pop("reward", {}), "reward"))
-        return cls(reward=reward, **config_fields(cls, data, "task config"))
+        weights = data.pop("reward", {})
+        fields = config_fields(cls, data, "task config")
+        kind = get_task(fields["task"]).reward_type if is_task(fields.get("task")) else RewardConfig
+        if isinstance(weights, dict):  # before tasks declared their own terms, every config
+            known = {f.name for f in dataclasses.fields(kind)}  # held Lift's at weight 0
+            weights = {k: v for k, v in weights.items() if k in known or v != 0}
+        reward = kind(**config_fields(kind, weights, "reward"))
+        return cls(reward=reward, **fields)
+
+
+def task_reward(task: str, reward: RewardConfig) -> RewardConfig:
+    """``reward`` as the weights of task ``task``'s reward type
+    (:attr:`~mjx_arm.task.spec.Task.reward_type`): the weights it shares with it kept, the
+    task's own terms at weight 0 where ``reward`` lacks them, and the weights of terms the task
+    does not have left out (they weighed terms that are 0 in that task: a config switched to
+    another task with ``replace(task=...)`` scores as before).
+    """
+    kind = get_task(task).reward_type
+    if type(reward) is kind:
+        return reward
+    known = {f.name for f in dataclasses.fields(kind)}
+    return kind(**{k: v for k, v in dataclasses.asdict(reward).items() if k in known})
 
 
 def task_config(name: str, **overrides: Any) -> TaskConfig:

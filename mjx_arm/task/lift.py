@@ -11,14 +11,16 @@ wrist reading: one above 100 N (the tool struck the table) ends the episode.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any, ClassVar
 
 from mjx_arm.task import grip as grip_lib
 from mjx_arm.task import reward as reward_lib
 from mjx_arm.task.config import RewardConfig, TaskConfig
-from mjx_arm.task.spec import Task
+from mjx_arm.task.spec import Budget, Task
 from mjx_arm.task.touch import Touch
-from mjx_arm.urdf.scene_shapes import CUBE_HALF, table_top_extent
+from mjx_arm.urdf.scene_shapes import CUBE_HALF, LIFT_SCENE, table_top_extent
 
 LIFT_HEIGHT = 0.10  # m above the resting height
 GRASP_FORCE = 0.5  # N on each pad: the pad presses the cube
@@ -36,6 +38,7 @@ CUBE_EDGE_MARGIN = 0.08  # m: the cube keeps this far from the table's edges
 CUBE_MASS_RANGE = (0.05, 0.2)
 FRICTION_RANGE = (0.8, 1.0)
 
+
 # Lift's reward. The distance charge and the near-field pull bring the ee to the cube;
 # ``cradle`` pays for closing the fingers around it (a policy that reaches the cube with the
 # fingers open otherwise learns nothing of closing them: the Panda's hand did so on one seed of
@@ -50,7 +53,25 @@ FRICTION_RANGE = (0.8, 1.0)
 # peaks 43-48 N) and gripped it low; in PyBullet they scored 0.755 and 0.685. With it (the same
 # seeds, H200) they scored 0.995 and 0.990 there, with peaks of 8-20 N in both CPU engines
 # (benchmarks/results/lift/stray_trial).
-LIFT_REWARD = RewardConfig(
+@dataclass(frozen=True)
+class LiftReward(RewardConfig):
+    """Lift's reward weights: the shared terms and Lift's own four
+    (:meth:`Lift.task_terms`), summed after them.
+
+    Terms: ``lift`` = how far the cube is up, as a fraction of :data:`LIFT_HEIGHT` (0 to 1),
+    ``grasp`` = 1 while both finger pads press the cube, ``cradle`` = the fingers' closure (0
+    open, 1 closed) while the cube's centre sits between them, ``stray`` = 1 while a finger
+    presses something (the cube's top, the table) with the cube's centre not between the pads.
+    """
+
+    task_terms: ClassVar[tuple[str, ...]] = ("lift", "grasp", "cradle", "stray")
+    lift: float = 0.0
+    grasp: float = 0.0
+    cradle: float = 0.0
+    stray: float = 0.0
+
+
+LIFT_REWARD = LiftReward(
     distance=-4.0,
     contact=0.0,
     proximity=2.0,
@@ -103,12 +124,21 @@ class Lift(Task):
     """Pick the cube off the table and hold it :data:`LIFT_HEIGHT` up between both pads."""
 
     name = "lift"
-    scene = "lift"
+    scene = LIFT_SCENE
     uses_contact = True
     gripper = True
     servo_dt = SERVO_DT
     extra_obs = (("gripper", 1), ("object_rel", 7), ("pad_force", 2))
     object_uniforms = 2
+    reward_type = LiftReward
+    default_arm = "ur5e_gripper.urdf"  # assets/: the UR5e with a parallel gripper
+    metrics: ClassVar[Mapping[str, str]] = {"height": "lift_height", "grasp": "grasp"}
+    # A longer task than Touch (reach, close, lift, hold 10 steps) at twice the physics steps;
+    # ``robust`` trains it under the SELECTED draw (mjx_arm.envs.physics_config).
+    budgets: ClassVar[Mapping[str, Budget]] = {
+        "fast": Budget(num_timesteps=40_000_000, num_evals=41),
+        "robust": Budget(num_timesteps=40_000_000, num_evals=41, randomization="selected"),
+    }
 
     def config(self, **overrides: Any) -> TaskConfig:
         """The Lift preset (its solver at :data:`LIFT_SOLVER_ITERATIONS`) with ``overrides``;

@@ -6,13 +6,14 @@ from typing import Any
 
 from mjx_arm.task.config import RewardConfig, TaskConfig
 from mjx_arm.task.spec import Task
+from mjx_arm.urdf.scene_shapes import REACH_SCENE
 
 
 class Reach(Task):
     """A point target drawn in a box in front of the arm; success is being within 2 cm of it."""
 
     name = "reach"
-    scene = "reach"
+    scene = REACH_SCENE
 
     def config(self, **overrides: Any) -> TaskConfig:
         """The Reach preset; ``variant`` may only be ``"seed"`` (Reach has one variant)."""

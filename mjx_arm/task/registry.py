@@ -5,7 +5,7 @@ success and contact rules). The registry stores where each task lives as an entr
 ``"module:ATTRIBUTE"``, and imports the module the first time the task is asked for, so naming a
 task (the command line's choices, a config's validation) loads nothing. Other packages add tasks
 through the ``mjx_arm.tasks`` entry-point group of their metadata; code adds them with
-:func:`register_task`.
+:func:`register_task` (and removes them with :func:`unregister_task`).
 """
 
 from __future__ import annotations
@@ -42,6 +42,21 @@ def register_task(task: Any, replace: bool = False) -> Any:
         raise ValueError(f"task {task.name!r} is already registered")
     _TASKS[task.name] = task
     return task
+
+
+def unregister_task(name: str) -> None:
+    """Remove the task registered as ``name`` (one :func:`register_task` added; a built-in
+    task's name goes back to its file).
+
+    Raises:
+        ValueError: no task has that name.
+    """
+    if name not in task_names():
+        raise ValueError(f"unknown task {name!r}; choose one of {list(task_names())}")
+    if name in TASKS:
+        _TASKS[name] = f"mjx_arm.task.{name}:{name.upper()}"
+    else:
+        del _TASKS[name]
 
 
 def task_names() -> tuple[str, ...]:

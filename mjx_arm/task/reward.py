@@ -16,9 +16,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from mjx_arm.task.config import REWARD_TERMS, TaskConfig
+from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.registry import get_task
-from mjx_arm.task.spec import GRIP_TERMS
 
 
 class JointBand(NamedTuple):
@@ -261,10 +260,11 @@ def band_reward_terms(
         motion: the previous step's distance, the action change and the hold count (None: their
             terms are 0).
         extra: the task's measures (:meth:`mjx_arm.task.spec.Task.measures`; None: the
-            ``lift``, ``grasp``, ``cradle`` and ``stray`` terms are 0).
+            task's own terms are 0).
 
     Returns:
-        Dict term name -> float array, shape ``(...)``; keys are ``REWARD_TERMS``.
+        Dict term name -> float array, shape ``(...)``; keys are ``REWARD_TERMS``, then the
+        task's own terms (:attr:`mjx_arm.task.spec.Task.reward_terms`).
     """
     limit, speed = joint_terms(xp, qpos, qvel, band)
     near = distance < cfg.success_distance
@@ -272,8 +272,8 @@ def band_reward_terms(
     contact, excess = task.contact_terms(xp, near, force_norm, cfg)
     closing, change, held = _motion_terms(xp, distance, cfg, motion)
     zero = 0.0 * distance
-    grip = task.task_terms(xp, extra, zero) if extra else dict.fromkeys(GRIP_TERMS, zero)
-    terms = {
+    own = task.task_terms(xp, extra, zero) if extra else dict.fromkeys(task.reward_terms, zero)
+    return {
         "distance": 1.0 - xp.exp(-distance / cfg.reward.distance_length),
         "contact": contact,
         "joint_limit": limit,
@@ -286,12 +286,8 @@ def band_reward_terms(
         "overforce": (excess > 0) * 1.0,
         "proximity": xp.exp(-distance / cfg.reward.proximity_length),
         "streak": held,
-        "lift": grip["lift"],
-        "grasp": grip["grasp"],
-        "cradle": grip["cradle"],
-        "stray": grip["stray"],
+        **{name: own[name] for name in task.reward_terms},
     }
-    return terms
 
 
 def _motion_terms(xp: Any, distance, cfg: TaskConfig, motion: Motion | None):
@@ -307,10 +303,15 @@ def _motion_terms(xp: Any, distance, cfg: TaskConfig, motion: Motion | None):
     return closing, motion.action_change + zero, streak(xp, motion.hold + zero, cfg)
 
 
-_WEIGHTS = operator.attrgetter(*REWARD_TERMS)  # RewardConfig -> the weights in term order
+@functools.cache
+def _weights(kind: type) -> tuple[tuple[str, ...], operator.attrgetter]:
+    """The term names of a reward type in summing order, and the getter of their weights."""
+    names = kind.term_names()
+    return names, operator.attrgetter(*names)
 
 
 def total_reward(terms: dict, cfg: TaskConfig):
-    """Weighted sum of the reward terms (every name of ``REWARD_TERMS``), shape ``(...)``."""
-    values = map(terms.__getitem__, REWARD_TERMS)
-    return sum(map(operator.mul, _WEIGHTS(cfg.reward), values))
+    """Weighted sum of the reward terms (every name of ``cfg.reward.term_names()``: the shared
+    ``REWARD_TERMS``, then the task's own), shape ``(...)``."""
+    names, weights = _weights(type(cfg.reward))
+    return sum(map(operator.mul, weights(cfg.reward), map(terms.__getitem__, names)))

@@ -14,20 +14,36 @@ overrides the force methods (see :mod:`mjx_arm.task.touch`). Every method works 
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
 from typing import Any, ClassVar
 
 from mjx_arm import names
-from mjx_arm.task.config import TaskConfig
-
-SCENES = (
-    "reach",
-    "touch",
-    "lift",
-)  # what the converter can build around the arm (mjx_arm.urdf.scene)
+from mjx_arm.task.config import RewardConfig, TaskConfig
+from mjx_arm.urdf.scene_shapes import REACH_SCENE, SceneSpec
 
 
-# the reward terms of a gripper task's measures
-GRIP_TERMS = ("lift", "grasp", "cradle", "stray")
+@dataclass(frozen=True)
+class Budget:
+    """What a training preset changes for one task (:attr:`Task.budgets`); None keeps the
+    preset's value. The fields are those of ``mjx_arm.train.config.TrainConfig``.
+
+    Attributes:
+        num_timesteps, num_evals, num_envs, batch_size, stop_at_success: as in the preset.
+        randomization: the training draw by name (``mjx_arm.train.config.RANDOMIZATIONS``).
+    """
+
+    num_timesteps: int | None = None
+    num_evals: int | None = None
+    num_envs: int | None = None
+    batch_size: int | None = None
+    stop_at_success: float | None = None
+    randomization: str | None = None
+
+    def changes(self) -> dict[str, Any]:
+        """The fields this budget sets, name -> value."""
+        values = {f.name: getattr(self, f.name) for f in fields(self)}
+        return {name: value for name, value in values.items() if value is not None}
 
 
 class Task:
@@ -35,8 +51,9 @@ class Task:
 
     Attributes:
         name: the registry name and ``TaskConfig.task`` value (lower case).
-        scene: the scene built around the arm: ``"reach"`` (a marker the arm can pass through)
-            or ``"touch"`` (the 5 cm box standing on the table).
+        scene: what the scene around the arm holds (table, target box or marker, a free
+            cube), as data every engine builds from: one of
+            :data:`mjx_arm.urdf.scene_shapes.SCENES` or a :class:`SceneSpec` of the task's own.
         uses_contact: whether the success condition reads the contact force.
         gripper: the task drives a parallel gripper: the arm must have one, the action has one
             more entry (the driven finger's speed, positive closes) and every engine fills the
@@ -45,15 +62,27 @@ class Task:
         extra_obs: observation keys after the contract's four, ``(key, size)`` in order.
         object_uniforms: uniform draws per episode for the object (:meth:`object_start`),
             after the target's three.
+        reward_type: the task's reward weights: :class:`RewardConfig`, or a subclass in the
+            task's file that adds the task's own terms (:meth:`task_terms` computes them).
+        budgets: what each training preset changes for this task, preset name ->
+            :class:`Budget` (a preset not named trains the task as it stands).
+        default_arm: the arm the task's presets and envs take when none is given: an asset
+            file (``assets/``), or "" for the shipped arm.
+        metrics: the :meth:`measures` the batched envs report as training metrics, measure
+            name -> metric name.
     """
 
     name: ClassVar[str]
-    scene: ClassVar[str] = "reach"
+    scene: ClassVar[SceneSpec] = REACH_SCENE
     uses_contact: ClassVar[bool] = False
     gripper: ClassVar[bool] = False
     servo_dt: ClassVar[float] = 0.0
     extra_obs: ClassVar[tuple[tuple[str, int], ...]] = ()
     object_uniforms: ClassVar[int] = 0
+    reward_type: ClassVar[type[RewardConfig]] = RewardConfig
+    budgets: ClassVar[Mapping[str, Budget]] = {}
+    default_arm: ClassVar[str] = ""
+    metrics: ClassVar[Mapping[str, str]] = {}
 
     @property
     def env_id(self) -> str:
@@ -90,11 +119,15 @@ class Task:
         tasks; empty otherwise)."""
         return {}
 
+    @property
+    def reward_terms(self) -> tuple[str, ...]:
+        """The task's own reward terms (after the shared ones): ``reward_type.task_terms``."""
+        return self.reward_type.task_terms
+
     def task_terms(self, xp: Any, extra: dict[str, Any], zero) -> dict[str, Any]:
-        """The raw ``lift``, ``grasp``, ``cradle`` and ``stray`` reward terms from
-        :meth:`measures`, each
-        ``(...)`` (``zero``: a zero array of the batch shape)."""
-        return dict.fromkeys(GRIP_TERMS, zero)
+        """The task's own raw reward terms (:attr:`reward_terms`) from :meth:`measures`, each
+        ``(...)`` (``zero``: a zero array of the batch shape); 0 by default."""
+        return dict.fromkeys(self.reward_terms, zero)
 
     def holds(self, xp: Any, distance, force_norm, cfg: TaskConfig, extra=None):
         """The success condition of one step (bool ``(...)``): the ee within

@@ -11,19 +11,18 @@ per update in 128 minibatches). In the batched setting a rollout is ``num_envs``
 from __future__ import annotations
 
 import dataclasses
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from mjx_arm.envs.base import GRIPPER_ARM
 from mjx_arm.envs.physics_config import LATENCY, SELECTED, PhysicsConfig, RandomizationConfig
 from mjx_arm.inputs import MAX_SEED, ConfigError, MissingInputError, read_json_object
 from mjx_arm.names import BACKENDS, PRESET_NAMES
 from mjx_arm.paths import asset
 from mjx_arm.settings import check_range, check_types, config_fields, set_path, split_setting
-from mjx_arm.task.config import RewardConfig, TaskConfig, task_config
+from mjx_arm.task.config import TaskConfig, task_config
 from mjx_arm.task.registry import get_task, is_task, task_names
+from mjx_arm.train.task_settings import set_task_field, task_changes
 from mjx_arm.urdf.arm_config import ArmConfig
 
 PARTITIONS = ("auto", "xla", "per_device")
@@ -41,10 +40,12 @@ class TrainConfig:
     """Everything a training run needs besides the task. Saved as JSON in the run directory.
 
     Attributes:
-        task: "reach" or "touch".
+        task: a registered task's name ("reach", "touch", "lift", ...).
+        task_settings: the task's config: its preset, with what the run changed
+            (``--set task.action_scale=0.4``; ``task.variant=seed`` picks the seed document's
+            Touch); None takes the task's default preset. Saved with every run; a run saved
+            before it existed stored the changes as ``task_overrides``, read the same way.
         arm: the arm trained (URDF, end effector, joints, home pose; default: the shipped arm).
-        task_overrides: fields of the task config to change (e.g. {"action_scale": 0.4};
-            {"variant": "seed"} picks the seed document's Touch).
         backend: "auto", "mjx" or "mujoco" (C MuJoCo through a host callback, CPU).
         physics: the MJX implementation (jax or warp) and its buffers.
         randomization: domain randomisation of the training envs (evaluation stays nominal).
@@ -81,7 +82,7 @@ class TrainConfig:
     """
 
     task: str = "reach"
-    task_overrides: dict[str, Any] = field(default_factory=dict)
+    task_settings: TaskConfig | None = None
     arm: ArmConfig = field(default_factory=ArmConfig)
     backend: str = "auto"
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
@@ -114,6 +115,8 @@ class TrainConfig:
     partition: str = "auto"
 
     def __post_init__(self) -> None:
+        if self.task_settings is None and is_task(self.task):
+            object.__setattr__(self, "task_settings", task_config(self.task))
         check_types(self)
         check_range(self, _POSITIVE_INTS, low=1)
         check_range(self, ("policy_hidden", "value_hidden"), low=1, high=MAX_LAYER)
@@ -147,15 +150,25 @@ class TrainConfig:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
         """Inverse of :meth:`to_dict`; unknown keys are an error. Sections missing from older
-        files take their defaults."""
+        files take their defaults; ``task_overrides`` (the task's changes to its preset, as
+        configs stored them before ``task_settings``) is read onto the task's preset."""
         data = dict(data)
         if "max_devices" in data:  # the name in configs written before "devices"
             data.setdefault("devices", data.pop("max_devices"))
+        overrides = data.pop("task_overrides", None)
+        settings = data.pop("task_settings", None)
         data = config_fields(cls, data, "training config")
         for key, kind in SECTIONS.items():
             if isinstance(data.get(key), dict):
                 data[key] = kind.from_dict(data[key])
-        return cls(**data)
+        task = data.get("task", cls.task)
+        if isinstance(settings, dict):
+            settings = TaskConfig.from_dict(settings)
+        if overrides is not None:
+            if not isinstance(overrides, dict):
+                raise ConfigError("task_overrides must be a table of task fields")
+            settings = task_changes(task, settings, overrides)
+        return cls(task_settings=settings, **data)
 
     def validate(self) -> None:
         """Check names, the task's settings, the arm's URDF and the batch arithmetic PPO
@@ -180,17 +193,16 @@ class TrainConfig:
         self.task_config()
 
     def task_config(self) -> TaskConfig:
-        """The task config of ``task`` with ``task_overrides``.
+        """The task's config, ``task_settings``.
 
         Raises:
-            ConfigError: an override that is not a task field, or of the wrong type or range.
+            ConfigError: settings of another task than ``task``.
         """
-        try:
-            return task_config(self.task, **self.task_overrides)
-        except ConfigError as err:
-            raise ConfigError(f"task settings: {err}") from err
-        except (TypeError, ValueError) as err:  # an unknown field, a bad variant
-            raise ConfigError(f"task settings {self.task_overrides}: {err}") from err
+        settings = self.task_settings
+        if settings is None or settings.task != self.task:
+            held = settings.task if settings else None
+            raise ConfigError(f"task settings are of task {held!r}, not of {self.task!r}")
+        return settings
 
     def check_devices(self, count: int) -> None:
         """Check that the batches split evenly over ``count`` devices.
@@ -222,8 +234,9 @@ MAX_BATCH = 2**20  # envs or sequences in one batch: beyond any accelerator's me
 MAX_LAYER = 2**14  # units in one hidden layer
 
 # The seed document's PPO settings mapped onto a GPU batch, on the seed document's task (Touch
-# succeeds on the first in-band step; no force or speed terms) and without randomisation.
-SEED = TrainConfig(task_overrides={"variant": "seed"})
+# succeeds on the first in-band step; no force or speed terms: PRESET_VARIANTS) and without
+# randomisation.
+SEED = TrainConfig()
 
 # Fastest to a solved task on one GPU. The physics steps 8192 envs at once (Warp's throughput
 # flattens out above that), and each 10-step rollout (81,920 transitions) feeds 4 epochs of 32
@@ -249,7 +262,7 @@ FAST = TrainConfig(
 )
 
 # A small CPU run: the README's main job and the CI learning test (Reach); Touch takes a larger
-# batch and budget (TASK_PRESETS).
+# batch and budget (its Task.budgets).
 CPU = TrainConfig(
     num_timesteps=300_000,
     num_envs=64,
@@ -263,7 +276,7 @@ CPU = TrainConfig(
     num_eval_envs=64,
 )
 
-# ``fast`` trained under a randomisation chosen by measurement, per task (TASK_PRESETS):
+# ``fast`` trained under a randomisation chosen by measurement, per task (Task.budgets):
 # Touch under :data:`mjx_arm.envs.physics_config.LATENCY`, Lift under ``SELECTED`` (why: see
 # there). Evaluation during training stays nominal. Its own preset, beside ``fast`` rather than
 # in it: it costs more than the 1.5x of ``fast``'s steps to solve that a default may cost
@@ -273,91 +286,77 @@ ROBUST_FAST = FAST.replace(randomization=LATENCY)
 PRESETS = {"seed": SEED, "fast": FAST, "cpu": CPU, "robust": ROBUST_FAST}
 assert tuple(PRESETS) == PRESET_NAMES
 
-# What a preset changes for one task: Touch needs more env steps than Reach (it must learn to
-# hold a press), so its budget and evaluation count are its own.
-TASK_PRESETS: dict[tuple[str, str], dict[str, Any]] = {
-    ("fast", "touch"): {"num_timesteps": 30_000_000, "num_evals": 31},
-    # Lift: a longer task (reach, close, lift, hold 10 steps) at twice the physics steps.
-    ("fast", "lift"): {"num_timesteps": 40_000_000, "num_evals": 41},
-    # Touch under latency needs up to 49M steps (seeds 0-4 of robustness/robust_seeds); at
-    # fast's 30M budget two of four seeds stopped unsolved.
-    ("robust", "touch"): {"num_timesteps": 60_000_000, "num_evals": 61},
-    ("robust", "lift"): {"num_timesteps": 40_000_000, "num_evals": 41, "randomization": SELECTED},
-    ("cpu", "touch"): {
-        "num_timesteps": 8_000_000,
-        "num_envs": 256,
-        "batch_size": 256,
-        "num_evals": 33,
-        "stop_at_success": 0.95,
-    },
-}
+# The task variant a preset picks (the task's default variant elsewhere).
+PRESET_VARIANTS = {"seed": "seed"}
+
+# The training draws a task's budget names (mjx_arm.task.spec.Budget.randomization).
+RANDOMIZATIONS = {"latency": LATENCY, "selected": SELECTED}
 
 
-def preset_config(name: str, task: str | None = None) -> TrainConfig:
-    """Preset ``name`` for ``task`` (default: the preset's own task), with the task's changes.
+def preset_config(name: str, task: str | None = None, variant: str | None = None) -> TrainConfig:
+    """Preset ``name`` for ``task`` (default: the preset's own task), with the task's budget
+    for that preset (:attr:`mjx_arm.task.spec.Task.budgets`), its default arm and its preset
+    of ``variant`` (None: the variant the preset picks, else the task's default).
 
     Raises:
-        ConfigError: an unknown preset.
+        ConfigError: an unknown preset or task, or a variant the task does not have.
     """
     if name not in PRESETS:
         raise ConfigError(f"unknown preset {name!r}; choose one of {sorted(PRESETS)}")
     config = PRESETS[name]
     task = task or config.task
-    config = config.replace(task=task, **TASK_PRESETS.get((name, task), {}))
-    if is_task(task) and get_task(task).gripper:  # a gripper task trains the gripper arm
-        config = config.replace(arm=ArmConfig(urdf=str(asset(GRIPPER_ARM))))
-    return config
+    if not is_task(task):
+        raise ConfigError(f"task must be one of {list(task_names())}, got {task!r}")
+    spec = get_task(task)
+    budget = spec.budgets.get(name)
+    changes = budget.changes() if budget else {}
+    if "randomization" in changes:
+        changes["randomization"] = _randomization(changes["randomization"])
+    if spec.default_arm:
+        changes["arm"] = ArmConfig(urdf=str(asset(spec.default_arm)))
+    settings = task_changes(task, None, {"variant": variant or PRESET_VARIANTS.get(name)})
+    return config.replace(task=task, task_settings=settings, **changes)
 
 
-def _set_task_field(task_changes: dict[str, Any], name: str, text: str) -> None:
-    """Put ``task.NAME=text`` into ``task_changes`` (``reward.TERM`` into its ``reward`` dict).
-
-    Raises:
-        ConfigError: NAME is not a field of the task config or of its reward.
-    """
-    try:
-        value = json.loads(text)
-    except json.JSONDecodeError:
-        value = text
-    head, dot, term = name.partition(".")
-    if dot and head == "reward":
-        terms = {f.name for f in dataclasses.fields(RewardConfig)}
-        if term not in terms:
-            raise ConfigError(f"unknown reward key 'task.{name}'; known: {sorted(terms)}")
-        task_changes["reward"] = {**task_changes.get("reward", {}), term: value}
-        return
-    fields = {f.name for f in dataclasses.fields(TaskConfig)}
-    if name not in fields:
-        raise ConfigError(f"unknown task key 'task.{name}'; known: {sorted(fields)}")
-    task_changes[name] = value
+def _randomization(name: str) -> RandomizationConfig:
+    if name not in RANDOMIZATIONS:
+        raise ConfigError(f"unknown randomization {name!r}; choose one of {list(RANDOMIZATIONS)}")
+    return RANDOMIZATIONS[name]
 
 
 def apply_overrides(config: TrainConfig, items: list[str]) -> TrainConfig:
-    """Apply ``key=value`` overrides (:mod:`mjx_arm.settings`); ``task.KEY=value`` goes to
-    ``task_overrides`` and ``task.reward.TERM=value`` to its reward weights."""
-    task_changes = dict(config.task_overrides)
+    """Apply ``key=value`` overrides (:mod:`mjx_arm.settings`); ``task.KEY=value`` changes
+    ``task_settings`` (:func:`task_changes`) and ``task.reward.TERM=value`` its reward
+    weights. A ``task=`` naming another task starts from that task's default settings."""
+    changes: dict[str, Any] = {}
     for item in items:
         path, text = split_setting(item)
         try:
             if path[0] == "task" and len(path) > 1:
-                _set_task_field(task_changes, ".".join(path[1:]), text)
+                set_task_field(changes, ".".join(path[1:]), text, config.task)
             else:
                 config = set_path(config, path, text, "config key")
         except ConfigError as err:
             raise ConfigError(f"--set {item}: {err}") from err
-    return config.replace(task_overrides=task_changes)
+    if not changes and config.task_settings and config.task_settings.task == config.task:
+        return config
+    if not is_task(config.task):
+        return config  # validate() names the unknown task
+    return config.replace(task_settings=task_changes(config.task, config.task_settings, changes))
 
 
-def _task_named(data: dict[str, Any], overrides: list[str]) -> str | None:
-    """The task a config file or the overrides name (the last override wins), or None."""
-    task = data.get("task")
+def _named(data: dict[str, Any], overrides: list[str], key: str) -> str | None:
+    """The value of ``key`` (``task`` or ``task.variant``) a config file or the overrides name
+    (the last override wins), or None."""
+    value = data.get(key)
     for item in overrides:
-        key, _, value = item.partition("=")
-        if key.strip() == "task":
-            task = value.strip()
-    if task is not None and not isinstance(task, str):
-        raise ConfigError(f"task must be a task's name (a string), not {type(task).__name__}")
-    return task
+        name, _, text = item.partition("=")
+        if name.strip() == key:
+            value = text.strip()
+    if value is not None and not isinstance(value, str):
+        what = key.rpartition(".")[2]  # task or variant
+        raise ConfigError(f"{key} must be a {what}'s name (a string), not {type(value).__name__}")
+    return value
 
 
 def load_config(
@@ -376,20 +375,31 @@ def load_config(
         data = data.get("train", data)
         if not isinstance(data, dict):
             raise ConfigError(f"config file {str(file)!r}: 'train' must be a table of fields")
-    config = preset_config(preset, _task_named(data, overrides or []))
+    overrides = overrides or []
+    variant = _named({}, overrides, "task.variant")
+    config = preset_config(preset, _named(data, overrides, "task"), variant)
     if file is not None:
         config = _merge_file(config, data, file)
-    config = apply_overrides(config, overrides or [])
+    config = apply_overrides(config, overrides)
     config.validate()
     return config
 
 
 def _merge_file(config: TrainConfig, data: dict[str, Any], file: str | Path) -> TrainConfig:
-    """``config`` with the fields of a config file (sections merged field by field)."""
+    """``config`` with the fields of a config file (sections merged field by field; the
+    file's ``task_settings`` are changes to the preset's, its ``task_overrides`` changes to
+    the task's default preset, as before ``task_settings`` existed)."""
     merged = config.to_dict()
+    if "task_settings" in data and "task_overrides" in data:
+        raise ConfigError(f"config file {str(file)!r}: give task_settings or task_overrides")
     for key, value in data.items():
         if key in SECTIONS and isinstance(value, dict):
             merged[key] = {**merged[key], **value}
+        elif key == "task_settings":
+            merged["task_overrides"] = value
+        elif key == "task_overrides":
+            merged.pop("task_settings")
+            merged[key] = value
         else:
             merged[key] = value
     try:

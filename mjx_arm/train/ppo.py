@@ -75,7 +75,10 @@ def full_config(
         "train": config.to_dict(),
         "task": task.to_dict(),
         "arm": arm_record(arm),
-        "convert": {k: v for k, v in vars(conversion).items() if k != "package_dirs"},
+        "convert": {
+            **{k: v for k, v in vars(conversion).items() if k != "package_dirs"},
+            "scene": conversion.scene.name,
+        },
         "backend": resolve_backend(config.backend),
         "physics_resolved": physics or {},
         "jax_backend": jax.default_backend(),

@@ -78,7 +78,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
     package_dirs = _package_dirs(args.package)
     repairs = repairs_of(args)
     config = ConvertConfig(
-        scene=args.scene,
+        scene=SCENES[args.scene],
         package_dirs=package_dirs,
         repair_inertia=repairs.repair_inertia,
         default_effort=repairs.default_effort,

@@ -8,6 +8,8 @@ import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+from mjx_arm.urdf.scene_shapes import NO_SCENE, SCENES, SceneSpec
+
 # Collision bit masks. Scene geoms (table, target box) never collide with each other. Arm geoms
 # collide with the scene, and with each other only when self_collision is on.
 ARM_CONTYPE, ARM_CONAFFINITY = 1, 3
@@ -65,7 +67,8 @@ class ConvertConfig:
             Touch scene steps 1.6M physics steps/s at 4 iterations (line search 8), 3.2M at
             2 (4) and 5.0M at 1 (2), 32k envs (``benchmarks/results/sweep/*.json``).
         ls_iterations: line-search iterations of the Newton solver.
-        scene: "none", "reach" or "touch": the task scene added around the arm.
+        scene: the task scene added around the arm (:class:`~mjx_arm.urdf.scene_shapes.SceneSpec`;
+            a name of :data:`~mjx_arm.urdf.scene_shapes.SCENES` is read as that scene).
         package_dirs: ``package://NAME`` -> directory; unnamed packages are searched for upwards
             from the URDF's folder.
         repair_inertia: replace inertia tensors that break the triangle inequality (or are not
@@ -98,7 +101,7 @@ class ConvertConfig:
     rest_qpos: tuple[tuple[str, float], ...] = ()
     solver_iterations: int = 2
     ls_iterations: int = 4
-    scene: str = "none"
+    scene: SceneSpec = NO_SCENE
     package_dirs: Mapping[str, str] = field(default_factory=dict)
     repair_inertia: bool = False
     default_effort: float = 0.0
@@ -107,6 +110,10 @@ class ConvertConfig:
     collision: str = "mesh"
     convert_meshes: bool = True
     mesh_cache_dir: str | None = None
+
+    def __post_init__(self) -> None:
+        if isinstance(self.scene, str) and self.scene in SCENES:
+            object.__setattr__(self, "scene", SCENES[self.scene])
 
     def default_limits(self) -> dict[str, float]:
         """``effort``/``velocity`` -> the value the converter supplies where a joint has none."""

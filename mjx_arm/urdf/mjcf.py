@@ -23,7 +23,7 @@ from mjx_arm.urdf.model import RobotModel, parse_urdf
 from mjx_arm.urdf.repair import INERTIA_FIX, UrdfRepairs, inertial_links, link_tensor, repair_tree
 from mjx_arm.urdf.safe_xml import read_xml
 from mjx_arm.urdf.scene import add_scene
-from mjx_arm.urdf.scene_shapes import SCENES
+from mjx_arm.urdf.scene_shapes import SCENES, SceneSpec
 from mjx_arm.urdf.spec_edits import (
     _add_actuators,
     _add_pad_sensors,
@@ -40,7 +40,7 @@ from mjx_arm.urdf.spec_edits import (
 def build_checked_spec(path: Path, config: ConvertConfig) -> mujoco.MjSpec:
     """``mjx_arm.urdf.convert.build_spec`` for a URDF that already passed the static checks
     (the validator's native layer calls it). Raises ``ConversionError`` as that does."""
-    if config.scene not in SCENES:
+    if not isinstance(config.scene, SceneSpec):
         raise ConversionError(f"unknown scene {config.scene!r}; choose one of {sorted(SCENES)}")
     model = parse_urdf(path)
     xml_text = _prepare_urdf_text(path, config)

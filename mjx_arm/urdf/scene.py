@@ -24,6 +24,7 @@ from mjx_arm.urdf.scene_shapes import (
     TARGET_BODY,
     TARGET_GEOM,
     TARGET_SITE,
+    SceneSpec,
     box_top_offset,
     scene_geometry,
 )
@@ -40,6 +41,7 @@ __all__ = [
     "TARGET_BODY",
     "TARGET_GEOM",
     "TARGET_SITE",
+    "SceneSpec",
     "add_scene",
     "box_top_offset",
     "camera_quat",
@@ -60,10 +62,10 @@ def camera_quat() -> np.ndarray:
     return quat
 
 
-def add_scene(spec: mujoco.MjSpec, scene: str) -> None:
-    """Add floor, table, light, camera and the mocap target body; ``touch`` puts the box on
-    the target, ``lift`` adds a free cube resting on the table."""
-    if scene == "none":
+def add_scene(spec: mujoco.MjSpec, scene: SceneSpec) -> None:
+    """Add what ``scene`` holds: floor, table, light, camera and the mocap target body, with the
+    box on the target or a marker, and a free cube resting on the table."""
+    if not scene.table:
         return
     world = spec.worldbody
     light = world.add_light()
@@ -94,7 +96,7 @@ def add_scene(spec: mujoco.MjSpec, scene: str) -> None:
     site.name = TARGET_SITE
     site.size = [0.006, 0, 0]
     site.group = 4
-    if scene == "touch":
+    if scene.box:
         for g in scene_geometry()["box"]:
             geom = target.add_geom()
             geom.name = TARGET_GEOM
@@ -106,25 +108,24 @@ def add_scene(spec: mujoco.MjSpec, scene: str) -> None:
         marker.name = "target_marker"
         marker.type = mujoco.mjtGeom.mjGEOM_SPHERE
         marker.size = [0.02, 0, 0]
-        # the lift scene's target is the cube itself: its marker is not drawn
-        marker.rgba = [0.1, 0.8, 0.2, 0.0 if scene == "lift" else 0.5]
+        marker.rgba = [0.1, 0.8, 0.2, 0.5 if scene.marker else 0.0]
         marker.contype = marker.conaffinity = 0
-    if scene == "lift":
-        _add_cube(world)
+    if scene.cube_half:
+        _add_cube(world, scene.cube_half)
 
 
-def _add_cube(world) -> None:
-    """The free cube, resting on the table in front of the arm (a :data:`CUBE_HALF` half edge,
+def _add_cube(world, half: float) -> None:
+    """The free cube, resting on the table in front of the arm (a ``half`` edge (m),
     :data:`CUBE_MASS`); its free joint is its body's name."""
     cube = world.add_body()
     cube.name = CUBE_BODY
-    cube.pos = [0.5, 0.15, CUBE_HALF]
+    cube.pos = [0.5, 0.15, half]
     joint = cube.add_freejoint()
     joint.name = CUBE_BODY
     geom = cube.add_geom()
     geom.name = CUBE_GEOM
     geom.type = mujoco.mjtGeom.mjGEOM_BOX
-    geom.size = [CUBE_HALF] * 3
+    geom.size = [half] * 3
     geom.mass = CUBE_MASS
     geom.rgba = [0.2, 0.35, 0.85, 1.0]
     # it rests on the table and is held by the fingers: it collides with both

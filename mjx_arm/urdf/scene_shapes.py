@@ -9,6 +9,7 @@ PyBullet reference env loads directly, so both engines see the same scene. Engin
 from __future__ import annotations
 
 import functools
+from dataclasses import dataclass
 
 from mjx_arm.paths import asset
 from mjx_arm.urdf.model import Geometry, parse_urdf
@@ -17,7 +18,6 @@ from mjx_arm.urdf.model import Geometry, parse_urdf
 # only with the arm (mjx_arm.urdf.convert_config has the arm's bits).
 SCENE_CONTYPE, SCENE_CONAFFINITY = 2, 1
 
-SCENES = frozenset({"none", "reach", "touch", "lift"})
 TARGET_BODY = "target"
 TARGET_SITE = "target"
 TARGET_GEOM = "target_box"
@@ -26,6 +26,38 @@ FLOOR_Z = -0.75
 # half edge (m) and mass (kg) as built; a task or check moves it through its free joint.
 CUBE_BODY, CUBE_GEOM = "cube", "cube"
 CUBE_HALF, CUBE_MASS = 0.0225, 0.1
+
+
+@dataclass(frozen=True)
+class SceneSpec:
+    """What a task's scene holds around the arm, as data: the MuJoCo scene builder
+    (:func:`mjx_arm.urdf.scene.add_scene`) and the PyBullet env build from it. A task declares
+    its scene (:attr:`mjx_arm.task.spec.Task.scene`): one of :data:`SCENES` or its own.
+
+    Attributes:
+        name: the scene's name (``mjx-arm convert --scene`` takes those of :data:`SCENES`).
+        table: the floor, light, table, camera and the mocap target body (False: the arm
+            alone; nothing below applies).
+        box: the target box (``assets/target_box.urdf``) stands on the target body, the target
+            site on its top face; otherwise the target body carries a sphere marker.
+        marker: the sphere marker is drawn (it marks the target in the model either way).
+        cube_half: half edge (m) of a free cube (:data:`CUBE_BODY`, :data:`CUBE_MASS`) resting
+            on the table; 0: no cube.
+    """
+
+    name: str
+    table: bool = True
+    box: bool = False
+    marker: bool = True
+    cube_half: float = 0.0
+
+
+NO_SCENE = SceneSpec("none", table=False, marker=False)
+REACH_SCENE = SceneSpec("reach")  # a marker the arm passes through
+TOUCH_SCENE = SceneSpec("touch", box=True, marker=False)  # the 5 cm box on the table
+LIFT_SCENE = SceneSpec("lift", marker=False, cube_half=CUBE_HALF)  # the target is the cube
+# The scenes the converter builds by name (``--scene``); a task may declare one of its own.
+SCENES = {scene.name: scene for scene in (NO_SCENE, REACH_SCENE, TOUCH_SCENE, LIFT_SCENE)}
 
 # One camera for every engine: eye, look-at point (m, world frame) and vertical field of view.
 CAMERA_EYE = (1.45, -1.05, 0.85)

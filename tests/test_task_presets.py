@@ -1,0 +1,139 @@
+"""Every preset of every task resolves to the numbers it shipped with.
+
+``tests/data/preset_configs.json`` holds ``preset_config(preset, task).to_dict()``, its task config
+and each task variant's config as they were while budgets sat in a ``(preset, task)`` table of
+the training config, reward weights in one list for every task and task settings in an untyped
+``task_overrides`` dict. Since then a task declares its budgets, reward terms and scene in its
+own file and the settings are a typed ``TaskConfig``: every number must be the same. The only
+keys allowed to go are reward weights of terms a task no longer carries, and only at weight 0.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from mjx_arm.inputs import ConfigError
+from mjx_arm.task import task_config
+from mjx_arm.train.config import PRESETS, TrainConfig, preset_config
+
+SNAPSHOT = json.loads((Path(__file__).parent / "data" / "preset_configs.json").read_text())
+CASES = sorted(SNAPSHOT["train"])
+
+
+def _json(value):
+    """``value`` as JSON reads it back (tuples become lists)."""
+    return json.loads(json.dumps(value))
+
+
+def _drop_zero_terms(before: dict, after: dict) -> dict:
+    """``before`` (a task config's dict) without the reward weights ``after`` lacks; each of
+    them must be 0."""
+    dropped = {k: v for k, v in before["reward"].items() if k not in after["reward"]}
+    assert all(v == 0 for v in dropped.values()), dropped
+    return {**before, "reward": {k: v for k, v in before["reward"].items() if k not in dropped}}
+
+
+def test_the_snapshot_covers_every_preset_and_shipped_task() -> None:
+    assert {case.split("/")[0] for case in CASES} == set(PRESETS)
+    assert {case.split("/")[1] for case in CASES} == {"reach", "touch", "lift"}
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_preset_resolves_to_the_shipped_numbers(case: str) -> None:
+    preset, task = case.split("/")
+    before_train, before_task = SNAPSHOT["train"][case], SNAPSHOT["task"][case]
+    if before_task == "ConfigError":  # the seed preset's variant is not one of Lift's
+        with pytest.raises(ConfigError, match="unknown lift variant 'seed'"):
+            preset_config(preset, task)
+        return
+    after = _json(preset_config(preset, task).to_dict())
+    settings = after.pop("task_settings")
+    assert after == {k: v for k, v in before_train.items() if k != "task_overrides"}
+    assert settings == _drop_zero_terms(before_task, settings)
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_a_config_saved_with_task_overrides_reads_as_it_did(case: str) -> None:
+    """A run directory written before ``task_settings`` stored ``task_overrides``: it loads
+    with the same task config."""
+    before_train, before_task = SNAPSHOT["train"][case], SNAPSHOT["task"][case]
+    if before_task == "ConfigError":
+        with pytest.raises(ConfigError, match="unknown lift variant 'seed'"):
+            TrainConfig.from_dict(before_train)
+        return
+    loaded = _json(TrainConfig.from_dict(before_train).task_config().to_dict())
+    assert loaded == _drop_zero_terms(before_task, loaded)
+
+
+@pytest.mark.parametrize("case", sorted(SNAPSHOT["variants"]))
+def test_each_task_variant_keeps_its_numbers(case: str) -> None:
+    task, variant = case.split("/")
+    after = _json(task_config(task, variant=variant).to_dict())
+    assert after == _drop_zero_terms(SNAPSHOT["variants"][case], after)
+
+
+def test_settings_round_trip_through_a_saved_config() -> None:
+    """A run saves the whole typed task config and reads back an equal one."""
+    config = preset_config("fast", "lift")
+    assert TrainConfig.from_dict(_json(config.to_dict())) == config
+    assert TrainConfig.from_dict(_json(config.to_dict())).task_config().reward.lift == 20.0
+
+
+# The ``--set`` examples of README.md, docs/commands.md and the task pages.
+DOCUMENTED = [
+    ("cpu", ["task=touch", "num_envs=256", "task.action_scale=0.2",
+             "task.reward.approach_speed=-50", "physics.impl=jax", "randomization.enabled=true"]),
+    ("fast", ["task=touch", "task.variant=seed"]),
+    ("fast", ["task=touch", "task.variant=gentle"]),
+    ("fast", ["task=lift", "task.variant=soft"]),
+    ("seed", ["task=lift", "task.variant=gentle"]),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize(("preset", "items"), DOCUMENTED)
+def test_documented_task_settings_work(preset: str, items: list[str]) -> None:
+    """Each documented ``--set task.*`` lands in the typed task settings, on top of the preset
+    of the variant it names, and survives a save and load."""
+    from mjx_arm.train.config import load_config
+
+    config = load_config(preset, None, items)
+    settings = config.task_config()
+    task = items[0].partition("=")[2]
+    variant = next((i.partition("=")[2] for i in items if i.startswith("task.variant=")), None)
+    expected = task_config(task, **({"variant": variant} if variant else {}))
+    if "task.action_scale=0.2" in items:
+        expected = expected.replace(action_scale=0.2, reward={"approach_speed": -50.0})
+    assert settings == expected
+    assert TrainConfig.from_dict(_json(config.to_dict())) == config
+
+
+def test_task_settings_refuse_what_the_task_lacks() -> None:
+    """A reward term of another task, an unknown field and a foreign variant are errors."""
+    from mjx_arm.train.config import load_config
+
+    with pytest.raises(ConfigError, match=r"unknown reward key 'task\.reward\.lift'"):
+        load_config("fast", None, ["task=touch", "task.reward.lift=1"])
+    lift = load_config("fast", None, ["task=lift", "task.reward.lift=1"])
+    assert lift.task_config().reward.lift == 1
+    with pytest.raises(ConfigError, match="unknown task key"):
+        load_config("fast", None, ["task.no_such=1"])
+    with pytest.raises(ConfigError, match="unknown touch variant"):
+        load_config("fast", None, ["task=touch", "task.variant=soft"])
+
+
+@pytest.mark.parametrize("case", ["fast/reach", "cpu/touch", "fast/lift"])
+def test_a_task_config_saved_with_every_terms_weight_loads(case: str) -> None:
+    """A run's or a policy's task config saved while every task carried Lift's four weights
+    (at 0 outside Lift) loads as the task's config of today."""
+    from mjx_arm.task.config import TaskConfig
+
+    preset, task = case.split("/")
+    saved = SNAPSHOT["task"][case]
+    assert TaskConfig.from_dict(saved) == preset_config(preset, task).task_config()
+    if task != "lift":
+        assert "lift" in saved["reward"]
+        with pytest.raises(ConfigError, match="unknown reward keys"):
+            TaskConfig.from_dict({**saved, "reward": {**saved["reward"], "lift": 1.0}})
