@@ -19,6 +19,7 @@ from mjx_arm.inputs import ConfigError
 from mjx_arm.task import task_config
 from mjx_arm.train.config import PRESETS, TrainConfig, preset_config
 
+REPO = Path(__file__).resolve().parents[1].as_posix()
 SNAPSHOT = json.loads((Path(__file__).parent / "data" / "preset_configs.json").read_text())
 CASES = sorted(SNAPSHOT["train"])
 
@@ -26,6 +27,11 @@ CASES = sorted(SNAPSHOT["train"])
 def _json(value):
     """``value`` as JSON reads it back (tuples become lists)."""
     return json.loads(json.dumps(value))
+
+
+def _portable(value):
+    """:func:`_json` with paths inside the repository relative to it (the snapshot's are)."""
+    return json.loads(json.dumps(value).replace(f"{REPO}/", ""))
 
 
 def _drop_zero_terms(before: dict, after: dict) -> dict:
@@ -49,7 +55,7 @@ def test_preset_resolves_to_the_shipped_numbers(case: str) -> None:
         with pytest.raises(ConfigError, match="unknown lift variant 'seed'"):
             preset_config(preset, task)
         return
-    after = _json(preset_config(preset, task).to_dict())
+    after = _portable(preset_config(preset, task).to_dict())
     settings = after.pop("task_settings")
     assert after == {k: v for k, v in before_train.items() if k != "task_overrides"}
     assert settings == _drop_zero_terms(before_task, settings)
@@ -64,14 +70,14 @@ def test_a_config_saved_with_task_overrides_reads_as_it_did(case: str) -> None:
         with pytest.raises(ConfigError, match="unknown lift variant 'seed'"):
             TrainConfig.from_dict(before_train)
         return
-    loaded = _json(TrainConfig.from_dict(before_train).task_config().to_dict())
+    loaded = _portable(TrainConfig.from_dict(before_train).task_config().to_dict())
     assert loaded == _drop_zero_terms(before_task, loaded)
 
 
 @pytest.mark.parametrize("case", sorted(SNAPSHOT["variants"]))
 def test_each_task_variant_keeps_its_numbers(case: str) -> None:
     task, variant = case.split("/")
-    after = _json(task_config(task, variant=variant).to_dict())
+    after = _portable(task_config(task, variant=variant).to_dict())
     assert after == _drop_zero_terms(SNAPSHOT["variants"][case], after)
 
 
