@@ -30,9 +30,8 @@ import gymnasium as gym
 import numpy as np
 
 from mjx_arm.envs.arm import ArmInfo, validated_arm_info
-from mjx_arm.envs.scalar import state as scalar_state
 from mjx_arm.envs.scalar.codegen import Scorer, step_scorers
-from mjx_arm.envs.scalar.state import ScalarState
+from mjx_arm.envs.scalar.state import ScalarState, finite
 from mjx_arm.envs.scalar.step import StepInput
 from mjx_arm.envs.scalar.xp import SCALAR_XP
 from mjx_arm.envs.setup import arm_setup
@@ -284,11 +283,10 @@ class BaseRobotEnv(gym.Env):
         """The flat state before and after clipping (``16 + n + k`` floats), distance d (m)
         and contact force norm (N) of a reading, each computed once, in Python floats
         (:mod:`mjx_arm.envs.scalar.state`)."""
-        ee_pos, ee_quat, qpos, _, target_pos, wrench, grip = reading
-        extra = None
+        r, spec, extra = reading, self.task_spec, None
         if self._extra:
-            extra = self.task_spec.grip_observation(SCALAR_XP, ee_pos, ee_quat, grip, self.task)
-        return self._flat.measure(ee_pos, ee_quat, qpos, target_pos, wrench, extra)
+            extra = spec.grip_observation(SCALAR_XP, r.ee_pos, r.ee_quat, r.grip, self.task)
+        return self._flat.measure(r.ee_pos, r.ee_quat, r.qpos, r.target_pos, r.wrench, extra)
 
     def _measures(self, reading: PhysicsReading) -> dict[str, float] | None:
         """The task's measures of a reading (gripper tasks), else None."""
@@ -331,7 +329,7 @@ class BaseRobotEnv(gym.Env):
             velocity term (a sum of magnitudes).
         """
         raw, state, d, force = self._measure(reading)
-        if not (diverged or scalar_state.finite(raw)):
+        if not (diverged or finite(raw)):
             return None
         qvel = reading.qvel.tolist()  # the rules take lists
         if not diverged and self._runaway(qvel):
