@@ -135,6 +135,44 @@ def joint_servo(arm: ArmInfo, sim_dt: float) -> JointServo:
     return _servo_cached(arm.config, arm.urdf.stat().st_mtime, sim_dt)
 
 
+@dataclass(frozen=True)
+class ArmIds:
+    """PyBullet indices of the arm, looked up by name (link index = joint index).
+
+    Attributes:
+        joints: the n actuated joints, contract order.
+        ft: the joint of the wrist F/T reading (the fixed F/T joint, or the last arm joint);
+            its child link is the tool link.
+        ee: the end-effector link.
+        read: what one ``getJointStates`` call reads: ``joints`` then ``ft``.
+        dofs: every moving joint (the arm's and a gripper's): inverse dynamics needs them all.
+        arm_in_dofs: where each of ``joints`` sits in ``dofs``.
+        tool_links: where the F/T point is an arm joint (no fixed F/T joint), the links of the
+            tool subtree, whose contacts make the reading; else empty (the F/T sensor reads).
+        tool_com: the tool link's centre of mass in the tool link frame (m), ``(3,)``; PyBullet
+            reports the F/T torque about this point.
+        inertia: principal inertia (kg m^2) of each actuated joint's child link with the
+            joint's armature added, 6 triples.
+        self_collision_off: arm link pairs whose contacts are disabled (empty: no self-collision).
+        finger, finger_lower, pads, gripper_start: see :func:`pybullet_ref.gripper.gripper_ids`.
+    """
+
+    joints: tuple[int, ...]
+    ft: int
+    ee: int
+    read: tuple[int, ...]
+    dofs: tuple[int, ...]
+    arm_in_dofs: tuple[int, ...]
+    tool_links: frozenset[int]
+    tool_com: np.ndarray
+    inertia: tuple[tuple[float, float, float], ...]
+    self_collision_off: tuple[tuple[int, int], ...]
+    finger: int = -1
+    finger_lower: float = 0.0
+    pads: tuple[int, ...] = ()
+    gripper_start: tuple[tuple[int, float], ...] = ()
+
+
 def subtree_links(infos: Sequence[tuple], root: int) -> frozenset[int]:
     """Link ``root`` and every link below it, from ``getJointInfo`` rows (index 16: parent)."""
     links = {root}

@@ -30,20 +30,9 @@ are convex hulls shrunk by the 1 mm margin Bullet pads them with (:mod:`pybullet
 and the table, the box and the cube are compliant, calibrated on trained policies against
 MuJoCo's soft contacts (:mod:`pybullet_ref.contact`; ``contact="rigid"`` keeps Bullet's).
 
-Wrist F/T: ``enableJointForceTorqueSensor`` on the fixed joint ``ft_sensor_joint``. Found with
-the tool hanging at rest in several orientations: ``getJointState(ft)[2]`` is the force the arm
-exerts on the tool subtree, in the tool link frame (the contract's sign), with the torque taken
-about the tool link's centre of mass, not the joint; it is moved to the joint here. The tare uses
-:func:`mjx_arm.task.wrench.external_wrench` with accelerations by finite differences over the
-last substep. In fast free motion the tared reading stays below 0.6 N and 0.04 N m: Bullet's
-joint reaction carries a small velocity-product term when several joints turn at once.
-
-An arm without a fixed F/T joint takes its reading at the last arm joint. PyBullet's reaction
-at a motorised joint carries the motor torque, the joint's rotor inertia (given to the link,
-above) and Bullet's own constraint terms: tared, it still read up to 50 N m on a Panda in free
-motion. There the reading is instead the sum of the contact forces on the links of the tool
-subtree (normal and friction, about the ee point): zero in free motion, as MuJoCo's tared
-sensor reads.
+Wrist F/T: PyBullet's sensor on the fixed F/T joint, tared, or where the F/T point is an arm
+joint (or the tool holds a gripper) the sum of the tool's contact forces
+(:mod:`pybullet_ref.wrench`).
 
 Each control step starts from the joint states its previous read took (nothing moves between
 the two): a change made to the world through ``env.client`` between steps shows from the
@@ -58,12 +47,11 @@ from __future__ import annotations
 
 import operator
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from pybullet_ref.hot_calls import HotCalls
+from pybullet_ref.fast.calls import HotCalls
 from pybullet_ref.quiet import STDERR, STDOUT, native_output_silenced
 
 with native_output_silenced((STDOUT, STDERR)):  # "pybullet build time: ..."
@@ -76,13 +64,13 @@ from mjx_arm.paths import asset
 from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.grip import ObjectStart
-from mjx_arm.task.wrench import external_wrench_features
 from mjx_arm.urdf.arm_config import ArmConfig
 from mjx_arm.urdf.repair import UrdfRepairs
 from mjx_arm.urdf.scene import CAMERA_EYE, CAMERA_FOVY, CAMERA_TARGET
 from mjx_arm.urdf.scene_shapes import CUBE_HALF, CUBE_MASS
 from pybullet_ref.arm_model import (
     BASE,
+    ArmIds,
     excluded_pairs,
     inertia_with_armature,
     joint_servo,
@@ -92,10 +80,8 @@ from pybullet_ref.contact import SOFT, SceneContact, scene_contact
 from pybullet_ref.gripper import gripper_ids
 from pybullet_ref.hulls import bullet_urdf
 from pybullet_ref.mimic import add_mimic_constraints
-from pybullet_ref.vec3 import add, cross, rate, rotate, rotate_back
+from pybullet_ref.wrench import GRAVITY, ToolTare, contact_wrench, tared_wrench
 
-GRAVITY = (0.0, 0.0, -9.81)
-_UP = tuple(-g for g in GRAVITY)  # minus gravity
 _NO_GRIP = np.zeros(0)  # the reading's grip without a gripper
 # MuJoCo's sliding friction (every geom 1.0, a contact takes the larger); Bullet multiplies the
 # two bodies' coefficients, so 1.0 on every body gives the same 1.0 per contact.
@@ -105,44 +91,6 @@ TARGET_MARKER_RADIUS = 0.02
 TARGET_MARKER_RGBA = (0.1, 0.8, 0.2, 0.5)
 NEAR, FAR = 0.01, 10.0
 CUBE_RGBA = (0.2, 0.35, 0.85, 1.0)
-
-
-@dataclass(frozen=True)
-class ArmIds:
-    """PyBullet indices of the arm, looked up by name (link index = joint index).
-
-    Attributes:
-        joints: the n actuated joints, contract order.
-        ft: the joint of the wrist F/T reading (the fixed F/T joint, or the last arm joint);
-            its child link is the tool link.
-        ee: the end-effector link.
-        read: what one ``getJointStates`` call reads: ``joints`` then ``ft``.
-        dofs: every moving joint (the arm's and a gripper's): inverse dynamics needs them all.
-        arm_in_dofs: where each of ``joints`` sits in ``dofs``.
-        tool_links: where the F/T point is an arm joint (no fixed F/T joint), the links of the
-            tool subtree, whose contacts make the reading; else empty (the F/T sensor reads).
-        tool_com: the tool link's centre of mass in the tool link frame (m), ``(3,)``; PyBullet
-            reports the F/T torque about this point.
-        inertia: principal inertia (kg m^2) of each actuated joint's child link with the
-            joint's armature added, 6 triples.
-        self_collision_off: arm link pairs whose contacts are disabled (empty: no self-collision).
-        finger, finger_lower, pads, gripper_start: see :func:`pybullet_ref.gripper.gripper_ids`.
-    """
-
-    joints: tuple[int, ...]
-    ft: int
-    ee: int
-    read: tuple[int, ...]
-    dofs: tuple[int, ...]
-    arm_in_dofs: tuple[int, ...]
-    tool_links: frozenset[int]
-    tool_com: np.ndarray
-    inertia: tuple[tuple[float, float, float], ...]
-    self_collision_off: tuple[tuple[int, int], ...]
-    finger: int = -1
-    finger_lower: float = 0.0
-    pads: tuple[int, ...] = ()
-    gripper_start: tuple[tuple[int, float], ...] = ()
 
 
 class PybulletArmEnv(BaseRobotEnv):
@@ -194,8 +142,12 @@ class PybulletArmEnv(BaseRobotEnv):
         self._u = list(self._zeros)
         self._target_body = sampling.target_body_pos(np, np.full(3, 0.5), self.task)
         self._tool_before = (np.zeros(3), np.zeros(3))
-        self._tool_com = tuple(self.ids.tool_com.tolist())  # floats for the tare (_wrench)
-        self._com_offset = tuple((self.arm.tool.com - self.ids.tool_com).tolist())
+        self._tare = ToolTare(
+            com=tuple(self.ids.tool_com.tolist()),
+            com_offset=tuple((self.arm.tool.com - self.ids.tool_com).tolist()),
+            dt=self.task.sim_dt,
+            wrench_matrix=self.arm.tool.wrench_matrix,
+        )
         self._target_of: tuple[np.ndarray, np.ndarray] | None = None  # body -> target point
         self._camera = self._camera_matrices()
         self._object = ObjectStart(np.array([1.0, 0.0, 0.0, 0.0]), CUBE_MASS, FRICTION)
@@ -381,9 +333,9 @@ class PybulletArmEnv(BaseRobotEnv):
         # arm joint or the tool holds a gripper, the pads' make a gripper task's pad forces
         contacts = self.client.getContactPoints(bodyA=self.body) if self.ids.tool_links else ()
         if self.ids.tool_links:
-            wrench = self._contact_wrench(ee_pos, ee[5], contacts)
+            wrench = contact_wrench(self.body, self.ids.tool_links, ee_pos, ee[5], contacts)
         else:
-            wrench = self._wrench(states[-1][2], tool)
+            wrench = tared_wrench(self._tare, states[-1][2], self._tool_before, tool)
         target, grip = self._target_point(), _NO_GRIP
         if self.gripper is not None:  # the target is the cube, wherever it is now
             grip = self._grip(contacts)
@@ -429,23 +381,6 @@ class PybulletArmEnv(BaseRobotEnv):
 
     # ------------------------------------------------------------------ helpers
 
-    def _contact_wrench(
-        self, ee_pos: np.ndarray, ee_xyzw: Sequence[float], contacts: Sequence[tuple]
-    ) -> np.ndarray:
-        """External wrench on the tool in the ee frame about the ee point, ``(6,)``: the sum of
-        the contact forces (normal and friction) on the links of the tool subtree, from the
-        arm's ``contacts`` (``getContactPoints(bodyA=arm)`` rows)."""
-        force, torque = np.zeros(3), np.zeros(3)
-        for contact in contacts:
-            if contact[2] == self.body or contact[3] not in self.ids.tool_links:
-                continue
-            f = contact[9] * np.array(contact[7])  # normal force along the normal on B (to A)
-            f += contact[10] * np.array(contact[11]) + contact[12] * np.array(contact[13])
-            force += f
-            torque += cross(np.array(contact[5]) - ee_pos, f)
-        rot = np.array(pybullet.getMatrixFromQuaternion(ee_xyzw)).reshape(3, 3)
-        return np.concatenate([rot.T @ force, rot.T @ torque])
-
     def _tool_velocity(self) -> tuple[Sequence[float], Sequence[float]]:
         """World velocity of the tool link's centre of mass and its angular velocity, 3 floats
         each."""
@@ -461,28 +396,6 @@ class PybulletArmEnv(BaseRobotEnv):
             point = np.asarray(sampling.target_point(np, self._target_body, self.task))
             self._target_of = (self._target_body, point)
         return self._target_of[1]
-
-    def _wrench(self, reaction: Sequence[float], tool_state: Sequence) -> np.ndarray:
-        """Tared external wrench on the tool in the ee frame, ``(6,)``, from PyBullet's F/T.
-
-        Args:
-            reaction: ``getJointState(ft)[2]``: the force the arm exerts on the tool link, in
-                the tool link frame, and the torque about the tool link's centre of mass.
-            tool_state: ``getLinkState(tool)`` with velocities, after the step.
-        """
-        # in Python floats (:mod:`pybullet_ref.vec3`), one array at the end
-        rot, dt = pybullet.getMatrixFromQuaternion(tool_state[5]), self.task.sim_dt
-        force = reaction[:3]
-        torque = add(reaction[3:], cross(self._tool_com, force))  # about the origin
-        (v0, w0), v1, w1 = self._tool_before, tool_state[6], tool_state[7]
-        alpha = rate(w0, w1, dt)
-        offset = rotate(rot, self._com_offset)  # link com -> subtree com
-        a_com = add(add(rate(v0, v1, dt), cross(alpha, offset)), cross(w1, cross(w1, offset)))
-        acc = rotate_back(rot, add(a_com, _UP))  # a_com - g
-        x = external_wrench_features(
-            force, torque, acc, rotate_back(rot, w1), rotate_back(rot, alpha)
-        )
-        return np.array(x).dot(self.arm.tool.wrench_matrix)  # external_wrench's value
 
     def _camera_matrices(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
         view = self.client.computeViewMatrix(CAMERA_EYE, CAMERA_TARGET, [0.0, 0.0, 1.0])

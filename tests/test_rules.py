@@ -9,12 +9,12 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from mjx_arm.envs.scalar.xp import SCALAR_XP
 from mjx_arm.task import reach_config, touch_config
 from mjx_arm.task import reward as reward_lib
 from mjx_arm.task.config import REWARD_TERMS
 from mjx_arm.task.lift import lift_config
 from mjx_arm.task.rules import score_step
-from mjx_arm.task.scalar_xp import SCALAR_XP
 
 N = 64
 LIMITS = (-np.full(6, 2.0), np.full(6, 2.0))

@@ -12,13 +12,14 @@ from typing import Any
 import numpy as np
 import pytest
 
+from mjx_arm.envs.scalar.codegen import Untraceable, compile_score
+from mjx_arm.envs.scalar.step import StepInput, score_generic
+from mjx_arm.envs.scalar.xp import SCALAR_XP
 from mjx_arm.task import reach_config, register_task, touch_config
 from mjx_arm.task import reward as reward_lib
 from mjx_arm.task.lift import lift_config
 from mjx_arm.task.reach import Reach
 from mjx_arm.task.rules import score_step
-from mjx_arm.task.scalar_compile import Untraceable, compile_score
-from mjx_arm.task.scalar_xp import SCALAR_XP
 from mjx_arm.task.wrench import ToolInertia, external_wrench, external_wrench_features
 
 BAND = reward_lib.JointBand([0.1, -0.2, 0.0, 0.3, 0.0, -1.0], [1.8, 2.0, 1.5, 2.2, 3.0, 2.5])
@@ -85,10 +86,11 @@ def test_traced_rules_are_the_scalar_rules_bit_for_bit(make_cfg, diverged: bool)
             SCALAR_XP, cfg, reward_lib.Progress(x["hold"], x["over"]), x["prev_distance"],
             x["change"], x["distance"], x["force"], x["qpos"], x["qvel"], BAND, diverged, extra,
         )  # fmt: skip
-        got = score(
-            x["hold"], x["over"], x["prev_distance"], x["change"], x["distance"], x["force"],
-            x["qpos"], x["qvel"], *x["measures"],
-        )  # fmt: skip
+        out = score(StepInput(
+            reward_lib.Progress(x["hold"], x["over"]), x["prev_distance"], x["change"],
+            x["distance"], x["force"], x["qpos"], x["qvel"], tuple(x["measures"]),
+        ))  # fmt: skip
+        got = (*out.progress, *out[1:])
         want = (*ref.progress, ref.success, ref.over, ref.terms, ref.reward, ref.done)
         assert all(_same(a, b) for a, b in zip(got, want, strict=True)), (x, got, want)
 
@@ -136,7 +138,9 @@ def test_an_env_scores_its_steps_as_the_rules_do() -> None:
     traced = env._scores
     assert all(hasattr(fn, "source") for fn in traced)  # the traced functions
     keys = ()
-    generic = tuple(functools.partial(env._score_generic, d, keys) for d in (False, True))
+    generic = tuple(
+        functools.partial(score_generic, env.task, env._band_lists, d, keys) for d in (False, True)
+    )
     runs = []
     for scores in (traced, generic):
         env._scores = scores

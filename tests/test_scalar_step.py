@@ -9,18 +9,18 @@ import math
 import numpy as np
 import pytest
 
-from mjx_arm.envs.scalar_state import ScalarState, distance, finite
+from mjx_arm.envs.scalar.state import ScalarState, distance, finite
+from mjx_arm.envs.scalar.xp import SCALAR_XP
 from mjx_arm.task import observation as obs_lib
 from mjx_arm.task import reward as reward_lib
 from mjx_arm.task.lift import LIFT
-from mjx_arm.task.scalar_xp import SCALAR_XP
 from mjx_arm.task.wrench import (
     SENSOR_BLOCK_SIZE,
     ToolInertia,
     sensor_feature_factors,
     sensor_wrench,
 )
-from pybullet_ref import vec3
+from pybullet_ref.fast import vec3
 
 SPECIALS = [0.0, -0.0, 1.5, -2.25, 1e300, -1e300, math.inf, -math.inf, math.nan]
 

@@ -20,7 +20,6 @@ that went on working in one engine and failed in another would hide a use-after-
 
 from __future__ import annotations
 
-import functools
 import math
 import operator
 from abc import abstractmethod
@@ -30,17 +29,17 @@ from typing import Any, ClassVar, NamedTuple
 import gymnasium as gym
 import numpy as np
 
-from mjx_arm.envs import scalar_state
 from mjx_arm.envs.arm import ArmInfo, validated_arm_info
-from mjx_arm.envs.scalar_state import ScalarState
+from mjx_arm.envs.scalar.codegen import Scorer, step_scorers
+from mjx_arm.envs.scalar.state import ScalarState, finite
+from mjx_arm.envs.scalar.step import StepInput
+from mjx_arm.envs.scalar.xp import SCALAR_XP
 from mjx_arm.envs.setup import arm_setup
 from mjx_arm.task import observation as obs_lib
 from mjx_arm.task import reward as reward_lib
-from mjx_arm.task import rules, sampling
+from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.grip import ObjectStart
-from mjx_arm.task.scalar_compile import Untraceable, compile_score
-from mjx_arm.task.scalar_xp import SCALAR_XP
 from mjx_arm.task.touch import touch_config
 from mjx_arm.urdf.arm_config import ArmConfig
 
@@ -283,12 +282,11 @@ class BaseRobotEnv(gym.Env):
     def _measure(self, reading: PhysicsReading) -> tuple[list, list, float, float]:
         """The flat state before and after clipping (``16 + n + k`` floats), distance d (m)
         and contact force norm (N) of a reading, each computed once, in Python floats
-        (:mod:`mjx_arm.envs.scalar_state`)."""
-        ee_pos, ee_quat, qpos, _, target_pos, wrench, grip = reading
-        extra = None
+        (:mod:`mjx_arm.envs.scalar.state`)."""
+        r, spec, extra = reading, self.task_spec, None
         if self._extra:
-            extra = self.task_spec.grip_observation(SCALAR_XP, ee_pos, ee_quat, grip, self.task)
-        return self._flat.measure(ee_pos, ee_quat, qpos, target_pos, wrench, extra)
+            extra = spec.grip_observation(SCALAR_XP, r.ee_pos, r.ee_quat, r.grip, self.task)
+        return self._flat.measure(r.ee_pos, r.ee_quat, r.qpos, r.target_pos, r.wrench, extra)
 
     def _measures(self, reading: PhysicsReading) -> dict[str, float] | None:
         """The task's measures of a reading, or None where it has none."""
@@ -296,34 +294,16 @@ class BaseRobotEnv(gym.Env):
         values = spec.measures(SCALAR_XP, r.ee_pos, r.ee_quat, r.grip, self.task)
         return {key: float(value) for key, value in values.items()} or None
 
-    def _scorers(self) -> tuple[Any, Any]:
-        """The step rules of this env's task and arm as two functions of Python floats, for a
-        sane step and a diverged one (:func:`mjx_arm.task.scalar_compile.compile_score`); the
-        rules through :data:`SCALAR_XP` where the task's do not trace."""
+    def _scorers(self) -> tuple[Scorer, Scorer]:
+        """The step rules of this env's task and arm as two functions of a
+        :class:`~mjx_arm.envs.scalar.step.StepInput`, for a sane step and a diverged one
+        (:func:`mjx_arm.envs.scalar.codegen.step_scorers`)."""
         n = self.arm.n_joints
         grip = np.zeros(10 if self.task_spec.gripper else 0)
         probe = PhysicsReading(np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(n),
                                np.zeros(n), np.zeros(3), np.zeros(6), grip)  # fmt: skip
         keys = tuple(self._measures(probe) or ())  # the names of the task's measures
-        try:
-            return tuple(
-                compile_score(self.task, n, self._band_lists, diverged, keys)
-                for diverged in (False, True)
-            )
-        except Untraceable:
-            return tuple(functools.partial(self._score_generic, d, keys) for d in (False, True))
-
-    def _score_generic(self, diverged: bool, keys: tuple, hold, over, *args) -> tuple:
-        """:func:`mjx_arm.task.rules.score_step` through :data:`SCALAR_XP`, with the values
-        and order of a compiled scorer's answer."""
-        args, measures = args[:6], args[6:]
-        extra = dict(zip(keys, measures, strict=True)) or None
-        progress = reward_lib.Progress(hold, over)
-        score = rules.score_step(
-            SCALAR_XP, self.task, progress, *args, self._band_lists, diverged, extra
-        )
-        return (*score.progress, bool(score.success), bool(score.over), score.terms,
-                float(score.reward), bool(score.done))  # fmt: skip
+        return step_scorers(self.task, n, self._band_lists, keys)
 
     def _evaluate(
         self, reading: PhysicsReading, diverged: bool = False, change: float = 0.0
@@ -347,31 +327,29 @@ class BaseRobotEnv(gym.Env):
             velocity term (a sum of magnitudes).
         """
         raw, state, d, force = self._measure(reading)
-        if not (diverged or scalar_state.finite(raw)):
+        if not (diverged or finite(raw)):
             return None
         qvel = reading.qvel.tolist()  # the rules take lists
         if not diverged and self._runaway(qvel):
             return None
         measures = self._measures(reading)
-        values = () if measures is None else measures.values()
-        progress = self._progress
-        hold, over, success, over_now, terms, reward, done = self._scores[diverged](
-            progress.hold, progress.over, self._distance, change, d, force,
-            reading.qpos.tolist(), qvel, *values,
-        )  # fmt: skip
-        self._progress, self._distance = reward_lib.Progress(hold, over), d
+        values = () if measures is None else tuple(measures.values())
+        step = StepInput(self._progress, self._distance, change, d, force,
+                         reading.qpos.tolist(), qvel, values)  # fmt: skip
+        out = self._scores[diverged](step)
+        self._progress, self._distance = out.progress, d
         info = {
-            "is_success": success,
+            "is_success": out.success,
             "distance": d,
             "contact_force_norm": force,
-            "reward_terms": terms,  # Python floats: the rules ran on Python scalars
+            "reward_terms": out.terms,  # Python floats: the rules ran on Python scalars
             "diverged": diverged,
             "nonfinite": diverged,  # the older name of ``diverged``
-            "overforce": over_now,
+            "overforce": out.over_now,
         }
         if measures is not None:
             info.update(measures)
-        return self._flat.observation(state), reward, done, info
+        return self._flat.observation(state), out.reward, out.done, info
 
     def _observation(self, state: list[float]) -> dict[str, np.ndarray]:
         """The observation dict of a clipped flat state: views of one new float32 array (the

@@ -2,7 +2,7 @@
 
 Every function works on one env (scalars and ``(6,)`` vectors) and on batches (a leading shape
 ``(...)``), in ``numpy``, under ``jax.numpy`` / ``jax.jit`` and, for one env on the CPU, in
-:data:`~mjx_arm.task.scalar_xp.SCALAR_XP` (Python floats, bools and lists of them). Norms are
+:data:`~mjx_arm.envs.scalar.xp.SCALAR_XP` (Python floats, bools and lists of them). Norms are
 ``sqrt(vecdot)``, sums over the joints are matrix products with ones and 0/1 flags are
 ``flag * 1.0``: the values of ``linalg.norm``, ``sum`` and ``where(flag, 1.0, 0.0)``, plain XLA
 ops under ``jit``, and a few operations of Python floats for one env.
@@ -62,7 +62,7 @@ def joint_terms(xp: Any, qpos, qvel, band: JointBand):
     ``joint_velocity`` term (the sum of the joint speeds), each ``(...)``.
 
     Args:
-        xp: the array namespace (:data:`~mjx_arm.task.scalar_xp.SCALAR_XP` also takes one
+        xp: the array namespace (:data:`~mjx_arm.envs.scalar.xp.SCALAR_XP` also takes one
             env's joints as lists of floats, with the band's as lists).
         qpos, qvel: joint angles (rad) and velocities (rad/s), ``(..., n)``.
         band: the joint-limit band.

@@ -3,9 +3,8 @@
 After each control step an engine measures the distance ``d`` and the tared contact force, and
 decides whether its physics diverged; :func:`score_step` turns that into the episode's progress,
 success, the reward terms and their total, and termination. The CPU envs (one env, on Python
-floats: traced once into one function by :mod:`mjx_arm.task.scalar_compile`, or through
-:data:`~mjx_arm.task.scalar_xp.SCALAR_XP`) and the batched MJX env (``jax.numpy``, traced
-under ``jit``/``vmap``) all run it, so the rules cannot drift apart between engines.
+floats, :mod:`mjx_arm.envs.scalar`) and the batched MJX env (``jax.numpy``, traced under
+``jit``/``vmap``) all run it, so the rules cannot drift apart between engines.
 
 On a diverged step the reading is not physics: every reward term except ``nonfinite`` is zero,
 success is ruled out and the episode ends.
@@ -88,7 +87,7 @@ def score_step(
 def _masked(xp: Any, sane, terms: dict[str, Any]) -> dict[str, Any]:
     """``terms`` with every term but ``nonfinite`` zero where the step is not ``sane``.
 
-    One env's sane step (``sane`` the Python ``True``, :mod:`mjx_arm.task.scalar_xp`) keeps
+    One env's sane step (``sane`` the Python ``True``, :mod:`mjx_arm.envs.scalar.xp`) keeps
     its terms as they are, without a ``where`` per term.
     """
     if sane is True:

@@ -1,7 +1,7 @@
 """The step rules of one task, traced once into one straight-line Python function.
 
 :func:`mjx_arm.task.rules.score_step` is written once against an array namespace. On one env's
-Python floats (:data:`~mjx_arm.task.scalar_xp.SCALAR_XP`) every step still walks the rules'
+Python floats (:data:`~mjx_arm.envs.scalar.xp.SCALAR_XP`) every step still walks the rules'
 layers: a few dozen Python calls, each asking what its arguments are, to compute about a hundred
 float operations. :func:`compile_score` runs the same rules once on traced values that record
 each operation, and writes them out as the body of one function: the same operations on the same
@@ -14,19 +14,24 @@ conditional expression for ``where``, ``maximum`` and ``minimum`` with numpy's N
 namespace's ``exp`` and ``sqrt`` themselves, ``sum`` for ``matmul`` and for the weighted total).
 Python's operators (``+``, ``<``, ``&`` ...) are written as they were applied. A rule that
 branches on a traced value, or calls a function the trace does not know, cannot be traced:
-:func:`compile_score` then raises :class:`Untraceable` and the caller keeps the namespace path.
+:func:`compile_score` then raises :class:`Untraceable`, and :func:`step_scorers` keeps the
+namespace path (:func:`~mjx_arm.envs.scalar.step.score_generic`).
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from mjx_arm.envs.scalar.step import StepInput, StepOutcome, score_generic
+from mjx_arm.envs.scalar.xp import SCALAR_XP
 from mjx_arm.task import reward as reward_lib
 from mjx_arm.task import rules
 from mjx_arm.task.config import TaskConfig
-from mjx_arm.task.scalar_xp import SCALAR_XP
+
+Scorer = Callable[[StepInput], StepOutcome]
 
 _PLAIN = (bool, int, float)
 
@@ -260,7 +265,7 @@ def compile_score(
     band: reward_lib.JointBand,
     diverged: bool,
     extra_keys: Sequence[str] = (),
-) -> Callable:
+) -> Scorer:
     """:func:`~mjx_arm.task.rules.score_step` of ``cfg`` on one env's Python floats, as one
     function.
 
@@ -270,23 +275,20 @@ def compile_score(
         band: the joint-limit band as lists of n floats (a constant of the env).
         diverged: which kind of step the function scores (a constant of the function: the env
             keeps one of each).
-        extra_keys: the names of the task's measures in the order the function takes them
-            (:meth:`mjx_arm.task.spec.Task.measures`; empty: none).
+        extra_keys: the names of the task's measures in the order ``StepInput.measures`` holds
+            them (:meth:`mjx_arm.task.spec.Task.measures`; empty: none).
 
     Returns:
-        ``score(hold, over, prev_distance, action_change, distance, force_norm, qpos, qvel,
-        *measures) -> (hold, over, success, over_now, terms, reward, done)``: the progress
-        before the step (a float and a bool), Python floats, ``qpos`` and ``qvel`` lists of n
-        floats and the measures' floats in, the :class:`~mjx_arm.task.rules.StepScore`'s
-        values out (``terms`` a new dict of Python floats by term name), each the value and
-        type :func:`~mjx_arm.task.rules.score_step` gives under ``SCALAR_XP``.
+        ``score(step) -> outcome``: a :class:`~mjx_arm.envs.scalar.step.StepInput` (n joints,
+        ``len(extra_keys)`` measures) in, its :class:`~mjx_arm.envs.scalar.step.StepOutcome`
+        out (``terms`` a new dict), each value the value and type
+        :func:`~mjx_arm.envs.scalar.step.score_generic` gives. Its source is its ``source``.
 
     Raises:
         Untraceable: the task's rules cannot be traced.
     """
     trace = _Trace()
-    inputs = ["hold", "over", "prev_distance", "change", "distance", "force"]
-    value = {name: _Value(trace, name) for name in inputs}
+    value = {name: _Value(trace, name) for name in _INPUTS}
     qpos = [_Value(trace, f"q{j}") for j in range(n_joints)]
     qvel = [_Value(trace, f"w{j}") for j in range(n_joints)]
     extra = {key: _Value(trace, f"m{i}") for i, key in enumerate(extra_keys)} or None
@@ -300,29 +302,68 @@ def compile_score(
         raise
     except Exception as error:  # e.g. a traced value hashed or indexed
         raise Untraceable(f"the rules of {cfg.task!r} do not trace: {error}") from error
-    head = ", ".join([*inputs, "qpos", "qvel", *(f"m{i}" for i in range(len(extra_keys)))])
-    return _define(trace, score, head, n_joints, cfg.task)
+    return _define(trace, score, n_joints, len(extra_keys), cfg.task)
 
 
-def _define(trace: _Trace, score: rules.StepScore, head: str, n_joints: int, task: str):
-    """The Python function ``score(head)`` of the recorded ``trace`` that returns ``score``'s
-    values (see :func:`compile_score`)."""
+# the locals the traced function unpacks its StepInput into (the progress as hold, over)
+_INPUTS = ("hold", "over", "prev_distance", "change", "distance", "force")
+
+
+def _unpack(names: Sequence[str], source: str) -> list[str]:
+    """The line ``a, b, = source`` (none where ``names`` is empty)."""
+    return [f"{''.join(f'{name}, ' for name in names)}= {source}"] if names else []
+
+
+def _define(trace: _Trace, score: rules.StepScore, n_joints: int, n_measures: int, task: str):
+    """The Python function ``score(step)`` of the recorded ``trace`` that returns ``score``'s
+    values as a StepOutcome (see :func:`compile_score`)."""
     text = trace.text
     terms = "".join(f"{key!r}: {text(v)}, " for key, v in score.terms.items())
-    outputs = [score.progress.hold, score.progress.over, score.success, score.over]
-    out = ", ".join(map(text, outputs))
-    ret = f"return {out}, {{{terms}}}, {text(score.reward)}, {text(score.done)}"
+    hold, over = text(score.progress.hold), text(score.progress.over)
+    out = f"{text(score.success)}, {text(score.over)}, {{{terms}}}, {text(score.reward)}"
+    head = "(hold, over), prev_distance, change, distance, force, qpos, qvel, measures"
     source = "\n    ".join(
         [
-            f"def score({head}):",
-            f"{''.join(f'q{j}, ' for j in range(n_joints))}= qpos",
-            f"{''.join(f'w{j}, ' for j in range(n_joints))}= qvel",
+            "def score(step):",
+            f"{head} = step",
+            *_unpack([f"q{j}" for j in range(n_joints)], "qpos"),
+            *_unpack([f"w{j}" for j in range(n_joints)], "qvel"),
+            *_unpack([f"m{i}" for i in range(n_measures)], "measures"),
             *trace.lines,
-            ret,
+            f"return _Outcome(_Progress({hold}, {over}), {out}, {text(score.done)})",
         ]
     )
-    namespace = dict(trace.names)
+    namespace = {**trace.names, "_Outcome": StepOutcome, "_Progress": reward_lib.Progress}
     exec(compile(source, f"<score_step of {task}>", "exec"), namespace)
     fn = namespace["score"]
     fn.source = source
     return fn
+
+
+def step_scorers(
+    cfg: TaskConfig, n_joints: int, band: reward_lib.JointBand, keys: Sequence[str] = ()
+) -> tuple[Scorer, Scorer]:
+    """The step rules of a task and arm as two functions of a StepInput, for a sane step and a
+    diverged one: traced (:func:`compile_score`), or through ``SCALAR_XP``
+    (:func:`~mjx_arm.envs.scalar.step.score_generic`) where the rules do not trace.
+
+    Args:
+        cfg: the task configuration.
+        n_joints: joints of the arm.
+        band: the joint-limit band as lists of n floats.
+        keys: the names of the task's measures, in the order of ``StepInput.measures``.
+
+    Returns:
+        ``(sane, diverged)``, each ``score(step) -> StepOutcome``.
+    """
+    try:
+        return (
+            compile_score(cfg, n_joints, band, False, keys),
+            compile_score(cfg, n_joints, band, True, keys),
+        )
+    except Untraceable:
+        keys = tuple(keys)
+        return (
+            functools.partial(score_generic, cfg, band, False, keys),
+            functools.partial(score_generic, cfg, band, True, keys),
+        )
