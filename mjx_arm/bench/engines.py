@@ -25,10 +25,10 @@ import mujoco
 import numpy as np
 
 from mjx_arm import engines
+from mjx_arm.arm.info import ArmInfo, arm_info
+from mjx_arm.arm.model_io import arm_model
 from mjx_arm.bench.parity_config import ENGINES
-from mjx_arm.envs.arm import ArmInfo, arm_info
 from mjx_arm.envs.base import BaseRobotEnv, PhysicsReading
-from mjx_arm.envs.model_io import arm_model
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.urdf.convert import EE_SITE
 

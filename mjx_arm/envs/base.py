@@ -30,10 +30,11 @@ from typing import Any, ClassVar, NamedTuple
 import gymnasium as gym
 import numpy as np
 
+from mjx_arm.arm.config import ArmConfig
+from mjx_arm.arm.info import ArmInfo, validated_arm_info
+from mjx_arm.arm.setup import arm_setup
 from mjx_arm.envs import scalar_state
-from mjx_arm.envs.arm import ArmInfo, validated_arm_info
 from mjx_arm.envs.scalar_state import ScalarState
-from mjx_arm.envs.setup import arm_setup
 from mjx_arm.task import observation as obs_lib
 from mjx_arm.task import reward as reward_lib
 from mjx_arm.task import rules, sampling
@@ -42,7 +43,6 @@ from mjx_arm.task.grip import ObjectStart
 from mjx_arm.task.scalar_compile import Untraceable, compile_score
 from mjx_arm.task.scalar_xp import SCALAR_XP
 from mjx_arm.task.touch import touch_config
-from mjx_arm.urdf.arm_config import ArmConfig
 
 DEFAULT_WIDTH, DEFAULT_HEIGHT = 640, 480
 
@@ -86,7 +86,7 @@ class BaseRobotEnv(gym.Env):
         task: the task configuration (default: Touch). Its empty ``home_qpos`` and
             ``workspace_scale`` are filled in from the arm (:meth:`TaskConfig.for_arm`).
         arm: the arm: a URDF path, an arm file (.toml/.json) or an
-            :class:`~mjx_arm.urdf.arm_config.ArmConfig` (default: the shipped UR5e-class arm).
+            :class:`~mjx_arm.arm.config.ArmConfig` (default: the shipped UR5e-class arm).
             Its URDF is validated for the engine before anything is loaded; an invalid URDF
             raises ``UrdfError``.
         render_mode: None, "rgb_array" or "human".
@@ -407,7 +407,7 @@ _SHIPPED_BOUNDS = (np.full(6, -1.0, np.float32), np.full(6, 1.0, np.float32))
 
 
 def task_for_arm(task: TaskConfig, arm: ArmInfo) -> TaskConfig:
-    """``task`` with the arm's setup (:func:`mjx_arm.envs.setup.arm_setup`: home pose,
+    """``task`` with the arm's setup (:func:`mjx_arm.arm.setup.arm_setup`: home pose,
     workspace scale, episode length) filled in where it leaves them empty.
 
     Raises:

@@ -30,11 +30,12 @@ import mujoco
 from brax.envs.base import Env, State
 from flax import struct
 
+from mjx_arm.arm.config import ArmConfig
+from mjx_arm.arm.info import validated_arm_info
+from mjx_arm.arm.model_io import arm_model
 from mjx_arm.engines import BatchPhysics
-from mjx_arm.envs.arm import validated_arm_info
 from mjx_arm.envs.base import action_size, default_arm, gripper_speed, task_for_arm
 from mjx_arm.envs.mjx_physics import MjxPhysics, Reading
-from mjx_arm.envs.model_io import arm_model
 from mjx_arm.envs.physics_config import PhysicsConfig
 from mjx_arm.envs.randomization import (
     MAX_LATENCY,
@@ -52,7 +53,6 @@ from mjx_arm.task import reward as reward_lib
 from mjx_arm.task import rules, sampling
 from mjx_arm.task.config import REWARD_TERMS, TaskConfig
 from mjx_arm.task.touch import touch_config
-from mjx_arm.urdf.arm_config import ArmConfig
 
 __all__ = ["MjxArmEnv", "Reading", "TaskMemory"]
 
@@ -104,7 +104,7 @@ class MjxArmEnv(Env):
         physics_factory: builds the physics (a :class:`mjx_arm.engines.BatchPhysics`) from
             (mj_model, arm, task); default: MJX with ``physics`` and ``batch_size``.
         mj_model: a task model converted with other settings (benchmark sweeps); default: the
-            task's model from :func:`mjx_arm.envs.model_io.arm_model`.
+            task's model from :func:`mjx_arm.arm.model_io.arm_model`.
         physics: MJX implementation and buffers (default: ``impl="auto"``).
         batch_size: the largest batch stepped at once (sizes Warp's contact pool).
         randomization: domain randomisation (default: off).

@@ -7,14 +7,14 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from mjx_arm.arm.config import ArmConfig
+from mjx_arm.arm.model_io import EE_POS as _EE_POS
+from mjx_arm.arm.model_io import EE_QUAT as _EE_QUAT
+from mjx_arm.arm.model_io import GripReader, SensorReader, arm_model, as_slice
 from mjx_arm.envs.base import DEFAULT_HEIGHT, DEFAULT_WIDTH, BaseRobotEnv, PhysicsReading
-from mjx_arm.envs.model_io import EE_POS as _EE_POS
-from mjx_arm.envs.model_io import EE_QUAT as _EE_QUAT
-from mjx_arm.envs.model_io import GripReader, SensorReader, arm_model, as_slice
 from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.grip import ObjectStart
-from mjx_arm.urdf.arm_config import ArmConfig
 from mjx_arm.urdf.scene import TARGET_BODY
 
 _NO_GRIP = PhysicsReading._field_defaults["grip"]  # the reading's grip without a gripper

@@ -53,7 +53,7 @@ def make_env(
 
 def make_timed_env(task_name: str, **kwargs: Any) -> gym.Env:
     """:func:`make_env` inside a time limit of the env's own ``task.episode_steps``, as the
-    arm's setup fills them in (a slow arm's episode is longer: :mod:`mjx_arm.envs.setup`):
+    arm's setup fills them in (a slow arm's episode is longer: :mod:`mjx_arm.arm.setup`):
     the entry point of the registered ids."""
     env = make_env(task_name, **kwargs)
     return gym.wrappers.TimeLimit(env, env.task.episode_steps)

@@ -108,14 +108,14 @@ def eval_arm(policy: Any, source: str | Path | None = None) -> Any:
     with its URDF found there instead), else the arm the policy records (files from before arm
     records: the shipped arm). A recorded arm of ``assets/`` (trained where this package lived
     elsewhere) is this install's copy; the model hash check
-    (:func:`mjx_arm.envs.arm.check_same_arm`) still compares the two.
+    (:func:`mjx_arm.arm.info.check_same_arm`) still compares the two.
 
     Raises:
         FileNotFoundError: the recorded arm's URDF is not on this machine (pass ``source``; a
             :class:`~mjx_arm.inputs.MissingInputError`).
     """
+    from mjx_arm.arm.config import ARM_FILE_SUFFIXES, SHIPPED_ARMS, ArmConfig, load_arm
     from mjx_arm.paths import asset
-    from mjx_arm.urdf.arm_config import ARM_FILE_SUFFIXES, SHIPPED_ARMS, ArmConfig, load_arm
 
     record = getattr(policy, "metadata", {}).get("arm") or {}
     arm = ArmConfig.from_dict(record.get("config", {}))
@@ -164,13 +164,13 @@ def evaluate(
         backend: for ``engine="mjx"``: "mjx" (default) or "mujoco" (C MuJoCo, fast on a CPU).
         impl: for the MJX backend: "auto" (Warp on a GPU where installed), "jax" or "warp".
         arm: the arm (a URDF, an arm file or an ArmConfig; default: the shipped arm). A policy
-            that records another arm raises :class:`~mjx_arm.envs.arm.ArmMismatchError`.
+            that records another arm raises :class:`~mjx_arm.arm.info.ArmMismatchError`.
         contact: PyBullet's scene contact (see :func:`make_eval_env`); None: the default.
 
     Returns:
         The JSON-ready summary and the raw :class:`EvalRun`.
     """
-    from mjx_arm.envs.arm import arm_info
+    from mjx_arm.arm.info import arm_info
 
     _check_engine(engine)
     check_policy_fits(policy, task, arm_info(arm))  # before the task meets the arm
@@ -198,7 +198,7 @@ def evaluate(
 
 
 def check_policy_fits(policy: Any, task: TaskConfig, arm: Any) -> None:
-    """Check that ``policy`` was trained on ``arm`` (an :class:`~mjx_arm.envs.arm.ArmInfo`;
+    """Check that ``policy`` was trained on ``arm`` (an :class:`~mjx_arm.arm.info.ArmInfo`;
     :func:`~mjx_arm.evaluate.runners.check_policy_arm`) and takes the observation and gives
     the action of ``task`` on it.
 

@@ -185,9 +185,9 @@ def _open_video(env: gym.Env, video: str | Path | None) -> tuple[_SafeVideo | No
 
 
 def check_policy_arm(policy: Any, arm: Any) -> None:
-    """Raise :class:`~mjx_arm.envs.arm.ArmMismatchError` when ``policy`` (with ``metadata``)
-    was trained on another arm than ``arm`` (an :class:`~mjx_arm.envs.arm.ArmInfo`)."""
-    from mjx_arm.envs.arm import check_same_arm
+    """Raise :class:`~mjx_arm.arm.info.ArmMismatchError` when ``policy`` (with ``metadata``)
+    was trained on another arm than ``arm`` (an :class:`~mjx_arm.arm.info.ArmInfo`)."""
+    from mjx_arm.arm.info import check_same_arm
 
     metadata = getattr(policy, "metadata", None)
     if metadata is not None:

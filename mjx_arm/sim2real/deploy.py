@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from mjx_arm.envs.arm import arm_info
+from mjx_arm.arm.info import arm_info
 from mjx_arm.evaluate import (
     EvalRun,
     Policy,

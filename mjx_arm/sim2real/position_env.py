@@ -53,7 +53,8 @@ import mujoco
 import numpy as np
 
 from mjx_arm import engines
-from mjx_arm.envs.arm import ArmInfo
+from mjx_arm.arm.config import ArmConfig
+from mjx_arm.arm.info import ArmInfo
 from mjx_arm.envs.base import DEFAULT_HEIGHT, DEFAULT_WIDTH
 from mjx_arm.envs.mujoco_env import MujocoArmEnv
 from mjx_arm.sim2real.adapter import VelocityToPositionAdapter
@@ -61,7 +62,6 @@ from mjx_arm.sim2real.gripper import GripperPassthrough
 from mjx_arm.sim2real.limiter import JointLimits, SafetyLimiter
 from mjx_arm.sim2real.settings import ChainConfig, ServoConfig
 from mjx_arm.task.config import TaskConfig
-from mjx_arm.urdf.arm_config import ArmConfig
 
 
 @dataclass(frozen=True)

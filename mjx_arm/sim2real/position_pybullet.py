@@ -8,11 +8,11 @@ from pathlib import Path
 
 import numpy as np
 
+from mjx_arm.arm.config import ArmConfig
 from mjx_arm.envs.base import DEFAULT_HEIGHT, DEFAULT_WIDTH
 from mjx_arm.sim2real.position_env import _ChainActuation, servo_gains
 from mjx_arm.sim2real.settings import ChainConfig
 from mjx_arm.task.config import TaskConfig
-from mjx_arm.urdf.arm_config import ArmConfig
 from pybullet_ref.env import PybulletArmEnv, pybullet  # pybullet imported quietly there
 
 

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from mjx_arm.arm.config import ArmConfig
 from mjx_arm.envs.base import GRIPPER_ARM
 from mjx_arm.envs.physics_config import LATENCY, SELECTED, PhysicsConfig, RandomizationConfig
 from mjx_arm.inputs import MAX_SEED, ConfigError, MissingInputError, read_json_object
@@ -24,7 +25,6 @@ from mjx_arm.paths import asset
 from mjx_arm.settings import check_range, check_types, config_fields, set_path, split_setting
 from mjx_arm.task.config import RewardConfig, TaskConfig, task_config
 from mjx_arm.task.registry import get_task, is_task, task_names
-from mjx_arm.urdf.arm_config import ArmConfig
 
 PARTITIONS = ("auto", "xla", "per_device")
 

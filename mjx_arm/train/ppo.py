@@ -62,11 +62,11 @@ def full_config(
         task: the task config as the env resolved it (the arm's home pose and reach scale
             filled in).
         physics: what the env's physics reports of itself (implementation, buffer sizes).
-        arm: the env's :class:`~mjx_arm.envs.arm.ArmInfo` (default: the config's arm).
+        arm: the env's :class:`~mjx_arm.arm.info.ArmInfo` (default: the config's arm).
     """
     from mjx_arm import __version__
-    from mjx_arm.envs.arm import arm_info, arm_record
-    from mjx_arm.envs.model_io import task_convert_config
+    from mjx_arm.arm.info import arm_info, arm_record
+    from mjx_arm.arm.model_io import task_convert_config
 
     arm = arm or arm_info(config.arm)
     conversion = task_convert_config(task, arm)
@@ -141,7 +141,7 @@ def _check_arm(config: TrainConfig, task: TaskConfig) -> None:
     Raises:
         InputError: an arm that does not validate or resolve, or a task that does not fit it.
     """
-    from mjx_arm.envs.arm import validated_arm_info
+    from mjx_arm.arm.info import validated_arm_info
     from mjx_arm.envs.base import default_arm, task_for_arm
 
     arm = validated_arm_info(default_arm(task, config.arm), "mujoco")
