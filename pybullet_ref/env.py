@@ -151,7 +151,7 @@ class PybulletArmEnv(BaseRobotEnv):
     module docstring).
 
     Args:
-        task: the task configuration (default: Touch).
+        task: the task configuration (default: Touch), or an ArmTask (a task on its arm).
         arm: the arm (a URDF, an arm file or an ArmConfig; default: the shipped arm).
         render_mode: None, "rgb_array" or "human".
         width, height: frame size (pixels).

@@ -429,7 +429,7 @@ def check_seed_settings(
         InputError: a bad override, an arm that does not validate, a bad device count.
     """
     from mjx_arm.arm.info import validated_arm_info
-    from mjx_arm.envs.base import default_arm
+    from mjx_arm.arm.resolve import default_arm
     from mjx_arm.train.config import load_config
     from mjx_arm.train.learner import local_devices
 

@@ -16,19 +16,23 @@ from typing import Any
 import gymnasium as gym
 
 from mjx_arm import engines
+from mjx_arm.arm.resolve import ArmTask
 from mjx_arm.names import env_id
 from mjx_arm.task.config import TaskConfig, task_config
 from mjx_arm.task.registry import task_names
 
 
-def _task(name: str, task: TaskConfig | dict | None) -> TaskConfig:
-    if isinstance(task, TaskConfig):
+def _task(name: str, task: TaskConfig | ArmTask | dict | None) -> TaskConfig | ArmTask:
+    if isinstance(task, TaskConfig | ArmTask):
         return task
     return task_config(name, **(task or {}))
 
 
 def make_env(
-    task_name: str, engine: str = "mujoco", task: TaskConfig | dict | None = None, **kwargs: Any
+    task_name: str,
+    engine: str = "mujoco",
+    task: TaskConfig | ArmTask | dict | None = None,
+    **kwargs: Any,
 ) -> gym.Env:
     """Build one env of ``task_name`` on ``engine``, a registered engine with a Gymnasium env
     (:func:`mjx_arm.engines.engine_names` ``("env")``); its class is imported only now (the
@@ -37,7 +41,8 @@ def make_env(
     Args:
         task_name: a registered task name.
         engine: the CPU engine.
-        task: the task config, or overrides of the task's preset (None: the preset).
+        task: the task on its arm (:class:`~mjx_arm.arm.resolve.ArmTask`: pass no ``arm``),
+            the task config, or overrides of the task's preset (None: the preset).
         kwargs: passed to the env class (``arm``: a URDF, an arm file or an ArmConfig;
             ``render_mode``, ...).
     """

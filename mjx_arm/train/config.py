@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from mjx_arm.arm.config import ArmConfig
-from mjx_arm.envs.base import GRIPPER_ARM
+from mjx_arm.arm.resolve import GRIPPER_ARM
 from mjx_arm.envs.physics_config import LATENCY, SELECTED, PhysicsConfig, RandomizationConfig
 from mjx_arm.inputs import MAX_SEED, ConfigError, MissingInputError, read_json_object
 from mjx_arm.names import BACKENDS, PRESET_NAMES
