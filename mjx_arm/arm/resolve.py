@@ -18,14 +18,16 @@ from typing import Any
 from mjx_arm.arm.config import ArmConfig, load_arm
 from mjx_arm.arm.info import ArmInfo, arm_info
 from mjx_arm.arm.setup import arm_setup
+from mjx_arm.inputs import ConfigError
 from mjx_arm.task.config import TaskConfig
 
 GRIPPER_ARM = "ur5e_gripper.urdf"  # assets/: the arm of the gripper tasks' presets
 
 
-class TaskFitError(ValueError):
+class TaskFitError(ConfigError):
     """A task that does not fit the arm: a gripper task on an arm without a gripper, or a home
-    pose with another number of angles than the arm has joints."""
+    pose with another number of angles than the arm has joints (a named input error, and a
+    ``ValueError``)."""
 
 
 @dataclass(frozen=True, eq=False)

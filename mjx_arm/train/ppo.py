@@ -22,7 +22,7 @@ from typing import Any
 import jax
 import numpy as np
 
-from mjx_arm.arm.resolve import ArmTask, TaskFitError, resolve_task
+from mjx_arm.arm.resolve import ArmTask, resolve_task
 from mjx_arm.envs.backend import make_batched_env, resolve_backend
 from mjx_arm.inputs import ConfigError, MissingInputError
 from mjx_arm.task.config import TaskConfig
@@ -142,10 +142,7 @@ def resolve_run_task(config: TrainConfig) -> ArmTask:
     Raises:
         InputError: an arm that does not validate or resolve, or a task that does not fit it.
     """
-    try:
-        return resolve_task(config.task_config(), config.arm, "mujoco")
-    except TaskFitError as err:
-        raise ConfigError(str(err)) from err
+    return resolve_task(config.task_config(), config.arm, "mujoco")
 
 
 def _start_point(
