@@ -6,15 +6,18 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import jax
 import numpy as np
 
-from mjx_arm.arm.resolve import ArmTask
 from mjx_arm.envs.physics_config import PhysicsConfig
 from mjx_arm.inputs import ConfigError
 from mjx_arm.names import BACKENDS
 from mjx_arm.task.config import TaskConfig
+
+if TYPE_CHECKING:
+    from mjx_arm.arm.resolve import ArmTask
 
 
 def resolve_backend(name: str) -> str:

@@ -11,18 +11,22 @@ A task added with :func:`mjx_arm.task.registry.register_task` gets its id from
 from __future__ import annotations
 
 import functools
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 
 from mjx_arm import engines
-from mjx_arm.arm.resolve import ArmTask
 from mjx_arm.names import env_id
 from mjx_arm.task.config import TaskConfig, task_config
 from mjx_arm.task.registry import task_names
 
+if TYPE_CHECKING:
+    from mjx_arm.arm.resolve import ArmTask
+
 
 def _task(name: str, task: TaskConfig | ArmTask | dict | None) -> TaskConfig | ArmTask:
+    from mjx_arm.arm.resolve import ArmTask  # here: ``import mjx_arm`` stays light
+
     if isinstance(task, TaskConfig | ArmTask):
         return task
     return task_config(name, **(task or {}))

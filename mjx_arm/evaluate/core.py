@@ -13,7 +13,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from mjx_arm import engines
-from mjx_arm.arm.resolve import ArmTask
 from mjx_arm.evaluate.runners import Policy, check_policy_arm, run_batched, run_episodes
 from mjx_arm.evaluate.stats import EvalRun, summarize
 from mjx_arm.inputs import ConfigError, MissingInputError
@@ -26,6 +25,8 @@ DYNAMICS_FIELDS = ("ctrl_dt", "sim_dt", "action_scale", "joint_encoding")
 
 if TYPE_CHECKING:
     import gymnasium as gym
+
+    from mjx_arm.arm.resolve import ArmTask
 
 
 # --------------------------------------------------------------------------- evaluate
@@ -96,6 +97,7 @@ def make_eval_env(
     None: the env's default); an engine whose row lists no ``contact`` option ignores it."""
     import gymnasium as gym
 
+    from mjx_arm.arm.resolve import ArmTask
     from mjx_arm.envs.registration import register_envs
 
     register_envs()  # idempotent; also registers tasks added since import
