@@ -51,8 +51,8 @@ def _env(task_name: str, backend: str, convert: list[str], physics, batch: int, 
         raise SystemExit("--convert is for the shipped arm only")
     import dataclasses
 
+    from mjx_arm.arm.model_io import task_convert_config
     from mjx_arm.envs.mjx_env import MjxArmEnv
-    from mjx_arm.envs.model_io import task_convert_config
     from mjx_arm.paths import default_arm_urdf
     from mjx_arm.urdf import load_model
 

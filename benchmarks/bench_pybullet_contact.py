@@ -82,13 +82,13 @@ def run_case(case: str, engine: str, contact: str | None, episodes: int, seed: i
 
 def available(case: str) -> bool:
     """Whether the case's arm resolves on this machine (the UR10 needs its package)."""
-    from mjx_arm.urdf.arm_config import load_arm
+    from mjx_arm.arm.config import load_arm
 
     arm_file = CASES[case][1]
     if arm_file is None:
         return True
     try:
-        from mjx_arm.envs.arm import arm_info
+        from mjx_arm.arm.info import arm_info
 
         arm_info(load_arm(arm_file))
     except Exception as exc:  # reported, the case is skipped

@@ -253,6 +253,65 @@ def _gpu_scaling_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
     return "Training on several GPUs, a process per GPU", value, list(GPU_SCALING)
 
 
+def _arm_group(load: Callable[[str], Json], label: str, seeds: tuple[str, ...],
+               transfers: tuple[str, ...]) -> str:  # fmt: skip
+    """``label N/M`` over the seeds files, then each engine's lowest transfer and highest mean
+    peak force over the transfer files."""
+    summaries = [load(rel)["summary"] for rel in seeds]
+    solved, total = sum(s["solved"] for s in summaries), sum(s["seeds"] for s in summaries)
+    rows = [r for rel in transfers for r in load(rel)["rows"]]
+    engines = []
+    for key in dict.fromkeys(r["key"] for r in rows):
+        mine = [r for r in rows if r["key"] == key]
+        peak = max(r["mean_peak_contact_force"] for r in mine)
+        engines.append(f"{mine[0]['engine']} >= {min(r['success_rate'] for r in mine):.3f} "
+                       f"(peak <= {peak:.0f} N)")  # fmt: skip
+    return f"{label} {solved}/{total}" + (f", exported {', '.join(engines)}" if engines else "")
+
+
+ArmGroup = tuple[str, tuple[str, ...], tuple[str, ...]]  # label, seeds files, transfer files
+
+
+def _arm_groups_row(
+    figure: str,
+    groups: tuple[ArmGroup, ...],
+    extra: Callable[[Callable[[str], Json]], str] | None = None,
+) -> Headline:
+    """Seeds solved per arm and the lowest transfer per engine of its policies."""
+
+    def read(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
+        value = "; ".join(_arm_group(load, *group) for group in groups)
+        if extra is not None:
+            value += f". {extra(load)}"
+        rels = [rel for _, seeds, transfers in groups for rel in (*seeds, *transfers)]
+        return figure, value, rels
+
+    return Headline(read)
+
+
+LINKAGE = "arms/linkage/"
+LINKAGE_GROUPS = (
+    ("2F-85 class", (f"{LINKAGE}seeds_lift_fast_ur5e_2f85.json",
+                     f"{LINKAGE}seeds_lift_fast_ur5e_2f85_seed1.json"),
+     tuple(f"{LINKAGE}transfer_lift_ur5e_2f85_seed{s}.json" for s in (0, 1))),
+    ("xArm-gripper class", (f"{LINKAGE}seeds_lift_fast_ur5e_xarm_gripper.json",),
+     tuple(f"{LINKAGE}transfer_lift_ur5e_xarm_gripper_seed{s}.json" for s in (0, 1))),
+)  # fmt: skip
+SEVEN = "arms/seven_joint/"
+SEVEN_GROUPS = tuple(
+    (label, (f"{SEVEN}seeds_touch_fast_{name}.json",),
+     tuple(f"{SEVEN}transfer_touch_{stem}_seed{s}.json" for s in (0, 1, 2)))
+    for label, name, stem in (("panda", "panda_mesh_warm", "panda"),
+                              ("panda on capsules", "panda_capsules", "panda_capsules"),
+                              ("xarm7 on capsules", "xarm7_capsules", "xarm7_capsules"))
+)  # fmt: skip
+
+
+def _seven_compile(load: Callable[[str], Json]) -> str:
+    rows = load(f"{SEVEN}compile_cold_mesh_vs_capsules.json")["rows"]
+    return "Cold compile: " + ", ".join(f"{r['arm']} {secs(r['compile_s'])}" for r in rows)
+
+
 HEADLINES: tuple[Headline, ...] = (
     _seeds_row("Touch", "seeds/seeds_touch_fast.json", "`--preset fast`, time to threshold"),
     _seeds_row("Reach", "seeds/seeds_reach_fast.json", "`--preset fast`, time to threshold"),
@@ -263,6 +322,10 @@ HEADLINES: tuple[Headline, ...] = (
     _transfer_row("Touch", TOUCH_TRANSFER, ("mujoco", "pybullet")),
     Headline(_any_arm_row),
     Headline(_pick_row),
+    _arm_groups_row("Lift on the UR5e with a linkage gripper, `--preset fast` as shipped",
+                    LINKAGE_GROUPS),
+    _arm_groups_row("Touch on 7-joint arms, `--preset fast` as shipped", SEVEN_GROUPS,
+                    _seven_compile),
     _summary_row(LIFT_SUMMARIES, "Lift: `--preset fast` as shipped, seeds and transfer"),
     _summary_row(ROBUST_LIFT_SUMMARY, "Lift: `--preset robust` as shipped, seeds and transfer"),
     _summary_row(ROBUST_TOUCH_SUMMARY, "Touch: `--preset robust` as shipped, seeds and transfer",

@@ -62,7 +62,7 @@ class Corpus:
 
 def build(folder: Path) -> Corpus:
     """Write every good input into ``folder`` (created) and return their paths."""
-    from mjx_arm.envs.arm_report import arm_file_text
+    from mjx_arm.arm.report import arm_file_text
     from mjx_arm.paths import default_arm_urdf
     from mjx_arm.policy.export import export_run
 
@@ -84,7 +84,7 @@ def build(folder: Path) -> Corpus:
 
 
 def _arm():
-    from mjx_arm.envs.arm import arm_info
+    from mjx_arm.arm.info import arm_info
 
     return arm_info()
 
@@ -103,7 +103,7 @@ def _task(arm):
 
 def write_run(run_dir: Path, arm) -> Path:
     """A run directory as ``mjx-arm train`` leaves it after its first checkpoint."""
-    from mjx_arm.envs.arm import arm_record
+    from mjx_arm.arm.info import arm_record
     from mjx_arm.train.config import load_config
     from mjx_arm.train.rundir import RunDir
 

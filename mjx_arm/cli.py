@@ -86,9 +86,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
     About 1-2 minutes on a 2-core CPU (--quick: under a minute). --arm runs it on another arm
     (a URDF or an arm file).
     """
+    from mjx_arm.arm.config import load_arm
     from mjx_arm.demo import run_demo
     from mjx_arm.inputs import check_folder
-    from mjx_arm.urdf.arm_config import load_arm
 
     if args.out:
         check_folder(args.out, "--out")
@@ -116,8 +116,8 @@ def _add_demo(sub: argparse._SubParsersAction) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every subcommand, in the order of the pipeline."""
+    from mjx_arm.arm import cli as arm_cli
     from mjx_arm.bench import cli as bench_cli
-    from mjx_arm.envs import cli as envs_cli
     from mjx_arm.evaluate import cli as evaluate_cli
     from mjx_arm.policy import cli as policy_cli
     from mjx_arm.sim2real import cli as sim2real_cli
@@ -129,7 +129,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Train and check 6-DoF arm control policies (URDF -> MJCF -> MJX + Brax PPO).",
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for package in (urdf_cli, envs_cli, train_cli, policy_cli, evaluate_cli):
+    for package in (urdf_cli, arm_cli, train_cli, policy_cli, evaluate_cli):
         package.register(sub)
     _add_demo(sub)
     sim2real_cli.register(sub)
@@ -140,9 +140,9 @@ def build_parser() -> argparse.ArgumentParser:
 def named_errors() -> tuple[type[Exception], ...]:
     """The exceptions that mean a bad input: :class:`InputError` and the named errors that
     keep their own base (the standalone numpy runtime's, the arm config's, an arm mismatch)."""
-    from mjx_arm.envs.arm import ArmMismatchError
+    from mjx_arm.arm.config import ArmConfigError
+    from mjx_arm.arm.info import ArmMismatchError
     from mjx_arm.policy.numpy_policy import PolicyFileError
-    from mjx_arm.urdf.arm_config import ArmConfigError
 
     return InputError, PolicyFileError, ArmConfigError, ArmMismatchError
 

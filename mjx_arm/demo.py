@@ -30,9 +30,9 @@ from mjx_arm.inputs import InputError
 from mjx_arm.names import engine_label
 
 if TYPE_CHECKING:
+    from mjx_arm.arm.config import ArmConfig
     from mjx_arm.evaluate import EvalRun
     from mjx_arm.task.config import TaskConfig
-    from mjx_arm.urdf.arm_config import ArmConfig
 
 
 class DemoError(InputError, RuntimeError):
@@ -90,11 +90,11 @@ def validate_and_convert(
     build it (``<urdf stem>_<task>.xml``)."""
     import mujoco
 
-    from mjx_arm.envs.arm import arm_info
-    from mjx_arm.envs.model_io import task_convert_config
+    from mjx_arm.arm.config import ArmConfig
+    from mjx_arm.arm.info import arm_info
+    from mjx_arm.arm.model_io import task_convert_config
     from mjx_arm.task.config import task_config
     from mjx_arm.urdf import to_mjcf
-    from mjx_arm.urdf.arm_config import ArmConfig
     from mjx_arm.urdf.validate import validate
 
     arm = arm or ArmConfig()
@@ -274,7 +274,7 @@ def run_demo(
     Raises:
         DemoError: ``out`` already holds a training run, or the arm's URDF is invalid.
     """
-    from mjx_arm.urdf.arm_config import load_arm
+    from mjx_arm.arm.config import load_arm
 
     arm_config = load_arm(arm) if arm else None
     settings = QUICK if quick else FULL

@@ -20,7 +20,7 @@ import os
 import warnings
 from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -36,6 +36,9 @@ from mjx_arm.inputs import (
 )
 from mjx_arm.task.config import TaskConfig, task_config
 from mjx_arm.task.observation import decode_joints, n_joints_of, obs_size, obs_slices
+
+if TYPE_CHECKING:
+    from mjx_arm.arm.resolve import ArmTask
 
 REQUIRED_KEYS = ("obs", "reward", "ee_pos", "contact_force")
 # The members a trajectory's reader unpacks (any other is never read), and what they may unpack
@@ -305,13 +308,14 @@ def fit_framebuffer(model: Any, width: int, height: int) -> None:
 
 def render_frames(
     traj: dict[str, Any],
-    task: TaskConfig,
+    task: TaskConfig | ArmTask,
     width: int = DEFAULT_WIDTH,
     height: int = DEFAULT_HEIGHT,
     arm: Any = None,
 ) -> Iterator[np.ndarray]:
-    """MuJoCo frames ``(height, width, 3)`` uint8 of each step's joint angles and target, on
-    ``arm`` (default: the shipped arm)."""
+    """MuJoCo frames ``(height, width, 3)`` uint8 of each step's joint angles and target:
+    ``task`` on its arm (an :class:`~mjx_arm.arm.resolve.ArmTask`), or a task config on ``arm``
+    (default: the shipped arm)."""
     import mujoco
 
     from mjx_arm.envs.mujoco_env import MujocoArmEnv
@@ -319,6 +323,7 @@ def render_frames(
     from mjx_arm.urdf.scene import TARGET_BODY
 
     env = MujocoArmEnv(task, arm, render_mode="rgb_array", width=width, height=height)
+    task = env.task
     fit_framebuffer(env.model, width, height)
     env.reset(seed=0)
     model, data = env.model, env.data

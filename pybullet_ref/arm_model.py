@@ -19,8 +19,8 @@ with native_output_silenced((STDOUT, STDERR)):  # "pybullet build time: ..."
     import pybullet
     from pybullet_utils.bullet_client import BulletClient
 
-from mjx_arm.envs.arm import ArmInfo, arm_info
-from mjx_arm.urdf.arm_config import ArmConfig
+from mjx_arm.arm.config import ArmConfig
+from mjx_arm.arm.info import ArmInfo, arm_info
 from mjx_arm.urdf.convert import load_model
 
 BASE = -1  # PyBullet's link index of a multibody's base

@@ -21,7 +21,7 @@ is zeroed in PyBullet (Bullet applies it explicitly, which diverges on the light
 is part of the law above). ``kv``, ``d``, the effort and the armature are read from the
 converted MuJoCo model. Friction is MuJoCo's 1.0 per contact.
 
-Self-collision as the task model has it (:func:`mjx_arm.envs.model_io.task_convert_config`):
+Self-collision as the task model has it (:func:`mjx_arm.arm.model_io.task_convert_config`):
 off, so the arm is loaded without ``URDF_USE_SELF_COLLISION`` (with it, a joint-limited UR10
 ran its wrist into its forearm, which MuJoCo never does); on, without MuJoCo's filtered pairs.
 
@@ -58,13 +58,13 @@ with native_output_silenced((STDOUT, STDERR)):  # "pybullet build time: ..."
     import pybullet
     from pybullet_utils.bullet_client import BulletClient
 
+from mjx_arm.arm.config import ArmConfig
+from mjx_arm.arm.model_io import task_convert_config
 from mjx_arm.envs.base import DEFAULT_HEIGHT, DEFAULT_WIDTH, BaseRobotEnv, PhysicsReading
-from mjx_arm.envs.model_io import task_convert_config
 from mjx_arm.paths import asset
 from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.grip import ObjectStart
-from mjx_arm.urdf.arm_config import ArmConfig
 from mjx_arm.urdf.repair import UrdfRepairs
 from mjx_arm.urdf.scene import CAMERA_EYE, CAMERA_FOVY, CAMERA_TARGET
 from mjx_arm.urdf.scene_shapes import CUBE_HALF, CUBE_MASS
@@ -101,7 +101,7 @@ class PybulletArmEnv(BaseRobotEnv):
     module docstring).
 
     Args:
-        task: the task configuration (default: Touch).
+        task: the task configuration (default: Touch), or an ArmTask (a task on its arm).
         arm: the arm (a URDF, an arm file or an ArmConfig; default: the shipped arm).
         render_mode: None, "rgb_array" or "human".
         width, height: frame size (pixels).

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from mjx_arm.envs.arm import Gripper
+from mjx_arm.arm.info import Gripper
 
 
 def gripper_ids(

@@ -6,7 +6,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from mjx_arm.envs.model_io import arm_model
+from mjx_arm.arm.model_io import arm_model
 from mjx_arm.task.observation import decode_joints
 
 GAIN = 4.0  # 1/s: Cartesian speed per metre (and rad/s per rad) of error

@@ -18,13 +18,13 @@ import numpy as np
 import pytest
 
 import mjx_arm  # noqa: F401  (registers the ids)
+from mjx_arm.arm.config import SHIPPED_HOME_QPOS, ArmConfig, load_arm, resolve_arm
+from mjx_arm.arm.info import arm_info, press_kv_factor, tool_down_solver
+from mjx_arm.arm.setup import arm_setup, grid_targets, task_verdict
 from mjx_arm.cli import main
-from mjx_arm.envs.arm import arm_info, press_kv_factor, tool_down_solver
-from mjx_arm.envs.setup import arm_setup, grid_targets, task_verdict
 from mjx_arm.paths import default_arm_urdf
 from mjx_arm.task import observation as obs_lib
 from mjx_arm.task.config import TaskConfig, task_config
-from mjx_arm.urdf.arm_config import SHIPPED_HOME_QPOS, ArmConfig, load_arm, resolve_arm
 from mjx_arm.urdf.convert import EE_SITE
 
 ROBOTS = Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix/share/example-robot-data/robots"
@@ -37,7 +37,7 @@ UR3 = ROBOTS / "ur_description/urdf/ur3_robot.urdf"
 
 published = pytest.mark.skipif(not UR10.is_file(), reason="example-robot-data not installed")
 
-# The IK's tolerances (mjx_arm.envs.ik): 1 mm and 1 degree.
+# The IK's tolerances (mjx_arm.arm.ik): 1 mm and 1 degree.
 POS_TOL, TILT_TOL = 1e-3, math.radians(1.0)
 
 

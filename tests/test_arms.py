@@ -16,15 +16,15 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import mjx_arm  # noqa: F401  (registers the ids)
-from mjx_arm.envs.arm import ArmMismatchError, arm_info, arm_record, check_same_arm
-from mjx_arm.task import reach_config, sampling
-from mjx_arm.urdf.arm_config import (
+from mjx_arm.arm.config import (
     SHIPPED_HOME_QPOS,
     ArmConfig,
     ArmConfigError,
     load_arm,
     resolve_arm,
 )
+from mjx_arm.arm.info import ArmMismatchError, arm_info, arm_record, check_same_arm
+from mjx_arm.task import reach_config, sampling
 
 ROBOTS = Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix/share/example-robot-data/robots"
 UR10 = ROBOTS / "ur_description/urdf/ur10_robot.urdf"
@@ -171,7 +171,7 @@ def test_parity_forward_kinematics_on_panda(tmp_path: Path) -> None:
 def test_collision_meshes_can_be_fitted_capsules() -> None:
     import mujoco
 
-    from mjx_arm.envs.model_io import arm_model
+    from mjx_arm.arm.model_io import arm_model
 
     def collision_types(collision: str) -> set[str]:
         arm = arm_info(ArmConfig(urdf=str(UR10), collision=collision))

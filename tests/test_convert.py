@@ -16,10 +16,10 @@ import mujoco
 import numpy as np
 import pytest
 
-from mjx_arm.envs.arm import arm_info
-from mjx_arm.envs.model_io import SensorReader
+from mjx_arm.arm.config import SHIPPED_HOME_QPOS
+from mjx_arm.arm.info import arm_info
+from mjx_arm.arm.model_io import SensorReader
 from mjx_arm.paths import default_arm_urdf
-from mjx_arm.task.config import HOME_QPOS
 from mjx_arm.urdf import ConversionError, ConvertConfig, load_model, parse_urdf, to_mjcf
 from mjx_arm.urdf.convert import EE_SITE, FT_SITE, SENSORS, TOOL_COM_SITE
 from mjx_arm.urdf.kinematics import link_frames
@@ -205,7 +205,7 @@ def test_neighbour_and_base_contacts_are_excluded(model: mujoco.MjModel, arm: Ro
     assert excluded - neighbours == {("wrist_1_link", "wrist_3_link")}
     # no contact in the reference and home configurations, self-collision on
     data = mujoco.MjData(model)
-    for q in (np.zeros(6), np.array(HOME_QPOS)):
+    for q in (np.zeros(6), np.array(SHIPPED_HOME_QPOS)):
         data.qpos[:6] = q
         mujoco.mj_forward(model, data)
         assert data.ncon == 0, q
@@ -332,7 +332,7 @@ def test_mimic_joint_gets_no_actuator(panda_urdf: Path):
 
 def _settle_at_home(model: mujoco.MjModel, reader: SensorReader) -> mujoco.MjData:
     data = mujoco.MjData(model)
-    data.qpos[reader.qpos_adr] = HOME_QPOS
+    data.qpos[reader.qpos_adr] = SHIPPED_HOME_QPOS
     mujoco.mj_forward(model, data)
     return data
 
@@ -418,7 +418,7 @@ def _zigzag(v: np.ndarray) -> float:
 def _step_responses(model: mujoco.MjModel, joint: int, sign: float) -> tuple[np.ndarray, int]:
     """Joint velocities ``(120, 6)`` under a +-1 rad/s step then its reversal; capped substeps."""
     data = mujoco.MjData(model)
-    data.qpos[:6] = HOME_QPOS
+    data.qpos[:6] = SHIPPED_HOME_QPOS
     mujoco.mj_forward(model, data)
     trace, capped = [], 0
     for target in (sign, -sign):

@@ -47,11 +47,11 @@ def test_demo_refuses_a_folder_with_a_run(tmp_path: Path, capsys):
 
 def test_demo_writes_the_model_of_the_task_it_trains(tmp_path: Path):
     """The MJCF is named after the task the demo trains and holds that task's model."""
+    from mjx_arm.arm.config import load_arm
     from mjx_arm.demo import TASK, validate_and_convert
     from mjx_arm.envs.mujoco_env import MujocoArmEnv
     from mjx_arm.paths import asset
     from mjx_arm.task.config import task_config
-    from mjx_arm.urdf.arm_config import load_arm
 
     arm = load_arm(asset("ur5e_gripper.urdf"))
     lines: list[str] = []

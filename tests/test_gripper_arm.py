@@ -9,9 +9,9 @@ import mujoco
 import numpy as np
 import pytest
 
-from mjx_arm.envs.arm import arm_info
+from mjx_arm.arm.config import SHIPPED_HOME_QPOS
+from mjx_arm.arm.info import arm_info
 from mjx_arm.paths import asset
-from mjx_arm.urdf.arm_config import SHIPPED_HOME_QPOS
 from mjx_arm.urdf.convert import to_mjcf
 from mjx_arm.urdf.model import parse_urdf
 from mjx_arm.urdf.validate import validate

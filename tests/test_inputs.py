@@ -81,7 +81,7 @@ def test_numeric_arguments_out_of_range(corpus: Corpus, capsys) -> None:
 
 def test_a_urdf_without_links_is_an_arm_config_error(tmp_path: Path) -> None:
     """example-robot-data's ur3.urdf is an empty <robot> (a xacro stub)."""
-    from mjx_arm.urdf.arm_config import ArmConfig, ArmConfigError, resolve_arm
+    from mjx_arm.arm.config import ArmConfig, ArmConfigError, resolve_arm
 
     empty = tmp_path / "ur3.urdf"
     empty.write_text(

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from lift_script import run_scripted_lift
 
+from mjx_arm.arm.model_io import arm_model
 from mjx_arm.envs.base import action_size
-from mjx_arm.envs.model_io import arm_model
 from mjx_arm.envs.mujoco_env import MujocoArmEnv
 from mjx_arm.paths import asset
 from mjx_arm.task import lift as lift_lib
@@ -209,7 +209,7 @@ def test_soft_variant_charges_from_25_n_and_the_touchdown_speed():
 def test_task_solver_iterations_reach_the_model():
     """``solver_iterations`` / ``ls_iterations`` set the task model's solver (Lift's preset:
     4 and 8); 0 keeps the converter's 2 and 4."""
-    from mjx_arm.envs.arm import arm_info
+    from mjx_arm.arm.info import arm_info
 
     arm = arm_info(GRIPPER)
     model = arm_model(arm, lift_config(solver_iterations=6, ls_iterations=12))

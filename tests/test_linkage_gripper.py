@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 from lift_script import run_scripted_lift
 
-from mjx_arm.envs.arm import arm_info
-from mjx_arm.envs.model_io import arm_model
+from mjx_arm.arm.config import ArmConfig, resolve_arm
+from mjx_arm.arm.info import arm_info
+from mjx_arm.arm.model_io import arm_model
 from mjx_arm.envs.mujoco_env import MujocoArmEnv
 from mjx_arm.paths import asset
 from mjx_arm.task.lift import LIFT_HEIGHT, lift_config
 from mjx_arm.task.touch import touch_config
-from mjx_arm.urdf.arm_config import ArmConfig, resolve_arm
 from mjx_arm.urdf.grippers import find_layout, pad_gap
 from mjx_arm.urdf.validate import validate
 

@@ -168,7 +168,7 @@ def test_inputs_shapes_and_range(exported: dict[str, Path], kind: str):
 
 
 def test_action_scaling_is_the_contracts(exported: dict[str, Path]):
-    from mjx_arm.envs.arm import arm_info
+    from mjx_arm.arm.info import arm_info
 
     policy = load(exported["npz"])
     expected = np.array([1, -1, 0.5, 0, 1, 1]) * 0.5 * arm_info().v_max  # reach: scale 0.5

@@ -15,6 +15,7 @@ import mujoco
 import numpy as np
 import pytest
 
+from mjx_arm.arm.config import ArmConfig
 from mjx_arm.cli import main
 from mjx_arm.envs.mujoco_env import MujocoArmEnv
 from mjx_arm.envs.registration import register_envs
@@ -23,7 +24,6 @@ from mjx_arm.evaluate.runners import run_episodes
 from mjx_arm.names import EXIT_INVALID, EXIT_OK, env_id
 from mjx_arm.policy import load
 from mjx_arm.task import touch_config
-from mjx_arm.urdf.arm_config import ArmConfig
 from mjx_arm.urdf.convert import EE_SITE
 from mjx_arm.urdf.errors import ConversionError
 from mjx_arm.urdf.mesh_convert import load_mesh

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mjx_arm.envs.arm import arm_info
+from mjx_arm.arm.info import arm_info
 from mjx_arm.envs.mujoco_env import MujocoArmEnv
 from mjx_arm.paths import asset
 from mjx_arm.task.lift import lift_config

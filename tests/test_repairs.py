@@ -12,11 +12,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from mjx_arm.arm.config import ArmConfig, load_arm
 from mjx_arm.cli import EXIT_INVALID, EXIT_OK, build_parser, main
 from mjx_arm.envs.mujoco_env import MujocoArmEnv
 from mjx_arm.paths import default_arm_urdf
 from mjx_arm.task import touch_config
-from mjx_arm.urdf.arm_config import ArmConfig, load_arm
 from mjx_arm.urdf.errors import UrdfError
 from mjx_arm.urdf.inertia import principal_moments, repair_inertia
 from mjx_arm.urdf.repair import link_tensor

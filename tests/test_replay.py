@@ -36,10 +36,10 @@ def transitions(tmp_path_factory) -> Path:
 
 def _synthetic(steps: int = 12) -> dict[str, np.ndarray]:
     """A made-up trajectory: the base turning from home, the reward dropping by 5 at step 7."""
-    from mjx_arm.task.config import HOME_QPOS
+    from mjx_arm.arm.config import SHIPPED_HOME_QPOS
 
     obs = np.zeros((steps, 22), np.float32)
-    obs[:, 7:13] = HOME_QPOS
+    obs[:, 7:13] = SHIPPED_HOME_QPOS
     obs[:, 7] = np.linspace(0.0, 0.5, steps)  # distinct frames (a GIF merges equal ones)
     obs[:, 13:16] = (0.5, 0.1, 0.04)
     reward = -np.linspace(5.0, 1.0, steps)

@@ -17,7 +17,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mjx_arm.envs.arm import arm_info
+from mjx_arm.arm.info import arm_info
 from mjx_arm.sim2real import (
     FrameAlignmentError,
     JointLimits,

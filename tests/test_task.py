@@ -13,12 +13,13 @@ import math
 import numpy as np
 import pytest
 
+from mjx_arm.arm.config import SHIPPED_HOME_QPOS
 from mjx_arm.task import config as config_lib
 from mjx_arm.task import observation as obs_lib
 from mjx_arm.task import reach_config, sampling, touch_config
 from mjx_arm.task import reward as reward_lib
 from mjx_arm.task import touch as touch_lib
-from mjx_arm.task.config import HOME_QPOS, REWARD_TERMS, RewardConfig, TaskConfig
+from mjx_arm.task.config import REWARD_TERMS, RewardConfig, TaskConfig
 from mjx_arm.task.wrench import (
     SENSOR_BLOCK_SIZE,
     ToolInertia,
@@ -418,7 +419,7 @@ def test_random_obs_always_inside_space() -> None:
 
 @pytest.mark.parametrize("preset", [reach_config, touch_config])
 def test_sampling_inside_bounds(preset) -> None:
-    cfg = preset().for_arm(HOME_QPOS, 1.0)
+    cfg = preset().for_arm(SHIPPED_HOME_QPOS, 1.0)
     rng = np.random.default_rng(1)
     u = rng.uniform(size=(500, sampling.n_uniforms(6)))
     u[0], u[1] = 0.0, np.nextafter(1.0, 0.0)  # the edges of [0, 1)

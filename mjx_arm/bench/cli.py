@@ -44,7 +44,7 @@ def _check_arm(arm: str) -> None:
         InputError: no such file, or an arm that does not validate or resolve.
     """
     if arm:
-        from mjx_arm.envs.arm import validated_arm_info
+        from mjx_arm.arm.info import validated_arm_info
 
         validated_arm_info(arm, "mujoco")
 
@@ -264,7 +264,7 @@ def cmd_robustness(args: argparse.Namespace) -> int:
     arm = eval_arm(policy, args.arm or None)
     _enable_jax_cache()
     task, _ = eval_task(policy)
-    from mjx_arm.envs.arm import arm_info
+    from mjx_arm.arm.info import arm_info
 
     check_policy_fits(policy, task, arm_info(arm))
     meta = environment_metadata(accelerator=config.engine == "mjx")

@@ -25,10 +25,11 @@ import mujoco
 import numpy as np
 
 from mjx_arm import engines
+from mjx_arm.arm.info import ArmInfo, arm_info
+from mjx_arm.arm.model_io import arm_model
+from mjx_arm.arm.resolve import ArmTask
 from mjx_arm.bench.parity_config import ENGINES
-from mjx_arm.envs.arm import ArmInfo, arm_info
 from mjx_arm.envs.base import BaseRobotEnv, PhysicsReading
-from mjx_arm.envs.model_io import arm_model
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.urdf.convert import EE_SITE
 
@@ -313,7 +314,7 @@ def mujoco_engine(task: TaskConfig, impl: str, batch_size: int, arm: ArmInfo | N
     concern MJX only)."""
     from mjx_arm.envs.mujoco_env import MujocoArmEnv
 
-    return MujocoEngine(MujocoArmEnv(task, arm.config if arm is not None else None))
+    return MujocoEngine(MujocoArmEnv(_on_arm(task, arm)))
 
 
 def bullet_engine(task: TaskConfig, impl: str, batch_size: int, arm: ArmInfo | None) -> Engine:
@@ -321,4 +322,11 @@ def bullet_engine(task: TaskConfig, impl: str, batch_size: int, arm: ArmInfo | N
     ``batch_size`` concern MJX only)."""
     from pybullet_ref import PybulletArmEnv
 
-    return BulletEngine(PybulletArmEnv(task, arm.config if arm is not None else None))
+    return BulletEngine(PybulletArmEnv(_on_arm(task, arm)))
+
+
+def _on_arm(task: TaskConfig, arm: ArmInfo | None) -> TaskConfig | ArmTask:
+    """``task`` on ``arm`` as the caller resolved them (:func:`mjx_arm.arm.resolve.task_for_arm`
+    filled the task in), for an env to take as they are; without an arm, the task alone (the
+    env resolves it on the shipped arm)."""
+    return ArmTask(arm, task) if arm is not None else task

@@ -33,9 +33,9 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from mjx_arm.arm.info import ArmInfo, arm_info
 from mjx_arm.engines import engine as engine_row
 from mjx_arm.engines import engine_names, load
-from mjx_arm.envs.arm import ArmInfo, arm_info
 from mjx_arm.paths import asset
 from mjx_arm.task.grip import ObjectStart
 from mjx_arm.task.lift import LIFT_SIM_DT, SERVO_DT

@@ -27,6 +27,8 @@ from typing import Any
 
 import numpy as np
 
+from mjx_arm.arm.info import ArmInfo, arm_info
+from mjx_arm.arm.resolve import task_for_arm
 from mjx_arm.bench.engines import Engine, Inputs, MujocoEngine, Trace, make_engine
 from mjx_arm.bench.parity_config import (
     BOX_POSITIONS,
@@ -43,8 +45,6 @@ from mjx_arm.bench.parity_figures import (
     open_loop_figures,
     press_figures,
 )
-from mjx_arm.envs.arm import ArmInfo, arm_info
-from mjx_arm.envs.base import task_for_arm
 from mjx_arm.envs.physics_config import resolve_impl
 from mjx_arm.task import reach_config, sampling, touch_config
 from mjx_arm.task.config import TaskConfig

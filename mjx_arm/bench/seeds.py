@@ -76,10 +76,10 @@ def train_seed(
         overrides: ``key=value`` changes to the preset (exploration; empty: as shipped).
         start: ``time.time()`` the seed's times count from (default: now).
     """
+    from mjx_arm.arm.config import load_arm
     from mjx_arm.train.config import load_config
     from mjx_arm.train.ppo import train
     from mjx_arm.train.rundir import RunDir
-    from mjx_arm.urdf.arm_config import load_arm
 
     items = [f"task={config.task}", f"backend={config.backend}", *overrides, f"seed={seed}"]
     if config.devices:
@@ -267,8 +267,8 @@ def check_seed_settings(
     Raises:
         InputError: a bad override, an arm that does not validate, a bad device count.
     """
-    from mjx_arm.envs.arm import validated_arm_info
-    from mjx_arm.envs.base import default_arm
+    from mjx_arm.arm.info import validated_arm_info
+    from mjx_arm.arm.resolve import default_arm
     from mjx_arm.train.config import load_config
     from mjx_arm.train.learner import local_devices
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import jax
 import numpy as np
@@ -14,6 +15,9 @@ from mjx_arm.envs.physics_config import PhysicsConfig
 from mjx_arm.inputs import ConfigError
 from mjx_arm.names import BACKENDS
 from mjx_arm.task.config import TaskConfig
+
+if TYPE_CHECKING:
+    from mjx_arm.arm.resolve import ArmTask
 
 
 def resolve_backend(name: str) -> str:
@@ -26,7 +30,7 @@ def resolve_backend(name: str) -> str:
 
 
 def make_batched_env(
-    task: TaskConfig,
+    task: TaskConfig | ArmTask,
     backend: str = "auto",
     physics: PhysicsConfig | None = None,
     batch_size: int = 1,
@@ -37,13 +41,15 @@ def make_batched_env(
     """The single-env JAX env (``MjxArmEnv``) with the physics of ``backend``.
 
     Args:
-        task: the task configuration.
+        task: the task on its arm (:class:`~mjx_arm.arm.resolve.ArmTask`), or a task
+            configuration resolved with ``arm``.
         backend: "auto", "mjx" or "mujoco" (C MuJoCo through a host callback).
         physics: the MJX implementation and buffers (``mjx`` only; default ``impl="auto"``).
         batch_size: the largest batch stepped at once (sizes Warp's shared contact pool).
         randomization: domain randomisation
             (:class:`mjx_arm.envs.randomization.RandomizationConfig`; default off).
-        arm: the arm (a URDF, an arm file or an ArmConfig; default: the shipped arm).
+        arm: with a task configuration, the arm (a URDF, an arm file or an ArmConfig; default:
+            the shipped arm); None with an ArmTask.
         background_compile: compile MuJoCo Warp's kernels on a background thread; the caller
             waits with ``env.physics.wait_precompiled()`` before the first step runs.
     """

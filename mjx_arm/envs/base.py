@@ -29,19 +29,18 @@ from typing import Any, ClassVar, NamedTuple
 import gymnasium as gym
 import numpy as np
 
-from mjx_arm.envs.arm import ArmInfo, validated_arm_info
+from mjx_arm.arm.config import ArmConfig
+from mjx_arm.arm.info import ArmInfo
+from mjx_arm.arm.resolve import ArmTask, as_arm_task
 from mjx_arm.envs.scalar.codegen import Scorer, step_scorers
 from mjx_arm.envs.scalar.state import ScalarState, finite
 from mjx_arm.envs.scalar.step import StepInput
 from mjx_arm.envs.scalar.xp import SCALAR_XP
-from mjx_arm.envs.setup import arm_setup
 from mjx_arm.task import observation as obs_lib
 from mjx_arm.task import reward as reward_lib
 from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.grip import ObjectStart
-from mjx_arm.task.touch import touch_config
-from mjx_arm.urdf.arm_config import ArmConfig
 
 DEFAULT_WIDTH, DEFAULT_HEIGHT = 640, 480
 
@@ -82,12 +81,14 @@ class BaseRobotEnv(gym.Env):
     """An arm task with the contract's spaces, reward and success rule.
 
     Args:
-        task: the task configuration (default: Touch). Its empty ``home_qpos`` and
-            ``workspace_scale`` are filled in from the arm (:meth:`TaskConfig.for_arm`).
-        arm: the arm: a URDF path, an arm file (.toml/.json) or an
-            :class:`~mjx_arm.urdf.arm_config.ArmConfig` (default: the shipped UR5e-class arm).
-            Its URDF is validated for the engine before anything is loaded; an invalid URDF
-            raises ``UrdfError``.
+        task: the task on its arm, resolved once (:class:`~mjx_arm.arm.resolve.ArmTask`), or
+            a task configuration (default: Touch) to resolve with ``arm`` here
+            (:func:`~mjx_arm.arm.resolve.resolve_task`: its empty ``home_qpos``,
+            ``workspace_scale`` and ``episode_steps`` are filled in from the arm).
+        arm: with a task configuration, the arm: a URDF path, an arm file (.toml/.json) or an
+            :class:`~mjx_arm.arm.config.ArmConfig` (default: the shipped UR5e-class arm);
+            None with an ``ArmTask``. Its URDF is validated for the engine before anything is
+            loaded; an invalid URDF raises ``UrdfError``.
         render_mode: None, "rgb_array" or "human".
         width, height: frame size (pixels) of ``render()``.
     """
@@ -98,15 +99,15 @@ class BaseRobotEnv(gym.Env):
 
     def __init__(
         self,
-        task: TaskConfig | None = None,
+        task: TaskConfig | ArmTask | None = None,
         arm: str | Path | ArmConfig | None = None,
         render_mode: str | None = None,
         width: int = DEFAULT_WIDTH,
         height: int = DEFAULT_HEIGHT,
     ) -> None:
-        task = task or touch_config()
-        self.arm: ArmInfo = validated_arm_info(default_arm(task, arm), self.engine)
-        self.task = task_for_arm(task, self.arm)
+        self.arm_task = as_arm_task(task, arm, self.engine)
+        self.arm: ArmInfo = self.arm_task.arm
+        self.task = self.arm_task.task
         self.metadata = {**self.metadata, "render_fps": round(1.0 / self.task.ctrl_dt)}
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}")
@@ -380,38 +381,6 @@ class BaseRobotEnv(gym.Env):
 
 _FLOAT32 = np.dtype(np.float32)
 _SHIPPED_BOUNDS = (np.full(6, -1.0, np.float32), np.full(6, 1.0, np.float32))
-
-
-def task_for_arm(task: TaskConfig, arm: ArmInfo) -> TaskConfig:
-    """``task`` with the arm's setup (:func:`mjx_arm.envs.setup.arm_setup`: home pose,
-    workspace scale, episode length) filled in where it leaves them empty.
-
-    Raises:
-        ValueError: a gripper task on an arm without a parallel gripper.
-    """
-    if task.spec.gripper and arm.gripper is None:
-        raise ValueError(
-            f"task {task.task!r} needs an arm with a parallel gripper (two prismatic fingers, "
-            f"one driven, the other its <mimic>); {arm.urdf} has none. Try "
-            "--arm assets/ur5e_gripper.urdf"
-        )
-    if len(task.home_qpos) not in (0, arm.n_joints):
-        raise ValueError(
-            f"home_qpos has {len(task.home_qpos)} angles; the arm has {arm.n_joints} joints"
-        )
-    setup = arm_setup(arm, task)
-    return task.for_arm(setup.home_qpos, setup.workspace_scale, setup.episode_steps)
-
-
-def default_arm(task: TaskConfig, arm: Any = None) -> Any:
-    """``arm``, or where it is None the arm the task declares
-    (:attr:`~mjx_arm.task.spec.Task.default_arm`; Lift: ``assets/ur5e_gripper.urdf``), else
-    the shipped arm (None)."""
-    if arm is None and task.spec.default_arm:
-        from mjx_arm.paths import asset
-
-        return asset(task.spec.default_arm)
-    return arm
 
 
 def action_size(arm: ArmInfo, task: TaskConfig) -> int:

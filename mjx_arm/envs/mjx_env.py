@@ -30,11 +30,12 @@ import mujoco
 from brax.envs.base import Env, State
 from flax import struct
 
+from mjx_arm.arm.config import ArmConfig
+from mjx_arm.arm.model_io import arm_model
+from mjx_arm.arm.resolve import ArmTask, as_arm_task
 from mjx_arm.engines import BatchPhysics
-from mjx_arm.envs.arm import validated_arm_info
-from mjx_arm.envs.base import action_size, default_arm, gripper_speed, task_for_arm
+from mjx_arm.envs.base import action_size, gripper_speed
 from mjx_arm.envs.mjx_physics import MjxPhysics, Reading
-from mjx_arm.envs.model_io import arm_model
 from mjx_arm.envs.physics_config import PhysicsConfig
 from mjx_arm.envs.randomization import (
     MAX_LATENCY,
@@ -51,8 +52,6 @@ from mjx_arm.task import observation as obs_lib
 from mjx_arm.task import reward as reward_lib
 from mjx_arm.task import rules, sampling
 from mjx_arm.task.config import TaskConfig
-from mjx_arm.task.touch import touch_config
-from mjx_arm.urdf.arm_config import ArmConfig
 
 __all__ = ["MjxArmEnv", "Reading", "TaskMemory"]
 
@@ -97,14 +96,16 @@ class MjxArmEnv(Env):
     """A batched-ready arm task on MJX (one env; ``jax.vmap`` it or use Brax's wrappers).
 
     Args:
-        task: the task configuration (default: Touch); its empty home pose and workspace scale
-            come from the arm.
-        arm: the arm (a URDF, an arm file or an ArmConfig; default: the shipped arm); its URDF
-            is validated before use.
+        task: the task on its arm, resolved once (:class:`~mjx_arm.arm.resolve.ArmTask`), or
+            a task configuration (default: Touch) resolved here with ``arm``
+            (:func:`~mjx_arm.arm.resolve.resolve_task`: its empty home pose, workspace scale
+            and episode length come from the arm).
+        arm: with a task configuration, the arm (a URDF, an arm file or an ArmConfig;
+            default: the shipped arm), its URDF validated before use; None with an ArmTask.
         physics_factory: builds the physics (a :class:`mjx_arm.engines.BatchPhysics`) from
             (mj_model, arm, task); default: MJX with ``physics`` and ``batch_size``.
         mj_model: a task model converted with other settings (benchmark sweeps); default: the
-            task's model from :func:`mjx_arm.envs.model_io.arm_model`.
+            task's model from :func:`mjx_arm.arm.model_io.arm_model`.
         physics: MJX implementation and buffers (default: ``impl="auto"``).
         batch_size: the largest batch stepped at once (sizes Warp's contact pool).
         randomization: domain randomisation (default: off).
@@ -114,7 +115,7 @@ class MjxArmEnv(Env):
 
     def __init__(
         self,
-        task: TaskConfig | None = None,
+        task: TaskConfig | ArmTask | None = None,
         arm: str | Path | ArmConfig | None = None,
         physics_factory=None,
         mj_model: mujoco.MjModel | None = None,
@@ -124,9 +125,8 @@ class MjxArmEnv(Env):
         background_compile: bool = False,
     ) -> None:
         start = time.monotonic()
-        task = task or touch_config()
-        self.arm = validated_arm_info(default_arm(task, arm), "mujoco")
-        self.task = task_for_arm(task, self.arm)
+        self.arm_task = as_arm_task(task, arm, "mujoco")
+        self.arm, self.task = self.arm_task.arm, self.arm_task.task
         self.mj_model = mj_model if mj_model is not None else arm_model(self.arm, self.task)
         converted = time.monotonic()
         self.physics: BatchPhysics

@@ -32,9 +32,9 @@ import numpy as np
 from flax import struct
 from mujoco import mjx
 
+from mjx_arm.arm.info import ArmInfo
+from mjx_arm.arm.model_io import GripReader, SensorReader
 from mjx_arm.envs import warp_compile
-from mjx_arm.envs.arm import ArmInfo
-from mjx_arm.envs.model_io import GripReader, SensorReader
 from mjx_arm.envs.physics_config import PhysicsConfig, resolve_impl
 from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig

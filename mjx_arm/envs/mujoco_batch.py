@@ -29,9 +29,9 @@ import numpy as np
 from flax import struct
 from mujoco import rollout as mj_rollout
 
-from mjx_arm.envs.arm import ArmInfo
+from mjx_arm.arm.info import ArmInfo
+from mjx_arm.arm.model_io import GripReader, SensorReader
 from mjx_arm.envs.mjx_physics import Dynamics, Reading, batched_where
-from mjx_arm.envs.model_io import GripReader, SensorReader
 from mjx_arm.inputs import ConfigError
 from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig

@@ -7,14 +7,15 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from mjx_arm.arm.config import ArmConfig
+from mjx_arm.arm.model_io import EE_POS as _EE_POS
+from mjx_arm.arm.model_io import EE_QUAT as _EE_QUAT
+from mjx_arm.arm.model_io import GripReader, SensorReader, arm_model, as_slice
+from mjx_arm.arm.resolve import ArmTask
 from mjx_arm.envs.base import DEFAULT_HEIGHT, DEFAULT_WIDTH, BaseRobotEnv, PhysicsReading
-from mjx_arm.envs.model_io import EE_POS as _EE_POS
-from mjx_arm.envs.model_io import EE_QUAT as _EE_QUAT
-from mjx_arm.envs.model_io import GripReader, SensorReader, arm_model, as_slice
 from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.grip import ObjectStart
-from mjx_arm.urdf.arm_config import ArmConfig
 from mjx_arm.urdf.scene import TARGET_BODY
 
 _NO_GRIP = PhysicsReading._field_defaults["grip"]  # the reading's grip without a gripper
@@ -24,8 +25,10 @@ class MujocoArmEnv(BaseRobotEnv):
     """The arm task on C MuJoCo (one world, CPU).
 
     Args:
-        task: the task configuration (default: Touch).
-        arm: the arm (a URDF, an arm file or an ArmConfig; default: the shipped arm).
+        task: the task on its arm (:class:`~mjx_arm.arm.resolve.ArmTask`), or a task
+            configuration (default: Touch) resolved with ``arm``.
+        arm: with a task configuration, the arm (a URDF, an arm file or an ArmConfig;
+            default: the shipped arm).
         render_mode: None, "rgb_array" or "human".
         width, height: frame size (pixels).
     """
@@ -34,7 +37,7 @@ class MujocoArmEnv(BaseRobotEnv):
 
     def __init__(
         self,
-        task: TaskConfig | None = None,
+        task: TaskConfig | ArmTask | None = None,
         arm: str | Path | ArmConfig | None = None,
         render_mode: str | None = None,
         width: int = DEFAULT_WIDTH,

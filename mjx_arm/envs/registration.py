@@ -11,7 +11,7 @@ A task added with :func:`mjx_arm.task.registry.register_task` gets its id from
 from __future__ import annotations
 
 import functools
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 
@@ -20,15 +20,23 @@ from mjx_arm.names import env_id
 from mjx_arm.task.config import TaskConfig, task_config
 from mjx_arm.task.registry import task_names
 
+if TYPE_CHECKING:
+    from mjx_arm.arm.resolve import ArmTask
 
-def _task(name: str, task: TaskConfig | dict | None) -> TaskConfig:
-    if isinstance(task, TaskConfig):
+
+def _task(name: str, task: TaskConfig | ArmTask | dict | None) -> TaskConfig | ArmTask:
+    from mjx_arm.arm.resolve import ArmTask  # here: ``import mjx_arm`` stays light
+
+    if isinstance(task, TaskConfig | ArmTask):
         return task
     return task_config(name, **(task or {}))
 
 
 def make_env(
-    task_name: str, engine: str = "mujoco", task: TaskConfig | dict | None = None, **kwargs: Any
+    task_name: str,
+    engine: str = "mujoco",
+    task: TaskConfig | ArmTask | dict | None = None,
+    **kwargs: Any,
 ) -> gym.Env:
     """Build one env of ``task_name`` on ``engine``, a registered engine with a Gymnasium env
     (:func:`mjx_arm.engines.engine_names` ``("env")``); its class is imported only now (the
@@ -37,7 +45,8 @@ def make_env(
     Args:
         task_name: a registered task name.
         engine: the CPU engine.
-        task: the task config, or overrides of the task's preset (None: the preset).
+        task: the task on its arm (:class:`~mjx_arm.arm.resolve.ArmTask`: pass no ``arm``),
+            the task config, or overrides of the task's preset (None: the preset).
         kwargs: passed to the env class (``arm``: a URDF, an arm file or an ArmConfig;
             ``render_mode``, ...).
     """
@@ -53,7 +62,7 @@ def make_env(
 
 def make_timed_env(task_name: str, **kwargs: Any) -> gym.Env:
     """:func:`make_env` inside a time limit of the env's own ``task.episode_steps``, as the
-    arm's setup fills them in (a slow arm's episode is longer: :mod:`mjx_arm.envs.setup`):
+    arm's setup fills them in (a slow arm's episode is longer: :mod:`mjx_arm.arm.setup`):
     the entry point of the registered ids."""
     env = make_env(task_name, **kwargs)
     return gym.wrappers.TimeLimit(env, env.task.episode_steps)

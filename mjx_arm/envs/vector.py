@@ -21,6 +21,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from mjx_arm.arm.resolve import ArmTask
 from mjx_arm.envs.backend import (
     MemoryEstimate,
     check_memory,
@@ -39,12 +40,14 @@ class ArmVectorEnv(VectorEnv):
     """``num_envs`` copies of a task stepped as one jitted batch.
 
     Args:
-        task: the task configuration.
+        task: the task on its arm (:class:`~mjx_arm.arm.resolve.ArmTask`), or a task
+            configuration resolved with ``arm``.
         num_envs: batch size.
         backend: "auto" (MJX on an accelerator, C MuJoCo on a CPU), "mjx" or "mujoco".
         physics: the MJX implementation (``mjx`` only; default ``impl="auto"``: Warp on a GPU
             where it is installed).
-        arm: the arm (a URDF, an arm file or an ArmConfig; default: the shipped arm).
+        arm: with a task configuration, the arm (a URDF, an arm file or an ArmConfig; default:
+            the shipped arm); None with an ArmTask.
 
     Raises:
         InsufficientMemoryError: the batch would not fit in the host's available memory
@@ -58,7 +61,7 @@ class ArmVectorEnv(VectorEnv):
 
     def __init__(
         self,
-        task: TaskConfig,
+        task: TaskConfig | ArmTask,
         num_envs: int,
         backend: str = "auto",
         physics: PhysicsConfig | None = None,
@@ -72,7 +75,7 @@ class ArmVectorEnv(VectorEnv):
         joints, extra = self.env.arm.n_joints, self.env.task_spec.extra_obs
         coding = self.env.arm.joint_coding(self.task)
         self.single_observation_space = obs_lib.observation_space(
-            task.force_clip, joints, extra, coding
+            self.task.force_clip, joints, extra, coding
         )
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.single_action_space = gym.spaces.Box(-1.0, 1.0, (n,), np.float32)

@@ -26,6 +26,8 @@ DYNAMICS_FIELDS = ("ctrl_dt", "sim_dt", "action_scale", "joint_encoding")
 if TYPE_CHECKING:
     import gymnasium as gym
 
+    from mjx_arm.arm.resolve import ArmTask
+
 
 # --------------------------------------------------------------------------- evaluate
 
@@ -78,7 +80,7 @@ def eval_task(policy: Any, name: str | None = None) -> tuple[TaskConfig, list[st
 
 
 def make_eval_env(
-    task: TaskConfig,
+    task: TaskConfig | ArmTask,
     engine: str,
     render: bool = False,
     width: int = 640,
@@ -88,19 +90,22 @@ def make_eval_env(
 ) -> gym.Env:
     """A Gymnasium env of ``task`` on a CPU engine (``engine_names("env")``), made through its
     registered id (:func:`mjx_arm.envs.registration.make_env` behind Gymnasium's wrappers: the
-    time limit and the checks), with an ``rgb_array`` renderer when ``render``, for ``arm`` (a
-    URDF, an arm file or an ArmConfig; default: the shipped arm). ``contact``: PyBullet's scene
-    contact ("soft", "rigid" or ``FIXED/CUBE``, :mod:`pybullet_ref.contact`; None: the env's
-    default); an engine whose row lists no ``contact`` option ignores it."""
+    time limit and the checks), with an ``rgb_array`` renderer when ``render``. ``task``: the
+    task on its arm (:class:`~mjx_arm.arm.resolve.ArmTask`, ``arm`` None), or a task config on
+    ``arm`` (a URDF, an arm file or an ArmConfig; default: the shipped arm). ``contact``:
+    PyBullet's scene contact ("soft", "rigid" or ``FIXED/CUBE``, :mod:`pybullet_ref.contact`;
+    None: the env's default); an engine whose row lists no ``contact`` option ignores it."""
     import gymnasium as gym
 
+    from mjx_arm.arm.resolve import ArmTask
     from mjx_arm.envs.registration import register_envs
 
     register_envs()  # idempotent; also registers tasks added since import
     kwargs = {"render_mode": "rgb_array", "width": width, "height": height} if render else {}
     if contact is not None and "contact" in engines.engine(engine).env_options:
         kwargs["contact"] = contact
-    return gym.make(env_id(task.task), engine=engine, task=task, arm=arm, **kwargs)
+    name = task.task.task if isinstance(task, ArmTask) else task.task
+    return gym.make(env_id(name), engine=engine, task=task, arm=arm, **kwargs)
 
 
 def eval_arm(policy: Any, source: str | Path | None = None) -> Any:
@@ -108,14 +113,14 @@ def eval_arm(policy: Any, source: str | Path | None = None) -> Any:
     with its URDF found there instead), else the arm the policy records (files from before arm
     records: the shipped arm). A recorded arm of ``assets/`` (trained where this package lived
     elsewhere) is this install's copy; the model hash check
-    (:func:`mjx_arm.envs.arm.check_same_arm`) still compares the two.
+    (:func:`mjx_arm.arm.info.check_same_arm`) still compares the two.
 
     Raises:
         FileNotFoundError: the recorded arm's URDF is not on this machine (pass ``source``; a
             :class:`~mjx_arm.inputs.MissingInputError`).
     """
+    from mjx_arm.arm.config import ARM_FILE_SUFFIXES, SHIPPED_ARMS, ArmConfig, load_arm
     from mjx_arm.paths import asset
-    from mjx_arm.urdf.arm_config import ARM_FILE_SUFFIXES, SHIPPED_ARMS, ArmConfig, load_arm
 
     record = getattr(policy, "metadata", {}).get("arm") or {}
     arm = ArmConfig.from_dict(record.get("config", {}))
@@ -164,25 +169,24 @@ def evaluate(
         backend: for ``engine="mjx"``: "mjx" (default) or "mujoco" (C MuJoCo, fast on a CPU).
         impl: for the MJX backend: "auto" (Warp on a GPU where installed), "jax" or "warp".
         arm: the arm (a URDF, an arm file or an ArmConfig; default: the shipped arm). A policy
-            that records another arm raises :class:`~mjx_arm.envs.arm.ArmMismatchError`.
+            that records another arm raises :class:`~mjx_arm.arm.info.ArmMismatchError`.
         contact: PyBullet's scene contact (see :func:`make_eval_env`); None: the default.
 
     Returns:
         The JSON-ready summary and the raw :class:`EvalRun`.
     """
-    from mjx_arm.envs.arm import arm_info
+    from mjx_arm.arm.info import arm_info
+    from mjx_arm.arm.resolve import resolve_task
 
     _check_engine(engine)
     check_policy_fits(policy, task, arm_info(arm))  # before the task meets the arm
     start = time.monotonic()
+    setup = resolve_task(task, arm)  # once: every env below takes it as it is
     if engine in engines.batch_engines():
-        run = run_batched(policy, task, episodes, seed, backend or "mjx", impl, arm)
-        if video is not None:
-            run.frames, note = _replay_video(run.trajectory, task, video, width, height, arm)
-            run.notes += [note] if note else []
+        run = _run_batch(policy, setup, episodes, seed, backend, impl, video, (width, height))
         physics = _batch_physics(backend, impl)
     else:
-        env = make_eval_env(task, engine, video is not None, width, height, arm, contact)
+        env = make_eval_env(setup, engine, video is not None, width, height, None, contact)
         try:
             run = run_episodes(policy, env, episodes, seed, video, video_episodes)
         finally:
@@ -197,8 +201,19 @@ def evaluate(
     return result, run
 
 
+def _run_batch(policy, setup, episodes, seed, backend, impl, video, size) -> EvalRun:
+    """:func:`run_batched` of ``setup`` (an :class:`~mjx_arm.arm.resolve.ArmTask`), and its
+    env 0's episode filmed in CPU MuJoCo (frames of ``size``: width, height) where a ``video``
+    is asked for. ``backend`` None: "mjx"."""
+    run = run_batched(policy, setup, episodes, seed, backend or "mjx", impl)
+    if video is not None:
+        run.frames, note = _replay_video(run.trajectory, setup, video, *size)
+        run.notes += [note] if note else []
+    return run
+
+
 def check_policy_fits(policy: Any, task: TaskConfig, arm: Any) -> None:
-    """Check that ``policy`` was trained on ``arm`` (an :class:`~mjx_arm.envs.arm.ArmInfo`;
+    """Check that ``policy`` was trained on ``arm`` (an :class:`~mjx_arm.arm.info.ArmInfo`;
     :func:`~mjx_arm.evaluate.runners.check_policy_arm`) and takes the observation and gives
     the action of ``task`` on it.
 
@@ -245,20 +260,16 @@ def _batch_physics(backend: str | None, impl: str) -> dict[str, str]:
 
 
 def _replay_video(
-    traj: dict[str, np.ndarray],
-    task: TaskConfig,
-    video: str | Path,
-    width: int,
-    height: int,
-    arm: Any = None,
+    traj: dict[str, np.ndarray], setup: ArmTask, video: str | Path, width: int, height: int
 ) -> tuple[int, str]:
-    """Film a batched env's trajectory through the CPU MuJoCo renderer."""
+    """Film a batched env's trajectory of ``setup`` through the CPU MuJoCo renderer."""
     from mjx_arm.replay import render_frames, rendering_available, write_video
 
     ok, reason = rendering_available()
     if not ok:
         return 0, f"video skipped: {reason}"
-    frames = write_video(video, render_frames(traj, task, width, height, arm), 1.0 / task.ctrl_dt)
+    rate = 1.0 / setup.task.ctrl_dt
+    frames = write_video(video, render_frames(traj, setup, width, height), rate)
     return frames, "video: env 0's episode re-rendered in CPU MuJoCo from its joint angles"
 
 

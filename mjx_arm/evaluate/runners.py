@@ -19,6 +19,8 @@ from mjx_arm.task.observation import flatten_obs
 if TYPE_CHECKING:
     import gymnasium as gym
 
+    from mjx_arm.arm.resolve import ArmTask
+
 Policy = Callable[[Any], np.ndarray]
 
 
@@ -185,9 +187,9 @@ def _open_video(env: gym.Env, video: str | Path | None) -> tuple[_SafeVideo | No
 
 
 def check_policy_arm(policy: Any, arm: Any) -> None:
-    """Raise :class:`~mjx_arm.envs.arm.ArmMismatchError` when ``policy`` (with ``metadata``)
-    was trained on another arm than ``arm`` (an :class:`~mjx_arm.envs.arm.ArmInfo`)."""
-    from mjx_arm.envs.arm import check_same_arm
+    """Raise :class:`~mjx_arm.arm.info.ArmMismatchError` when ``policy`` (with ``metadata``)
+    was trained on another arm than ``arm`` (an :class:`~mjx_arm.arm.info.ArmInfo`)."""
+    from mjx_arm.arm.info import check_same_arm
 
     metadata = getattr(policy, "metadata", None)
     if metadata is not None:
@@ -199,7 +201,7 @@ def check_policy_arm(policy: Any, arm: Any) -> None:
 
 def run_batched(
     policy: Policy,
-    task: TaskConfig,
+    task: TaskConfig | ArmTask,
     episodes: int,
     seed: int = 0,
     backend: str = "mjx",
@@ -213,12 +215,14 @@ def run_batched(
 
     Args:
         policy: batched observation Dict -> actions ``(episodes, n)``.
-        task: the task configuration.
+        task: the task on its arm (:class:`~mjx_arm.arm.resolve.ArmTask`), or a task
+            configuration resolved with ``arm``.
         episodes: number of envs (= episodes).
         seed: seed of the batch's PRNG key.
         backend: "mjx" (MJX: slow on a CPU), "mujoco" (C MuJoCo) or "auto".
         impl: MJX implementation: "auto", "jax" or "warp".
-        arm: the arm (a URDF, an arm file or an ArmConfig; default: the shipped arm).
+        arm: with a task configuration, the arm (a URDF, an arm file or an ArmConfig;
+            default: the shipped arm); None with an ArmTask.
     """
     from mjx_arm.envs.physics_config import PhysicsConfig
     from mjx_arm.envs.vector import ArmVectorEnv

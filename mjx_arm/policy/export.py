@@ -129,7 +129,7 @@ def policy_metadata(config: Mapping[str, Any], checkpoint: Path, run_dir: Path) 
         InputError: the run's config.json or the checkpoint's meta.json is not usable.
     """
     from mjx_arm import __version__
-    from mjx_arm.envs.arm import arm_info, arm_record
+    from mjx_arm.arm.info import arm_info, arm_record
     from mjx_arm.task.config import TaskConfig
     from mjx_arm.task.observation import obs_layout
     from mjx_arm.train.rundir import RunDir

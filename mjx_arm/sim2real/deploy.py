@@ -16,7 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from mjx_arm.envs.arm import arm_info
+from mjx_arm.arm.info import arm_info
+from mjx_arm.arm.resolve import resolve_task
 from mjx_arm.evaluate import (
     EvalRun,
     Policy,
@@ -103,9 +104,9 @@ def deploy_sim(
     task = task or eval_task(policy)[0]
     arm = eval_arm(policy, arm)
     check_policy_fits(policy, task, arm_info(arm))
-    velocity_env = make_eval_env(task, engine, arm=arm)
-    velocity_run, _ = _run_closed(policy, velocity_env, episodes, seed)
-    position_env = make_position_env(task, engine, config.chain(), arm=arm)
+    setup = resolve_task(task, arm)  # once: both envs take it as it is
+    velocity_run, _ = _run_closed(policy, make_eval_env(setup, engine), episodes, seed)
+    position_env = make_position_env(setup, engine, config.chain())
     position_run, base = _run_closed(policy, position_env, episodes, seed)
     longest = max(range(episodes), key=lambda i: len(base.episodes[i].commands))
     return {

@@ -98,7 +98,7 @@ class JointLimits:
         Raises:
             ValueError: the margin leaves no room between a joint's limits.
         """
-        from mjx_arm.envs.arm import arm_info
+        from mjx_arm.arm.info import arm_info
 
         config = config or LimiterConfig()
         arm = arm_info(urdf)

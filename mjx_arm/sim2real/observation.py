@@ -13,11 +13,11 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from mjx_arm.envs.arm import arm_info
-from mjx_arm.envs.model_io import arm_model
+from mjx_arm.arm.config import ArmConfig
+from mjx_arm.arm.info import arm_info
+from mjx_arm.arm.model_io import arm_model
 from mjx_arm.task import observation as obs_lib
 from mjx_arm.task.config import TaskConfig
-from mjx_arm.urdf.arm_config import ArmConfig
 from mjx_arm.urdf.convert import EE_SITE
 
 

@@ -53,7 +53,9 @@ import mujoco
 import numpy as np
 
 from mjx_arm import engines
-from mjx_arm.envs.arm import ArmInfo
+from mjx_arm.arm.config import ArmConfig
+from mjx_arm.arm.info import ArmInfo
+from mjx_arm.arm.resolve import ArmTask
 from mjx_arm.envs.base import DEFAULT_HEIGHT, DEFAULT_WIDTH
 from mjx_arm.envs.mujoco_env import MujocoArmEnv
 from mjx_arm.sim2real.adapter import VelocityToPositionAdapter
@@ -61,7 +63,6 @@ from mjx_arm.sim2real.gripper import GripperPassthrough
 from mjx_arm.sim2real.limiter import JointLimits, SafetyLimiter
 from mjx_arm.sim2real.settings import ChainConfig, ServoConfig
 from mjx_arm.task.config import TaskConfig
-from mjx_arm.urdf.arm_config import ArmConfig
 
 
 @dataclass(frozen=True)
@@ -233,15 +234,17 @@ class MujocoPositionArmEnv(_ChainActuation, MujocoArmEnv):
     """:class:`MujocoArmEnv` driven through the chain into position servos.
 
     Args:
-        task: the task configuration (default: Touch).
-        arm: the arm (a URDF, an arm file or an ArmConfig; default: the shipped arm).
+        task: the task on its arm (:class:`~mjx_arm.arm.resolve.ArmTask`), or a task
+            configuration (default: Touch) resolved with ``arm``.
+        arm: with a task configuration, the arm (a URDF, an arm file or an ArmConfig;
+            default: the shipped arm).
         config: the chain and the servo (default: :class:`ChainConfig()`).
         render_mode, width, height: as for :class:`MujocoArmEnv`.
     """
 
     def __init__(
         self,
-        task: TaskConfig | None = None,
+        task: TaskConfig | ArmTask | None = None,
         arm: str | Path | ArmConfig | None = None,
         config: ChainConfig | None = None,
         render_mode: str | None = None,
@@ -288,16 +291,19 @@ class MujocoPositionArmEnv(_ChainActuation, MujocoArmEnv):
         MujocoArmEnv._physics_set_gripper(self, speed)
 
 
-def make_position_env(task: TaskConfig, engine: str, config: ChainConfig | None = None, **kwargs):
+def make_position_env(
+    task: TaskConfig | ArmTask, engine: str, config: ChainConfig | None = None, **kwargs
+):
     """A position-controlled env of ``task`` on ``engine`` (a registered engine with a position
     env: :func:`mjx_arm.engines.engine_names` ``("position_env")``), truncated at its task's
     ``episode_steps`` (as the arm's setup fills them in) like the registered envs.
 
     Args:
-        task: the task configuration.
+        task: the task on its arm (:class:`~mjx_arm.arm.resolve.ArmTask`), or a task
+            configuration resolved with the ``arm`` of ``kwargs``.
         engine: the CPU engine.
         config: the chain and the servo.
-        kwargs: ``arm``, ``render_mode``, ``width``, ``height``.
+        kwargs: ``arm`` (None with an ArmTask), ``render_mode``, ``width``, ``height``.
     """
     choices = engines.engine_names("position_env")
     if engine not in choices:

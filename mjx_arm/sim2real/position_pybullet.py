@@ -8,11 +8,12 @@ from pathlib import Path
 
 import numpy as np
 
+from mjx_arm.arm.config import ArmConfig
+from mjx_arm.arm.resolve import ArmTask
 from mjx_arm.envs.base import DEFAULT_HEIGHT, DEFAULT_WIDTH
 from mjx_arm.sim2real.position_env import _ChainActuation, servo_gains
 from mjx_arm.sim2real.settings import ChainConfig
 from mjx_arm.task.config import TaskConfig
-from mjx_arm.urdf.arm_config import ArmConfig
 from pybullet_ref.env import PybulletArmEnv, pybullet  # pybullet imported quietly there
 
 
@@ -27,7 +28,7 @@ class PybulletPositionArmEnv(_ChainActuation, PybulletArmEnv):
 
     def __init__(
         self,
-        task: TaskConfig | None = None,
+        task: TaskConfig | ArmTask | None = None,
         arm: str | Path | ArmConfig | None = None,
         config: ChainConfig | None = None,
         render_mode: str | None = None,

@@ -17,7 +17,6 @@ from mjx_arm.inputs import ConfigError
 from mjx_arm.settings import check_range, check_types, config_fields
 from mjx_arm.task.observation import JOINT_ENCODINGS
 from mjx_arm.task.registry import get_task, is_task, task_names
-from mjx_arm.urdf.arm_config import SHIPPED_HOME_QPOS as HOME_QPOS  # noqa: F401  (re-export)
 
 # The speed limits (rad/s) a joint's command is scaled from (TaskConfig.joint_speeds): the arms
 # measured so far (URDF limits of 2.2 to 3.2 rad/s) command action_scale times their own limit;
@@ -116,7 +115,7 @@ class TaskConfig:
         episode_steps: control steps before truncation (150 = 5 s).
         terminate_on_success: end the episode on the first success step.
         home_qpos: joint angles (rad) episodes start around; () takes the arm's home pose
-            (:class:`mjx_arm.urdf.arm_config.ArmConfig`). An env fills it in from its arm.
+            (:class:`mjx_arm.arm.config.ArmConfig`). An env fills it in from its arm.
         init_noise: half-width (rad) of the uniform noise added to ``home_qpos`` at reset.
         target_low, target_high: box (m, base frame) the target is drawn from uniformly, for
             the shipped arm. For touch only x and y are used: the box stands on the table at

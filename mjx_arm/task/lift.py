@@ -106,7 +106,7 @@ LIFT_ACTION_SCALE = 0.15
 # gains of 240 Hz, so only the integration changes.
 LIFT_SIM_DT = 1.0 / 480.0
 SERVO_DT = 1.0 / 240.0
-# The shipped gripper arm's start in Lift (mjx_arm.envs.setup.shipped_home): tool down, the ee
+# The shipped gripper arm's start in Lift (mjx_arm.arm.setup.shipped_home): tool down, the ee
 # (between the pads) 0.15 m above the table at (0.49, 0.13), the middle of the cube's box (the
 # arm's own home puts the ee 0.37 m up). Other arms' Lift homes are derived the same way.
 LIFT_HOME = (0.0, -1.4149, 2.0035, -2.1594, -1.5708, 0.0)

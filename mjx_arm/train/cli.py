@@ -177,7 +177,7 @@ def cmd_warmup(args: argparse.Namespace) -> int:
 
 def _with_arm(config, source: str | None, ee_link: str | None):
     """``config`` with the arm of ``--arm`` and ``--ee-link`` (each None: unchanged)."""
-    from mjx_arm.urdf.arm_config import load_arm
+    from mjx_arm.arm.config import load_arm
 
     arm = load_arm(source) if source else config.arm
     if ee_link:

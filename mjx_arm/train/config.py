@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from mjx_arm.arm.config import ArmConfig
 from mjx_arm.envs.physics_config import LATENCY, SELECTED, PhysicsConfig, RandomizationConfig
 from mjx_arm.inputs import MAX_SEED, ConfigError, MissingInputError, read_json_object
 from mjx_arm.names import BACKENDS, PRESET_NAMES
@@ -23,7 +24,6 @@ from mjx_arm.settings import check_range, check_types, config_fields, set_path, 
 from mjx_arm.task.config import TaskConfig, task_config
 from mjx_arm.task.registry import get_task, is_task, task_names
 from mjx_arm.train.task_settings import set_task_field, task_changes
-from mjx_arm.urdf.arm_config import ArmConfig
 
 PARTITIONS = ("auto", "xla", "per_device")
 

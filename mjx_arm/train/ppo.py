@@ -22,6 +22,7 @@ from typing import Any
 import jax
 import numpy as np
 
+from mjx_arm.arm.resolve import ArmTask, resolve_task
 from mjx_arm.envs.backend import make_batched_env, resolve_backend
 from mjx_arm.inputs import ConfigError, MissingInputError
 from mjx_arm.task.config import TaskConfig
@@ -62,11 +63,11 @@ def full_config(
         task: the task config as the env resolved it (the arm's home pose and reach scale
             filled in).
         physics: what the env's physics reports of itself (implementation, buffer sizes).
-        arm: the env's :class:`~mjx_arm.envs.arm.ArmInfo` (default: the config's arm).
+        arm: the env's :class:`~mjx_arm.arm.info.ArmInfo` (default: the config's arm).
     """
     from mjx_arm import __version__
-    from mjx_arm.envs.arm import arm_info, arm_record
-    from mjx_arm.envs.model_io import task_convert_config
+    from mjx_arm.arm.info import arm_info, arm_record
+    from mjx_arm.arm.model_io import task_convert_config
 
     arm = arm or arm_info(config.arm)
     conversion = task_convert_config(task, arm)
@@ -117,8 +118,7 @@ def train(
     config.validate()
     config = devices_for_physics(config)
     config.check_devices(len(train_devices(config.devices)))
-    task = config.task_config()
-    _check_arm(config, task)
+    setup = resolve_run_task(config)
     if resume and not (Path(run_dir) / "config.json").is_file():
         raise MissingInputError(
             f"cannot resume {run_dir}: no checkpoint, it is not a run directory (no "
@@ -127,31 +127,25 @@ def train(
     if not is_leader():  # process 0 holds the run directory; the others only read it
         barrier("run directory ready")
         step_offset, restore = _start_point(None, config, resume, Path(run_dir))
-        return _train(None, config, task, step_offset, restore, True, stop_after)
+        return _train(None, config, setup, step_offset, restore, True, stop_after)
     run = RunDir(run_dir)
     run.check_writable()  # before the lock file and any compilation (a full disk)
     with run.lock():
         step_offset, restore = _start_point(run, config, resume)
         run.truncate_metrics(step_offset)  # rows a killed run wrote after its last checkpoint
         barrier("run directory ready")
-        return _train(run, config, task, step_offset, restore, quiet, stop_after)
+        return _train(run, config, setup, step_offset, restore, quiet, stop_after)
 
 
-def _check_arm(config: TrainConfig, task: TaskConfig) -> None:
-    """Validate the run's arm and check that the task fits it (a gripper task needs a
-    gripper, a home pose needs one angle per joint) before any env is built.
+def resolve_run_task(config: TrainConfig) -> ArmTask:
+    """The run's task on its arm, resolved once before any env is built
+    (:func:`~mjx_arm.arm.resolve.resolve_task`): the arm validated, the task checked to fit
+    it (a gripper task needs a gripper, a home pose needs one angle per joint) and filled in.
 
     Raises:
         InputError: an arm that does not validate or resolve, or a task that does not fit it.
     """
-    from mjx_arm.envs.arm import validated_arm_info
-    from mjx_arm.envs.base import default_arm, task_for_arm
-
-    arm = validated_arm_info(default_arm(task, config.arm), "mujoco")
-    try:
-        task_for_arm(task, arm)
-    except ValueError as err:
-        raise ConfigError(str(err)) from err
+    return resolve_task(config.task_config(), config.arm, "mujoco")
 
 
 def _start_point(
@@ -208,19 +202,19 @@ def _start_point(
 def _train(
     run: RunDir | None,
     config: TrainConfig,
-    task: TaskConfig,
+    setup: ArmTask,
     step_offset: int,
     restore: Any,
     quiet: bool,
     stop_after: int = 0,
 ) -> TrainResult:
-    """Build the envs and run PPO from ``step_offset`` (the checks are done)."""
+    """Build the envs of ``setup`` and run PPO from ``step_offset`` (the checks are done)."""
     report = CompileReport().open()
     start = time.monotonic()
+    task = setup.task  # with the arm's home pose, reach scale and episode length
     try:  # a run that fails (a checkpoint that does not fit) leaves nothing open
-        env, eval_env, restore = _envs_and_restore(run, config, task, restore, report)
-        task = env.task  # with the arm's home pose and reach scale
-        progress = _Progress(run, config, task, step_offset, quiet, stop_after)
+        env, eval_env, restore = _envs_and_restore(run, config, setup, restore, report)
+        progress = _Progress(run, config, setup, step_offset, quiet, stop_after)
         progress.physics = env.physics.describe()
         progress.watch_compile(report)
         if not quiet:
@@ -259,17 +253,17 @@ def _train(
 
 
 def _envs_and_restore(
-    run: RunDir | None, config: TrainConfig, task: TaskConfig, restore: Any, report: CompileReport
+    run: RunDir | None, config: TrainConfig, setup: ArmTask, restore: Any, report: CompileReport
 ) -> tuple[Any, Any, Any]:
     """The training and evaluation envs (their build timed into ``report``) and what to
     restore (a checkpoint folder read: :func:`_restore_state`); a new run's config saved."""
     with report.stage("build env"):
-        env, eval_env = make_envs(config, task, background_compile=True)
+        env, eval_env = make_envs(config, setup, background_compile=True)
     check_training_memory(config, env)  # before the config is saved and anything allocated
     for name, seconds in env.build_seconds.items():
         report.add(f"of it {name}", seconds)
     if restore is None and run is not None:
-        run.save_config(full_config(config, env.task, env.physics.describe(), env.arm))
+        run.save_config(full_config(config, setup.task, env.physics.describe(), setup.arm))
     if isinstance(restore, Path):
         restore = _restore_state(restore, config, env)
     return env, eval_env, restore
@@ -294,9 +288,10 @@ def _restore_state(folder: Path, config: TrainConfig, env: Any):
 
 
 def make_envs(
-    config: TrainConfig, task: TaskConfig, background_compile: bool = False
+    config: TrainConfig, setup: ArmTask, background_compile: bool = False
 ) -> tuple[Any, Any]:
-    """The training env (randomised as configured) and the evaluation env (nominal).
+    """The training env (randomised as configured) and the evaluation env (nominal), both of
+    the run's resolved task and arm ``setup`` (:func:`resolve_run_task`).
 
     Warp's contact pool is sized for the larger of the training and evaluation batches. With
     ``background_compile``, MuJoCo Warp's kernels compile on a background thread: wait with
@@ -304,19 +299,16 @@ def make_envs(
     """
     batch = max(config.num_envs, config.num_eval_envs)
     train_env = make_batched_env(
-        task,
+        setup,
         config.backend,
         config.physics,
         batch,
         config.randomization,
-        config.arm,
         background_compile=background_compile,
     )
     if not config.randomization.enabled:
         return train_env, train_env
-    eval_env = make_batched_env(
-        task, config.backend, config.physics, config.num_eval_envs, arm=config.arm
-    )
+    eval_env = make_batched_env(setup, config.backend, config.physics, config.num_eval_envs)
     return train_env, eval_env
 
 

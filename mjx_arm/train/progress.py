@@ -16,6 +16,7 @@ from typing import Any
 import jax
 import numpy as np
 
+from mjx_arm.arm.resolve import ArmTask
 from mjx_arm.envs.mjx_physics import PhysicsOverflowError, overflow_message
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.train.compile_report import CompileReport, expected_compile, remember_compile
@@ -117,14 +118,18 @@ class _Progress:
         self,
         run: RunDir | None,
         config: TrainConfig,
-        task: TaskConfig,
+        task: TaskConfig | ArmTask,
         step_offset: int,
         quiet: bool,
         stop_after: int = 0,
     ) -> None:
         from tqdm import tqdm
 
-        self.run, self.config, self.task = run, config, task
+        self.run, self.config = run, config
+        # the run's task on its arm, as the trainer resolved it (a task config alone: on
+        # ``config.arm``, resolved where a snapshot's episode is rolled out)
+        self.setup = task if isinstance(task, ArmTask) else None
+        self.task = task.task if isinstance(task, ArmTask) else task
         self.physics: dict[str, Any] = {}
         self.total = config.num_timesteps  # the run ends on the first evaluation at or past it
         self.bar = tqdm(
@@ -246,9 +251,12 @@ class _Progress:
         resume: ResumeState | None = None,
     ) -> None:
         params = jax.tree.map(np.asarray, params)
-        transitions = rollout_transitions(
-            make_policy, params, self.task, seed=step, arm=self.config.arm
-        )
+        if self.setup is not None:
+            transitions = rollout_transitions(make_policy, params, self.setup, seed=step)
+        else:
+            transitions = rollout_transitions(
+                make_policy, params, self.task, seed=step, arm=self.config.arm
+            )
         meta = {"task": self.config.task, **(meta or {})}
         arrays = resume_arrays(resume) if resume is not None else None
         # the envs' state is kept in the newest checkpoint that has it, only
@@ -274,10 +282,11 @@ def host_params(params: Any) -> tuple:
 
 
 def rollout_transitions(
-    make_policy, params, task: TaskConfig, seed: int, arm: Any = None
+    make_policy, params, task: TaskConfig | ArmTask, seed: int, arm: Any = None
 ) -> dict[str, np.ndarray]:
-    """One evaluation episode in the CPU MuJoCo env of ``arm`` (default: the shipped arm); the
-    last 100 transitions as arrays.
+    """One evaluation episode in the CPU MuJoCo env of ``task`` on its arm (an
+    :class:`~mjx_arm.arm.resolve.ArmTask`), or of a task config on ``arm`` (default: the
+    shipped arm); the last 100 transitions as arrays.
 
     Returns:
         obs ``(T, 16 + n)``, action ``(T, n)``, reward ``(T,)``, done ``(T,)``, ee_pos ``(T, 3)``,
@@ -294,7 +303,7 @@ def rollout_transitions(
     rows: dict[str, list] = {
         k: [] for k in ("obs", "action", "reward", "done", "ee_pos", "contact_force")
     }
-    for _ in range(task.episode_steps):
+    for _ in range(env.task.episode_steps):
         flat = flatten_obs(np, obs)
         action = np.asarray(act(params, flat, key)[0], dtype=np.float32)
         obs, reward, terminated, _, info = env.step(action)

@@ -64,7 +64,7 @@ def limit_fix(attr: str, unit: str) -> str:
 @dataclass(frozen=True)
 class UrdfRepairs:
     """What to repair in a URDF: the fields of the same names of
-    :class:`~mjx_arm.urdf.arm_config.ArmConfig` and
+    :class:`~mjx_arm.arm.config.ArmConfig` and
     :class:`~mjx_arm.urdf.convert_config.ConvertConfig`.
 
     Attributes:

@@ -6,13 +6,19 @@ names (:mod:`mjx_arm.urdf.repair`), which a run saves and its policy files recor
 from __future__ import annotations
 
 import argparse
-from typing import TYPE_CHECKING
+from typing import Protocol, Self, TypeVar
 
 from mjx_arm.inputs import float_in
 from mjx_arm.urdf.repair import LIMIT_ATTRS, UrdfRepairs
 
-if TYPE_CHECKING:
-    from mjx_arm.urdf.arm_config import ArmConfig
+
+class Repairable(Protocol):
+    """A config with the repair fields (:class:`mjx_arm.arm.config.ArmConfig`)."""
+
+    def replace(self, **changes: object) -> Self: ...
+
+
+C = TypeVar("C", bound=Repairable)
 
 _UNITS = {"effort": "N m or N", "velocity": "rad/s or m/s"}
 
@@ -48,7 +54,7 @@ def repairs_of(args: argparse.Namespace) -> UrdfRepairs:
     )
 
 
-def with_repair_arguments(arm: ArmConfig, args: argparse.Namespace) -> ArmConfig:
+def with_repair_arguments(arm: C, args: argparse.Namespace) -> C:
     """``arm`` with the repairs of the flags given; the others as the arm (file) has them."""
     changes: dict[str, object] = {"repair_inertia": True} if args.repair_inertia else {}
     for attr in LIMIT_ATTRS:

@@ -10,7 +10,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from mjx_arm.envs.arm import ArmInfo, arm_info
+from mjx_arm.arm.info import ArmInfo, arm_info
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.wrench import (
     SENSOR_BLOCK,
@@ -160,7 +160,7 @@ class GripReader:
         fingers_qpos: qpos addresses of every gripper joint (the driven one and its mimics);
             open_qpos: their positions open.
         lower, stroke: the finger's lower limit and travel (m).
-        gripper: the arm's :class:`~mjx_arm.envs.arm.Gripper` (open and closed positions).
+        gripper: the arm's :class:`~mjx_arm.arm.info.Gripper` (open and closed positions).
         cube_qpos: qpos address of the cube's free joint (position, then quaternion).
         cube_dof: its dof address (6 velocities).
         pad_index: ``sensordata`` positions of the pads' touch sensors, ``(2,)``.

@@ -9,11 +9,11 @@ Every field may be left empty; :func:`resolve_arm` fills it from the URDF:
   joints (prismatic fingers, a jaw, and anything off the chain) are left out.
 - ``home_qpos``: here, the middle of each joint's limits (a full-turn joint: 0; the shipped
   arms: their tool-down pose). The home a task starts from is derived per task from the model
-  (:mod:`mjx_arm.envs.setup`) unless the config names one.
+  (:mod:`mjx_arm.arm.setup`) unless the config names one.
 - ``ft_joint``: a fixed joint named ``ft_sensor_joint`` if there is one; else the wrist
   force/torque reading is taken where the last arm joint meets its child link.
 
-``ee_offset`` and ``kv_factor`` are derived from the arm's model (:mod:`mjx_arm.envs.arm`).
+``ee_offset`` and ``kv_factor`` are derived from the arm's model (:mod:`mjx_arm.arm.info`).
 
 An arm file is TOML or JSON with the same fields; a relative ``urdf`` path is read from the
 file's folder, and ``package://NAME/...`` from the ROS package NAME (found through the
@@ -73,11 +73,11 @@ class ArmConfig:
         kv_factor: the joints' velocity servo gain as a multiple of ``I_min / sim_dt``
             (:class:`~mjx_arm.urdf.convert_config.ConvertConfig`); 0 derives it from the
             model so the arm presses the box like the shipped arm
-            (:func:`mjx_arm.envs.arm.press_kv_factor`; the shipped arms: 1). Configs recorded
+            (:func:`mjx_arm.arm.info.press_kv_factor`; the shipped arms: 1). Configs recorded
             before this field existed read 1, what they trained with.
         ee_offset: the end-effector point in ``ee_link``'s frame (m, 3 values); () derives it:
             where the tool's shapes meet a surface pressed against them along the tool axis
-            (:func:`mjx_arm.envs.arm.derive_ee_offset`; the shipped arms and arms with a
+            (:func:`mjx_arm.arm.info.derive_ee_offset`; the shipped arms and arms with a
             parallel gripper: the link's origin). Configs recorded before this field existed
             read (0, 0, 0).
     """

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mjx_arm.envs.arm import ArmInfo, tool_down_solver
-from mjx_arm.envs.setup import ArmSetup, arm_setup, gripper_problem, task_verdict
+from mjx_arm.arm.info import ArmInfo, tool_down_solver
+from mjx_arm.arm.setup import ArmSetup, arm_setup, gripper_problem, task_verdict
 from mjx_arm.inputs import write_atomic
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.urdf.repair import UrdfRepairs
@@ -149,7 +149,7 @@ def draw_check(arm: ArmInfo, tasks: list[TaskConfig], path: Path) -> None:
 
 
 def _draw_targets(top, side, arm: ArmInfo, task: TaskConfig, colour: str) -> None:
-    from mjx_arm.envs.setup import grid_targets
+    from mjx_arm.arm.setup import grid_targets
 
     setup = arm_setup(arm, task)
     points = grid_targets(task.replace(workspace_scale=setup.workspace_scale))

@@ -1,7 +1,7 @@
 """The task setup of an arm, derived from its model: home pose, task area and timing.
 
 No arm needs a hand-written file to train. What an arm brings by itself (its ee point at the
-tool's working point, its servo gain) is derived in :mod:`mjx_arm.envs.arm`; what a task needs
+tool's working point, its servo gain) is derived in :mod:`mjx_arm.arm.info`; what a task needs
 of it is derived here, for a task config and an arm:
 
 - **task area**: the task's target box (:meth:`TaskConfig.target_box`) scaled about the base
@@ -12,7 +12,7 @@ of it is derived here, for a task config and an arm:
   limits less a margin.
 - **home pose**: the tool pointing down, :data:`HOME_HEIGHT` above the table (lower where no
   pose holds the tool down that high: :data:`HOME_HEIGHTS`) over the middle of the task area,
-  found by tool-down inverse kinematics (:mod:`mjx_arm.envs.ik`) from seeded starts; among the
+  found by tool-down inverse kinematics (:mod:`mjx_arm.arm.ik`) from seeded starts; among the
   poses free of self-collision and of the table, the one that reaches the most grid targets
   wins, then the best-conditioned (manipulability). Angles of joints with a range over a full
   turn are taken nearest the middle of the range. Where the slowest home-to-target motion from
@@ -37,8 +37,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mjx_arm.envs.arm import HOME_HEIGHT, ArmInfo, tool_down_solver
-from mjx_arm.envs.ik import ToolDownSolver
+from mjx_arm.arm.ik import ToolDownSolver
+from mjx_arm.arm.info import HOME_HEIGHT, ArmInfo, tool_down_solver
 from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.urdf.scene_shapes import box_half_width, box_top_offset
@@ -153,8 +153,8 @@ def given_home(arm: ArmInfo, task: TaskConfig) -> tuple[np.ndarray | None, str]:
 
 def shipped_home(arm: ArmInfo, task: TaskConfig) -> tuple[float, ...] | None:
     """The measured home of a shipped arm (Lift's for the gripper tasks), else None."""
+    from mjx_arm.arm.config import SHIPPED_HOME_QPOS, is_shipped
     from mjx_arm.task.lift import LIFT_HOME
-    from mjx_arm.urdf.arm_config import SHIPPED_HOME_QPOS, is_shipped
 
     if not is_shipped(arm.config):
         return None

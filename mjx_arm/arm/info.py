@@ -11,11 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mjx_arm.envs.ik import ToolDownSolver
-from mjx_arm.task.config import TaskConfig
-from mjx_arm.task.observation import JointCoding, joint_coding
-from mjx_arm.task.wrench import ToolInertia, tool_inertia
-from mjx_arm.urdf.arm_config import (
+from mjx_arm.arm.config import (
     SHIPPED_HOME_QPOS,
     ArmConfig,
     ResolvedArm,
@@ -23,6 +19,10 @@ from mjx_arm.urdf.arm_config import (
     load_arm,
     resolve_arm,
 )
+from mjx_arm.arm.ik import ToolDownSolver
+from mjx_arm.task.config import TaskConfig
+from mjx_arm.task.observation import JointCoding, joint_coding
+from mjx_arm.task.wrench import ToolInertia, tool_inertia
 from mjx_arm.urdf.convert_config import ConvertConfig
 from mjx_arm.urdf.grippers import Follower, find_layout, grasp_centre
 
@@ -240,7 +240,7 @@ MIN_EE_OFFSET = 0.005
 
 def derive_ee_offset(arm: ArmInfo) -> np.ndarray:
     """The ee point in the ee link's frame, ``(3,)``: on the tool axis where the tool meets a
-    surface pressed against it (:meth:`~mjx_arm.envs.ik.ToolDownSolver.tool_protrusion` over
+    surface pressed against it (:meth:`~mjx_arm.arm.ik.ToolDownSolver.tool_protrusion` over
     the Touch box's top face), so the ee point is where the tool touches (a jaw's tips, the
     palm of an open hand). An arm with a parallel gripper keeps the link's origin (between the
     pads: what Lift grasps around); a linkage gripper's is its grasp centre (between the pads
@@ -263,13 +263,13 @@ def derive_ee_offset(arm: ArmInfo) -> np.ndarray:
     return np.round(reach * solver.ik.tool, 6) + 0.0  # + 0.0: no negative zeros
 
 
-# The working height (m) of the ee point above the table at a home pose (mjx_arm.envs.setup).
+# The working height (m) of the ee point above the table at a home pose (mjx_arm.arm.setup).
 HOME_HEIGHT = 0.20
 KV_MIN = 0.25  # the lowest servo gain factor press_kv_factor gives
 
 
 def tool_down_solver(arm: ArmInfo) -> ToolDownSolver:
-    """The arm's :class:`~mjx_arm.envs.ik.ToolDownSolver` (one per arm, file version and ee
+    """The arm's :class:`~mjx_arm.arm.ik.ToolDownSolver` (one per arm, file version and ee
     point): its model in the Reach scene with self-collision on, servo gain factor 1."""
     return _solver_cached(arm, arm.urdf.stat().st_mtime, tuple(arm.ee_offset))
 

@@ -18,13 +18,13 @@ def cmd_arm(args: argparse.Namespace) -> int:
     over the task area into P.png (nothing is drawn unless asked). With -o, writes the resolved
     config as an arm file (TOML) to edit and pass to --arm. Every file written is named.
     """
-    from mjx_arm.envs.arm import validated_arm_info
-    from mjx_arm.envs.arm_report import arm_file_text, check_lines, describe, draw_check
-    from mjx_arm.envs.setup import arm_setup
+    from mjx_arm.arm.config import load_arm
+    from mjx_arm.arm.info import validated_arm_info
+    from mjx_arm.arm.report import arm_file_text, check_lines, describe, draw_check
+    from mjx_arm.arm.setup import arm_setup
     from mjx_arm.inputs import check_output, write_atomic
     from mjx_arm.names import TASKS
     from mjx_arm.task.config import task_config
-    from mjx_arm.urdf.arm_config import load_arm
     from mjx_arm.urdf.repair_args import with_repair_arguments
 
     if args.output:  # named errors (bad files, bad arm) go to mjx_arm.cli.main
