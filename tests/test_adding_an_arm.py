@@ -94,7 +94,7 @@ def test_a_task_that_does_not_fit_the_arm_is_refused_before_any_env(tmp_path: Pa
     from mjx_arm.train.config import load_config
     from mjx_arm.train.ppo import resolve_run_task
 
-    with pytest.raises(TaskFitError, match="parallel gripper"):
+    with pytest.raises(TaskFitError, match="needs an arm with a gripper"):
         resolve_task(lift_config(), _long_arm(tmp_path))
     config = load_config("cpu", None, ["backend=mujoco", f"arm.urdf={_long_arm(tmp_path)}"])
     assert resolve_run_task(config).arm.urdf == (tmp_path / "long_arm.urdf").resolve()
