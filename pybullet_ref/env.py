@@ -11,15 +11,14 @@ joint with ``clip(kv * (u - qdot), +-effort)`` (a velocity actuator) and adds jo
 ``-d * qdot``, reflected rotor inertia (armature) and gravity compensation. PyBullet's
 ``VELOCITY_CONTROL`` motor is a hard velocity constraint instead: blocked by the box it pushes
 with its whole torque cap (measured: about 380 N at the tool where MuJoCo gives 26 N), so contact
-forces would not be comparable. Here, at every substep, the same law goes through
-``TORQUE_CONTROL``: ``clip(kv * (u - qdot), +-effort) - d * qdot + g(q)``, with ``g(q)`` from
-``calculateInverseDynamics`` (MuJoCo's ``gravcomp``; gravity is -9.81 in both engines). A servo
-this stiff (``kv * dt`` equals the joint's smallest apparent inertia *with* armature) is only
-stable with the armature, which PyBullet lacks, so each joint's child link gets it as a rotor
-disc: ``a`` about the joint axis, ``a / 2`` across (a valid inertia tensor). URDF joint damping
-is zeroed in PyBullet (Bullet applies it explicitly, which diverges on the light wrist links; it
-is part of the law above). ``kv``, ``d``, the effort and the armature are read from the
-converted MuJoCo model. Friction is MuJoCo's 1.0 per contact.
+forces would not be comparable. Here, at every substep, ``TORQUE_CONTROL`` applies the torque
+that makes PyBullet's step MuJoCo's (:mod:`pybullet_ref.drive`): the servo and the damping
+implicit, the armature on the diagonal of the mass matrix (``calculateMassMatrix``), plus
+``g(q)`` from ``calculateInverseDynamics`` (MuJoCo's ``gravcomp``; gravity is -9.81 in both
+engines), with the contacts' share observed from the last substep and joint-limit reactions
+kept out of it. URDF joint damping is zeroed in PyBullet (Bullet applies it explicitly, which
+diverges on the light wrist links; it is part of the drive). ``kv``, ``d``, the effort and the
+armature are read from the converted MuJoCo model. Friction is MuJoCo's 1.0 per contact.
 
 Self-collision as the task model has it (:func:`mjx_arm.envs.model_io.task_convert_config`):
 off, so the arm is loaded without ``URDF_USE_SELF_COLLISION`` (with it, a joint-limited UR10
@@ -39,11 +38,10 @@ last substep. In fast free motion the tared reading stays below 0.6 N and 0.04 N
 joint reaction carries a small velocity-product term when several joints turn at once.
 
 An arm without a fixed F/T joint takes its reading at the last arm joint. PyBullet's reaction
-at a motorised joint carries the motor torque, the joint's rotor inertia (given to the link,
-above) and Bullet's own constraint terms: tared, it still read up to 50 N m on a Panda in free
-motion. There the reading is instead the sum of the contact forces on the links of the tool
-subtree (normal and friction, about the ee point): zero in free motion, as MuJoCo's tared
-sensor reads.
+at a motorised joint carries the motor torque and Bullet's own constraint terms: tared, it
+still read up to 50 N m on a Panda in free motion. There the reading is instead the sum of
+the contact forces on the links of the tool subtree (normal and friction, about the ee point):
+zero in free motion, as MuJoCo's tared sensor reads.
 
 Each control step starts from the joint states its previous read took (nothing moves between
 the two): a change made to the world through ``env.client`` between steps shows from the
@@ -83,11 +81,11 @@ from mjx_arm.urdf.scene_shapes import CUBE_HALF, CUBE_MASS
 from pybullet_ref.arm_model import (
     BASE,
     excluded_pairs,
-    inertia_with_armature,
     joint_servo,
     subtree_links,
 )
 from pybullet_ref.contact import SOFT, SceneContact, scene_contact
+from pybullet_ref.drive import ArmDrive, JointLimits
 from pybullet_ref.hulls import bullet_urdf
 from pybullet_ref.mimic import add_mimic_constraints
 from pybullet_ref.vec3 import add, cross, rate, rotate, rotate_back
@@ -121,8 +119,7 @@ class ArmIds:
             tool subtree, whose contacts make the reading; else empty (the F/T sensor reads).
         tool_com: the tool link's centre of mass in the tool link frame (m), ``(3,)``; PyBullet
             reports the F/T torque about this point.
-        inertia: principal inertia (kg m^2) of each actuated joint's child link with the
-            joint's armature added, 6 triples.
+        limits: the position limits of ``joints``.
         self_collision_off: arm link pairs whose contacts are disabled (empty: no self-collision).
         finger: the driven finger joint of a gripper (-1 without one); finger_lower: its lower
             limit (m); pads: the finger links, whose contacts make the pad forces.
@@ -136,7 +133,7 @@ class ArmIds:
     arm_in_dofs: tuple[int, ...]
     tool_links: frozenset[int]
     tool_com: np.ndarray
-    inertia: tuple[tuple[float, float, float], ...]
+    limits: JointLimits
     self_collision_off: tuple[tuple[int, int], ...]
     finger: int = -1
     finger_lower: float = 0.0
@@ -189,6 +186,9 @@ class PybulletArmEnv(BaseRobotEnv):
         identity = arm_in_dofs == tuple(range(len(self.ids.dofs)))
         self._pick = None if identity else operator.itemgetter(*arm_in_dofs)
         self._read_states: tuple | None = None  # the joint states of the last read
+        self._drive = ArmDrive.of(
+            self.servo, self.ids.limits, None if identity else arm_in_dofs, self.task.sim_dt
+        )
         self._u = list(self._zeros)
         self._target_body = sampling.target_body_pos(np, np.full(3, 0.5), self.task)
         self._tool_before = (np.zeros(3), np.zeros(3))
@@ -234,10 +234,7 @@ class PybulletArmEnv(BaseRobotEnv):
             tool_links=tool_links,
             arm_in_dofs=tuple(dofs.index(j) for j in joints),
             tool_com=np.array(c.getDynamicsInfo(arm, ft)[3]),
-            inertia=tuple(
-                inertia_with_armature(c, arm, j, a)
-                for j, a in zip(joints, self.servo.armature, strict=True)
-            ),
+            limits=JointLimits.of([infos[j][8] for j in joints], [infos[j][9] for j in joints]),
             self_collision_off=excluded_pairs(c, arm) if self.self_collision else (),
             **self._gripper_ids(joint, link, infos),
         )
@@ -301,8 +298,8 @@ class PybulletArmEnv(BaseRobotEnv):
             c.changeDynamics(
                 arm, link, linearDamping=0.0, angularDamping=0.0, lateralFriction=FRICTION
             )
-        for j, inertia in zip(ids.joints, ids.inertia, strict=True):
-            c.changeDynamics(arm, j, jointDamping=0.0, localInertiaDiagonal=inertia)
+        for j in ids.joints:
+            c.changeDynamics(arm, j, jointDamping=0.0)
         for i, j in ids.self_collision_off:
             c.setCollisionFilterPair(arm, arm, i, j, 0)
         # free the joints of the default velocity motors: the servo acts through torques
@@ -328,6 +325,7 @@ class PybulletArmEnv(BaseRobotEnv):
         self, qpos: np.ndarray, target_body_pos: np.ndarray, obj: ObjectStart | None = None
     ) -> None:
         self._read_states = None  # the world is rebuilt: read it afresh
+        self._drive.reset()
         self._target_body = np.asarray(target_body_pos, dtype=np.float64).copy()
         if obj is not None:
             self._object = obj
@@ -340,6 +338,7 @@ class PybulletArmEnv(BaseRobotEnv):
         self._physics_step(1)
         for j, q in zip(self.ids.joints, qpos, strict=True):
             self.client.resetJointState(self.body, j, float(q), 0.0)
+        self._drive.reset()
         self._tool_before = (np.zeros(3), np.zeros(3))
 
     def _physics_set_velocity_targets(self, qdot_target: np.ndarray) -> None:
@@ -355,17 +354,14 @@ class PybulletArmEnv(BaseRobotEnv):
         )
 
     def _physics_step(self, n_substeps: int) -> None:
-        calls, body, joints, zeros = self._calls, self.body, self.ids.joints, self._dof_zeros
-        dofs, pick, torque, u = self.ids.dofs, self._pick, self.servo.torque, self._u
+        calls, body, joints = self._calls, self.body, self.ids.joints
+        dofs, u = self.ids.dofs, self._u
         # the joint states of the last read, where nothing has moved since (arm-only dofs)
         states, self._read_states = self._read_states, None
         for i in range(n_substeps):
             if states is None:
                 states = calls.get_joint_states(body, dofs)
-            gravity = calls.inverse_dynamics(body, [s[0] for s in states], zeros, zeros)
-            if pick is not None:  # the arm's joints among the dofs (5 or more: a tuple)
-                states, gravity = pick(states), pick(gravity)
-            forces = torque(u, [s[1] for s in states], gravity)
+            forces = self._drive.torques(calls, body, states, lambda q: u)
             calls.set_motors(body, joints, pybullet.TORQUE_CONTROL, forces=forces)
             if i == n_substeps - 1:
                 self._tool_before = self._tool_velocity()
