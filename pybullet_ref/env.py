@@ -27,7 +27,8 @@ ran its wrist into its forearm, which MuJoCo never does); on, without MuJoCo's f
 Contacts as MuJoCo makes them: the arm is loaded from a copy of its URDF whose collision meshes
 are convex hulls shrunk by the 1 mm margin Bullet pads them with (:mod:`pybullet_ref.hulls`),
 and the table, the box and the cube are compliant, calibrated on trained policies against
-MuJoCo's soft contacts (:mod:`pybullet_ref.contact`; ``contact="rigid"`` keeps Bullet's).
+MuJoCo's soft contacts (:mod:`pybullet_ref.contact`, scaled per arm by
+:mod:`pybullet_ref.tool_contact`; ``contact="rigid"`` keeps Bullet's).
 
 Wrist F/T: ``enableJointForceTorqueSensor`` on the fixed joint ``ft_sensor_joint``. Found with
 the tool hanging at rest in several orientations: ``getJointState(ft)[2]`` is the force the arm
@@ -84,10 +85,11 @@ from pybullet_ref.arm_model import (
     joint_servo,
     subtree_links,
 )
-from pybullet_ref.contact import SOFT, SceneContact, scene_contact
+from pybullet_ref.contact import SOFT, SceneContact
 from pybullet_ref.drive import ArmDrive, JointLimits
 from pybullet_ref.hulls import bullet_urdf
 from pybullet_ref.mimic import add_mimic_constraints
+from pybullet_ref.tool_contact import arm_contact
 from pybullet_ref.vec3 import add, cross, rate, rotate, rotate_back
 
 GRAVITY = (0.0, 0.0, -9.81)
@@ -153,7 +155,8 @@ class PybulletArmEnv(BaseRobotEnv):
         render_mode: None, "rgb_array" or "human".
         width, height: frame size (pixels).
         contact: how the table, the box and the cube push back: "soft" (compliant, calibrated
-            on MuJoCo's contacts; default), "rigid" (Bullet's hard contacts), a
+            on MuJoCo's contacts and scaled by the arm's tool mass,
+            :mod:`pybullet_ref.tool_contact`; default), "rigid" (Bullet's hard contacts), a
             :class:`~pybullet_ref.contact.SceneContact` or its text form.
     """
 
@@ -169,7 +172,7 @@ class PybulletArmEnv(BaseRobotEnv):
         contact: SceneContact | str = SOFT,
     ) -> None:
         super().__init__(task, arm, render_mode, width, height)
-        self.contact = scene_contact(contact)
+        self.contact = arm_contact(contact, self.arm)
         self._urdf = bullet_urdf(self.arm.urdf)
         self._ee_offset = self.arm.ee_offset.copy() if np.any(self.arm.ee_offset) else None
         self.servo = joint_servo(self.arm, self.task.spec.servo_dt or self.task.sim_dt)
