@@ -61,5 +61,7 @@ def arm_contact(value: SceneContact | str, arm: ArmInfo) -> SceneContact:
     if contact != SOFT or SOFT.fixed is None:
         return contact
     scale = tool_mass(arm) / tool_mass(arm_info())
+    if not (np.isfinite(scale) and scale > 0.0):  # a degenerate pose: keep the calibration
+        return contact
     fixed = Compliance(SOFT.fixed.stiffness * scale, SOFT.fixed.damping * scale)
     return SceneContact(fixed, SOFT.cube)
