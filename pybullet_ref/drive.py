@@ -70,9 +70,10 @@ class JointLimits:
     def without_reaction(self, q: np.ndarray, residual: np.ndarray) -> np.ndarray:
         """``residual`` (N m), ``(n,)``, less the share a limit could have made: zero where a
         joint at ``q`` ``(n,)`` sits on a limit and the residual pushes it off."""
-        at_lower = (q <= self.lower + LIMIT_MARGIN) & (residual > 0.0)
-        at_upper = (q >= self.upper - LIMIT_MARGIN) & (residual < 0.0)
-        return np.where(at_lower | at_upper, 0.0, residual)
+        on_limit = ((q <= self.lower + LIMIT_MARGIN) & (residual > 0.0)) | (
+            (q >= self.upper - LIMIT_MARGIN) & (residual < 0.0)
+        )
+        return np.where(on_limit, 0.0, residual) if on_limit.any() else residual
 
 
 @dataclass(frozen=True)
@@ -118,13 +119,17 @@ def drive_torque(
         external: the other generalized forces on the joints (N m), ``(n,)``.
         dt: the physics step (s).
     """
-    servo = gains.kv * (np.asarray(u, dtype=np.float64) - qdot)
-    capped = np.abs(servo) > gains.effort
-    servo = np.clip(servo, -gains.effort, gains.effort)
-    stiffness = np.where(capped, gains.damping, gains.kv + gains.damping)
+    # fewest numpy calls on the common path (no servo at its cap): this runs every substep
+    kv, damping, effort = gains.kv, gains.damping, gains.effort
+    servo = kv * (np.array(u, dtype=np.float64) - qdot)
+    stiffness = kv + damping
+    capped = np.abs(servo) > effort
+    if capped.any():
+        servo = np.minimum(np.maximum(servo, -effort), effort)
+        stiffness = np.where(capped, damping, stiffness)
     lhs = mass + np.diag(gains.armature + dt * stiffness)
-    qddot = np.linalg.solve(lhs, servo - gains.damping * qdot + external)
-    return mass @ qddot - external + np.asarray(gravity)
+    qddot = np.linalg.solve(lhs, servo - damping * qdot + external)
+    return mass @ qddot - external + np.array(gravity, dtype=np.float64)
 
 
 @dataclass
