@@ -98,6 +98,11 @@ class DriveGains:
         arrays = (np.asarray(x, dtype=np.float64) for x in (kv, damping, effort, armature))
         return cls(*arrays)
 
+    @classmethod
+    def of_servo(cls, servo) -> DriveGains:
+        """From a :class:`~pybullet_ref.arm_model.JointServo`."""
+        return cls.of(servo.kv, servo.damping, servo.effort, servo.armature)
+
 
 def drive_torque(
     gains: DriveGains,
@@ -184,8 +189,7 @@ class ArmDrive:
     @classmethod
     def of(cls, servo, limits: JointLimits, arm_in_dofs, dt: float) -> ArmDrive:
         """From a :class:`~pybullet_ref.arm_model.JointServo` and the joints' limits."""
-        gains = DriveGains.of(servo.kv, servo.damping, servo.effort, servo.armature)
-        return cls(gains, ExternalTorque(limits), arm_in_dofs, dt)
+        return cls(DriveGains.of_servo(servo), ExternalTorque(limits), arm_in_dofs, dt)
 
     def reset(self) -> None:
         """Forget the last substep (call it whenever the joints are set from outside)."""
