@@ -12,7 +12,7 @@ of them alike):
 * ``raw``: the physics alone on the same trajectory (same reset, same commands). MuJoCo: the
   env's ``ctrl`` of each action (recorded through ``apply_action``), then
   ``mujoco.mj_step(model, data, nstep=substeps)``. PyBullet: the same Bullet calls per substep
-  as the env's servo (``getJointStates``, ``calculateInverseDynamics``,
+  as the env's servo (``getJointStates``, ``calculateInverseDynamics``, ``calculateMassMatrix``,
   ``setJointMotorControlArray`` with the torques the env applied, recorded, and
   ``stepSimulation``), without the servo law's Python or any read-out. ``ratio`` = env
   steps/s / raw control steps/s, the median of the per-repeat ratios: the share of an env step
@@ -197,12 +197,14 @@ class CaseBench:
         env = self.env
         client, body, dofs, joints = env.client, env.body, env.ids.dofs, env.ids.joints
         get_states, gravity = client.getJointStates, client.calculateInverseDynamics
-        motors, step = client.setJointMotorControlArray, client.stepSimulation
-        zeros, torque = env._dof_zeros, pybullet.TORQUE_CONTROL
+        mass, motors = client.calculateMassMatrix, client.setJointMotorControlArray
+        step, zeros, torque = client.stepSimulation, env._dof_zeros, pybullet.TORQUE_CONTROL
         for substeps in self.commands:
             for forces in substeps:
                 states = get_states(body, dofs)
-                gravity(body, [s[0] for s in states], zeros, zeros)
+                q = [s[0] for s in states]
+                gravity(body, q, zeros, zeros)
+                mass(body, q)  # the drive's mass matrix
                 motors(body, joints, torque, forces=forces)
                 step()
 

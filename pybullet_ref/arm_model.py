@@ -1,5 +1,6 @@
-"""The arm as PyBullet drives it: the MuJoCo model's joint servo, the links' rotor inertia, the
-self-collision filter and the tool subtree, all looked up from the loaded multibody.
+"""The arm as PyBullet drives it: the MuJoCo model's joint servo (applied by
+:mod:`pybullet_ref.drive`), the self-collision filter and the tool subtree, all looked up from the
+loaded multibody.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ with native_output_silenced((STDOUT, STDERR)):  # "pybullet build time: ..."
 from mjx_arm.arm.config import ArmConfig
 from mjx_arm.arm.info import ArmInfo, arm_info
 from mjx_arm.urdf.convert import load_model
+from pybullet_ref.drive import JointLimits
 
 BASE = -1  # PyBullet's link index of a multibody's base
 
@@ -72,26 +74,6 @@ class JointServo:
         ``speed`` itself closed the fingers 12 % faster than MuJoCo)."""
         kv = self.finger.kv
         return speed * kv / (kv + self.finger.damping)
-
-    def torque(self, u: list[float], qdot: list[float], gravity: list[float]) -> list[float]:
-        """Joint torques (N m): ``clip(kv (u - qdot), +-effort) - d qdot + gravity``.
-
-        Plain Python on purpose: for 6 joints it is ~1 us, numpy ~5 us.
-
-        Args:
-            u: velocity targets (rad/s), 6 values.
-            qdot: joint velocities (rad/s), 6 values.
-            gravity: gravity compensation torques (N m), 6 values.
-        """
-        return [
-            (effort if t > effort else -effort if t < -effort else t) - d * w + g
-            for (kv, d, effort), v, w, g in zip(self._gains, u, qdot, gravity, strict=True)
-            for t in (kv * (v - w),)
-        ]
-
-    @functools.cached_property
-    def _gains(self) -> tuple[tuple[float, float, float], ...]:
-        return tuple(zip(self.kv, self.damping, self.effort, strict=True))
 
 
 @functools.cache
@@ -151,8 +133,7 @@ class ArmIds:
             tool subtree, whose contacts make the reading; else empty (the F/T sensor reads).
         tool_com: the tool link's centre of mass in the tool link frame (m), ``(3,)``; PyBullet
             reports the F/T torque about this point.
-        inertia: principal inertia (kg m^2) of each actuated joint's child link with the
-            joint's armature added, 6 triples.
+        limits: the position limits of ``joints``.
         self_collision_off: arm link pairs whose contacts are disabled (empty: no self-collision).
         finger, finger_lower, pads, gripper_start: see :func:`pybullet_ref.gripper.gripper_ids`.
     """
@@ -165,7 +146,7 @@ class ArmIds:
     arm_in_dofs: tuple[int, ...]
     tool_links: frozenset[int]
     tool_com: np.ndarray
-    inertia: tuple[tuple[float, float, float], ...]
+    limits: JointLimits
     self_collision_off: tuple[tuple[int, int], ...]
     finger: int = -1
     finger_lower: float = 0.0
@@ -180,31 +161,6 @@ def subtree_links(infos: Sequence[tuple], root: int) -> frozenset[int]:
         if info[16] in links:
             links.add(info[0])
     return frozenset(links)
-
-
-def inertia_with_armature(
-    client: BulletClient, arm: int, joint: int, armature: float
-) -> tuple[float, float, float]:
-    """Principal inertia of ``joint``'s child link plus a rotor disc of ``armature`` on its axis.
-
-    The disc adds ``armature`` about the joint axis and half of it about the two axes across
-    (a valid inertia tensor, which Bullet's inverse dynamics checks). When the joint axis is not
-    a principal axis of the link, ``armature`` is added about all three axes instead.
-
-    Returns:
-        The three principal moments (kg m^2) for ``changeDynamics(localInertiaDiagonal=...)``.
-    """
-    dynamics = client.getDynamicsInfo(arm, joint)
-    diagonal = np.array(dynamics[2], dtype=np.float64)
-    rot = np.array(client.getMatrixFromQuaternion(dynamics[4])).reshape(3, 3)
-    axis = rot.T @ np.array(client.getJointInfo(arm, joint)[13])  # in the inertial frame
-    axis /= np.linalg.norm(axis)
-    principal = np.flatnonzero(np.abs(axis) > 1.0 - 1e-9)
-    disc = np.full(3, armature)
-    if principal.size == 1:
-        disc = np.full(3, armature / 2)
-        disc[principal[0]] = armature
-    return tuple(float(v) for v in diagonal + disc)
 
 
 def excluded_pairs(client: BulletClient, arm: int) -> tuple[tuple[int, int], ...]:

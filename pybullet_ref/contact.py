@@ -28,6 +28,8 @@ sit closest to MuJoCo's.
   Over 5 Lift policies: 0.050 and 12 % (rigid: 0.199 and 13 %); Lift seed 0 succeeds in 0.940.
 
 The arm's own links set nothing, so the arm's contacts with the cube take the cube's values.
+These are the shipped arm's values: :mod:`pybullet_ref.tool_contact` scales the table and box
+spring and damper by another arm's tool mass.
 """
 
 from __future__ import annotations

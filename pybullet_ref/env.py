@@ -11,15 +11,14 @@ joint with ``clip(kv * (u - qdot), +-effort)`` (a velocity actuator) and adds jo
 ``-d * qdot``, reflected rotor inertia (armature) and gravity compensation. PyBullet's
 ``VELOCITY_CONTROL`` motor is a hard velocity constraint instead: blocked by the box it pushes
 with its whole torque cap (measured: about 380 N at the tool where MuJoCo gives 26 N), so contact
-forces would not be comparable. Here, at every substep, the same law goes through
-``TORQUE_CONTROL``: ``clip(kv * (u - qdot), +-effort) - d * qdot + g(q)``, with ``g(q)`` from
-``calculateInverseDynamics`` (MuJoCo's ``gravcomp``; gravity is -9.81 in both engines). A servo
-this stiff (``kv * dt`` equals the joint's smallest apparent inertia *with* armature) is only
-stable with the armature, which PyBullet lacks, so each joint's child link gets it as a rotor
-disc: ``a`` about the joint axis, ``a / 2`` across (a valid inertia tensor). URDF joint damping
-is zeroed in PyBullet (Bullet applies it explicitly, which diverges on the light wrist links; it
-is part of the law above). ``kv``, ``d``, the effort and the armature are read from the
-converted MuJoCo model. Friction is MuJoCo's 1.0 per contact.
+forces would not be comparable. Here, at every substep, ``TORQUE_CONTROL`` applies the torque
+that makes PyBullet's step MuJoCo's (:mod:`pybullet_ref.drive`): the servo and the damping
+implicit, the armature on the diagonal of the mass matrix (``calculateMassMatrix``), plus
+``g(q)`` from ``calculateInverseDynamics`` (MuJoCo's ``gravcomp``; gravity is -9.81 in both
+engines), with the contacts' share observed from the last substep and joint-limit reactions
+kept out of it. URDF joint damping is zeroed in PyBullet (Bullet applies it explicitly, which
+diverges on the light wrist links; it is part of the drive). ``kv``, ``d``, the effort and the
+armature are read from the converted MuJoCo model. Friction is MuJoCo's 1.0 per contact.
 
 Self-collision as the task model has it (:func:`mjx_arm.arm.model_io.task_convert_config`):
 off, so the arm is loaded without ``URDF_USE_SELF_COLLISION`` (with it, a joint-limited UR10
@@ -28,7 +27,8 @@ ran its wrist into its forearm, which MuJoCo never does); on, without MuJoCo's f
 Contacts as MuJoCo makes them: the arm is loaded from a copy of its URDF whose collision meshes
 are convex hulls shrunk by the 1 mm margin Bullet pads them with (:mod:`pybullet_ref.hulls`),
 and the table, the box and the cube are compliant, calibrated on trained policies against
-MuJoCo's soft contacts (:mod:`pybullet_ref.contact`; ``contact="rigid"`` keeps Bullet's).
+MuJoCo's soft contacts (:mod:`pybullet_ref.contact`, scaled per arm by
+:mod:`pybullet_ref.tool_contact`; ``contact="rigid"`` keeps Bullet's).
 
 Wrist F/T: PyBullet's sensor on the fixed F/T joint, tared, or where the F/T point is an arm
 joint (or the tool holds a gripper) the sum of the tool's contact forces
@@ -72,14 +72,15 @@ from pybullet_ref.arm_model import (
     BASE,
     ArmIds,
     excluded_pairs,
-    inertia_with_armature,
     joint_servo,
     subtree_links,
 )
-from pybullet_ref.contact import SOFT, SceneContact, scene_contact
+from pybullet_ref.contact import SOFT, SceneContact
+from pybullet_ref.drive import ArmDrive, JointLimits
 from pybullet_ref.gripper import gripper_ids
 from pybullet_ref.hulls import bullet_urdf
 from pybullet_ref.mimic import add_mimic_constraints
+from pybullet_ref.tool_contact import arm_contact
 from pybullet_ref.wrench import GRAVITY, ToolTare, contact_wrench, tared_wrench
 
 _NO_GRIP = np.zeros(0)  # the reading's grip without a gripper
@@ -106,7 +107,8 @@ class PybulletArmEnv(BaseRobotEnv):
         render_mode: None, "rgb_array" or "human".
         width, height: frame size (pixels).
         contact: how the table, the box and the cube push back: "soft" (compliant, calibrated
-            on MuJoCo's contacts; default), "rigid" (Bullet's hard contacts), a
+            on MuJoCo's contacts and scaled by the arm's tool mass,
+            :mod:`pybullet_ref.tool_contact`; default), "rigid" (Bullet's hard contacts), a
             :class:`~pybullet_ref.contact.SceneContact` or its text form.
     """
 
@@ -122,7 +124,7 @@ class PybulletArmEnv(BaseRobotEnv):
         contact: SceneContact | str = SOFT,
     ) -> None:
         super().__init__(task, arm, render_mode, width, height)
-        self.contact = scene_contact(contact)
+        self.contact = arm_contact(contact, self.arm)
         self._urdf = bullet_urdf(self.arm.urdf, repairs=UrdfRepairs.of(self.arm.config))
         self._ee_offset = self.arm.ee_offset.copy() if np.any(self.arm.ee_offset) else None
         self.servo = joint_servo(self.arm, self.task.spec.servo_dt or self.task.sim_dt)
@@ -139,6 +141,9 @@ class PybulletArmEnv(BaseRobotEnv):
         identity = arm_in_dofs == tuple(range(len(self.ids.dofs)))
         self._pick = None if identity else operator.itemgetter(*arm_in_dofs)
         self._read_states: tuple | None = None  # the joint states of the last read
+        self._drive = ArmDrive.of(
+            self.servo, self.ids.limits, None if identity else arm_in_dofs, self.task.sim_dt
+        )
         self._u = list(self._zeros)
         self._target_body = sampling.target_body_pos(np, np.full(3, 0.5), self.task)
         self._tool_before = (np.zeros(3), np.zeros(3))
@@ -188,10 +193,7 @@ class PybulletArmEnv(BaseRobotEnv):
             tool_links=tool_links,
             arm_in_dofs=tuple(dofs.index(j) for j in joints),
             tool_com=np.array(c.getDynamicsInfo(arm, ft)[3]),
-            inertia=tuple(
-                inertia_with_armature(c, arm, j, a)
-                for j, a in zip(joints, self.servo.armature, strict=True)
-            ),
+            limits=JointLimits.of([infos[j][8] for j in joints], [infos[j][9] for j in joints]),
             self_collision_off=excluded_pairs(c, arm) if self.self_collision else (),
             **gripper_ids(self.arm.gripper, self.task.spec.gripper, joint, link, infos),
         )
@@ -246,8 +248,8 @@ class PybulletArmEnv(BaseRobotEnv):
             c.changeDynamics(
                 arm, link, linearDamping=0.0, angularDamping=0.0, lateralFriction=FRICTION
             )
-        for j, inertia in zip(ids.joints, ids.inertia, strict=True):
-            c.changeDynamics(arm, j, jointDamping=0.0, localInertiaDiagonal=inertia)
+        for j in ids.joints:
+            c.changeDynamics(arm, j, jointDamping=0.0)
         for i, j in ids.self_collision_off:
             c.setCollisionFilterPair(arm, arm, i, j, 0)
         # free the joints of the default velocity motors: the servo acts through torques
@@ -272,6 +274,7 @@ class PybulletArmEnv(BaseRobotEnv):
         self, qpos: np.ndarray, target_body_pos: np.ndarray, obj: ObjectStart | None = None
     ) -> None:
         self._read_states = None  # the world is rebuilt: read it afresh
+        self._drive.reset()
         self._target_body = np.asarray(target_body_pos, dtype=np.float64).copy()
         if obj is not None:
             self._object = obj
@@ -284,6 +287,7 @@ class PybulletArmEnv(BaseRobotEnv):
         self._physics_step(1)
         for j, q in zip(self.ids.joints, qpos, strict=True):
             self.client.resetJointState(self.body, j, float(q), 0.0)
+        self._drive.reset()
         self._tool_before = (np.zeros(3), np.zeros(3))
 
     def _physics_set_velocity_targets(self, qdot_target: np.ndarray) -> None:
@@ -299,17 +303,14 @@ class PybulletArmEnv(BaseRobotEnv):
         )
 
     def _physics_step(self, n_substeps: int) -> None:
-        calls, body, joints, zeros = self._calls, self.body, self.ids.joints, self._dof_zeros
-        dofs, pick, torque, u = self.ids.dofs, self._pick, self.servo.torque, self._u
+        calls, body, joints = self._calls, self.body, self.ids.joints
+        dofs, u = self.ids.dofs, self._u
         # the joint states of the last read, where nothing has moved since (arm-only dofs)
         states, self._read_states = self._read_states, None
         for i in range(n_substeps):
             if states is None:
                 states = calls.get_joint_states(body, dofs)
-            gravity = calls.inverse_dynamics(body, [s[0] for s in states], zeros, zeros)
-            if pick is not None:  # the arm's joints among the dofs (5 or more: a tuple)
-                states, gravity = pick(states), pick(gravity)
-            forces = torque(u, [s[1] for s in states], gravity)
+            forces = self._drive.torques(calls, body, states, lambda q: u)
             calls.set_motors(body, joints, pybullet.TORQUE_CONTROL, forces=forces)
             if i == n_substeps - 1:
                 self._tool_before = self._tool_velocity()

@@ -10,11 +10,10 @@ one array at the end. In fast free motion the tared reading stays below 0.6 N an
 Bullet's joint reaction carries a small velocity-product term when several joints turn at once.
 
 An arm without a fixed F/T joint takes its reading at the last arm joint. PyBullet's reaction
-at a motorised joint carries the motor torque, the joint's rotor inertia (given to the link)
-and Bullet's own constraint terms: tared, it still read up to 50 N m on a Panda in free
-motion. There the reading is instead the sum of the contact forces on the links of the tool
-subtree (normal and friction, about the ee point, :func:`contact_wrench`): zero in free motion,
-as MuJoCo's tared sensor reads.
+at a motorised joint carries the motor torque and Bullet's own constraint terms: tared, it
+still read up to 50 N m on a Panda in free motion. There the reading is instead the sum of
+the contact forces on the links of the tool subtree (normal and friction, about the ee point,
+:func:`contact_wrench`): zero in free motion, as MuJoCo's tared sensor reads.
 """
 
 from __future__ import annotations

@@ -136,17 +136,17 @@ def _link_index(client: BulletClient, body: int, name: str) -> int:
 def test_train_takes_the_repair_flags_and_saves_them_with_the_run(tmp_path: Path, capsys) -> None:
     from mjx_arm.train.cli import config_from_args
     from mjx_arm.train.config import saved_config
-    from mjx_arm.train.ppo import _check_arm, full_config
+    from mjx_arm.train.ppo import full_config, resolve_run_task
     from mjx_arm.train.rundir import RunDir
 
     urdf = _broken_urdf(tmp_path)
     argv = ["train", "--preset", "cpu", "--arm", str(urdf), "--repair-inertia"]
     config = config_from_args(build_parser().parse_args([*argv, "--default-effort", "80"]))
     assert config.arm.repair_inertia and config.arm.default_effort == 80.0
-    _check_arm(config, config.task_config())  # what train validates before any compilation
+    resolve_run_task(config)  # what train validates before any compilation
     without = config.replace(arm=config.arm.replace(repair_inertia=False))
     with pytest.raises(UrdfError, match="--repair-inertia"):
-        _check_arm(without, without.task_config())
+        resolve_run_task(without)
     run = RunDir(tmp_path / "run")  # config.json as train writes it
     run.save_config(full_config(config, config.task_config()))
     assert saved_config(run.path).arm == config.arm

@@ -207,8 +207,11 @@ class BulletEngine(EnvEngine):
 
     def scale_damping(self, factor: float) -> None:
         """Set the six joints' damping to ``factor`` times the converted model's."""
+        from pybullet_ref.drive import DriveGains
+
         damping = tuple(factor * d for d in self._servo.damping)
         self.env.servo = dataclasses.replace(self._servo, damping=damping)
+        self.env._drive.gains = DriveGains.of_servo(self.env.servo)  # the drive's copy
 
 
 class MjxEngine:

@@ -189,8 +189,9 @@ CAUSES = {
         "chain of bodies"
     ),
     ("joint divergence", "pybullet"): (
-        "different integrators and contact solvers: PyBullet applies the servo law as an "
-        "explicit torque once per substep, MuJoCo integrates servo and damping implicitly"
+        "different integrators and contact solvers: PyBullet's drive takes MuJoCo's implicit "
+        "servo step but sees the contacts' torque one substep late, and Bullet's Featherstone "
+        "integrator and contact solver are not MuJoCo's"
     ),
     ("joint divergence", "mjx"): (
         "float32 against float64 (and, in sequences that touch the table, MJX's own collision "

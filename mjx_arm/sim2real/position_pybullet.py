@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import numpy as np
@@ -20,10 +21,9 @@ from pybullet_ref.env import PybulletArmEnv, pybullet  # pybullet imported quiet
 class PybulletPositionArmEnv(_ChainActuation, PybulletArmEnv):
     """:class:`PybulletArmEnv` driven through the chain into position servos.
 
-    The torque law at every substep is the velocity servo's with the velocity target
-    ``K * (q_target - q)``: ``clip(kv * (K * (q_target - q) - qdot), +-effort) - d * qdot
-    + g(q)``, the same law as MuJoCo's position actuator with its joint damping and gravity
-    compensation. Arguments as for :class:`MujocoPositionArmEnv`.
+    The drive at every substep is the velocity servo's (:mod:`pybullet_ref.drive`) with the
+    velocity target ``K * (q_target - q)``: MuJoCo's position actuator with its joint damping
+    and gravity compensation. Arguments as for :class:`MujocoPositionArmEnv`.
     """
 
     def __init__(
@@ -70,21 +70,23 @@ class PybulletPositionArmEnv(_ChainActuation, PybulletArmEnv):
 
     def _physics_step(self, n_substeps: int) -> None:
         # PybulletArmEnv._physics_step with the position loop in front of the velocity servo
-        calls, body, joints, zeros = self._calls, self.body, self.ids.joints, self._dof_zeros
-        dofs, pick, gain = self.ids.dofs, self._pick, self._gain
+        calls, body, joints, dofs = self._calls, self.body, self.ids.joints, self.ids.dofs
+        target = self._position_target
         for i in range(n_substeps):
-            states = calls.get_joint_states(body, dofs)
-            gravity = calls.inverse_dynamics(body, [s[0] for s in states], zeros, zeros)
-            if pick is not None:  # the arm's joints among the dofs (5 or more: a tuple)
-                states, gravity = pick(states), pick(gravity)
-            arm = states
-            q = [s[0] for s in arm]
             if self._feedforward and not self._holding:
-                u = self._servo_velocity((i + 1) / n_substeps, np.asarray(q)).tolist()
-            else:
-                u = [gain * (t - x) for t, x in zip(self._q_target, q, strict=True)]
-            torque = self.servo.torque(u, [s[1] for s in arm], gravity)
+                target = functools.partial(self._feedforward_target, (i + 1) / n_substeps)
+            states = calls.get_joint_states(body, dofs)
+            torque = self._drive.torques(calls, body, states, target)
             calls.set_motors(body, joints, pybullet.TORQUE_CONTROL, forces=torque)
             if i == n_substeps - 1:
                 self._tool_before = self._tool_velocity()
             calls.step()
+
+    def _position_target(self, q: list[float]) -> list[float]:
+        """The velocity targets (rad/s) of the position loop at the joint angles ``q``."""
+        gain = self._gain
+        return [gain * (t - x) for t, x in zip(self._q_target, q, strict=True)]
+
+    def _feedforward_target(self, frac: float, q: list[float]) -> list[float]:
+        """The feed-forward loop's velocity targets (rad/s) at ``frac`` of the control step."""
+        return self._servo_velocity(frac, np.asarray(q)).tolist()

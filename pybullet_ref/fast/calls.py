@@ -22,6 +22,7 @@ class HotCalls(NamedTuple):
     get_link_state: Callable
     get_link_states: Callable
     inverse_dynamics: Callable
+    mass_matrix: Callable
     set_motors: Callable
     step: Callable
 
@@ -33,6 +34,7 @@ class HotCalls(NamedTuple):
             client.getLinkState,
             client.getLinkStates,
             client.calculateInverseDynamics,
+            client.calculateMassMatrix,
             client.setJointMotorControlArray,
             client.stepSimulation,
         )
