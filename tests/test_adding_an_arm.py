@@ -7,6 +7,7 @@ any env is built.
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+from dataclasses import replace
 from pathlib import Path
 
 import gymnasium as gym
@@ -99,4 +100,6 @@ def test_a_task_that_does_not_fit_the_arm_is_refused_before_any_env(tmp_path: Pa
     config = load_config("cpu", None, ["backend=mujoco", f"arm.urdf={_long_arm(tmp_path)}"])
     assert resolve_run_task(config).arm.urdf == (tmp_path / "long_arm.urdf").resolve()
     with pytest.raises(ConfigError, match="home_qpos has 2 angles"):
-        resolve_run_task(config.replace(task_overrides={"home_qpos": [0.0, 1.0]}))
+        resolve_run_task(
+            config.replace(task_settings=replace(config.task_settings, home_qpos=(0.0, 1.0)))
+        )

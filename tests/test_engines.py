@@ -148,11 +148,10 @@ def test_a_removed_engine_is_gone_everywhere(toy_engine, capsys) -> None:
 # package: checks of what that engine reads in a URDF (mesh formats, path lengths, damping),
 # a package name in a benchmark's version list, and a word of a parity report's causes.
 ALLOWED = {
-    "mjx_arm/bench/parity.py": 1,
+    "mjx_arm/bench/parity_figures.py": 1,
     "mjx_arm/bench/results.py": 1,
     "mjx_arm/urdf/check_geometry.py": 3,
     "mjx_arm/urdf/check_joints.py": 2,
-    "mjx_arm/urdf/check_physics.py": 1,
     "mjx_arm/urdf/validate.py": 1,
 }
 

@@ -223,7 +223,7 @@ def test_task_solver_iterations_reach_the_model():
 def test_lift_needs_a_gripper_arm():
     """Lift on the arm without a gripper is a named error that points at the gripper arm;
     without an arm it runs on the gripper arm."""
-    with pytest.raises(ValueError, match=r"parallel gripper.*ur5e_gripper"):
+    with pytest.raises(ValueError, match=r"needs an arm with a gripper.*ur5e_gripper"):
         MujocoArmEnv(lift_config(), asset("ur5e.urdf"))
     env = MujocoArmEnv(lift_config())
     assert env.arm.gripper is not None
