@@ -271,12 +271,16 @@ def band_reward_terms(
     terms["joint_limit"], terms["joint_velocity"] = joint_terms(xp, qpos, qvel, band)
     terms["success"], terms["nonfinite"] = success * 1.0, nonfinite * 1.0
     terms.update(zip(MOTION_TERMS, _motion_terms(xp, distance, cfg, motion), strict=True))
+    own = _own_terms(xp, task, distance, extra)
+    return {**{name: terms[name] for name in REWARD_TERMS}, **own}
+
+
+def _own_terms(xp: Any, task: Any, distance, extra: dict | None) -> dict:
+    """``task``'s own terms from its measures ``extra`` (None: each 0), shaped as ``distance``
+    ``(...)``, in the order of ``task.reward_terms``."""
     zero = 0.0 * distance
     own = task.task_terms(xp, extra, zero) if extra else dict.fromkeys(task.reward_terms, zero)
-    return {
-        **{name: terms[name] for name in REWARD_TERMS},
-        **{n: own[n] for n in task.reward_terms},
-    }
+    return {name: own[name] for name in task.reward_terms}
 
 
 def _state_terms(xp: Any, task: Any, distance, force_norm, cfg: TaskConfig) -> dict:
