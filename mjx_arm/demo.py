@@ -279,19 +279,29 @@ def run_demo(
     arm_config = load_arm(arm) if arm else None
     settings = QUICK if quick else FULL
     out = Path(out) if out is not None else default_out()
-    run_dir = out / "run"
-    if (run_dir / "checkpoints").exists():
+    if (out / "run" / "checkpoints").exists():
         raise DemoError(f"{out} already holds a demo run; choose another --out")
     out.mkdir(parents=True, exist_ok=True)
     log = _Log(echo)
     summary: dict[str, Any] = {"out": str(out), "quick": quick, "settings": vars(settings)}
     summary["arm"] = str(arm) if arm else "shipped"
+    summary.update(_steps(out, settings, log, arm_config))
+    summary["timings_s"] = log.timings
+    summary["wall_seconds"] = round(time.monotonic() - log.start, 1)
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str))
+    echo(format_demo_summary(summary))
+    return summary
 
+
+def _steps(out: Path, settings: DemoSettings, log: _Log, arm: ArmConfig | None) -> dict[str, Any]:
+    """The demo's five steps into ``out``, each timed into ``log``; their summaries by name
+    (``urdf``, ``train``, ``export``, ``eval``, ``replay``)."""
+    echo, run_dir, summary = log.echo, out / "run", {}
     log.step("validate", f"1/5 validate the arm and write {TASK.capitalize()}'s MJCF")
-    summary["urdf"] = validate_and_convert(out, echo, arm_config)
+    summary["urdf"] = validate_and_convert(out, echo, arm)
     log.done("validate")
     log.step("train", f"2/5 train {TASK.capitalize()} with Brax PPO")
-    trained = train_reach(run_dir, settings, echo, arm_config)
+    trained = train_reach(run_dir, settings, echo, arm)
     summary["train"] = {
         "run_dir": str(run_dir),
         "steps": trained_steps(run_dir),
@@ -308,10 +318,6 @@ def run_demo(
     log.step("replay", "5/5 plot the longest MuJoCo episode")
     summary["replay"] = plot_episode(run, _task_of(summary["export"]["npz"]), out, echo)
     log.done("replay")
-    summary["timings_s"] = log.timings
-    summary["wall_seconds"] = round(time.monotonic() - log.start, 1)
-    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str))
-    echo(format_demo_summary(summary))
     return summary
 
 

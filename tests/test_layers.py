@@ -17,8 +17,11 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("mjx_arm", "pybullet_ref")
-MAX_FUNCTION_LINES = 60  # from the def line to the last line, docstring included
-MAX_MODULE_LINES = 500
+MAX_FUNCTION_LINES = 45  # from the def line to the last line, docstring included
+MAX_MODULE_LINES = 440
+# The numpy runtime is copied on its own to a robot computer, so it stays one file
+# (test_policy.py runs it alone): it keeps the earlier limit.
+STANDALONE_MODULE_LINES = {Path("mjx_arm/policy/numpy_policy.py"): 500}
 
 
 def _sources() -> list[Path]:
@@ -53,5 +56,7 @@ def test_no_function_is_longer_than_the_limit() -> None:
 
 def test_no_module_is_longer_than_the_limit() -> None:
     counts = {p.relative_to(ROOT): len(p.read_text().splitlines()) for p in _sources()}
-    long = {str(p): n for p, n in counts.items() if n > MAX_MODULE_LINES}
+    long = {
+        str(p): n for p, n in counts.items() if n > STANDALONE_MODULE_LINES.get(p, MAX_MODULE_LINES)
+    }
     assert not long, f"modules over {MAX_MODULE_LINES} lines: {long}"

@@ -130,10 +130,7 @@ class ToolDownIk:
         # once the pull stalls): the damped inverse's null space is not exact, and the pull
         # would hold the solution off by a millimetre or so
         for iteration in range(MAX_ITERATIONS):
-            pos, axis = self.pose(q)
-            err_p = target - pos
-            err_o = _cross(axis, DOWN) if tool_down else np.zeros(3)
-            error = float(np.sqrt(err_p @ err_p + err_o @ err_o))
+            axis, err_p, err_o, error = self._errors(q, target, tool_down)
             if error < min(POSITION_TOL, TILT_TOL) / 10 and (polish or iteration > 0):
                 break
             # while pulling, progress also counts the way to ``prefer``
@@ -147,6 +144,22 @@ class ToolDownIk:
             pull = None if polish else NULL_GAIN * (prefer - q)
             step = self._step(axis, err_p, err_o if tool_down else None, pull)
             q = np.clip(q + step, self.lower, self.upper)
+        return self._result(q, target, tool_down)
+
+    def _errors(
+        self, q: np.ndarray, target: np.ndarray, tool_down: bool
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """At ``q (n,)`` (the data left at that pose): the tool axis ``(3,)``, the position
+        error ``(3,)`` to ``target``, the tilt error ``(3,)`` (zero without ``tool_down``) and
+        the norm of both."""
+        pos, axis = self.pose(q)
+        err_p = target - pos
+        err_o = _cross(axis, DOWN) if tool_down else np.zeros(3)
+        return axis, err_p, err_o, float(np.sqrt(err_p @ err_p + err_o @ err_o))
+
+    def _result(self, q: np.ndarray, target: np.ndarray, tool_down: bool) -> IkResult:
+        """The result at the final ``q (n,)``: its errors and whether they are within the
+        tolerances (the tilt only with ``tool_down``)."""
         pos, axis = self.pose(q)
         position_error, tilt = float(np.linalg.norm(target - pos)), _tilt(axis)
         converged = position_error < POSITION_TOL and (tilt < TILT_TOL or not tool_down)

@@ -19,100 +19,16 @@ from mjx_arm.arm.config import (
     load_arm,
     resolve_arm,
 )
+from mjx_arm.arm.gripper import Gripper, find_gripper
 from mjx_arm.arm.ik import ToolDownSolver
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.observation import JointCoding, joint_coding
 from mjx_arm.task.wrench import ToolInertia, tool_inertia
 from mjx_arm.urdf.convert_config import ConvertConfig
-from mjx_arm.urdf.grippers import Follower, find_layout, grasp_centre
 
 # Poses drawn to measure an arm's reach (seeded: the same arm always gets the same scale).
 REACH_SAMPLES = 4096
 REACH_QUANTILE = 0.99
-
-
-@dataclass(frozen=True)
-class Gripper:
-    """A gripper moved by one command: one driven joint, the others its ``<mimic>`` copies
-    (:mod:`mjx_arm.urdf.grippers`): prismatic fingers, or a linkage of revolute knuckles.
-
-    Attributes:
-        joint: the driven joint (its actuator takes the gripper command).
-        pad_links: the finger links that get a touch sensor in the task model (the first two
-            close on each other).
-        v_max: the driven joint's speed limit (m/s, or rad/s for a linkage).
-        stroke: the driven joint's travel (m or rad): its upper limit minus its lower.
-        open_q, closed_q: the driven joint's position with the gripper open and closed:
-            its lower and upper limit, or the other way round (the Panda's fingers close
-            towards 0), whichever puts the pads farther apart open.
-        followers: the ``<mimic>`` joints with their multiplier and offset.
-        linkage: a linkage gripper (revolute driven joint), not prismatic fingers.
-        pad_opening: the pads' gap open minus closed (m), from the URDF's kinematics.
-        pad_width: the pad's width across the closing direction (m).
-        grasp_offset: where the pads hold an object, in the ee link's frame (m), ``(3,)``.
-    """
-
-    joint: str
-    pad_links: tuple[str, ...]
-    v_max: float
-    stroke: float
-    open_q: float = 0.0
-    closed_q: float = 0.0
-    followers: tuple[Follower, ...] = ()
-    linkage: bool = False
-    pad_opening: float = 0.0
-    pad_width: float = 0.0
-    grasp_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
-
-    @property
-    def closing_sign(self) -> float:
-        """+1 where the finger closes towards its upper limit, -1 towards its lower."""
-        return 1.0 if self.closed_q >= self.open_q else -1.0
-
-    def closure(self, q):
-        """How closed the gripper is at finger position ``q`` (m): 0 open, 1 closed."""
-        return (q - self.open_q) / (self.closed_q - self.open_q)
-
-    @property
-    def opening(self) -> float:
-        """The widest gap (m) the two fingers open between them: each prismatic finger moves
-        by the stroke; a linkage's pads by what its kinematics give."""
-        return self.pad_opening if self.linkage else 2.0 * self.stroke
-
-    @property
-    def pad_speed(self) -> float:
-        """The mean speed (m/s) the pads close at with the driven joint at ``v_max``."""
-        return self.opening * self.v_max / self.stroke if self.stroke > 0 else 0.0
-
-    def positions(self, q: float) -> dict[str, float]:
-        """Every gripper joint's position (driven and followers) with the driven one at ``q``."""
-        out = {self.joint: float(q)}
-        out.update({f.joint: f.multiplier * float(q) + f.offset for f in self.followers})
-        return out
-
-
-def find_gripper(resolved: ResolvedArm) -> Gripper | None:
-    """The arm's gripper (:func:`mjx_arm.urdf.grippers.find_layout`): parallel prismatic
-    fingers or a linkage, one joint driven; None where there is neither."""
-    layout = find_layout(resolved.model, set(resolved.joint_names))
-    if layout is None:
-        return None
-    lim = resolved.model.joints[layout.driven].limit
-    return Gripper(
-        joint=layout.driven,
-        pad_links=layout.pads,
-        v_max=lim.velocity or resolved.config.default_velocity,
-        stroke=lim.upper - lim.lower,
-        open_q=layout.open_q,
-        closed_q=layout.closed_q,
-        followers=layout.followers,
-        linkage=layout.kind == "linkage",
-        pad_opening=layout.opening,
-        pad_width=layout.pad_width,
-        grasp_offset=tuple(
-            float(v) for v in grasp_centre(resolved.model, layout, resolved.ee_link)
-        ),
-    )
 
 
 @dataclass(frozen=True, eq=False)

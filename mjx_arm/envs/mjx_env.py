@@ -221,22 +221,15 @@ class MjxArmEnv(Env):
         action = jnp.clip(action, -1.0, 1.0)
         applied = delayed_action(action, memory.past_actions, episode.latency)
         info = dict(state.info)
-        dynamics = None
+        keys = None  # (jitter, force-torque noise, joint noise)
         if self.randomization.enabled:
-            info["rng"], key_jitter, key_ft, key_joint = jax.random.split(state.info["rng"], 4)
-            dynamics = step_dynamics(key_jitter, episode)
+            info["rng"], *keys = jax.random.split(state.info["rng"], 4)
+        dynamics = None if keys is None else step_dynamics(keys[0], episode)
         data = self.physics.step(
             state.pipeline_state, applied * self._v_scale, dynamics, memory.object_params
         )
-        reading = self.physics.read(data)
-        # sane: finite, and no joint running away (else the physics diverged)
-        sane = _all_finite(reading) & ~reward_lib.runaway(jnp, reading.qvel, self._speeds)
-        reading = jax.tree.map(lambda x: jnp.where(sane, x, jnp.zeros_like(x)), reading)
-        noise, q_noise = None, None
-        if self.randomization.enabled:
-            noise = ft_noise(key_ft, episode)
-            q_noise = joint_noise(key_joint, episode)
-        obs = jnp.where(sane, self.observe(reading, episode, noise, q_noise), state.obs)
+        reading, sane = self._sane_reading(data)
+        obs = jnp.where(sane, self._noisy_obs(reading, episode, keys), state.obs)
         d, force = self._distance_and_force(reading)
         change = reward_lib.action_change(jnp, action, memory.prev_action)
         measures = self._task_measures(reading)
@@ -244,28 +237,58 @@ class MjxArmEnv(Env):
             jnp, self.task, memory.progress, memory.prev_distance, change, d, force,
             reading.qpos, reading.qvel, self._band, ~sane, measures,
         )  # fmt: skip
-        progress, success = score.progress, score.success
-        # strong float32 everywhere: a weak type would change the State's type and retrace
-        terms = {k: v.astype(jnp.float32) for k, v in score.terms.items()}
-        reward = score.reward.astype(jnp.float32)
-        done = score.done
         prev_distance = jnp.where(sane, d, memory.prev_distance)
         past = push_action(action, memory.past_actions)
-        info["task"] = TaskMemory(progress, action, prev_distance, memory.object_params, past)
-        metrics = dict(state.metrics)  # keep keys wrappers added (EvalWrapper's "reward")
-        metrics.update({f"reward/{name}": value for name, value in terms.items()})
-        overflow = self.physics.overflow(data)
-        metrics.update(self._measures(d, force, progress, success, score.over, overflow))
-        metrics.update(self._task_metrics(measures))
-        metrics["diverged"] = (~sane).astype(jnp.float32)
+        info["task"] = TaskMemory(score.progress, action, prev_distance, memory.object_params, past)
+        metrics = self._step_metrics(state.metrics, data, score, (d, force), measures, sane)
         return state.replace(
             pipeline_state=data,
             obs=obs,
-            reward=reward,
-            done=done.astype(jnp.float32),
+            reward=score.reward.astype(jnp.float32),  # strong: a weak type would retrace
+            done=score.done.astype(jnp.float32),
             metrics=metrics,
             info=info,
         )
+
+    def _sane_reading(self, data: Any) -> tuple[Reading, jax.Array]:
+        """``data``'s reading, zeroed where it is not sane, and the sane flag ``()``: finite,
+        and no joint running away (else the physics diverged)."""
+        reading = self.physics.read(data)
+        sane = _all_finite(reading) & ~reward_lib.runaway(jnp, reading.qvel, self._speeds)
+        return jax.tree.map(lambda x: jnp.where(sane, x, jnp.zeros_like(x)), reading), sane
+
+    def _noisy_obs(self, reading: Reading, episode: Episode, keys: list | None) -> jax.Array:
+        """The observation ``(16 + n + k,)`` of ``reading``, with force-torque and joint noise from
+        ``keys`` (jitter, force-torque, joint; each ``(2,)``) where randomisation is on."""
+        if keys is None:
+            return self.observe(reading, episode, None, None)
+        return self.observe(
+            reading, episode, ft_noise(keys[1], episode), joint_noise(keys[2], episode)
+        )
+
+    def _step_metrics(
+        self,
+        metrics: dict[str, jax.Array],
+        data: Any,
+        score: Any,
+        distance_force: tuple[jax.Array, jax.Array],
+        measures: dict[str, jax.Array] | None,
+        sane: jax.Array,
+    ) -> dict[str, jax.Array]:
+        """The step's metrics: ``metrics`` (keys wrappers added kept, e.g. EvalWrapper's
+        "reward") with the reward terms as ``reward/<name>``, the measures, the task's own and
+        ``diverged``; each ``()`` float32 (strong: a weak type would change the State's type
+        and retrace)."""
+        metrics = dict(metrics)
+        metrics.update({f"reward/{k}": v.astype(jnp.float32) for k, v in score.terms.items()})
+        d, force = distance_force
+        overflow = self.physics.overflow(data)
+        metrics.update(
+            self._measures(d, force, score.progress, score.success, score.over, overflow)
+        )
+        metrics.update(self._task_metrics(measures))
+        metrics["diverged"] = (~sane).astype(jnp.float32)
+        return metrics
 
     def restart(self, data: Any, rng: jax.Array) -> tuple[Any, jax.Array, dict[str, Any]]:
         """The same start state with a new target (and randomisation) from ``rng``.

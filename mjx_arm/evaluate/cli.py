@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import Any
 
 from mjx_arm import engines, names
 from mjx_arm.inputs import (
@@ -32,20 +33,11 @@ def cmd_eval(args: argparse.Namespace) -> int:
     success and the mean peak contact force, and saves them as JSON with -o. CPU engines reset
     episode i with seed + i, so mujoco and pybullet see the same episodes.
     """
-    import json
-
     from mjx_arm.evaluate import eval_arm, eval_task, evaluate, format_summary, resolve_policy
-    from mjx_arm.replay import save_trajectory
     from mjx_arm.urdf.repair_args import with_repair_arguments
 
     _check_eval_outputs(args)
-    if args.pybullet_contact is not None:
-        from pybullet_ref.contact import SceneContact
-
-        try:
-            SceneContact.parse(args.pybullet_contact)
-        except ConfigError as err:
-            raise ConfigError(f"--pybullet-contact: {err}") from err
+    _check_contact(args.pybullet_contact)
     policy, source = resolve_policy(args.policy, args.step)
     task, notes = eval_task(policy, args.task)
     arm = with_repair_arguments(eval_arm(policy, args.arm), args)
@@ -67,15 +59,39 @@ def cmd_eval(args: argparse.Namespace) -> int:
     )
     result = {"policy": str(source), **result, "notes": notes + result["notes"]}
     print(format_summary(result))
+    _write_eval(args, result, run.trajectory, task)
+    return EXIT_OK
+
+
+def _check_contact(contact: str | None) -> None:
+    """Check ``--pybullet-contact`` before any work (None: the default contact)."""
+    if contact is None:
+        return
+    from pybullet_ref.contact import SceneContact
+
+    try:
+        SceneContact.parse(contact)
+    except ConfigError as err:
+        raise ConfigError(f"--pybullet-contact: {err}") from err
+
+
+def _write_eval(
+    args: argparse.Namespace, result: dict[str, Any], trajectory: Any, task: Any
+) -> None:
+    """Save what eval's arguments ask for (the first episode's ``trajectory`` of ``task``, the
+    ``result`` as JSON) and print where, then the result without its episodes as one JSON line."""
+    import json
+
+    from mjx_arm.replay import save_trajectory
+
     if args.trajectory:
-        print(f"trajectory: {save_trajectory(args.trajectory, run.trajectory, task)}")
+        print(f"trajectory: {save_trajectory(args.trajectory, trajectory, task)}")
     if result["video"]:
         print(f"video: {result['video']}")
     if args.output:
         write_atomic(json.dumps(result, indent=2).encode(), Path(args.output))
         print(f"results: {args.output}")
     print(json.dumps({k: v for k, v in result.items() if k != "per_episode"}))
-    return EXIT_OK
 
 
 def _check_eval_outputs(args: argparse.Namespace) -> None:
@@ -131,6 +147,14 @@ def _add_eval(sub: argparse._SubParsersAction) -> None:
         description=cmd_eval.__doc__,
     )
     p.add_argument("policy", help="policy file (.npz/.onnx) or run directory (newest checkpoint)")
+    _add_eval_run(p)
+    _add_eval_arm(p)
+    _add_eval_outputs(p)
+    p.set_defaults(func=cmd_eval)
+
+
+def _add_eval_run(p: argparse.ArgumentParser) -> None:
+    """eval's engine, checkpoint and episodes."""
     p.add_argument(
         "--engine",
         choices=engines.eval_engines(),
@@ -154,6 +178,10 @@ def _add_eval(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--seed", type=seed_int, default=0, help="seed of the first episode (default: 0)"
     )
+
+
+def _add_eval_arm(p: argparse.ArgumentParser) -> None:
+    """eval's task, arm (and its repairs) and PyBullet contact."""
     p.add_argument(
         "--task",
         type=str.lower,
@@ -171,12 +199,15 @@ def _add_eval(sub: argparse._SubParsersAction) -> None:
         help="PyBullet's scene contact: soft (compliant, calibrated on MuJoCo; the default), "
         "rigid (Bullet's own), or FIXED/CUBE springs as STIFFNESS:DAMPING (N/m:N s/m)",
     )
+
+
+def _add_eval_outputs(p: argparse.ArgumentParser) -> None:
+    """eval's video, trajectory and JSON outputs."""
     p.add_argument("--video", help="video of the first episode (.mp4 or .gif)")
     p.add_argument("--width", type=pixels, default=640, help="video width (default: 640)")
     p.add_argument("--height", type=pixels, default=480, help="video height (default: 480)")
     p.add_argument("--trajectory", help="save the first episode as a trajectory .npz (replay)")
     p.add_argument("-o", "--output", help="JSON file for the results")
-    p.set_defaults(func=cmd_eval)
 
 
 def _add_replay(sub: argparse._SubParsersAction) -> None:

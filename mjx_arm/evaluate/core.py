@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import tempfile
 import time
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -175,39 +175,87 @@ def evaluate(
     Returns:
         The JSON-ready summary and the raw :class:`EvalRun`.
     """
+    _check_inputs(policy, engine, task, arm)  # before the task meets the arm
+    start = time.monotonic()
+    setup = _resolved(task, arm)  # once: every env below takes it as it is
+    options = _RunOptions(video, video_episodes, (width, height), backend, impl, contact)
+    run, physics = _run(policy, setup, engine, episodes, seed, options)
+    result = {"engine": engine, "task": task.task, "seed": seed, **summarize(run.episodes)}
+    return _finish(result, physics, start, video, run), run
+
+
+@dataclass(frozen=True)
+class _RunOptions:
+    """How :func:`evaluate` runs: the ``video`` of its first ``video_episodes`` episodes with
+    frames of ``size`` (width, height) pixels; the batched ``backend`` and ``impl``; the
+    PyBullet ``contact``. :func:`evaluate` documents each."""
+
+    video: str | Path | None
+    video_episodes: int
+    size: tuple[int, int]
+    backend: str | None
+    impl: str
+    contact: str | None
+
+
+def _check_inputs(policy: Policy, engine: str, task: TaskConfig, arm: Any) -> None:
+    """Check that ``engine`` evaluates and that ``policy`` fits ``task`` on ``arm``."""
     from mjx_arm.arm.info import arm_info
-    from mjx_arm.arm.resolve import resolve_task
 
     _check_engine(engine)
-    check_policy_fits(policy, task, arm_info(arm))  # before the task meets the arm
-    start = time.monotonic()
-    setup = resolve_task(task, arm)  # once: every env below takes it as it is
+    check_policy_fits(policy, task, arm_info(arm))
+
+
+def _resolved(task: TaskConfig, arm: Any) -> ArmTask:
+    """``task`` on ``arm``, resolved once (:func:`mjx_arm.arm.resolve.resolve_task`)."""
+    from mjx_arm.arm.resolve import resolve_task
+
+    return resolve_task(task, arm)
+
+
+def _run(
+    policy: Policy, setup: ArmTask, engine: str, episodes: int, seed: int, options: _RunOptions
+) -> tuple[EvalRun, dict[str, str]]:
+    """Run ``episodes`` episodes of ``setup`` on ``engine``; (the run, its physics settings)."""
     if engine in engines.batch_engines():
-        run = _run_batch(policy, setup, episodes, seed, backend, impl, video, (width, height))
-        physics = _batch_physics(backend, impl)
-    else:
-        env = make_eval_env(setup, engine, video is not None, width, height, None, contact)
-        try:
-            run = run_episodes(policy, env, episodes, seed, video, video_episodes)
-        finally:
-            env.close()
-        physics = _env_physics(env.unwrapped, engine)
-    result = {"engine": engine, "task": task.task, "seed": seed, **summarize(run.episodes)}
+        run = _run_batch(policy, setup, episodes, seed, options)
+        return run, _batch_physics(options.backend, options.impl)
+    width, height = options.size
+    filmed = options.video is not None
+    env = make_eval_env(setup, engine, filmed, width, height, None, options.contact)
+    try:
+        run = run_episodes(policy, env, episodes, seed, options.video, options.video_episodes)
+    finally:
+        env.close()
+    return run, _env_physics(env.unwrapped, engine)
+
+
+def _finish(
+    result: dict[str, Any],
+    physics: dict[str, str],
+    start: float,
+    video: str | Path | None,
+    run: EvalRun,
+) -> dict[str, Any]:
+    """``result`` with the physics settings, the seconds since ``start``, the video's path (if
+    any frame was filmed), the run's notes and its episodes one by one."""
     result.update(physics)
     result["wall_seconds"] = time.monotonic() - start
     result["video"] = str(video) if video is not None and run.frames else None
     result["notes"] = run.notes
     result["per_episode"] = [asdict(e) for e in run.episodes]
-    return result, run
+    return result
 
 
-def _run_batch(policy, setup, episodes, seed, backend, impl, video, size) -> EvalRun:
+def _run_batch(
+    policy: Policy, setup: ArmTask, episodes: int, seed: int, options: _RunOptions
+) -> EvalRun:
     """:func:`run_batched` of ``setup`` (an :class:`~mjx_arm.arm.resolve.ArmTask`), and its
-    env 0's episode filmed in CPU MuJoCo (frames of ``size``: width, height) where a ``video``
-    is asked for. ``backend`` None: "mjx"."""
-    run = run_batched(policy, setup, episodes, seed, backend or "mjx", impl)
-    if video is not None:
-        run.frames, note = _replay_video(run.trajectory, setup, video, *size)
+    env 0's episode filmed in CPU MuJoCo (frames of ``options.size``: width, height) where a
+    video is asked for. ``options.backend`` None: "mjx"."""
+    run = run_batched(policy, setup, episodes, seed, options.backend or "mjx", options.impl)
+    if options.video is not None:
+        run.frames, note = _replay_video(run.trajectory, setup, options.video, *options.size)
         run.notes += [note] if note else []
     return run
 

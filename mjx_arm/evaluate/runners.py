@@ -235,22 +235,32 @@ def run_batched(
     while acc.active.any():
         actions = np.asarray(policy(obs), dtype=np.float32).reshape(env.action_space.shape)
         next_obs, rewards, terminated, truncated, info = env.step(actions)
-        final = info.get("final_obs", next_obs)
         if acc.active[0]:
-            row = {k: v[0] for k, v in info.items() if k in ("contact_force_norm", "distance")}
-            row["is_success"] = info["is_success"][0]
-            rec.add(
-                _flat({k: v[0] for k, v in obs.items()}),
-                actions[0],
-                rewards[0],
-                terminated[0],
-                {"ee_pose": final["ee_pose"][0]},
-                row,
-            )
+            final = info.get("final_obs", next_obs)
+            _record_first(rec, obs, (actions, rewards, terminated), final, info)
         acc.add(rewards, terminated | truncated, info)
         obs = next_obs
     env.close()
     return EvalRun(acc.episodes(), [rec.arrays()])
+
+
+def _record_first(
+    rec: _Recorder, obs: dict, step: tuple[np.ndarray, ...], final: dict, info: dict
+) -> None:
+    """Record env 0's transition of a batched step: its observation (``obs``: Dict of
+    ``(episodes, ...)``), the step's ``(actions (episodes, n), rewards (episodes,),
+    terminated (episodes,))``, the ``final`` observation's ee pose and the info it reports."""
+    actions, rewards, terminated = step
+    row = {k: v[0] for k, v in info.items() if k in ("contact_force_norm", "distance")}
+    row["is_success"] = info["is_success"][0]
+    rec.add(
+        _flat({k: v[0] for k, v in obs.items()}),
+        actions[0],
+        rewards[0],
+        terminated[0],
+        {"ee_pose": final["ee_pose"][0]},
+        row,
+    )
 
 
 class _BatchAccumulator:

@@ -55,21 +55,7 @@ def build_model(arrays: Mapping[str, np.ndarray], metadata: Mapping[str, Any]):
         slice_ends=np.array([action_size], np.int64),
         slice_axes=np.array([1], np.int64),
     )
-    nodes = [
-        helper.make_node("Sub", [INPUT, "obs_mean"], ["centred"]),
-        helper.make_node("Div", ["centred", "obs_std"], ["h0"]),
-    ]
-    for i in range(n_layers):
-        last = i == n_layers - 1
-        nodes.append(helper.make_node("MatMul", [f"h{i}", f"kernel_{i}"], [f"mm{i}"]))
-        z = PARAMS if last else f"z{i}"
-        nodes.append(helper.make_node("Add", [f"mm{i}", f"bias_{i}"], [z]))
-        if not last:
-            nodes += _activation_nodes(helper, metadata["activation"], z, f"h{i + 1}")
-    nodes += [
-        helper.make_node("Slice", [PARAMS, "slice_starts", "slice_ends", "slice_axes"], ["loc"]),
-        helper.make_node("Tanh", ["loc"], [ACTION]),
-    ]
+    nodes = _nodes(helper, n_layers, metadata["activation"])
     obs_size = int(inits["obs_mean"].shape[0])
     n_params = int(inits[f"bias_{n_layers - 1}"].shape[0])
     graph = helper.make_graph(
@@ -92,6 +78,27 @@ def build_model(arrays: Mapping[str, np.ndarray], metadata: Mapping[str, Any]):
     helper.set_model_props(model, {METADATA_KEY: json.dumps(dict(metadata), sort_keys=True)})
     onnx.checker.check_model(model)
     return model
+
+
+def _nodes(helper: Any, n_layers: int, activation: str) -> list:
+    """The graph's nodes: normalise the observation, ``n_layers`` dense layers (``activation``
+    between them), then ``tanh`` of the first ``action_size`` outputs (the mean)."""
+    nodes = [
+        helper.make_node("Sub", [INPUT, "obs_mean"], ["centred"]),
+        helper.make_node("Div", ["centred", "obs_std"], ["h0"]),
+    ]
+    for i in range(n_layers):
+        last = i == n_layers - 1
+        nodes.append(helper.make_node("MatMul", [f"h{i}", f"kernel_{i}"], [f"mm{i}"]))
+        z = PARAMS if last else f"z{i}"
+        nodes.append(helper.make_node("Add", [f"mm{i}", f"bias_{i}"], [z]))
+        if not last:
+            nodes += _activation_nodes(helper, activation, z, f"h{i + 1}")
+    nodes += [
+        helper.make_node("Slice", [PARAMS, "slice_starts", "slice_ends", "slice_axes"], ["loc"]),
+        helper.make_node("Tanh", ["loc"], [ACTION]),
+    ]
+    return nodes
 
 
 class OnnxMissingError(InputError, ImportError):

@@ -108,12 +108,21 @@ def deploy_sim(
     velocity_run, _ = _run_closed(policy, make_eval_env(setup, engine), episodes, seed)
     position_env = make_position_env(setup, engine, config.chain())
     position_run, base = _run_closed(policy, position_env, episodes, seed)
-    longest = max(range(episodes), key=lambda i: len(base.episodes[i].commands))
+    head = {"engine": engine, "task": task.task, "episodes": episodes, "seed": seed}
+    runs = _compare(velocity_run, position_run, base, config, range(seed, seed + episodes))
+    return {**head, **runs, "ctrl_dt": task.ctrl_dt}
+
+
+def _compare(
+    velocity_run: EvalRun, position_run: EvalRun, base: Any, config: DeployConfig, seeds: range
+) -> dict[str, Any]:
+    """The two runs side by side: summaries, tracking, deviation, the longest episode's commands.
+
+    ``base`` is the position env, unwrapped; ``seeds`` are the episodes' seeds; the keys are
+    :func:`deploy_sim`'s.
+    """
+    longest = max(range(len(seeds)), key=lambda i: len(base.episodes[i].commands))
     return {
-        "engine": engine,
-        "task": task.task,
-        "episodes": episodes,
-        "seed": seed,
         "velocity_control": summarize(velocity_run.episodes),
         "position_control": summarize(position_run.episodes),
         "tracking_error_rad": tracking_error(base.episodes),
@@ -123,11 +132,10 @@ def deploy_sim(
         "settings": asdict(config),
         "commands": {
             "index": longest,
-            "seed": seed + longest,
+            "seed": seeds[longest],
             **base.episodes[longest].arrays(),
         },
         "joint_names": list(base.arm.joint_names),
-        "ctrl_dt": task.ctrl_dt,
     }
 
 

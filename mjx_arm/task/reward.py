@@ -16,7 +16,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from mjx_arm.task.config import TaskConfig
+from mjx_arm.task.config import REWARD_TERMS, TaskConfig
 from mjx_arm.task.registry import get_task
 
 
@@ -266,28 +266,39 @@ def band_reward_terms(
         Dict term name -> float array, shape ``(...)``; keys are ``REWARD_TERMS``, then the
         task's own terms (:attr:`mjx_arm.task.spec.Task.reward_terms`).
     """
-    limit, speed = joint_terms(xp, qpos, qvel, band)
-    near = distance < cfg.success_distance
     task = get_task(cfg.task)
-    contact, excess = task.contact_terms(xp, near, force_norm, cfg)
-    closing, change, held = _motion_terms(xp, distance, cfg, motion)
+    terms = _state_terms(xp, task, distance, force_norm, cfg)
+    terms["joint_limit"], terms["joint_velocity"] = joint_terms(xp, qpos, qvel, band)
+    terms["success"], terms["nonfinite"] = success * 1.0, nonfinite * 1.0
+    terms.update(zip(MOTION_TERMS, _motion_terms(xp, distance, cfg, motion), strict=True))
+    own = _own_terms(xp, task, distance, extra)
+    return {**{name: terms[name] for name in REWARD_TERMS}, **own}
+
+
+def _own_terms(xp: Any, task: Any, distance, extra: dict | None) -> dict:
+    """``task``'s own terms from its measures ``extra`` (None: each 0), shaped as ``distance``
+    ``(...)``, in the order of ``task.reward_terms``."""
     zero = 0.0 * distance
     own = task.task_terms(xp, extra, zero) if extra else dict.fromkeys(task.reward_terms, zero)
+    return {name: own[name] for name in task.reward_terms}
+
+
+def _state_terms(xp: Any, task: Any, distance, force_norm, cfg: TaskConfig) -> dict:
+    """The terms of the distance d (m) and the tared force norm (N), each ``(...)``:
+    ``distance``, ``proximity``, and ``task``'s ``contact``, ``force_excess``, ``overforce``."""
+    near = distance < cfg.success_distance
+    contact, excess = task.contact_terms(xp, near, force_norm, cfg)
     return {
         "distance": 1.0 - xp.exp(-distance / cfg.reward.distance_length),
         "contact": contact,
-        "joint_limit": limit,
-        "joint_velocity": speed,
-        "success": success * 1.0,
-        "nonfinite": nonfinite * 1.0,
         "force_excess": excess,
-        "approach_speed": closing,
-        "action_rate": change,
         "overforce": (excess > 0) * 1.0,
         "proximity": xp.exp(-distance / cfg.reward.proximity_length),
-        "streak": held,
-        **{name: own[name] for name in task.reward_terms},
     }
+
+
+# The terms of the arm's motion between two steps, as :func:`_motion_terms` gives them.
+MOTION_TERMS = ("approach_speed", "action_rate", "streak")
 
 
 def _motion_terms(xp: Any, distance, cfg: TaskConfig, motion: Motion | None):

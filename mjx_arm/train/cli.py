@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from mjx_arm import names
 from mjx_arm.inputs import ConfigError, nonnegative_int, positive_int
@@ -13,6 +14,9 @@ from mjx_arm.names import EXIT_OK
 from mjx_arm.settings import add_set_argument
 from mjx_arm.task.registry import task_names
 from mjx_arm.urdf.repair_args import add_repair_arguments, with_repair_arguments
+
+if TYPE_CHECKING:
+    from mjx_arm.train.config import TrainConfig
 
 DEFAULT_PRESET = "seed"
 
@@ -28,7 +32,6 @@ def cmd_train(args: argparse.Namespace) -> int:
     import sys
 
     from mjx_arm.train import launch
-    from mjx_arm.train.config import saved_config
     from mjx_arm.train.distributed import Hosts, ProcessGroup
     from mjx_arm.train.ppo import train
 
@@ -47,12 +50,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         group = plan.group
     group.join()
     enable_compilation_cache()
-    if args.resume:
-        config = saved_config(args.resume)
-        if args.devices is not None:  # a run resumes on any number of devices
-            config = config.replace(devices=args.devices)
-    else:
-        config = config_from_args(args)
+    config = _run_config(args)
     run_dir = Path(named) if named else _default_run_dir(args, config.task)
     if group.joined:
         config = config.replace(devices=0)  # every process trains on all of its devices
@@ -63,6 +61,18 @@ def cmd_train(args: argparse.Namespace) -> int:
         print(done_line(result))
         print(result.compile_summary)
     return EXIT_OK
+
+
+def _run_config(args: argparse.Namespace) -> TrainConfig:
+    """The run's config: the flags', or a resumed run's saved one (on --devices where given)."""
+    from mjx_arm.train.config import saved_config
+
+    if not args.resume:
+        return config_from_args(args)
+    config = saved_config(args.resume)
+    if args.devices is not None:  # a run resumes on any number of devices
+        config = config.replace(devices=args.devices)
+    return config
 
 
 def _check_resume_flags(args: argparse.Namespace) -> None:

@@ -69,11 +69,14 @@ def strong(tree: Any) -> Any:
     return jax.tree.map(lambda x: jnp.asarray(x).astype(jnp.asarray(x).dtype), tree)
 
 
-def _run_keys(seed: int) -> tuple[jax.Array, ...]:
-    """The run's keys from its seed: (policy init, value init, env reset, evaluation, epochs)."""
+def _run_keys(seed: int, restore: Any = None) -> tuple[jax.Array, ...]:
+    """The run's keys from its seed: (policy init, value init, env reset, evaluation, epochs);
+    a :class:`ResumeState` ``restore`` gives the last two as they were when it was taken."""
     global_key, local_key = jax.random.split(jax.random.PRNGKey(seed))
     local_key, key_env, key_eval = jax.random.split(local_key, 3)
     key_policy, key_value = jax.random.split(global_key)
+    if isinstance(restore, ResumeState):
+        local_key, key_eval = (jnp.asarray(restore.keys[k]) for k in ("epochs", "evaluation"))
     return key_policy, key_value, key_env, key_eval, local_key
 
 
@@ -147,38 +150,53 @@ def prepare_ppo(
     config.check_devices(len(devices))
     mesh = make_mesh(devices)
     partition = resolve_partition(config, env.physics.impl)
-    key_policy, key_value, key_env, key_eval, local_key = _run_keys(config.seed + step_offset)
-    if isinstance(restore, ResumeState):
-        local_key, key_eval = (jnp.asarray(restore.keys[k]) for k in ("epochs", "evaluation"))
-
+    run_keys = _run_keys(config.seed + step_offset, restore)
+    key_policy, key_value, key_env, key_eval, local_key = run_keys
     split_mesh = mesh if partition == "per_device" else None
     train_env = wrap_for_training(env, episode_length, mesh=split_mesh, axis=ENV_AXIS)
     with report.stage("learner init"):
         learner, state = _learner(config, env, mesh, (key_policy, key_value), restore)
     evaluate = _evaluator(config, eval_env, learner, episode_length, key_eval)
     sizes = EpochSizes.of(config, config.num_timesteps)
-    with report.stage("trace + lower"):
-        keys = jax.random.split(key_env, config.num_envs)
-        reset, shardings = _reset_fn(train_env, mesh, keys)
-        env_shapes = jax.tree.map(_strong_shape, jax.eval_shape(reset, keys), shardings)
-        epoch = learner.epoch_programs(train_env, sizes, shardings)
-        lowered = {"reset": reset.lower(keys), **epoch.lower(state, env_shapes, local_key)}
-        if is_leader():
-            lowered["evaluation"] = evaluate.lower(learner.params(state))
-    with report.stage("XLA compile (in parallel)"):
-        compiled = compile_all(lowered)
-    if "evaluation" in compiled:
-        evaluate.use(compiled["evaluation"])
-    epoch = epoch.with_programs(compiled["rollout"], compiled["update"])
+    keys = jax.random.split(key_env, config.num_envs)
+    programs = _Programs(train_env, mesh, keys, learner, evaluate)
+    epoch, reset = programs.compile(state, sizes, local_key, report)
     _wait_for_kernels((env, eval_env), report)
-    with report.stage("first reset run"):
-        env_state = jax.block_until_ready(strong(compiled["reset"](keys)))
-    paths = env_leaf_paths(env_state, config.num_envs, env.physics.splits)
-    if isinstance(restore, ResumeState) and restore.env_leaves is not None:
-        env_state = _restored_envs(env_state, paths, restore.env_leaves)
+    env_state, paths = _first_envs(reset, keys, env.physics.splits, restore, report)
     return Prepared(
         learner, state, env_state, epoch, evaluate, sizes, local_key, devices, partition, paths
     )
+
+
+@dataclass(frozen=True)
+class _Programs:
+    """What the run's programs are built from: the wrapped training envs on ``mesh``, their
+    reset keys (``[num_envs, 2]``), the learner and the evaluator."""
+
+    train_env: Any
+    mesh: Any
+    keys: jax.Array
+    learner: Learner
+    evaluate: Evaluator
+
+    def compile(
+        self, state: Any, sizes: EpochSizes, local_key: jax.Array, report: CompileReport
+    ) -> tuple[Any, Callable]:
+        """Trace and lower the reset, the epoch and (process 0) the evaluation, then compile
+        them at once; the evaluator takes its program. Returns (the compiled epoch, the
+        compiled reset ``keys -> env_state``)."""
+        with report.stage("trace + lower"):
+            reset, shardings = _reset_fn(self.train_env, self.mesh, self.keys)
+            env_shapes = jax.tree.map(_strong_shape, jax.eval_shape(reset, self.keys), shardings)
+            epoch = self.learner.epoch_programs(self.train_env, sizes, shardings)
+            lowered = {"reset": reset.lower(self.keys), **epoch.lower(state, env_shapes, local_key)}
+            if is_leader():
+                lowered["evaluation"] = self.evaluate.lower(self.learner.params(state))
+        with report.stage("XLA compile (in parallel)"):
+            compiled = compile_all(lowered)
+        if "evaluation" in compiled:
+            self.evaluate.use(compiled["evaluation"])
+        return epoch.with_programs(compiled["rollout"], compiled["update"]), compiled["reset"]
 
 
 def _evaluator(
@@ -188,6 +206,19 @@ def _evaluator(
     policy = functools.partial(learner.make_policy, deterministic=True)
     wrapped = wrap_for_training(eval_env, episode_length)
     return Evaluator(wrapped, policy, config.num_eval_envs, episode_length, key)
+
+
+def _first_envs(
+    reset: Callable, keys: jax.Array, splits: Any, restore: Any, report: CompileReport
+) -> tuple[Any, list]:
+    """The training envs' first state, reset from ``keys`` (``[num_envs, 2]``), or a
+    :class:`ResumeState`'s envs where it has them; and the tree paths of its per-env leaves."""
+    with report.stage("first reset run"):
+        env_state = jax.block_until_ready(strong(reset(keys)))
+    paths = env_leaf_paths(env_state, keys.shape[0], splits)
+    if isinstance(restore, ResumeState) and restore.env_leaves is not None:
+        env_state = _restored_envs(env_state, paths, restore.env_leaves)
+    return env_state, paths
 
 
 def _restored_envs(env_state: Any, paths: list, leaves: list[np.ndarray]) -> Any:
@@ -258,11 +289,8 @@ def run_ppo(
     report = report or CompileReport()
     run = prepare_ppo(config, env, eval_env, episode_length, restore, step_offset, report)
     state, env_state, local_key = run.state, run.env_state, run.local_key
-    params = run.learner.params(state)
     if config.num_evals > 1 and step_offset == 0:
-        with report.stage("first evaluation run"):
-            metrics = _evaluate(run.evaluate, params, {})
-        callbacks.progress(0, metrics)
+        _first_evaluation(run, callbacks, report)
     walltime, step = 0.0, step_offset
     while step < config.num_timesteps:
         epoch_key, local_key = jax.random.split(local_key)
@@ -273,15 +301,37 @@ def run_ppo(
             report.add("first epoch run", seconds)
         walltime += seconds
         step += run.sizes.env_steps_per_epoch
-        check_epoch(config, step, state, metrics)  # before anything of the epoch is saved
-        params = run.learner.params(state)
-        callbacks.policy_params(step, run.learner.make_policy, params)
-        taken = (state, env_state, local_key)
-        callbacks.snapshot(step, functools.partial(run.snapshot, *taken))
         training = _training_metrics(metrics, run.sizes.env_steps_per_epoch / seconds, walltime)
-        with rollout_guard(config, step):  # the checkpoint's rollout acts with the policy
-            callbacks.progress(step, _evaluate(run.evaluate, params, training))
+        taken = (state, env_state, local_key)
+        _epoch_done(config, run, callbacks, step, taken, metrics, training)
     return {"devices": [str(d) for d in run.devices], "partition": run.partition}
+
+
+def _first_evaluation(run: Prepared, callbacks: Callbacks, report: CompileReport) -> None:
+    """Evaluate the initial policy (timed into ``report``) and report it at step 0."""
+    with report.stage("first evaluation run"):
+        metrics = _evaluate(run.evaluate, run.learner.params(run.state), {})
+    callbacks.progress(0, metrics)
+
+
+def _epoch_done(
+    config: TrainConfig,
+    run: Prepared,
+    callbacks: Callbacks,
+    step: int,
+    taken: tuple[Any, Any, jax.Array],
+    metrics: dict[str, Any],
+    training: dict[str, Any],
+) -> None:
+    """After the epoch that reached ``step``: check it, hand out its params and a snapshot of
+    ``taken`` (state, env state, epochs' key), evaluate and report with ``training``."""
+    state = taken[0]
+    check_epoch(config, step, state, metrics)  # before anything of the epoch is saved
+    params = run.learner.params(state)
+    callbacks.policy_params(step, run.learner.make_policy, params)
+    callbacks.snapshot(step, functools.partial(run.snapshot, *taken))
+    with rollout_guard(config, step):  # the checkpoint's rollout acts with the policy
+        callbacks.progress(step, _evaluate(run.evaluate, params, training))
 
 
 def _evaluate(evaluate: Evaluator, params: Params, training: dict[str, Any]) -> dict[str, Any]:

@@ -119,11 +119,8 @@ def train(
     config = devices_for_physics(config)
     config.check_devices(len(train_devices(config.devices)))
     setup = resolve_run_task(config)
-    if resume and not (Path(run_dir) / "config.json").is_file():
-        raise MissingInputError(
-            f"cannot resume {run_dir}: no checkpoint, it is not a run directory (no "
-            "config.json); give the RUN_DIR of an earlier mjx-arm train"
-        )
+    if resume:
+        _check_run_dir(run_dir)
     if not is_leader():  # process 0 holds the run directory; the others only read it
         barrier("run directory ready")
         step_offset, restore = _start_point(None, config, resume, Path(run_dir))
@@ -135,6 +132,15 @@ def train(
         run.truncate_metrics(step_offset)  # rows a killed run wrote after its last checkpoint
         barrier("run directory ready")
         return _train(run, config, setup, step_offset, restore, quiet, stop_after)
+
+
+def _check_run_dir(run_dir: str | Path) -> None:
+    """Check that ``run_dir`` is a run directory to resume (it holds a ``config.json``)."""
+    if not (Path(run_dir) / "config.json").is_file():
+        raise MissingInputError(
+            f"cannot resume {run_dir}: no checkpoint, it is not a run directory (no "
+            "config.json); give the RUN_DIR of an earlier mjx-arm train"
+        )
 
 
 def resolve_run_task(config: TrainConfig) -> ArmTask:
@@ -185,6 +191,12 @@ def _start_point(
         if whole is not None and whole != latest:  # exact: go back to the envs' last state
             return int(RunDir.load_meta(whole)["step"]), whole
         return step_offset, latest
+    return step_offset, _params_only(latest)
+
+
+def _params_only(latest: Path) -> Any:
+    """The Brax PPO params of checkpoint ``latest``, one of an older version that holds no
+    training state; a warning that the run resumes without its optimiser, keys and envs."""
     raw = RunDir.load_params(latest)
     try:
         params = restore_brax_params(raw)
@@ -194,9 +206,9 @@ def _start_point(
         warnings.warn(
             f"{latest.name} holds params only (a checkpoint of an older version): the run "
             "resumes with fresh optimiser moments, new keys and reset envs",
-            stacklevel=2,
+            stacklevel=3,
         )
-    return step_offset, params
+    return params
 
 
 def _train(
@@ -233,6 +245,18 @@ def _train(
         report.close()
         if run is not None:
             run.close()
+    return _result(run, config, progress, report, start)
+
+
+def _result(
+    run: RunDir | None,
+    config: TrainConfig,
+    progress: _Progress,
+    report: CompileReport,
+    start: float,
+) -> TrainResult:
+    """The finished run's result: its steps, last metrics and timings since ``start``; the
+    compile report saved in the run directory."""
     total = time.monotonic() - start
     _, sps = _timings(progress.times, config)
     compile_s = report.compile_seconds  # the one compile figure (compile_report)

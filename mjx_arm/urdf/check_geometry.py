@@ -4,9 +4,7 @@ collide.
 
 from __future__ import annotations
 
-import functools
 import math
-import re
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -24,6 +22,7 @@ from mjx_arm.urdf.findings import (
     _numbers,
     _Tree,
 )
+from mjx_arm.urdf.mesh_bbox import READ_FORMATS, is_ascii_stl, mesh_box
 from mjx_arm.urdf.mesh_convert import (
     CONVERTIBLE_FORMATS,
     INSTALL_HINT,
@@ -189,25 +188,7 @@ def _check_mesh(
             'give three numbers, e.g. scale="0.001 0.001 0.001"',
         )
         return None
-    if resolved is None:
-        return None
-    too_long = path_problem(resolved) if "pybullet" in engines else None
-    if too_long:
-        out.error(
-            2,
-            _link(link),
-            f"has <{role}> mesh {filename[-60:]!r}, which {too_long}",
-            "move the meshes to a folder with a shorter path",
-        )
-        return None
-    too_large = mesh_problem(resolved)
-    if too_large:
-        out.error(
-            2,
-            _link(link),
-            f"has <{role}> mesh {filename!r}, which {too_large}",
-            "simplify the mesh (e.g. a quadric decimation in MeshLab or Blender)",
-        )
+    if resolved is None or not _mesh_file_usable(link, role, filename, resolved, engines, out):
         return None
     if convert:
         box = _converted_box(link, filename, resolved, out)
@@ -216,12 +197,38 @@ def _check_mesh(
     return None if box is None else np.sort(box * np.array(scale), axis=0)
 
 
+def _mesh_file_usable(
+    link: str, role: str, filename: str, resolved: Path, engines: tuple[str, ...], out: _Findings
+) -> bool:
+    """Whether the mesh file at ``resolved`` can be loaded: its path is short enough for
+    PyBullet (among ``engines``) and the file is not too large; an error where not."""
+    too_long = path_problem(resolved) if "pybullet" in engines else None
+    if too_long:
+        out.error(
+            2,
+            _link(link),
+            f"has <{role}> mesh {filename[-60:]!r}, which {too_long}",
+            "move the meshes to a folder with a shorter path",
+        )
+        return False
+    too_large = mesh_problem(resolved)
+    if too_large:
+        out.error(
+            2,
+            _link(link),
+            f"has <{role}> mesh {filename!r}, which {too_large}",
+            "simplify the mesh (e.g. a quadric decimation in MeshLab or Blender)",
+        )
+        return False
+    return True
+
+
 def _file_box(
     link: str, role: str, filename: str, resolved: Path, out: _Findings
 ) -> np.ndarray | None:
     """Bounding box ``(2, 3)`` of an STL or OBJ mesh file, None for other files; an ASCII STL
     is an error."""
-    if resolved.suffix.lower() == ".stl" and _is_ascii_stl(str(resolved), *_stamp(resolved)):
+    if resolved.suffix.lower() == ".stl" and is_ascii_stl(resolved):
         out.error(
             2,
             _link(link),
@@ -230,9 +237,9 @@ def _file_box(
             "save the mesh as binary STL (e.g. trimesh.load(path).export(path)) or as .obj",
         )
         return None
-    if resolved.suffix.lower() not in _READ_FORMATS:  # only mesh files are ever opened
+    if resolved.suffix.lower() not in READ_FORMATS:  # only mesh files are ever opened
         return None
-    return _mesh_box(str(resolved), *_stamp(resolved))
+    return mesh_box(resolved)
 
 
 def _converted_box(link: str, filename: str, resolved: Path, out: _Findings) -> np.ndarray | None:
@@ -332,11 +339,6 @@ def _resolve_mesh(
     return resolved
 
 
-def _stamp(path: Path) -> tuple[int, int]:
-    stat = path.stat()
-    return stat.st_mtime_ns, stat.st_size
-
-
 def _placed_box(box: np.ndarray, origin: ET.Element | None) -> np.ndarray:
     """Axis-aligned box ``(2, 3)`` in the link frame of a local box placed at ``origin``."""
     xyz = _numbers(origin.get("xyz"), 3) if origin is not None else None
@@ -371,59 +373,3 @@ def _check_sizes(link: str, shapes: list[_Shape], out: _Findings) -> None:
             f"{sizes['visual']:.3g} m)",
             "check the mesh units and <mesh scale> (mm vs m) and the collision mesh file",
         )
-
-
-# --------------------------------------------------------------------------- mesh reading
-
-_READ_FORMATS = frozenset({".stl", ".obj"})  # the formats whose bounding box is read
-_STL_RECORD = np.dtype([("normal", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")])
-
-
-@functools.lru_cache(maxsize=256)
-def _is_ascii_stl(path: str, mtime_ns: int, size: int) -> bool:
-    """True for a text STL (``solid ...`` and no consistent binary header)."""
-    del mtime_ns
-    try:
-        with open(path, "rb") as f:
-            head = f.read(84)
-    except OSError:
-        return False
-    binary = len(head) == 84 and size == 84 + 50 * int.from_bytes(head[80:84], "little")
-    return not binary and head.lstrip().startswith(b"solid")
-
-
-@functools.lru_cache(maxsize=256)
-def _mesh_box(path: str, mtime_ns: int, size: int) -> np.ndarray | None:
-    """Bounding box ``(2, 3)`` of an STL or OBJ file's vertices, or None when unreadable.
-
-    ``mtime_ns`` and ``size`` only key the cache.
-    """
-    del mtime_ns, size
-    try:
-        data = Path(path).read_bytes()
-        suffix = Path(path).suffix.lower()
-        vertices = _stl_vertices(data) if suffix == ".stl" else None
-        vertices = _obj_vertices(data) if suffix == ".obj" else vertices
-    except (OSError, ValueError):
-        return None
-    if vertices is None or len(vertices) == 0 or not np.all(np.isfinite(vertices)):
-        return None
-    return np.stack([vertices.min(axis=0), vertices.max(axis=0)])
-
-
-def _stl_vertices(data: bytes) -> np.ndarray | None:
-    """Vertices ``(n, 3)`` of a binary or ASCII STL."""
-    if len(data) >= 84:
-        count = int.from_bytes(data[80:84], "little")
-        exact = len(data) == 84 + 50 * count
-        if count and (exact or (not data.startswith(b"solid") and len(data) > 84 + 50 * count)):
-            records = np.frombuffer(data, dtype=_STL_RECORD, count=count, offset=84)
-            return records["v"].reshape(-1, 3).astype(float)
-    found = re.findall(rb"vertex\s+(\S+)\s+(\S+)\s+(\S+)", data)
-    return np.array(found, dtype=float) if found else None
-
-
-def _obj_vertices(data: bytes) -> np.ndarray | None:
-    """Vertices ``(n, 3)`` of a Wavefront OBJ (the ``v`` lines)."""
-    found = re.findall(rb"^[ \t]*v[ \t]+(\S+)[ \t]+(\S+)[ \t]+(\S+)", data, flags=re.MULTILINE)
-    return np.array(found, dtype=float) if found else None

@@ -68,6 +68,30 @@ def add_scene(spec: mujoco.MjSpec, scene: SceneSpec) -> None:
     if not scene.table:
         return
     world = spec.worldbody
+    _add_room(world)
+    target = world.add_body()
+    target.name = TARGET_BODY
+    target.mocap = True
+    target.pos = [0.5, 0.0, 0.0]
+    site = target.add_site()
+    site.name = TARGET_SITE
+    site.size = [0.006, 0, 0]
+    site.group = 4
+    if scene.box:
+        for g in scene_geometry()["box"]:
+            geom = target.add_geom()
+            geom.name = TARGET_GEOM
+            _set_box(geom, g, rgba=[0.85, 0.15, 0.15, 1.0])
+            geom.contype, geom.conaffinity = SCENE_CONTYPE, SCENE_CONAFFINITY
+        site.pos = [0.0, 0.0, box_top_offset()]
+    else:
+        _add_marker(target, scene.marker)
+    if scene.cube_half:
+        _add_cube(world, scene.cube_half)
+
+
+def _add_room(world: mujoco.MjsBody) -> None:
+    """The light, the floor (no collision), the table's boxes and the main camera."""
     light = world.add_light()
     light.pos = [0.5, -0.5, 2.5]
     light.dir = [-0.2, 0.2, -1.0]
@@ -88,30 +112,16 @@ def add_scene(spec: mujoco.MjSpec, scene: SceneSpec) -> None:
     camera.pos = list(CAMERA_EYE)
     camera.quat = camera_quat()
     camera.fovy = CAMERA_FOVY
-    target = world.add_body()
-    target.name = TARGET_BODY
-    target.mocap = True
-    target.pos = [0.5, 0.0, 0.0]
-    site = target.add_site()
-    site.name = TARGET_SITE
-    site.size = [0.006, 0, 0]
-    site.group = 4
-    if scene.box:
-        for g in scene_geometry()["box"]:
-            geom = target.add_geom()
-            geom.name = TARGET_GEOM
-            _set_box(geom, g, rgba=[0.85, 0.15, 0.15, 1.0])
-            geom.contype, geom.conaffinity = SCENE_CONTYPE, SCENE_CONAFFINITY
-        site.pos = [0.0, 0.0, box_top_offset()]
-    else:
-        marker = target.add_geom()
-        marker.name = "target_marker"
-        marker.type = mujoco.mjtGeom.mjGEOM_SPHERE
-        marker.size = [0.02, 0, 0]
-        marker.rgba = [0.1, 0.8, 0.2, 0.5 if scene.marker else 0.0]
-        marker.contype = marker.conaffinity = 0
-    if scene.cube_half:
-        _add_cube(world, scene.cube_half)
+
+
+def _add_marker(target: mujoco.MjsBody, visible: bool) -> None:
+    """The target's green sphere (no collision), transparent where not ``visible``."""
+    marker = target.add_geom()
+    marker.name = "target_marker"
+    marker.type = mujoco.mjtGeom.mjGEOM_SPHERE
+    marker.size = [0.02, 0, 0]
+    marker.rgba = [0.1, 0.8, 0.2, 0.5 if visible else 0.0]
+    marker.contype = marker.conaffinity = 0
 
 
 def _add_cube(world, half: float) -> None:
