@@ -253,3 +253,21 @@ def test_the_sim_to_real_chain_drives_a_seven_joint_arm(engine: str) -> None:
     commands = env.unwrapped.episodes[-1].arrays()["commands"]
     assert commands.shape == (10, 7)
     env.close()
+
+
+def test_the_report_names_an_ee_point_that_fitted_capsules_move(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The xArm7's capsule around its last link ends 8.8 mm past the mesh, so the ee point
+    derived on capsules is not where PyBullet (which keeps the meshes) presses: the report
+    says by how much and gives the meshes' point to set; the Panda's capsules move nothing."""
+    from mjx_arm.arm.report import describe
+
+    monkeypatch.setenv("ROS_PACKAGE_PATH", str(ROBOTS))
+    xarm = describe(arm_info(ARM_FILES / "xarm7_capsules.toml"))
+    line = next(s for s in xarm.splitlines() if s.startswith("collision"))
+    gap = float(line.split("ee point is ")[1].split(" mm")[0])
+    assert 7.0 <= gap <= 11.0, line  # measured 8.8 mm
+    assert "set ee_offset = [0, 0, 0]" in line
+    panda = describe(arm_info(ARM_FILES / "panda_capsules.toml"))
+    assert "collision   capsule\n" in panda + "\n" and "ee point is" not in panda

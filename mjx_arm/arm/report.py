@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mjx_arm.arm.info import ArmInfo, tool_down_solver
+from mjx_arm.arm.info import ArmInfo, arm_info, tool_down_solver
 from mjx_arm.arm.setup import ArmSetup, arm_setup, gripper_problem, task_verdict
 from mjx_arm.inputs import write_atomic
 from mjx_arm.task.config import TaskConfig
@@ -48,12 +48,34 @@ def describe(arm: ArmInfo) -> str:
         f"gripper     {gripper}",
         f"servo gain  kv_factor {arm.kv_factor:.3f}{gain}",
         f"reach scale {arm.reach_scale:.3f} (the shipped arm's reach is 1)",
-        f"collision   {arm.config.collision}",
+        f"collision   {arm.config.collision}{_mesh_ee_note(arm)}",
     ]
     repairs = UrdfRepairs.of(arm.config)
     if repairs.any:
         lines.append(f"repairs     {repairs.describe()} (in MuJoCo and PyBullet alike)")
     return "\n".join(lines)
+
+
+# mm: a derived ee point this far from the meshes' is named (a fitted primitive moves it)
+EE_NOTE_MM = 1.0
+
+
+def _mesh_ee_note(arm: ArmInfo) -> str:
+    """Where fitted primitives derive another ee point than the arm's own meshes: by how much,
+    and the ``ee_offset`` that trains on the meshes' point ("" otherwise). An engine that keeps
+    the meshes (PyBullet) presses with the meshes' tool, so a policy trained on the
+    primitives' point misses there (the xArm7's capsules: 9 mm)."""
+    if arm.config.collision == "mesh" or arm.config.ee_offset:
+        return ""
+    mesh = arm_info(arm.config.replace(collision="mesh")).ee_offset
+    gap = 1000 * float(np.linalg.norm(np.asarray(arm.ee_offset) - mesh))
+    if gap < EE_NOTE_MM:
+        return ""
+    point = ", ".join(f"{v:g}" for v in mesh)
+    return (
+        f"; its ee point is {gap:.1f} mm from the meshes' {_vector(mesh)}, which engines that "
+        f"keep the meshes (PyBullet) press with: set ee_offset = [{point}] in the arm file"
+    )
 
 
 def _linkage_lines(gripper) -> str:
