@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from mjx_arm.arm.config import ResolvedArm
-from mjx_arm.urdf.grippers import Follower, find_layout, grasp_centre
+from mjx_arm.urdf.grippers import Follower, find_layout, grasp_centre, mimic_positions
 
 
 @dataclass(frozen=True)
@@ -64,9 +64,7 @@ class Gripper:
 
     def positions(self, q: float) -> dict[str, float]:
         """Every gripper joint's position (driven and followers) with the driven one at ``q``."""
-        out = {self.joint: float(q)}
-        out.update({f.joint: f.multiplier * float(q) + f.offset for f in self.followers})
-        return out
+        return mimic_positions(self.joint, self.followers, q)
 
 
 def find_gripper(resolved: ResolvedArm) -> Gripper | None:

@@ -61,9 +61,14 @@ class GripperLayout:
 
     def positions(self, q: float) -> dict[str, float]:
         """Every gripper joint's position with the driven joint at ``q``."""
-        out = {self.driven: float(q)}
-        out.update({f.joint: f.multiplier * float(q) + f.offset for f in self.followers})
-        return out
+        return mimic_positions(self.driven, self.followers, q)
+
+
+def mimic_positions(driven: str, followers: tuple[Follower, ...], q: float) -> dict[str, float]:
+    """The driven joint at ``q`` and each follower at ``multiplier * q + offset``."""
+    out = {driven: float(q)}
+    out.update({f.joint: f.multiplier * float(q) + f.offset for f in followers})
+    return out
 
 
 def find_layout(model: RobotModel, arm_joints: set[str]) -> GripperLayout | None:

@@ -39,7 +39,7 @@ def joint_positions(model: RobotModel, q: JointPositions) -> dict[str, float]:
         model: the parsed URDF.
         q: a mapping from joint name to position, or an array of shape ``(n,)`` in
             ``model.actuated_joints`` order. A mapping may leave out a ``<mimic>`` joint, which
-            then copies its leader's position (multiplier and offset are not read: 1 and 0).
+            then follows its leader: ``multiplier * q_leader + offset``.
 
     Raises:
         ValueError: an array of the wrong length, or a mapping without a movable joint.
@@ -53,7 +53,7 @@ def joint_positions(model: RobotModel, q: JointPositions) -> dict[str, float]:
     out = {name: float(v) for name, v in q.items()}
     for j in joints:
         if j.name not in out and j.mimic is not None and j.mimic in out:
-            out[j.name] = out[j.mimic]
+            out[j.name] = j.mimic_multiplier * out[j.mimic] + j.mimic_offset
     missing = [j.name for j in joints if j.name not in out]
     if missing:
         raise ValueError(f"no position given for joints {missing}")
