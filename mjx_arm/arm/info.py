@@ -270,12 +270,21 @@ def validated_arm_info(arm: str | Path | ArmConfig | None, engine: str) -> ArmIn
     Validation comes first, so a broken file fails with the validator's report instead of a
     parse error.
     """
+    config = load_arm(arm)
+    validate_arm(config, engine)
+    return arm_info(config)
+
+
+def validate_arm(config: ArmConfig, engine: str) -> None:
+    """Validate the arm's URDF for ``engine`` with the config's repairs (cached per file
+    version and options), before anything reads it.
+
+    Raises:
+        UrdfError: the URDF has errors.
+    """
     from mjx_arm.urdf.validate import validated
 
-    config = load_arm(arm)
-    limits = config.default_limits()
-    validated(config.urdf_path, engine, None, config.repair_inertia, limits)
-    return arm_info(config)
+    validated(config.urdf_path, engine, None, config.repair_inertia, config.default_limits())
 
 
 def horizontal_reach(resolved: ResolvedArm) -> float:

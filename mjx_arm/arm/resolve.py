@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from mjx_arm.arm.config import ArmConfig, load_arm
-from mjx_arm.arm.info import ArmInfo, arm_info
+from mjx_arm.arm.info import ArmInfo, arm_info, validate_arm
 from mjx_arm.arm.setup import arm_setup
 from mjx_arm.inputs import ConfigError
 from mjx_arm.task.config import TaskConfig
@@ -84,18 +84,6 @@ def as_arm_task(
         raise ValueError("an ArmTask carries its arm: pass arm=None with it")
     validate_arm(task.arm.config, engine)
     return task
-
-
-def validate_arm(config: ArmConfig, engine: str) -> None:
-    """Validate the arm's URDF for ``engine`` (cached per file version and options), before
-    anything reads it: a broken file fails with the validator's report, not a parse error.
-
-    Raises:
-        UrdfError: the URDF has errors.
-    """
-    from mjx_arm.urdf.validate import validated
-
-    validated(config.urdf_path, engine, None, config.repair_inertia, config.default_limits())
 
 
 def task_for_arm(task: TaskConfig, arm: ArmInfo) -> TaskConfig:
