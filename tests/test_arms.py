@@ -258,16 +258,70 @@ def test_the_sim_to_real_chain_drives_a_seven_joint_arm(engine: str) -> None:
 def test_the_report_names_an_ee_point_that_fitted_capsules_move(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    """The xArm7's capsule around its last link ends 8.8 mm past the mesh, so the ee point
-    derived on capsules is not where PyBullet (which keeps the meshes) presses: the report
-    says by how much and gives the meshes' point to set; the Panda's capsules move nothing."""
+    """With every fitted capsule kept (no box where one bulges), the xArm7's capsule around its
+    flange reaches 8.8 mm past the mesh along the tool axis, so the ee point derived on capsules
+    is not where PyBullet (which keeps the meshes) presses: the report says by how much and
+    gives the meshes' point to set. As shipped, the flange gets a box and nothing moves; the
+    Panda's capsules move nothing either way."""
+    from mjx_arm.arm.info import _arm_info_cached, _solver_cached
     from mjx_arm.arm.report import describe
+    from mjx_arm.urdf import collision_fit
 
     monkeypatch.setenv("ROS_PACKAGE_PATH", str(ROBOTS))
-    xarm = describe(arm_info(ARM_FILES / "xarm7_capsules.toml"))
+    xarm_file = ARM_FILES / "xarm7_capsules.toml"
+    assert "ee point is" not in describe(arm_info(xarm_file))
+    for cached in (_arm_info_cached, _solver_cached):
+        cached.cache_clear()
+    monkeypatch.setattr(collision_fit, "CAPSULE_BULGE", np.inf)
+    try:
+        xarm = describe(arm_info(xarm_file))
+        panda = describe(arm_info(ARM_FILES / "panda_capsules.toml"))
+    finally:
+        for cached in (_arm_info_cached, _solver_cached):
+            cached.cache_clear()
     line = next(s for s in xarm.splitlines() if s.startswith("collision"))
     gap = float(line.split("ee point is ")[1].split(" mm")[0])
     assert 7.0 <= gap <= 11.0, line  # measured 8.8 mm
     assert "set ee_offset = [0, 0, 0]" in line
-    panda = describe(arm_info(ARM_FILES / "panda_capsules.toml"))
     assert "collision   capsule\n" in panda + "\n" and "ee point is" not in panda
+
+
+@pytest.mark.parametrize(
+    ("arm_file", "boxed"),
+    [
+        ("xarm7_capsules", {"link7"}),
+        ("ur10_capsules", {"base_link", "wrist_3_link"}),
+        ("panda_capsules", set()),
+    ],
+)
+def test_a_capsule_that_bulges_past_its_mesh_becomes_a_box(
+    monkeypatch: pytest.MonkeyPatch, arm_file: str, boxed: set[str]
+) -> None:
+    """``collision = "capsule"`` keeps a capsule only where it stays within CAPSULE_BULGE
+    (5 mm) of its mesh across its axis; the flanges of the xArm7 (8.7 mm) and the UR10 (11.8
+    mm) and the UR10's base (25.5 mm) get boxes, the Panda's capsules (at most 2.4 mm) all
+    stay. The ee point derived on the result is the meshes' to within 1 mm."""
+    import mujoco
+
+    from mjx_arm.arm.model_io import arm_model
+    from mjx_arm.urdf.collision_fit import CAPSULE_BULGE, capsule_bulge
+
+    monkeypatch.setenv("ROS_PACKAGE_PATH", str(ROBOTS))
+    arm = arm_info(ARM_FILES / f"{arm_file}.toml")
+    fitted = arm_model(arm, reach_config())
+    meshes = arm_model(arm_info(arm.config.replace(collision="mesh")), reach_config())
+    box, capsule = int(mujoco.mjtGeom.mjGEOM_BOX), int(mujoco.mjtGeom.mjGEOM_CAPSULE)
+    found = set()
+    for geom in range(meshes.ngeom):
+        if meshes.geom_type[geom] != mujoco.mjtGeom.mjGEOM_MESH or not meshes.geom_contype[geom]:
+            continue
+        body = meshes.body(meshes.geom_bodyid[geom]).name
+        mesh = meshes.mesh(meshes.geom_dataid[geom]).name
+        assert fitted.geom_type[geom] in (box, capsule), body
+        if fitted.geom_type[geom] == box:
+            found.add(body)
+        else:
+            assert capsule_bulge(fitted, geom, mesh) <= CAPSULE_BULGE, body
+    assert found == boxed
+    mesh_point = arm_info(arm.config.replace(collision="mesh")).ee_offset
+    assert np.linalg.norm(arm.ee_offset - mesh_point) < 1e-3

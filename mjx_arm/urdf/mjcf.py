@@ -10,6 +10,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from mjx_arm.urdf.collision_fit import fit_collision_primitives
 from mjx_arm.urdf.convert_config import ConvertConfig
 from mjx_arm.urdf.errors import ConversionError, one_line
 from mjx_arm.urdf.inertia import inertia_problem
@@ -30,7 +31,6 @@ from mjx_arm.urdf.spec_edits import (
     _add_sites_and_sensors,
     _edit_joints,
     _exclude_neighbours,
-    _fit_collision_primitives,
     _set_contact_bits,
     _set_options,
     _tool_bodies,
@@ -67,7 +67,7 @@ def _edit_spec(spec: mujoco.MjSpec, model: RobotModel, config: ConvertConfig, pa
     _add_actuators(spec, actuated, model, config)
     ee_body, ft_body = _tool_bodies(spec, model, config, path)
     _add_sites_and_sensors(spec, model, ee_body, ft_body, config)
-    _fit_collision_primitives(spec, config.collision)
+    fit_collision_primitives(spec, config.collision)
     _set_contact_bits(spec, config.self_collision)
     if config.gravity_compensation:
         for body in spec.bodies[1:]:

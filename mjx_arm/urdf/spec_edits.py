@@ -249,36 +249,6 @@ def _subtree_com_in_body(spec: mujoco.MjSpec, body_name: str) -> list[float]:
     return [float(v) for v in np.round(local, 12)]
 
 
-COLLISION_SHAPES = {
-    "mesh": None,
-    "capsule": mujoco.mjtGeom.mjGEOM_CAPSULE,
-    "box": mujoco.mjtGeom.mjGEOM_BOX,
-}
-
-
-def _fit_collision_primitives(spec: mujoco.MjSpec, collision: str) -> None:
-    """Replace each collision mesh of the arm by a capsule or box that MuJoCo's compiler fits
-    to it (``collision="mesh"`` keeps the meshes). The mesh stays as the fit's source.
-
-    Collision cylinders always become capsules of the same radius and half-length (each end
-    rounds off, one radius further out): MJX does not collide cylinders with boxes, spheres or
-    meshes, so a cylinder arm would not touch the table or the box in the batch.
-    """
-    if collision not in COLLISION_SHAPES:
-        raise ConversionError(
-            f"collision must be one of {list(COLLISION_SHAPES)}, not {collision!r}"
-        )
-    for geom in spec.geoms:
-        if geom.type == mujoco.mjtGeom.mjGEOM_CYLINDER and (geom.contype or geom.conaffinity):
-            geom.type = mujoco.mjtGeom.mjGEOM_CAPSULE
-    shape = COLLISION_SHAPES[collision]
-    if shape is None:
-        return
-    for geom in spec.geoms:
-        if geom.type == mujoco.mjtGeom.mjGEOM_MESH and (geom.contype or geom.conaffinity):
-            geom.type = shape
-
-
 def _set_contact_bits(spec: mujoco.MjSpec, self_collision: bool) -> None:
     """Arm collision geoms get the arm's bit masks and are hidden in renders (group 3)."""
     for geom in spec.geoms:
