@@ -12,8 +12,8 @@ largest).
 loader swapped for one that notes the module and its block size and loads nothing (a launch
 whose module did not load returns without running). Conditional graph nodes take both branches
 and loops one pass, so every kernel the step can launch is noted. :func:`precompile` then
-compiles the noted modules on a thread pool (NVRTC runs outside Python's lock), and the first
-step finds them loaded. Training starts the compiles on a background thread
+compiles the noted modules on one thread pool, slowest first (NVRTC runs outside Python's
+lock), and the first step finds them loaded. Training starts the compiles on a background thread
 (:func:`start_precompile`) so that they run while the XLA programs trace and compile.
 """
 
@@ -133,8 +133,41 @@ def _targets(threads: int, loads: Loads, devices: list[Any] | None) -> list[Any]
     return cuda_devices() if devices is None else devices
 
 
+# MuJoCo Warp's module families whose compile took longest on an H100, slowest first
+# (benchmarks/results/cold_start/warp_kernels_*.json: the convex-collision kernels about 50 s,
+# the Newton solver's Cholesky update 22.7 s, the narrow and broad phase 19.2 and 18.5 s, the
+# joint-limit constraints 16.6 s, the passive and smooth forces 15.7 and 15.6 s). Started first,
+# they set the compile's critical path instead of joining it late.
+SLOW_FIRST = (
+    "ccd_kernel",
+    "_update_gradient_cholesky",
+    "_primitive_narrowphase",
+    "_nxn_broadphase",
+    "_limit_slide_hinge",
+    "_qfrc_passive_kernel",
+    "_qfrc_smooth",
+)
+
+
+def compile_order(loads: Loads) -> list[tuple[Any, int]]:
+    """Every (module, block size) of ``loads`` in the order to compile them: the families of
+    :data:`SLOW_FIRST` first (in its order), then the rest as listed."""
+    jobs = [(module, block_dim) for block_dim, modules in loads.items() for module in modules]
+
+    def rank(job: tuple[Any, int]) -> int:
+        name = job[0].name
+        return next((i for i, f in enumerate(SLOW_FIRST) if f in name), len(SLOW_FIRST))
+
+    return sorted(jobs, key=rank)
+
+
 def precompile(threads: int, loads: Loads, devices: list[Any] | None = None) -> float:
     """Compile and load ``loads`` on ``devices`` (default: every local GPU), ``threads`` at once.
+
+    Every module of every block size goes to one thread pool, slowest first
+    (:func:`compile_order`): compiled a block size at a time, the largest module of each size
+    added to the wall time. The first device compiles; the others then load the binaries from
+    Warp's kernel cache.
 
     Args:
         threads: worker threads; 0 does nothing (modules compile on first use).
@@ -147,11 +180,11 @@ def precompile(threads: int, loads: Loads, devices: list[Any] | None = None) -> 
     devices = _targets(threads, loads, devices)
     if not devices:
         return 0.0
-    import warp as wp
-
     start = time.perf_counter()
-    for block_dim, modules in loads.items():
-        wp.force_load(device=devices, modules=modules, block_dim=block_dim, max_workers=threads)
+    jobs = compile_order(loads)
+    with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="warp-compile") as pool:
+        for device in devices:  # the first compiles, the next find the cache filled
+            list(pool.map(lambda job, device=device: job[0].load(device, job[1]), jobs))
     return time.perf_counter() - start
 
 
