@@ -18,7 +18,7 @@ error line, an error line over 300 characters (``long``), running out of memory 
 (``memory``), the worker dying (``crash``), more than 30 s, or a good output spoiled.
 
 Run from the repository root: ``python benchmarks/bench_input_fuzz.py --cases 6000``.
-Results: ``benchmarks/results/input_fuzz.{json,md}``.
+Results: ``benchmarks/results/fuzz/input_fuzz.{json,md}``.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.common import environment_metadata, markdown_table, save_results
+from benchmarks.common import RESULTS_DIR, environment_metadata, markdown_table, save_results
 
 NAME = "input_fuzz"
 STATUS_HEADERS = {
@@ -186,7 +186,7 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--budget", type=float, default=None, help="seconds; stop then")
     parser.add_argument("--name", default=NAME)
-    parser.add_argument("--results-dir", type=Path, default=None)
+    parser.add_argument("--results-dir", type=Path, default=RESULTS_DIR / "fuzz")
     args = parser.parse_args()
 
     from input_fuzz.harness import tally

@@ -11,7 +11,7 @@ more than 5 s, a named error when one reported named errors, else a pass; outsid
 files opened outside the URDF's folder.
 
 Run from the repository root: ``python benchmarks/bench_urdf_fuzz.py --mutations 2000``.
-Results: ``benchmarks/results/urdf_fuzz.{json,md}``.
+Results: ``benchmarks/results/fuzz/urdf_fuzz.{json,md}``.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.common import environment_metadata, markdown_table, save_results
+from benchmarks.common import RESULTS_DIR, environment_metadata, markdown_table, save_results
 
 NAME = "urdf_fuzz"
 COLUMNS = ("tried", "crash", "hang", "named_error", "pass", "outside_reads", "max_seconds")
@@ -80,7 +80,7 @@ def main() -> None:
     parser.add_argument("--mutations", type=int, default=2000)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--name", default=NAME)
-    parser.add_argument("--results-dir", type=Path, default=None)
+    parser.add_argument("--results-dir", type=Path, default=RESULTS_DIR / "fuzz")
     args = parser.parse_args()
 
     from urdf_fuzz.harness import HANG_SECONDS, OPS, default_bases, run_fuzz, tally

@@ -94,7 +94,7 @@ SECTIONS: tuple[Section, ...] = (
             "`bench_lift_transfer.py`).", ("sim2real/*",)),
     Section("robustness", "Robustness",
             "Hostile URDFs and bad inputs: named errors, never a crash.",
-            ("urdf_fuzz*", "input_fuzz*", "robustness/*")),
+            ("fuzz/*", "robustness/*")),
     Section("earlier", "Earlier training runs",
             "Single runs of older presets, kept for the record; not figures of the presets as "
             "shipped.", ("train/*", "warp/*", "solver4/*", "gentle/*")),

@@ -85,14 +85,14 @@ def _cpu_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
 
 
 def _fuzz_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
-    urdf, inputs = load("urdf_fuzz.json"), load("input_fuzz.json")
+    urdf, inputs = load("fuzz/urdf_fuzz.json"), load("fuzz/input_fuzz.json")
     crashes = sum(k.get("crash", 0) for k in urdf["by_kind"].values())
     tracebacks = sum(c.get("traceback", 0) for c in inputs["by_command"].values())
     value = (
         f"{fmt(urdf['mutations'])} mutated URDFs: {crashes} crashes; "
         f"{fmt(inputs['cases'])} command lines: {tracebacks} tracebacks"
     )
-    return "Hostile URDFs and bad inputs", value, ["urdf_fuzz.json", "input_fuzz.json"]
+    return "Hostile URDFs and bad inputs", value, ["fuzz/urdf_fuzz.json", "fuzz/input_fuzz.json"]
 
 
 def _any_arm_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:

@@ -11,7 +11,11 @@ registry sits at the bottom of the import layers, so it never imports an engine 
 - ``position_env``: the position-controlled env of sim-to-real, ``cls(task, config=, **kwargs)``;
 - ``parity``: the parity benchmark's engine factory, ``f(task, impl, batch_size, arm)``, with
   ``parity_goal`` (its divergence goal's setting) and ``grasp`` (its scripted pick);
-- ``urdf_check``: the URDF load check, ``f(tree, package_dirs, repair, findings, limits)``.
+- ``urdf_reader``: what its URDF loader reads (a ``mjx_arm.urdf.readers.UrdfReader``), for the
+  validator's static checks; an engine with one is a choice of ``mjx-arm validate --engine``;
+- ``urdf_check``: the URDF load check, ``f(tree, package_dirs, repair, findings, limits)``;
+- ``parity_causes``: check prefix -> the stated cause of a missed parity goal of a pair (or
+  engine) this engine's name is part of.
 
 Each is None (or empty) where the engine does not provide it. The built-in rows are below; an
 engine that lives in its own top-level package (the PyBullet reference, ``pybullet_ref``)
@@ -68,6 +72,10 @@ class EngineSpec:
         parity_goal: the :class:`~mjx_arm.bench.parity_config.ParityConfig` field that holds
             the joint divergence goal of a pair this engine takes part in (None: MJX's goal).
         grasp: the grasp benchmark's scripted pick, ``f(model, arm, script, frames) -> dict``.
+        parity_causes: check prefix (``"joint divergence"``) -> why a parity goal of this
+            engine is missed; the first row (engines with a ``parity_goal`` first) whose name
+            the goal's subject holds and whose prefix the check starts with gives the cause.
+        urdf_reader: what its URDF loader reads (an ``UrdfReader``), or None.
         urdf_check: the URDF load check, or None.
         requires: the optional module the engine imports (None: always installed).
         install_hint: what to run when ``requires`` is missing.
@@ -82,6 +90,8 @@ class EngineSpec:
     parity: str | None = None
     parity_goal: str | None = None
     grasp: str | None = None
+    parity_causes: Mapping[str, str] = field(default_factory=dict)
+    urdf_reader: str | None = None
     urdf_check: str | None = None
     requires: str | None = None
     install_hint: str | None = None
@@ -210,6 +220,7 @@ register_engine(
         position_env="mjx_arm.sim2real.position_env:MujocoPositionArmEnv",
         parity="mjx_arm.bench.engines:mujoco_engine",
         grasp="mjx_arm.bench.grasp:run_mujoco",
+        urdf_reader="mjx_arm.urdf.readers:MUJOCO",
         urdf_check="mjx_arm.urdf.check_physics:check_mujoco_load",
     )
 )
@@ -223,5 +234,16 @@ register_engine(
         },
         parity="mjx_arm.bench.engines:MjxEngine",
         grasp="mjx_arm.bench.grasp:run_mjx",
+        parity_causes={
+            "forward kinematics": (
+                "MJX computes in float32: about 1e-7 relative rounding per transform, summed "
+                "along the chain of bodies"
+            ),
+            "joint divergence": (
+                "float32 against float64 (and, in sequences that touch the table, MJX's own "
+                "collision routines and fixed solver iterations): differences grow along the "
+                "trajectory"
+            ),
+        },
     )
 )

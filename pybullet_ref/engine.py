@@ -18,6 +18,14 @@ SPEC = register_engine(
         parity="mjx_arm.bench.engines:bullet_engine",
         parity_goal="goal_pybullet_rad",
         grasp="mjx_arm.bench.grasp:run_pybullet",
+        parity_causes={
+            "joint divergence": (
+                "different integrators and contact solvers: PyBullet's drive takes MuJoCo's "
+                "implicit servo step but sees the contacts' torque one substep late, and "
+                "Bullet's Featherstone integrator and contact solver are not MuJoCo's"
+            ),
+        },
+        urdf_reader="pybullet_ref.urdf_reader:READER",
         urdf_check="mjx_arm.urdf.check_physics:check_pybullet_load",
         requires="pybullet",
         install_hint="pip install pybullet==3.2.7 (a dependency of mjx_arm)",

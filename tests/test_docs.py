@@ -34,10 +34,8 @@ def _results_copy(tmp_path: Path) -> Path:
     """A small copy of the committed results: the seeds and transfer files the headline reads,
     and the CPU envs' file."""
     src, dst = gen.RESULTS, tmp_path / "results"
-    for rel in ("seeds", "contact/transfer", "warp", "parity", "cpu"):
+    for rel in ("seeds", "contact/transfer", "warp", "parity", "cpu", "fuzz"):
         shutil.copytree(src / rel, dst / rel, ignore=shutil.ignore_patterns("*.npz", "*.mp4"))
-    for rel in ("urdf_fuzz.json", "input_fuzz.json"):
-        shutil.copy(src / rel, dst / rel)
     return dst
 
 
@@ -109,6 +107,13 @@ def test_every_committed_result_file_is_rendered_or_listed(tmp_path):
     text = "\n".join(p.read_text() for p in written)
     for path in gen.RESULTS.rglob("*.json"):
         assert f"`{path.relative_to(gen.RESULTS).as_posix()}`" in text
+
+
+def test_results_are_in_topic_folders_with_no_loose_files_at_the_top():
+    """Rule 1 of benchmarks/README.md: ``<topic>/<name>.json|md``, nothing beside the topics."""
+    topics = [p for p in gen.RESULTS.iterdir() if p.is_dir()]
+    assert len(topics) > 10
+    assert [p.name for p in gen.RESULTS.iterdir() if not p.is_dir()] == []
 
 
 def test_each_plot_is_drawn_from_its_one_result(tmp_path):

@@ -32,12 +32,17 @@ def test_rows_list_the_engines_in_the_orders_the_commands_show() -> None:
 
 
 def test_every_import_path_of_every_row_loads() -> None:
+    from mjx_arm.urdf.readers import UrdfReader
+
     fields = ("env", "position_env", "parity", "grasp", "urdf_check")
     for name in engines.engine_names():
         row = engines.engine(name)
         paths = [getattr(row, f) for f in fields if getattr(row, f)]
         for path in [*paths, *row.batch_physics.values()]:
             assert callable(engines.load(path)), path
+    for name in engines.engine_names("urdf_reader"):
+        assert isinstance(engines.load(engines.engine(name).urdf_reader), UrdfReader), name
+    assert engines.engine_names("urdf_reader") == engines.engine_names("urdf_check")
 
 
 def test_an_unknown_engine_is_a_named_input_error() -> None:
@@ -144,23 +149,49 @@ def test_a_removed_engine_is_gone_everywhere(toy_engine, capsys) -> None:
         make_env("reach", engine="toy")
 
 
+def test_a_missed_parity_goal_takes_its_cause_from_the_rows_of_its_engines() -> None:
+    from mjx_arm.bench.parity_figures import cause_of
+
+    divergence, fk = "joint divergence at 1 s, median", "forward kinematics, max"
+    mjx, bullet = (engines.engine(n).parity_causes for n in ("mjx", "pybullet"))
+    assert cause_of(divergence, "mujoco vs mjx-jax") == mjx["joint divergence"]
+    # A pair is explained by the engine whose own goal it is held to (PyBullet's, as the goal).
+    assert cause_of(divergence, "mjx-warp vs pybullet") == bullet["joint divergence"]
+    assert cause_of(fk, "mujoco vs mjx-jax") == mjx["forward kinematics"]
+    assert cause_of(fk, "mujoco vs pybullet").startswith("no cause established")
+    press = cause_of("steady press force in the Touch band", "pybullet")
+    assert press.startswith("the press commands were recorded in C MuJoCo")
+    row = engines.EngineSpec(name="toy", label="Toy", parity_causes={"joint divergence": "toy"})
+    engines.register_engine(row)
+    try:
+        assert cause_of(divergence, "mujoco vs toy") == "toy"
+    finally:
+        engines.unregister_engine("toy")
+    assert cause_of(divergence, "mujoco vs toy").startswith("no cause established")
+
+
 # Where the reference engine's name may still be written outside the registry and its own
-# package: checks of what that engine reads in a URDF (mesh formats, path lengths, damping),
-# a package name in a benchmark's version list, and a word of a parity report's causes.
-ALLOWED = {
-    "mjx_arm/bench/parity_figures.py": 1,
-    "mjx_arm/bench/results.py": 1,
-    "mjx_arm/urdf/check_geometry.py": 3,
-    "mjx_arm/urdf/check_joints.py": 2,
-    "mjx_arm/urdf/validate.py": 1,
-}
+# package: a package name in a benchmark's version list.
+ALLOWED = {"mjx_arm/bench/results.py": 1}
+# Modules that read what an engine does from its row (its URDF reader, its parity causes) and
+# name no engine at all, not even the built-in ones.
+NAMELESS = (
+    "mjx_arm/urdf/check_geometry.py",
+    "mjx_arm/urdf/check_joints.py",
+    "mjx_arm/urdf/check_physics.py",
+    "mjx_arm/urdf/check_tree.py",
+    "mjx_arm/urdf/findings.py",
+    "mjx_arm/urdf/mesh_limits.py",
+    "mjx_arm/urdf/readers.py",
+    "mjx_arm/urdf/validate.py",
+    "mjx_arm/bench/parity_figures.py",
+)
 
 
-def _name_strings(name: str) -> dict[str, int]:
+def _name_strings(name: str, paths: list[Path]) -> dict[str, int]:
+    """Per file, how many string constants of ``paths`` are exactly ``name``."""
     counts: dict[str, int] = {}
-    for path in sorted((ROOT / "mjx_arm").rglob("*.py")):
-        if path == ROOT / "mjx_arm" / "engines.py":
-            continue
+    for path in paths:
         tree = ast.parse(path.read_text(), str(path))
         n = sum(isinstance(c, ast.Constant) and c.value == name for c in ast.walk(tree))
         if n:
@@ -171,4 +202,11 @@ def _name_strings(name: str) -> dict[str, int]:
 def test_the_reference_engine_is_named_only_in_its_row_and_its_package() -> None:
     # "mujoco" and "mjx" are backend and module names too, so the count covers the engine that
     # lives in a package of its own, as any added engine would.
-    assert _name_strings("pybullet") == ALLOWED
+    paths = [p for p in sorted((ROOT / "mjx_arm").rglob("*.py")) if p.name != "engines.py"]
+    assert _name_strings("pybullet", paths) == ALLOWED
+
+
+def test_the_urdf_checks_and_parity_causes_name_no_engine() -> None:
+    paths = [ROOT / p for p in NAMELESS]
+    for name in engines.engine_names():
+        assert _name_strings(name, paths) == {}, name

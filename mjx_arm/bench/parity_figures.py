@@ -149,7 +149,7 @@ def check_goals(
 
     Returns:
         Rows of ``check``, ``subject`` (pair or engine), ``value``, ``goal`` (text), ``met``
-        and ``cause`` (why it is missed, from :data:`CAUSES`; None when met).
+        and ``cause`` (why it is missed, from :func:`cause_of`; None when met).
     """
     rows = [
         _goal("forward kinematics, max", key, value, value <= config.goal_fk_m, config.goal_fk_m)
@@ -181,23 +181,10 @@ def _goal(check: str, subject: str, value: Any, met: bool, goal: Any) -> dict[st
     }
 
 
-# Where a goal is missed: the difference between the engines that drives that figure, keyed by
-# check prefix and a word of the subject (the first match counts).
+# Where a goal is missed and no engine's row states a cause (``EngineSpec.parity_causes``): the
+# difference that drives that figure, keyed by check prefix.
 CAUSES = {
-    ("forward kinematics", "mjx"): (
-        "MJX computes in float32: about 1e-7 relative rounding per transform, summed along the "
-        "chain of bodies"
-    ),
-    ("joint divergence", "pybullet"): (
-        "different integrators and contact solvers: PyBullet's drive takes MuJoCo's implicit "
-        "servo step but sees the contacts' torque one substep late, and Bullet's Featherstone "
-        "integrator and contact solver are not MuJoCo's"
-    ),
-    ("joint divergence", "mjx"): (
-        "float32 against float64 (and, in sequences that touch the table, MJX's own collision "
-        "routines and fixed solver iterations): differences grow along the trajectory"
-    ),
-    ("steady press force", ""): (
+    "steady press force": (
         "the press commands were recorded in C MuJoCo; this engine resolves the contact "
         "(solver, friction) differently"
     ),
@@ -205,8 +192,19 @@ CAUSES = {
 
 
 def cause_of(check: str, subject: str) -> str:
-    """The stated cause of a missed goal (:data:`CAUSES`), or a pointer to the figures."""
-    for (prefix, word), cause in CAUSES.items():
-        if check.startswith(prefix) and word in subject:
+    """The stated cause of a missed goal, or a pointer to the figures.
+
+    The first registry row (those that name a ``parity_goal`` first, as in
+    :func:`divergence_goal`) whose name ``subject`` holds and one of whose ``parity_causes``
+    prefixes ``check`` starts with gives it; else :data:`CAUSES`.
+    """
+    goals = engine_names("parity_goal")
+    names = sorted(engine_names("parity_causes"), key=lambda name: name not in goals)
+    for name in names:
+        for prefix, cause in engine_row(name).parity_causes.items():
+            if name in subject and check.startswith(prefix):
+                return cause
+    for prefix, cause in CAUSES.items():
+        if check.startswith(prefix):
             return cause
     return "no cause established: see the figures in the JSON"

@@ -24,7 +24,6 @@ from mjx_arm.urdf.findings import (
 )
 from mjx_arm.urdf.mesh_bbox import READ_FORMATS, is_ascii_stl, mesh_box
 from mjx_arm.urdf.mesh_convert import (
-    CONVERTIBLE_FORMATS,
     INSTALL_HINT,
     MeshConvertError,
     default_cache_dir,
@@ -32,14 +31,9 @@ from mjx_arm.urdf.mesh_convert import (
     missing_packages,
 )
 from mjx_arm.urdf.mesh_limits import mesh_problem, path_problem
-from mjx_arm.urdf.meshes import (
-    MUJOCO_MESH_FORMATS,
-    PYBULLET_MESH_FORMATS,
-    AssetPathError,
-    is_file,
-    resolve_asset,
-)
+from mjx_arm.urdf.meshes import AssetPathError, is_file, resolve_asset
 from mjx_arm.urdf.model import rpy_to_matrix
+from mjx_arm.urdf.readers import UrdfReader
 
 # --------------------------------------------------------------------------- layer 2: geometry
 
@@ -54,13 +48,14 @@ class _Shape:
 
 
 def _check_geometry(
-    tree: _Tree, engines: tuple[str, ...], package_dirs: Mapping[str, str], out: _Findings
+    tree: _Tree, readers: tuple[UrdfReader, ...], package_dirs: Mapping[str, str], out: _Findings
 ) -> None:
+    """Every link's shapes, as each of ``readers`` reads them, and its textures."""
     for name, elem in tree.links.items():
         shapes = []
         for role in ("visual", "collision"):
             for item in elem.findall(role):
-                shape = _check_shape(tree.path, name, role, item, engines, package_dirs, out)
+                shape = _check_shape(tree.path, name, role, item, readers, package_dirs, out)
                 if shape is not None:
                     shapes.append(shape)
         _check_sizes(name, shapes, out)
@@ -87,7 +82,7 @@ def _check_shape(
     link: str,
     role: str,
     item: ET.Element,
-    engines: tuple[str, ...],
+    readers: tuple[UrdfReader, ...],
     package_dirs: Mapping[str, str],
     out: _Findings,
 ) -> _Shape | None:
@@ -105,10 +100,11 @@ def _check_shape(
         return None
     shape = shapes[0]
     if shape.tag == "mesh":
-        box = _check_mesh(path, link, role, shape, engines, package_dirs, out)
+        box = _check_mesh(path, link, role, shape, readers, package_dirs, out)
     else:
         box = _primitive_box(link, role, shape, out)
-    if role == "collision" and shape.tag == "cylinder" and "mujoco" in engines:
+    capsules = any(r.capsules_cylinders for r in readers)
+    if role == "collision" and shape.tag == "cylinder" and capsules:
         out.warning(
             2,
             _link(link),
@@ -163,7 +159,7 @@ def _check_mesh(
     link: str,
     role: str,
     shape: ET.Element,
-    engines: tuple[str, ...],
+    readers: tuple[UrdfReader, ...],
     package_dirs: Mapping[str, str],
     out: _Findings,
 ) -> np.ndarray | None:
@@ -177,7 +173,7 @@ def _check_mesh(
             "set filename to the mesh file (relative to the URDF, or package://...)",
         )
         return None
-    convert = _check_mesh_format(link, role, filename, engines, out)
+    convert = _check_mesh_format(link, role, filename, readers, out)
     resolved = _resolve_mesh(path, link, role, filename, package_dirs, out)
     scale = _numbers(shape.get("scale", "1 1 1"), 3)
     if scale is None:
@@ -188,29 +184,37 @@ def _check_mesh(
             'give three numbers, e.g. scale="0.001 0.001 0.001"',
         )
         return None
-    if resolved is None or not _mesh_file_usable(link, role, filename, resolved, engines, out):
+    if resolved is None or not _mesh_file_usable(link, role, filename, resolved, readers, out):
         return None
     if convert:
-        box = _converted_box(link, filename, resolved, out)
+        box = _converted_box(link, filename, resolved, convert, out)
     else:
         box = _file_box(link, role, filename, resolved, out)
     return None if box is None else np.sort(box * np.array(scale), axis=0)
 
 
 def _mesh_file_usable(
-    link: str, role: str, filename: str, resolved: Path, engines: tuple[str, ...], out: _Findings
+    link: str,
+    role: str,
+    filename: str,
+    resolved: Path,
+    readers: tuple[UrdfReader, ...],
+    out: _Findings,
 ) -> bool:
     """Whether the mesh file at ``resolved`` can be loaded: its path is short enough for
-    PyBullet (among ``engines``) and the file is not too large; an error where not."""
-    too_long = path_problem(resolved) if "pybullet" in engines else None
-    if too_long:
-        out.error(
-            2,
-            _link(link),
-            f"has <{role}> mesh {filename[-60:]!r}, which {too_long}",
-            "move the meshes to a folder with a shorter path",
-        )
-        return False
+    every reader with a ``max_mesh_path_bytes`` and the file is not too large; an error where
+    not."""
+    for reader in readers:
+        limit = reader.max_mesh_path_bytes
+        too_long = None if limit is None else path_problem(resolved, limit, reader.label)
+        if too_long:
+            out.error(
+                2,
+                _link(link),
+                f"has <{role}> mesh {filename[-60:]!r}, which {too_long}",
+                "move the meshes to a folder with a shorter path",
+            )
+            return False
     too_large = mesh_problem(resolved)
     if too_large:
         out.error(
@@ -242,14 +246,16 @@ def _file_box(
     return mesh_box(resolved)
 
 
-def _converted_box(link: str, filename: str, resolved: Path, out: _Findings) -> np.ndarray | None:
-    """Read a collision mesh the converter turns into STL with trimesh.
+def _converted_box(
+    link: str, filename: str, resolved: Path, who: str, out: _Findings
+) -> np.ndarray | None:
+    """Read a collision mesh the converter turns into STL with trimesh for the engines ``who``.
 
     Reports a warning that says where the STL goes, or an error when trimesh cannot read the
     file. Returns the mesh's bounding box ``(2, 3)`` (m, before ``<mesh scale>``) or None.
     """
     cannot = f"has <collision> mesh {filename!r} in format {Path(filename).suffix.lower()}, "
-    cannot += "which MuJoCo cannot read"
+    cannot += f"which {who} cannot read"
     try:
         box = mesh_bounds(resolved)
     except MeshConvertError as exc:
@@ -268,51 +274,56 @@ def _converted_box(link: str, filename: str, resolved: Path, out: _Findings) -> 
 
 
 def _check_mesh_format(
-    link: str, role: str, filename: str, engines: tuple[str, ...], out: _Findings
-) -> bool:
+    link: str, role: str, filename: str, readers: tuple[UrdfReader, ...], out: _Findings
+) -> str:
     """Report a mesh format an engine cannot read.
 
     Returns:
-        True for a collision mesh the converter turns into STL for MuJoCo (trimesh and the
-        packages it needs are installed): :func:`_converted_box` reports it once it is read.
+        For a collision mesh a converter turns into STL (trimesh and the packages it needs
+        are installed): the labels of the engines it is converted for, which
+        :func:`_converted_box` reports once it is read; else "".
     """
     suffix = Path(filename).suffix.lower()
-    readable = {"mujoco": MUJOCO_MESH_FORMATS, "pybullet": PYBULLET_MESH_FORMATS}
-    blind = [e for e in engines if suffix not in readable[e]]
-    if role == "visual" and "mujoco" in blind:
+    blind = [r for r in readers if not r.reads(suffix)]
+    for reader in [r for r in blind if role == "visual" and r.drops_unreadable_visuals]:
         out.warning(
             2,
             _link(link),
-            f"has <visual> mesh {filename!r} in format {suffix or '(none)'}, which MuJoCo "
-            "cannot read: the converter leaves this visual out (it only draws)",
-            "convert the mesh to .stl or .obj to see it in MuJoCo's renderer",
+            f"has <visual> mesh {filename!r} in format {suffix or '(none)'}, which "
+            f"{reader.label} cannot read: the converter leaves this visual out (it only draws)",
+            f"convert the mesh to .stl or .obj to see it in {reader.label}'s renderer",
         )
-        blind.remove("mujoco")
-    convert = False
-    if "mujoco" in blind and suffix in CONVERTIBLE_FORMATS:
-        blind.remove("mujoco")
-        convert = _converter_installed(link, filename, suffix, out)
+        blind.remove(reader)
+    converted = [r for r in blind if suffix in r.converts_formats]
+    blind = [r for r in blind if r not in converted]
+    who = _labels(converted)
+    convert = bool(converted) and _converter_installed(link, filename, suffix, who, out)
     if blind:
-        who = " and ".join({"mujoco": "MuJoCo", "pybullet": "PyBullet"}[e] for e in blind)
         out.error(
             2,
             _link(link),
             f"has <{role}> mesh {filename!r} in format "
-            f"{suffix or '(none)'}, which {who} cannot read",
+            f"{suffix or '(none)'}, which {_labels(blind)} cannot read",
             "convert the mesh to .stl or .obj (for example with trimesh or meshlab) and "
             "point filename at it",
         )
-    return convert
+    return who if convert else ""
 
 
-def _converter_installed(link: str, filename: str, suffix: str, out: _Findings) -> bool:
-    """True when trimesh (and pycollada for Collada) can be imported, else an error."""
+def _labels(readers: list[UrdfReader]) -> str:
+    """The readers' labels joined with "and" ("MuJoCo and PyBullet")."""
+    return " and ".join(r.label for r in readers)
+
+
+def _converter_installed(link: str, filename: str, suffix: str, who: str, out: _Findings) -> bool:
+    """True when trimesh (and pycollada for Collada) can be imported, else an error; ``who``
+    names the engines that cannot read the mesh as it is."""
     missing = missing_packages(suffix)
     if missing:
         out.error(
             2,
             _link(link),
-            f"has <collision> mesh {filename!r} in format {suffix}, which MuJoCo cannot read, "
+            f"has <collision> mesh {filename!r} in format {suffix}, which {who} cannot read, "
             f"and {' and '.join(missing)}, which the converter needs to convert it to STL, "
             f"{'is' if len(missing) == 1 else 'are'} not installed",
             f"{INSTALL_HINT}, or convert the mesh to .stl or .obj and point filename at it",

@@ -18,6 +18,7 @@ from mjx_arm.urdf.findings import (
     _numbers,
     _Tree,
 )
+from mjx_arm.urdf.readers import UrdfReader
 from mjx_arm.urdf.repair import limit_fix
 
 # --------------------------------------------------------------------------- layer 2: joints
@@ -25,31 +26,31 @@ from mjx_arm.urdf.repair import limit_fix
 
 def _check_joints(
     tree: _Tree,
-    engines: tuple[str, ...],
-    min_damping: float,
+    readers: tuple[UrdfReader, ...],
     out: _Findings,
     default_limits: Mapping[str, float] | None = None,
 ) -> None:
-    """Joint checks; ``default_limits`` (``effort``/``velocity`` -> value) are what the repair
-    puts where a joint gives none, in every engine (:mod:`mjx_arm.urdf.repair`)."""
+    """Joint checks for the engines whose URDF ``readers`` are given; ``default_limits``
+    (``effort``/``velocity`` -> value) are what the repair puts where a joint gives none, in
+    every engine (:mod:`mjx_arm.urdf.repair`)."""
     defaults = dict(default_limits or {})
     for j in tree.joints.values():
         if j.type in ("floating", "planar"):
-            _check_free_joint(j, engines, out)
+            _check_free_joint(j, readers, out)
         if j.type not in MOVABLE_TYPES:
             continue
         _check_axis(j, out)
         if j.type in LIMITED_TYPES:
             _check_limit(j, out, defaults)
-        elif "mujoco" in engines:
+        elif any(r.sizes_actuators_from_limits for r in readers):
             _check_effort_velocity(j, j.elem.find("limit"), out, True, defaults)
-        _check_damping(j, engines, min_damping, out)
+        _check_damping(j, readers, out)
 
 
-def _check_free_joint(j: _Joint, engines: tuple[str, ...], out: _Findings) -> None:
+def _check_free_joint(j: _Joint, readers: tuple[UrdfReader, ...], out: _Findings) -> None:
     """Floating and planar joints: MuJoCo rejects a free joint below the root; none is actuated."""
     fix = "use revolute, continuous, prismatic or fixed joints for an arm"
-    if j.type == "floating" and "mujoco" in engines:
+    if j.type == "floating" and any(r.free_joint_root_only for r in readers):
         out.error(
             2,
             _joint(j.name),
@@ -148,7 +149,9 @@ def _check_effort_velocity(
         )
 
 
-def _check_damping(j: _Joint, engines: tuple[str, ...], min_damping: float, out: _Findings) -> None:
+def _check_damping(j: _Joint, readers: tuple[UrdfReader, ...], out: _Findings) -> None:
+    """A damping >= 0; a warning where it is missing (each reader's ``undamped_note``) or
+    below a reader's ``min_damping``."""
     value = _number(j.elem.find("dynamics"), "damping")
     if isinstance(value, str) or (value is not None and value < 0):
         out.error(
@@ -158,22 +161,21 @@ def _check_damping(j: _Joint, engines: tuple[str, ...], min_damping: float, out:
             "give a damping >= 0 (N m s/rad or N s/m)",
         )
         return
-    if not value:
-        engines_text = []
-        if "mujoco" in engines:
-            engines_text.append("the converter injects its default damping for MuJoCo")
-        if "pybullet" in engines:
-            engines_text.append("PyBullet runs it undamped, which jitters")
+    notes = [r.undamped_note for r in readers if r.undamped_note]
+    if not value and notes:
         out.warning(
             2,
             _joint(j.name),
-            "has no <dynamics damping>: " + "; ".join(engines_text),
+            "has no <dynamics damping>: " + "; ".join(notes),
             'add <dynamics damping="..."/> with the joint\'s real damping',
         )
-    elif "pybullet" in engines and value < min_damping:
-        out.warning(
-            2,
-            _joint(j.name),
-            f"has damping {value:g} < {min_damping:g}: PyBullet jitters with so little damping",
-            f"raise <dynamics damping> to at least {min_damping:g}",
-        )
+        return
+    for reader in readers:
+        if value and value < reader.min_damping:
+            out.warning(
+                2,
+                _joint(j.name),
+                f"has damping {value:g} < {reader.min_damping:g}: {reader.label} jitters with "
+                "so little damping",
+                f"raise <dynamics damping> to at least {reader.min_damping:g}",
+            )

@@ -24,13 +24,17 @@ from mjx_arm.urdf.meshes import (
     AssetPathError,
     resolve_asset,
 )
+from mjx_arm.urdf.readers import UrdfReader
 from mjx_arm.urdf.repair import INERTIA_FIX, UrdfRepairs, repair_tree
 
 # --------------------------------------------------------------------------- layer 3: physics
 
 
-def _check_inertials(tree: _Tree, engines: tuple[str, ...], repair: bool, out: _Findings) -> None:
-    """Masses and inertia tensors: every moving link has mass, every used tensor is physical."""
+def _check_inertials(
+    tree: _Tree, readers: tuple[UrdfReader, ...], repair: bool, out: _Findings
+) -> None:
+    """Masses and inertia tensors: every moving link has mass, every tensor one of ``readers``
+    uses is physical."""
     moving = tree.moving_links()
     for name, elem in tree.links.items():
         inertial = elem.find("inertial")
@@ -42,13 +46,13 @@ def _check_inertials(tree: _Tree, engines: tuple[str, ...], repair: bool, out: _
             out.error(3, _link(name), f"has negative mass {mass:g}", "give the mass in kg, > 0")
             continue
         if name in moving:
-            _check_moving_mass(name, elem, mass or 0.0, moving[name], engines, out)
+            _check_moving_mass(name, elem, mass or 0.0, moving[name], readers, out)
         if inertial is None:
             continue
         if not moving.get(name) and is_frame(elem):
             continue  # a massless frame on a fixed joint: nothing to check, see is_frame
         # The converter checks every <inertia>; PyBullet uses those of massive or moving links.
-        if (mass or 0.0) > 0 or name in moving or "mujoco" in engines:
+        if (mass or 0.0) > 0 or name in moving or any(r.checks_every_inertia for r in readers):
             _check_tensor(name, inertial, repair, needed=(mass or 0.0) > 0, out=out)
 
 
@@ -57,7 +61,7 @@ def _check_moving_mass(
     elem: ET.Element,
     mass: float,
     direct: bool,
-    engines: tuple[str, ...],
+    readers: tuple[UrdfReader, ...],
     out: _Findings,
 ) -> None:
     """A moving link needs mass; a massless frame without collision geometry is allowed, and
@@ -67,7 +71,7 @@ def _check_moving_mass(
     if mass > 0 or not (direct or elem.find("collision") is not None):
         return
     written = elem.find("inertial") is not None
-    if not direct and (written or engines == ("mujoco",)):
+    if not direct and (written or not any(r.invents_mass for r in readers)):
         out.warning(
             3,
             _link(name),

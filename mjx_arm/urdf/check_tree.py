@@ -8,7 +8,6 @@ from pathlib import Path
 from mjx_arm.urdf.findings import (
     JOINT_TYPES,
     MAX_CHAIN_LINKS,
-    MAX_LINE_BYTES,
     MAX_LINKS,
     MAX_NAME_CHARS,
     MAX_OFFSET,
@@ -337,21 +336,22 @@ def _check_origins(tree: _Tree, out: _Findings) -> None:
                     )
 
 
-def _check_line_lengths(path: Path, out: _Findings) -> None:
-    """For PyBullet: no line of the file is longer than MAX_LINE_BYTES (PyBullet cuts longer
-    lines into pieces and silently changes names and values where it cuts)."""
+def _check_line_lengths(path: Path, limit: int, label: str, out: _Findings) -> None:
+    """No line of the file is longer than ``limit`` bytes, the most the engine ``label`` reads
+    whole (PyBullet cuts longer lines into pieces and silently changes names and values where
+    it cuts: :data:`~mjx_arm.urdf.findings.MAX_LINE_BYTES`)."""
     try:
         lines = path.read_bytes().split(b"\n")
     except OSError:
         return  # layer 1 already reported an unreadable file
-    long = [(i + 1, len(line)) for i, line in enumerate(lines) if len(line) > MAX_LINE_BYTES]
+    long = [(i + 1, len(line)) for i, line in enumerate(lines) if len(line) > limit]
     if long:
         number, size = long[0]
         more = f" (and {len(long) - 1} more lines)" if len(long) > 1 else ""
         out.error(
             2,
             f"line {number}",
-            f"has {size:,} bytes{more}, more than the {MAX_LINE_BYTES:,} PyBullet reads whole "
+            f"has {size:,} bytes{more}, more than the {limit:,} {label} reads whole "
             "(it cuts longer lines, changing names and values where it cuts)",
             "break the file into shorter lines, one element per line (e.g. xmllint --format)",
         )

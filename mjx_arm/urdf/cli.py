@@ -126,7 +126,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("urdf", help="path of the URDF file")
     p.add_argument(
         "--engine",
-        choices=[*engine_names("urdf_check"), "all"],
+        choices=[*engine_names("urdf_reader"), "all"],
         default="all",
         help="engine(s) to check compatibility with and load into (default: all)",
     )

@@ -9,6 +9,7 @@ length, and mesh paths, sizes and face counts.
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -16,12 +17,27 @@ import numpy as np
 
 from mjx_arm.engines import engine_names
 
-# What ``validate(engine=...)`` checks: one engine with a URDF load check in the registry
-# (mjx_arm.engines), or "all" of them.
-ENGINES: dict[str, tuple[str, ...]] = {
-    **{name: (name,) for name in engine_names("urdf_check")},
-    "all": engine_names("urdf_check"),
-}
+
+class _EngineChoices(Mapping[str, tuple[str, ...]]):
+    """What ``validate(engine=...)`` takes, read from the registry (:mod:`mjx_arm.engines`)
+    on every use: each engine whose row names a URDF reader, or "all" of them, mapped to the
+    engine names checked."""
+
+    def _now(self) -> dict[str, tuple[str, ...]]:
+        names = engine_names("urdf_reader")
+        return {**{name: (name,) for name in names}, "all": names}
+
+    def __getitem__(self, key: str) -> tuple[str, ...]:
+        return self._now()[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._now())
+
+    def __len__(self) -> int:
+        return len(self._now())
+
+
+ENGINES: Mapping[str, tuple[str, ...]] = _EngineChoices()
 JOINT_TYPES = frozenset({"revolute", "continuous", "prismatic", "fixed", "floating", "planar"})
 MOVABLE_TYPES = frozenset({"revolute", "continuous", "prismatic"})
 LIMITED_TYPES = frozenset({"revolute", "prismatic"})

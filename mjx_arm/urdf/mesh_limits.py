@@ -15,7 +15,6 @@ from pathlib import Path
 from mjx_arm.urdf.findings import (
     MAX_MESH_BYTES,
     MAX_MESH_FACES,
-    MAX_MESH_PATH_BYTES,
     MAX_MESH_VERTICES,
 )
 
@@ -50,13 +49,15 @@ def mesh_problem(path: Path) -> str | None:
     return None
 
 
-def path_problem(path: Path) -> str | None:
-    """What makes the absolute ``path`` of a mesh too long for PyBullet, or None."""
+def path_problem(path: Path, limit: int, label: str) -> str | None:
+    """What makes the absolute ``path`` of a mesh longer than the ``limit`` bytes the engine
+    ``label`` loads, or None (PyBullet crashes on longer ones:
+    :data:`~mjx_arm.urdf.findings.MAX_MESH_PATH_BYTES`)."""
     size = len(str(path).encode("utf-8", "surrogateescape"))
-    if size > MAX_MESH_PATH_BYTES:
+    if size > limit:
         return (
-            f"resolves to a path of {size:,} bytes, more than the {MAX_MESH_PATH_BYTES:,} "
-            "PyBullet reads (it crashes on longer ones)"
+            f"resolves to a path of {size:,} bytes, more than the {limit:,} "
+            f"{label} reads (it crashes on longer ones)"
         )
     return None
 

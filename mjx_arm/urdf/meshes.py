@@ -15,10 +15,9 @@ from pathlib import Path
 
 from mjx_arm.urdf.errors import ConversionError
 
-# MuJoCo reads STL, OBJ and its own MSH; PyBullet reads STL and OBJ (and DAE through assimp-free
-# loaders only partly). Collada (.dae) is the usual ROS format that MuJoCo cannot read.
+# MuJoCo reads STL, OBJ and its own MSH. Collada (.dae) is the usual ROS format that MuJoCo
+# cannot read (the converter turns it into STL: mjx_arm.urdf.mesh_convert).
 MUJOCO_MESH_FORMATS = frozenset({".stl", ".obj", ".msh"})
-PYBULLET_MESH_FORMATS = frozenset({".stl", ".obj", ".dae"})
 PACKAGE_PREFIX = "package://"
 FILE_PREFIX = "file://"
 # An unnamed package is searched for in the URDF's folder and this many folders above it (a ROS
