@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from mjx_arm.engines import eval_engines
+from mjx_arm.engines import REFERENCE_ENGINE, batch_engines, eval_engines
 from mjx_arm.inputs import InputError
 from mjx_arm.names import engine_label
 
@@ -198,8 +198,8 @@ def evaluate_engines(
     JAX env on the ``auto`` backend), on the arm the policy records.
 
     Returns:
-        Results per engine name (``eval_<engine>.json`` each) and the MuJoCo
-        :class:`~mjx_arm.evaluate.EvalRun`.
+        Results per engine name (``eval_<engine>.json`` each) and the
+        :class:`~mjx_arm.evaluate.EvalRun` of the reference engine (CPU MuJoCo, filmed).
     """
     from mjx_arm.envs.backend import resolve_backend
     from mjx_arm.evaluate import eval_arm, eval_task, evaluate, format_summary
@@ -210,9 +210,10 @@ def evaluate_engines(
     arm = eval_arm(policy)  # the arm the policy was trained on
     backend = resolve_backend("auto")
     runs: dict[str, dict] = {}
-    mujoco_run = None
+    filmed = None
     for engine in eval_engines():
-        video = out / "episodes_mujoco.mp4" if engine == "mujoco" else None
+        reference = engine == REFERENCE_ENGINE
+        video = out / f"episodes_{engine}.mp4" if reference else None
         result, run = evaluate(
             policy,
             engine,
@@ -222,7 +223,7 @@ def evaluate_engines(
             video=video,
             width=settings.width,
             height=settings.height,
-            backend=backend if engine == "mjx" else None,
+            backend=backend if engine in batch_engines() else None,
             video_episodes=settings.video_episodes,
             arm=arm,
         )
@@ -232,17 +233,19 @@ def evaluate_engines(
         result["json"] = str(path)
         runs[engine] = {k: v for k, v in result.items() if k != "per_episode"}
         echo(format_summary(result))
-        mujoco_run = run if engine == "mujoco" else mujoco_run
-    return runs, mujoco_run
+        filmed = run if reference else filmed
+    return runs, filmed
 
 
 def plot_episode(
     run: EvalRun, task: TaskConfig, out: Path, echo: Callable[[str], None]
 ) -> dict[str, Any]:
-    """Save the longest MuJoCo episode as a trajectory and plot it."""
+    """Save the reference engine's longest episode as a trajectory and plot it."""
     from mjx_arm.replay import replay, save_trajectory
 
-    traj_path = save_trajectory(out / "trajectory_mujoco.npz", run.longest_trajectory(), task)
+    traj_path = save_trajectory(
+        out / f"trajectory_{REFERENCE_ENGINE}.npz", run.longest_trajectory(), task
+    )
     summary = replay(traj_path, out / "replay.png")
     echo(f"wrote {traj_path} ({summary['steps']} steps) and {summary['plot']}")
     return {"trajectory": str(traj_path), "plot": summary["plot"]}
@@ -359,7 +362,7 @@ def format_demo_summary(summary: dict[str, Any]) -> str:
         *((f"eval {k} JSON", r["json"]) for k, r in summary["eval"].items()),
         ("trajectory", summary["replay"]["trajectory"]),
         ("replay plot", summary["replay"]["plot"]),
-        ("video", _video_line(summary["eval"]["mujoco"])),
+        ("video", _video_line(summary["eval"][REFERENCE_ENGINE])),
         ("summary", str(Path(summary["out"]) / "summary.json")),
     ]
     lines.append("files:")

@@ -15,7 +15,12 @@ registry sits at the bottom of the import layers, so it never imports an engine 
   validator's static checks; an engine with one is a choice of ``mjx-arm validate --engine``;
 - ``urdf_check``: the URDF load check, ``f(tree, package_dirs, repair, findings, limits)``;
 - ``parity_causes``: check prefix -> the stated cause of a missed parity goal of a pair (or
-  engine) this engine's name is part of.
+  engine) this engine's name is part of;
+- ``impl_choice``: whether it runs under a choice of MJX implementation (``impl``).
+
+Two engines have a standing role, named by :data:`CONVERTER_ENGINE` (its URDF loader is the
+URDF-to-MJCF converter every MuJoCo model is built with) and :data:`REFERENCE_ENGINE` (the one
+the others are compared with, recorded in and filmed).
 
 Each is None (or empty) where the engine does not provide it. The built-in rows are below; an
 engine that lives in its own top-level package (the PyBullet reference, ``pybullet_ref``)
@@ -33,6 +38,8 @@ from typing import Any, Protocol, runtime_checkable
 from mjx_arm.inputs import InputError
 
 __all__ = [
+    "CONVERTER_ENGINE",
+    "REFERENCE_ENGINE",
     "BatchPhysics",
     "EngineSpec",
     "EngineUnavailableError",
@@ -75,6 +82,8 @@ class EngineSpec:
         parity_causes: check prefix (``"joint divergence"``) -> why a parity goal of this
             engine is missed; the first row (engines with a ``parity_goal`` first) whose name
             the goal's subject holds and whose prefix the check starts with gives the cause.
+        impl_choice: it runs under a choice of MJX implementation (``impl``: ``jax``,
+            ``warp``), so the parity benchmark runs it once per implementation asked for.
         urdf_reader: what its URDF loader reads (an ``UrdfReader``), or None.
         urdf_check: the URDF load check, or None.
         requires: the optional module the engine imports (None: always installed).
@@ -91,6 +100,7 @@ class EngineSpec:
     parity_goal: str | None = None
     grasp: str | None = None
     parity_causes: Mapping[str, str] = field(default_factory=dict)
+    impl_choice: bool = False
     urdf_reader: str | None = None
     urdf_check: str | None = None
     requires: str | None = None
@@ -212,6 +222,13 @@ def load(path: str) -> Any:
     return getattr(importlib.import_module(module), attribute)
 
 
+# The engine whose URDF loader is the converter to MJCF: an arm is validated for it wherever a
+# MuJoCo model is built from the arm (the MuJoCo and MJX envs, training, the benchmarks).
+CONVERTER_ENGINE = "mujoco"
+# The engine the others are compared with where one reference is needed: parity records its
+# press commands in it, and the demo films and plots its episodes.
+REFERENCE_ENGINE = "mujoco"
+
 register_engine(
     EngineSpec(
         name="mujoco",
@@ -234,6 +251,7 @@ register_engine(
         },
         parity="mjx_arm.bench.engines:MjxEngine",
         grasp="mjx_arm.bench.grasp:run_mjx",
+        impl_choice=True,
         parity_causes={
             "forward kinematics": (
                 "MJX computes in float32: about 1e-7 relative rounding per transform, summed "

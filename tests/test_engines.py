@@ -173,9 +173,20 @@ def test_a_missed_parity_goal_takes_its_cause_from_the_rows_of_its_engines() -> 
 # Where the reference engine's name may still be written outside the registry and its own
 # package: a package name in a benchmark's version list.
 ALLOWED = {"mjx_arm/bench/results.py": 1}
-# Modules that read what an engine does from its row (its URDF reader, its parity causes) and
-# name no engine at all, not even the built-in ones.
+# Modules that read what an engine does from its row (its URDF reader, its parity causes, its
+# choice of MJX implementation) or from the registry's constants (the converter's engine, the
+# reference engine, the batch engines) and name no engine at all, not even the built-in ones.
 NAMELESS = (
+    "mjx_arm/arm/cli.py",
+    "mjx_arm/arm/resolve.py",
+    "mjx_arm/bench/cli.py",
+    "mjx_arm/bench/parity.py",
+    "mjx_arm/bench/parity_config.py",
+    "mjx_arm/bench/seeds.py",
+    "mjx_arm/demo.py",
+    "mjx_arm/train/ppo.py",
+    "mjx_arm/urdf/cli.py",
+    "mjx_arm/urdf/convert.py",
     "mjx_arm/urdf/check_geometry.py",
     "mjx_arm/urdf/check_joints.py",
     "mjx_arm/urdf/check_physics.py",
@@ -186,6 +197,18 @@ NAMELESS = (
     "mjx_arm/urdf/validate.py",
     "mjx_arm/bench/parity_figures.py",
 )
+
+# Modules that branched on an engine's name and now write one only where it is no branch: a
+# default a user can type, a backend of the batched JAX env ("mjx" or "mujoco", the choices of
+# --backend), an engine's choice of a command, an env naming its own engine.
+TYPED = {
+    "mjx_arm/evaluate/cli.py": {"mujoco": 1},  # --engine's default
+    "mjx_arm/evaluate/runners.py": {"mjx": 1},  # the batched runner's default backend
+    "mjx_arm/bench/transfer.py": {"mjx": 1, "mujoco": 1},  # the backends of two rows
+    "mjx_arm/bench/robustness.py": {"mjx": 1, "mujoco": 1},  # the backends of its engines
+    "mjx_arm/bench/robustness_config.py": {"mjx": 1},  # a choice of --engine
+    "mjx_arm/envs/mjx_env.py": {"mjx": 1},  # the env's own engine
+}
 
 
 def _name_strings(name: str, paths: list[Path]) -> dict[str, int]:
@@ -210,3 +233,29 @@ def test_the_urdf_checks_and_parity_causes_name_no_engine() -> None:
     paths = [ROOT / p for p in NAMELESS]
     for name in engines.engine_names():
         assert _name_strings(name, paths) == {}, name
+
+
+def test_the_modules_that_branched_on_names_keep_only_typed_names() -> None:
+    for path, expected in TYPED.items():
+        counts = {name: _name_strings(name, [ROOT / path]).get(path, 0) for name in expected}
+        assert counts == expected, path
+        others = set(engines.engine_names()) - set(expected)
+        assert all(_name_strings(name, [ROOT / path]) == {} for name in others), path
+
+
+def test_the_roles_name_rows_that_fill_them() -> None:
+    converter = engines.engine(engines.CONVERTER_ENGINE, "urdf_reader")
+    assert converter.provides("env")  # the converted MJCF model is what its env loads
+    reference = engines.engine(engines.REFERENCE_ENGINE, "parity")
+    assert reference.provides("env")  # the demo films it through its Gymnasium env
+    assert [n for n in engines.engine_names() if engines.engine(n).impl_choice] == ["mjx"]
+
+
+def test_parity_runs_once_per_implementation_only_where_the_row_offers_a_choice() -> None:
+    from mjx_arm.bench.parity import ParityConfig, engine_specs
+
+    both = ParityConfig.quick(engines=("mujoco", "mjx"), impls=("jax", "jax"))
+    assert engine_specs(both) == [("mujoco", "auto"), ("mjx", "jax")]
+    ParityConfig.quick(engines=("mjx",), impls=("jax", "warp"))  # two runs of one engine
+    with pytest.raises(ValueError, match="two engines"):
+        ParityConfig.quick(engines=("pybullet",), impls=("jax", "warp"))

@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from mjx_arm.engines import CONVERTER_ENGINE
 from mjx_arm.names import EXIT_OK
 
 
@@ -35,7 +36,7 @@ def cmd_arm(args: argparse.Namespace) -> int:
     config = with_repair_arguments(load_arm(args.arm), args)
     if args.ee_link:
         config = config.replace(ee_link=args.ee_link, joints=())
-    arm = validated_arm_info(config, "mujoco")
+    arm = validated_arm_info(config, CONVERTER_ENGINE)
     print(describe(arm))
     tasks = [task_config(name) for name in TASKS]
     if args.check:

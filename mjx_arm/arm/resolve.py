@@ -18,6 +18,7 @@ from typing import Any
 from mjx_arm.arm.config import ArmConfig, load_arm
 from mjx_arm.arm.info import ArmInfo, arm_info, validate_arm
 from mjx_arm.arm.setup import arm_setup
+from mjx_arm.engines import CONVERTER_ENGINE
 from mjx_arm.inputs import ConfigError
 from mjx_arm.task.config import TaskConfig
 
@@ -45,7 +46,7 @@ class ArmTask:
 def resolve_task(
     task: TaskConfig | None = None,
     arm: str | Path | ArmConfig | None = None,
-    engine: str = "mujoco",
+    engine: str = CONVERTER_ENGINE,
 ) -> ArmTask:
     """The task on the arm: the arm validated for ``engine`` and read, the task filled in.
 

@@ -37,6 +37,12 @@ def _enable_jax_cache() -> None:
     enable_compilation_cache()
 
 
+def _on_jax(names: tuple[str, ...] | list[str]) -> bool:
+    """Whether any of ``names`` is a batch engine of the registry (MJX: JAX, on an accelerator
+    where there is one)."""
+    return any(name in engines.batch_engines() for name in names)
+
+
 def _check_arm(arm: str) -> None:
     """Validate a benchmark's ``--arm`` before any work ("" is the shipped arm).
 
@@ -46,7 +52,7 @@ def _check_arm(arm: str) -> None:
     if arm:
         from mjx_arm.arm.info import validated_arm_info
 
-        validated_arm_info(arm, "mujoco")
+        validated_arm_info(arm, engines.CONVERTER_ENGINE)
 
 
 def _print_paths(paths: list[Path]) -> None:
@@ -87,9 +93,9 @@ def cmd_parity(args: argparse.Namespace) -> int:
     check_folder(args.out, "--out")
     _check_pictures(args, "--plot", "--grasp-video")
     _check_arm(config.arm)
-    if "mjx" in config.engines:
+    if _on_jax(config.engines):
         _enable_jax_cache()
-    meta = environment_metadata(accelerator="mjx" in config.engines)
+    meta = environment_metadata(accelerator=_on_jax(config.engines))
     result = run_parity(config)
     print(goals_table(result))
     _print_paths(write_report(result, meta, args.out, args.plot))
@@ -130,7 +136,7 @@ def cmd_grasp(args: argparse.Namespace) -> int:
     check_folder(args.out, "--out")
     _check_pictures(args, "--video")
     _enable_jax_cache()
-    meta = environment_metadata(accelerator="mjx" in args.engines)
+    meta = environment_metadata(accelerator=_on_jax(args.engines))
     _print_paths(_grasp_report(tuple(args.engines), meta, args.out, args.video))
     return EXIT_OK
 
@@ -267,7 +273,7 @@ def cmd_robustness(args: argparse.Namespace) -> int:
     from mjx_arm.arm.info import arm_info
 
     check_policy_fits(policy, task, arm_info(arm))
-    meta = environment_metadata(accelerator=config.engine == "mjx")
+    meta = environment_metadata(accelerator=_on_jax([config.engine]))
     result = run_robustness(policy, task, config, arm, log=lambda t: print(t, flush=True))
     name = args.name or f"robustness_{task.task}"
     paths = write_report(result, meta, args.out, name, source, args.plot)

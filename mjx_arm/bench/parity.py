@@ -45,6 +45,8 @@ from mjx_arm.bench.parity_figures import (
     open_loop_figures,
     press_figures,
 )
+from mjx_arm.engines import REFERENCE_ENGINE
+from mjx_arm.engines import engine as engine_row
 from mjx_arm.envs.physics_config import resolve_impl
 from mjx_arm.task import reach_config, sampling, touch_config
 from mjx_arm.task.config import TaskConfig
@@ -168,7 +170,9 @@ def engine_specs(config: ParityConfig) -> list[tuple[str, str]]:
     is resolved, so an implementation runs once."""
     out = []
     for name in config.engines:
-        impls = dict.fromkeys(resolve_impl(i) for i in config.impls) if name == "mjx" else ["auto"]
+        impls = ["auto"]
+        if engine_row(name).impl_choice:
+            impls = list(dict.fromkeys(resolve_impl(i) for i in config.impls))
         out += [(name, impl) for impl in impls]
     return out
 
@@ -187,7 +191,7 @@ def parity_inputs(config: ParityConfig, arm: ArmInfo) -> ParityInputs:
     reach_inputs = Inputs.concat(
         [open_loop_inputs(reach, config, steps), jitter_inputs(reach, config, steps)]
     )
-    recorder = make_engine("mujoco", touch, arm=arm)
+    recorder = make_engine(REFERENCE_ENGINE, touch, arm=arm)
     try:
         # the boxes move out with the arm's reach, as the tasks' targets do
         boxes = np.asarray(BOX_POSITIONS[: config.press_boxes]) * touch.workspace_scale

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from mjx_arm.bench.settings import setting
-from mjx_arm.engines import engine_names
+from mjx_arm.engines import engine, engine_names
 from mjx_arm.envs.physics_config import IMPLS
 from mjx_arm.inputs import MAX_SEED
 from mjx_arm.settings import check_range
@@ -35,7 +35,6 @@ CONTACT_N = 1.0  # a tared force above this (N) in free motion means the arm tou
 FREE_SCENARIOS = ("hold", "constant")  # jitter runs in free space (the Reach scene)
 JITTER_SCENARIOS = (*FREE_SCENARIOS, "press")
 DAMPING = {"converted": 1.0, "zeroed": 0.0}
-REFERENCE = "mujoco"  # the engine others are compared with where one reference is needed
 
 
 @dataclass(frozen=True)
@@ -78,7 +77,8 @@ class ParityConfig:
         unknown = set(self.engines) - set(ENGINES)
         if unknown or not self.engines:
             raise ValueError(f"engines must be some of {ENGINES}, got {self.engines}")
-        runs = len(self.engines) + (len(self.impls) - 1 if "mjx" in self.engines else 0)
+        chosen = sum(engine(name).impl_choice for name in self.engines)  # one run per impl
+        runs = len(self.engines) + chosen * (len(self.impls) - 1)
         if runs < 2:
             raise ValueError("parity needs two engines (or MJX with two impls) to compare")
         if not 0 < self.goal_time <= self.seconds:

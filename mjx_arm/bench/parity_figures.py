@@ -13,9 +13,9 @@ from typing import Any
 import numpy as np
 
 from mjx_arm.bench.engines import Trace
-from mjx_arm.bench.parity_config import CONTACT_N, REFERENCE, ParityConfig
+from mjx_arm.bench.parity_config import CONTACT_N, ParityConfig
+from mjx_arm.engines import REFERENCE_ENGINE, engine_names
 from mjx_arm.engines import engine as engine_row
-from mjx_arm.engines import engine_names
 
 # --------------------------------------------------------------------------- figures
 
@@ -84,7 +84,7 @@ def press_figures(traces: dict[str, Trace], ctrl_dt: float, average: int) -> dic
     """The tared force over time per engine, its steady value and the gap to the reference."""
     force = {name: t.force() for name, t in traces.items()}
     steady = {name: f[:, -average:].mean(axis=1) for name, f in force.items()}
-    reference = REFERENCE if REFERENCE in force else next(iter(force))
+    reference = REFERENCE_ENGINE if REFERENCE_ENGINE in force else next(iter(force))
     steps = next(iter(force.values())).shape[1]
     out: dict[str, Any] = {"time_s": ctrl_dt * np.arange(1, steps + 1), "reference": reference}
     out["engines"] = {}

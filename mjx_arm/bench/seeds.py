@@ -269,6 +269,7 @@ def check_seed_settings(
     """
     from mjx_arm.arm.info import validated_arm_info
     from mjx_arm.arm.resolve import default_arm
+    from mjx_arm.engines import CONVERTER_ENGINE
     from mjx_arm.train.config import load_config
     from mjx_arm.train.learner import local_devices
 
@@ -277,7 +278,7 @@ def check_seed_settings(
     count = devices if devices is not None else len(local_devices(config.devices))
     train_config.check_devices(count)
     arm = config.arm or train_config.arm
-    validated_arm_info(default_arm(train_config.task_config(), arm), "mujoco")
+    validated_arm_info(default_arm(train_config.task_config(), arm), CONVERTER_ENGINE)
 
 
 def run_seeds(

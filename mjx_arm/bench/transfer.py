@@ -19,7 +19,7 @@ from typing import Any
 
 from mjx_arm.bench.results import fmt, markdown_table, save_results, verdict
 from mjx_arm.bench.settings import setting
-from mjx_arm.engines import engine, engine_names
+from mjx_arm.engines import batch_engines, engine, engine_names
 from mjx_arm.envs.physics_config import IMPLS
 from mjx_arm.inputs import MAX_SEED
 from mjx_arm.names import TASK_IDS
@@ -37,9 +37,12 @@ class TransferEngine:
     backend: str | None = None
 
 
+# The batched JAX env's engine (MJX): its row runs it on MJX, the "batch" row on C MuJoCo (the
+# backends of :func:`mjx_arm.envs.backend.make_batched_env`).
+BATCH = batch_engines()[0]
 TRANSFER_ENGINES = {
-    "mjx": TransferEngine("MJX", "mjx", "mjx"),
-    "batch": TransferEngine("C MuJoCo batch", "mjx", "mujoco"),
+    BATCH: TransferEngine(engine(BATCH).label, BATCH, "mjx"),
+    "batch": TransferEngine("C MuJoCo batch", BATCH, "mujoco"),
     # the Gymnasium env engines of the registry, labelled by their rows
     **{name: TransferEngine(engine(name).label, name) for name in engine_names("env")},
 }
@@ -50,7 +53,7 @@ class TransferConfig:
     """Settings of the transfer matrix. Saved in the result JSON; the CLI flags come from here."""
 
     engines: tuple[str, ...] = setting(
-        ("mjx", *engine_names("env")), "engines (rows)", tuple(TRANSFER_ENGINES)
+        (BATCH, *engine_names("env")), "engines (rows)", tuple(TRANSFER_ENGINES)
     )
     task: str = setting("", "task to evaluate in: reach or touch (default: the policy's own)")
     episodes: int = setting(200, "episodes per engine")
@@ -94,16 +97,16 @@ def plan_engines(config: TransferConfig, jax_backend: str) -> tuple[list[str], l
         Engine keys in row order, and notes.
     """
     keys = list(config.engines)
-    if "mjx" not in keys or jax_backend != "cpu" or config.mjx_on_cpu:
+    if BATCH not in keys or jax_backend != "cpu" or config.mjx_on_cpu:
         return keys, []
     note = (
         "MJX skipped: no GPU (JAX runs on the CPU, where MJX takes minutes to compile and steps "
         "about 100x slower than C MuJoCo; --mjx-on-cpu runs it anyway)"
     )
     if "batch" in keys:
-        keys.remove("mjx")
+        keys.remove(BATCH)
         return keys, [note]
-    keys[keys.index("mjx")] = "batch"
+    keys[keys.index(BATCH)] = "batch"
     return keys, [note + "; the C MuJoCo batch is the batched engine instead"]
 
 

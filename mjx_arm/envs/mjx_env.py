@@ -33,7 +33,7 @@ from flax import struct
 from mjx_arm.arm.config import ArmConfig
 from mjx_arm.arm.model_io import arm_model
 from mjx_arm.arm.resolve import ArmTask, as_arm_task
-from mjx_arm.engines import BatchPhysics
+from mjx_arm.engines import CONVERTER_ENGINE, BatchPhysics
 from mjx_arm.envs.base import action_size, gripper_speed
 from mjx_arm.envs.mjx_physics import MjxPhysics, Reading
 from mjx_arm.envs.physics_config import PhysicsConfig
@@ -125,7 +125,7 @@ class MjxArmEnv(Env):
         background_compile: bool = False,
     ) -> None:
         start = time.monotonic()
-        self.arm_task = as_arm_task(task, arm, "mujoco")
+        self.arm_task = as_arm_task(task, arm, CONVERTER_ENGINE)
         self.arm, self.task = self.arm_task.arm, self.arm_task.task
         self.mj_model = mj_model if mj_model is not None else arm_model(self.arm, self.task)
         converted = time.monotonic()

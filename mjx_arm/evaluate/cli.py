@@ -41,7 +41,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     policy, source = resolve_policy(args.policy, args.step)
     task, notes = eval_task(policy, args.task)
     arm = with_repair_arguments(eval_arm(policy, args.arm), args)
-    if args.engine == "mjx":
+    if args.engine in engines.batch_engines():  # the batched JAX env
         enable_compilation_cache()
         _warn_mjx_on_cpu()
     result, run = evaluate(

@@ -176,12 +176,12 @@ def _open_video(env: gym.Env, video: str | Path | None) -> tuple[_SafeVideo | No
         return None, []
     if getattr(env, "render_mode", None) != "rgb_array":
         return None, ["video skipped: the env was not made with render_mode='rgb_array'"]
-    ok, reason = rendering_available()
-    if not ok and getattr(env.unwrapped, "engine", "") == "mujoco":
-        return None, [f"video skipped: {reason}"]
     model = getattr(env.unwrapped, "model", None)
-    if model is not None and hasattr(model, "vis"):  # MuJoCo: room for frames over 640 x 480
-        fit_framebuffer(model, env.unwrapped.width, env.unwrapped.height)
+    if model is not None and hasattr(model, "vis"):  # an env that draws with MuJoCo
+        ok, reason = rendering_available()
+        if not ok:
+            return None, [f"video skipped: {reason}"]
+        fit_framebuffer(model, env.unwrapped.width, env.unwrapped.height)  # frames over 640x480
     fps = env.metadata.get("render_fps", 30)
     return _SafeVideo(VideoWriter(video, fps)), []
 

@@ -23,6 +23,7 @@ import jax
 import numpy as np
 
 from mjx_arm.arm.resolve import ArmTask, resolve_task
+from mjx_arm.engines import CONVERTER_ENGINE
 from mjx_arm.envs.backend import make_batched_env, resolve_backend
 from mjx_arm.inputs import ConfigError, MissingInputError
 from mjx_arm.task.config import TaskConfig
@@ -151,7 +152,7 @@ def resolve_run_task(config: TrainConfig) -> ArmTask:
     Raises:
         InputError: an arm that does not validate or resolve, or a task that does not fit it.
     """
-    return resolve_task(config.task_config(), config.arm, "mujoco")
+    return resolve_task(config.task_config(), config.arm, CONVERTER_ENGINE)
 
 
 def _start_point(

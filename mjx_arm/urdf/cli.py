@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from mjx_arm.engines import engine_names
+from mjx_arm.engines import CONVERTER_ENGINE, engine_names
 from mjx_arm.inputs import InputError, check_output, require_file, write_atomic
 from mjx_arm.names import EXIT_INVALID, EXIT_OK
 from mjx_arm.urdf.repair_args import add_repair_arguments, repairs_of
@@ -87,7 +87,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
     )
     report = validate(
         args.urdf,
-        engine="mujoco",
+        engine=CONVERTER_ENGINE,
         package_dirs=package_dirs,
         native=False,
         repair_inertia=repairs.repair_inertia,

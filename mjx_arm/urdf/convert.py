@@ -13,6 +13,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from mjx_arm.engines import CONVERTER_ENGINE
 from mjx_arm.urdf.convert_config import (
     ARM_CONAFFINITY,
     ARM_CONAFFINITY_NO_SELF,
@@ -68,7 +69,7 @@ def build_spec(urdf: str | Path, config: ConvertConfig | None = None) -> mujoco.
     path = Path(urdf).resolve()
     report = validate(
         path,
-        engine="mujoco",
+        engine=CONVERTER_ENGINE,
         package_dirs=config.package_dirs,
         native=False,
         repair_inertia=config.repair_inertia,
