@@ -21,3 +21,21 @@ def pytest_configure(config: pytest.Config) -> None:
 
     jax.config.update("jax_compilation_cache_dir", str(_CACHE))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+
+
+@pytest.fixture
+def register_engine():
+    """Adds engine-registry rows for one test: ``register_engine(row)`` registers ``row`` and
+    returns it; every row added is removed when the test ends, pass or fail."""
+    from mjx_arm import engines
+
+    names: list[str] = []
+
+    def register(row: engines.EngineSpec) -> engines.EngineSpec:
+        engines.register_engine(row)
+        names.append(row.name)
+        return row
+
+    yield register
+    for name in names:
+        engines.unregister_engine(name)

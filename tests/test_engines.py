@@ -89,13 +89,10 @@ class ToyArmEnv(gym.Env):
 
 
 @pytest.fixture
-def toy_engine():
-    row = engines.EngineSpec(name="toy", label="Toy point", env=f"{__name__}:ToyArmEnv")
-    engines.register_engine(row)
-    try:
-        yield row
-    finally:
-        engines.unregister_engine("toy")
+def toy_engine(register_engine):
+    return register_engine(
+        engines.EngineSpec(name="toy", label="Toy point", env=f"{__name__}:ToyArmEnv")
+    )
 
 
 def _eval_help(capsys) -> str:

@@ -24,13 +24,10 @@ _INERTIAL = (
 
 
 @pytest.fixture
-def toy_engine():
-    row = engines.EngineSpec(name="toy", label="Toy point", urdf_reader=f"{__name__}:TOY_READER")
-    engines.register_engine(row)
-    try:
-        yield row
-    finally:
-        engines.unregister_engine("toy")
+def toy_engine(register_engine):
+    return register_engine(
+        engines.EngineSpec(name="toy", label="Toy point", urdf_reader=f"{__name__}:TOY_READER")
+    )
 
 
 @pytest.fixture
