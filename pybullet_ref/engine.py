@@ -26,7 +26,7 @@ SPEC = register_engine(
             ),
         },
         urdf_reader="pybullet_ref.urdf_reader:READER",
-        urdf_check="mjx_arm.urdf.check_physics:check_pybullet_load",
+        urdf_check="pybullet_ref.urdf_check:check_pybullet_load",
         requires="pybullet",
         install_hint="pip install pybullet==3.2.7 (a dependency of mjx_arm)",
     )

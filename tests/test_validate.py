@@ -17,7 +17,7 @@ import pytest
 
 from mjx_arm.cli import main
 from mjx_arm.paths import default_arm_urdf
-from mjx_arm.urdf import ConversionError, check_physics, to_mjcf
+from mjx_arm.urdf import ConversionError, to_mjcf
 from mjx_arm.urdf import validate as validate_mod
 from mjx_arm.urdf.errors import UrdfError
 from mjx_arm.urdf.validate import (
@@ -27,6 +27,7 @@ from mjx_arm.urdf.validate import (
     validate,
     validated,
 )
+from pybullet_ref import urdf_check
 
 # --------------------------------------------------------------------------- helpers
 
@@ -541,8 +542,8 @@ def test_unknown_engine_is_a_programming_error():
 
 
 def test_pybullet_failure_text_is_captured(capfd):
-    with check_physics._captured_fds() as captured:
-        text = check_physics._pybullet_load_file("/nonexistent/arm.urdf")
+    with urdf_check._captured_fds() as captured:
+        text = urdf_check._pybullet_load_file("/nonexistent/arm.urdf")
         os.write(2, b"native stderr\n")
     os.write(1, b"after\n")
     assert text is not None and "Cannot load URDF file" in text

@@ -1,18 +1,15 @@
-"""Validation layer 3: masses and inertia tensors, then the engines' own loaders (MuJoCo through
-the converter, PyBullet in this process, after the static checks that keep it from crashing).
+"""Validation layer 3: masses and inertia tensors, then MuJoCo's own loader (through the
+converter). Each engine's load check is named by its registry row (:mod:`mjx_arm.engines`);
+PyBullet's lives with that engine (:mod:`pybullet_ref.urdf_check`) and names the element a
+message concerns with :func:`native_element`.
 """
 
 from __future__ import annotations
 
-import contextlib
-import ctypes
-import os
 import re
-import sys
-import tempfile
 import warnings
 import xml.etree.ElementTree as ET
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -20,12 +17,8 @@ import numpy as np
 from mjx_arm.urdf.errors import one_line
 from mjx_arm.urdf.findings import _Findings, _joint, _link, _number, _Tree
 from mjx_arm.urdf.inertia import inertia_problem, inertia_tensor, is_frame
-from mjx_arm.urdf.meshes import (
-    AssetPathError,
-    resolve_asset,
-)
 from mjx_arm.urdf.readers import UrdfReader
-from mjx_arm.urdf.repair import INERTIA_FIX, UrdfRepairs, repair_tree
+from mjx_arm.urdf.repair import INERTIA_FIX
 
 # --------------------------------------------------------------------------- layer 3: physics
 
@@ -136,7 +129,7 @@ def _check_tensor(
 # --------------------------------------------------------------------------- layer 3: native
 
 
-def _native_element(tree: _Tree, text: str) -> str:
+def native_element(tree: _Tree, text: str) -> str:
     """The link or joint an engine's message names, else ``robot``."""
     named = re.search(r"(link|joint) '([^']+)'", text)
     if named:
@@ -199,155 +192,7 @@ def check_mujoco_load(
             text = one_line(exc)
             out.error(
                 3,
-                _native_element(tree, text),
+                native_element(tree, text),
                 f"MuJoCo cannot load the model: {text}",
                 "correct the element MuJoCo names (see the message)",
             )
-
-
-@contextlib.contextmanager
-def _captured_fds() -> Iterator[list[str]]:
-    """Send C-level stdout and stderr to a temporary file; the yielded list gets the text.
-
-    This swaps the process's file descriptors 1 and 2, so it is not safe to use from two threads
-    at once.
-    """
-    captured: list[str] = []
-    _flush_all()
-    with tempfile.TemporaryFile() as tmp:
-        saved = os.dup(1), os.dup(2)
-        try:
-            os.dup2(tmp.fileno(), 1)
-            os.dup2(tmp.fileno(), 2)
-            yield captured
-        finally:
-            _flush_all()
-            os.dup2(saved[0], 1)
-            os.dup2(saved[1], 2)
-            os.close(saved[0])
-            os.close(saved[1])
-            tmp.seek(0)
-            captured.append(tmp.read().decode("utf-8", errors="replace"))
-
-
-def _flush_all() -> None:
-    for stream in (sys.stdout, sys.stderr):
-        with contextlib.suppress(Exception):
-            stream.flush()
-    with contextlib.suppress(Exception):
-        ctypes.CDLL(None).fflush(None)
-
-
-def _absolute_mesh_copy(
-    tree: _Tree, package_dirs: Mapping[str, str], folder: str, repairs: UrdfRepairs
-) -> Path:
-    """Write the URDF with absolute mesh and texture paths (PyBullet knows no package_dirs) and
-    ``repairs`` applied (:mod:`mjx_arm.urdf.repair`: what the PyBullet env loads).
-
-    A filename that does not resolve inside its folder loses its ``filename`` (PyBullet then
-    opens nothing for it); the static checks report such meshes and textures before this runs.
-    """
-    root = ET.fromstring(ET.tostring(tree.root))
-    repair_tree(root, repairs)
-    for elem in [*root.iter("mesh"), *root.iter("texture")]:
-        filename = elem.get("filename")
-        if filename is None:
-            continue
-        try:
-            elem.set("filename", str(resolve_asset(filename, tree.path, package_dirs)))
-        except AssetPathError:
-            del elem.attrib["filename"]
-    copy = Path(folder) / tree.path.name
-    copy.write_bytes(ET.tostring(root, encoding="utf-8"))
-    return copy
-
-
-def check_pybullet_load(
-    tree: _Tree,
-    package_dirs: Mapping[str, str],
-    repair: bool,
-    out: _Findings,
-    limits: Mapping[str, float] | None = None,
-) -> None:
-    """The PyBullet row's URDF load check (:mod:`mjx_arm.engines`): :func:`_load_pybullet` of
-    the URDF with the repairs of ``repair`` and ``limits`` (the default effort and velocity),
-    as the PyBullet env loads it."""
-    _load_pybullet(tree, package_dirs, out, UrdfRepairs.from_limits(repair, limits))
-
-
-def _load_pybullet(
-    tree: _Tree, package_dirs: Mapping[str, str], out: _Findings, repairs: UrdfRepairs
-) -> None:
-    """Load into a private DIRECT PyBullet client with its C output captured; report problems.
-
-    PyBullet runs in this process (it segfaults on some broken trees, which is why this layer only
-    runs after the static checks passed). Its ``b3Warning`` messages become warnings.
-    """
-    with tempfile.TemporaryDirectory() as folder:
-        copy = _absolute_mesh_copy(tree, package_dirs, folder, repairs)
-        failure = None
-        with _captured_fds() as captured:
-            failure = _pybullet_load_file(str(copy))
-        text = captured[0].replace(str(copy), str(tree.path)).replace(folder, str(tree.path.parent))
-    messages = _attach_names(_bullet_messages(text), tree)
-    if failure is not None:
-        detail = one_line(" ".join([failure, *messages]))
-        out.error(
-            3,
-            _native_element(tree, detail),
-            f"PyBullet cannot load the file: {detail}",
-            "correct the element PyBullet names (see the message)",
-        )
-        return
-    for message in messages:
-        out.warning(
-            3,
-            _native_element(tree, message),
-            f"PyBullet warns: {message}",
-            "check the element PyBullet names",
-        )
-
-
-def _pybullet_load_file(path: str) -> str | None:
-    """Load ``path`` in a fresh DIRECT client (always disconnected); return error text or None."""
-    client = None
-    try:
-        import pybullet
-        from pybullet_utils import bullet_client
-
-        client = bullet_client.BulletClient(connection_mode=pybullet.DIRECT)
-        client.loadURDF(path, flags=pybullet.URDF_USE_INERTIA_FROM_FILE)
-        return None
-    except Exception as exc:
-        return str(exc) or type(exc).__name__
-    finally:
-        if client is not None:
-            with contextlib.suppress(Exception):
-                client.disconnect()
-
-
-def _bullet_messages(text: str) -> list[str]:
-    """The b3Warning / b3Error messages of PyBullet's output, deduplicated, in order."""
-    parts = re.findall(
-        r"b3(?:Warning|Error)\[[^\]]*\]:\s*(.*?)(?=b3\w+\[|pybullet build time|"
-        r"argv\[0\]|\Z)",
-        text,
-        flags=re.DOTALL,
-    )
-    messages: list[str] = []
-    for part in parts:
-        message = " ".join(part.split())
-        if message and message not in messages:
-            messages.append(message)
-    return messages
-
-
-def _attach_names(messages: list[str], tree: _Tree) -> list[str]:
-    """PyBullet prints some link names as a message of their own: join them to the one before."""
-    out: list[str] = []
-    for message in messages:
-        if out and (message in tree.links or message in tree.joints):
-            out[-1] = f"{out[-1]}: {message!r}"
-        else:
-            out.append(message)
-    return out

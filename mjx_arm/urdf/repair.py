@@ -18,7 +18,7 @@ Why a repaired copy of the URDF for PyBullet, not the same values set through it
   Bullet derived from the broken tensor, and cannot turn that frame; from the repaired text
   Bullet derives the frame of the repaired tensor itself.
 - The validator loads what the env loads: its PyBullet check loads the repaired copy
-  (:func:`mjx_arm.urdf.check_physics.check_pybullet_load`), so an arm that validates with its
+  (:func:`pybullet_ref.urdf_check.check_pybullet_load`), so an arm that validates with its
   repairs is the arm PyBullet steps.
 - The PyBullet env loads a cached copy of the URDF already (its collision hulls shrunk by
   Bullet's margin): the repairs go into that copy, named by a hash of the source's bytes and of
