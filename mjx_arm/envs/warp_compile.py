@@ -165,9 +165,9 @@ def precompile(threads: int, loads: Loads, devices: list[Any] | None = None) -> 
     """Compile and load ``loads`` on ``devices`` (default: every local GPU), ``threads`` at once.
 
     Every module of every block size goes to one thread pool, slowest first
-    (:func:`compile_order`): compiled a block size at a time, the largest module of each size
-    added to the wall time. The first device compiles; the others then load the binaries from
-    Warp's kernel cache.
+    (:func:`compile_order`), so the longest compiles start at once (a block size at a time,
+    each size's slowest module would add to the wall time). The first device compiles; the
+    others then load the binaries from Warp's kernel cache.
 
     Args:
         threads: worker threads; 0 does nothing (modules compile on first use).
