@@ -6,6 +6,10 @@ place (:func:`mjx_arm.cli.main`). Anything else is a bug: its traceback shows an
 is 1. The named errors of the packages (arm configs, URDFs, policy files, run directories)
 derive from it, and each is also the builtin error it always was (ValueError, OSError, ...).
 
+Input files are read with :func:`open_regular` / :func:`read_bytes` (and :func:`read_text`,
+:func:`read_json_object` on top): only a regular file (never a FIFO or a device), of a bounded
+size, and with ``within`` never through a link out of the given folder (a run directory).
+
 Outputs are written with :func:`write_atomic` (a temporary file in the same folder, renamed into
 place), so a failing or killed command never leaves half a file where a good one was.
 """
@@ -16,10 +20,11 @@ import argparse
 import json
 import math
 import os
+import stat
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 
 class InputError(Exception):
@@ -77,26 +82,32 @@ def require_file(path: str | Path, what: str) -> Path:
     return path
 
 
-def read_text(path: str | Path, what: str) -> str:
-    """The text of a readable UTF-8 file.
+def read_text(
+    path: str | Path, what: str, max_bytes: int | None = None, *, within: str | Path | None = None
+) -> str:
+    """The text of a readable UTF-8 regular file of at most ``max_bytes`` (default
+    :data:`MAX_TEXT_BYTES`), read by :func:`read_bytes` (``within``: see there).
 
     Raises:
-        InputFileError: missing, not a file, unreadable, or not UTF-8 text.
+        InputFileError: missing, not a regular file, too big, unreadable, or not UTF-8 text.
     """
-    path = require_file(path, what)
+    data = read_bytes(path, what, MAX_TEXT_BYTES if max_bytes is None else max_bytes, within=within)
     try:
-        return path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as err:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as err:
         raise InputFileError(f"{what} {str(path)!r} cannot be read as UTF-8 text: {err}") from err
 
 
-def read_json_object(path: str | Path, what: str) -> dict[str, Any]:
-    """A JSON file holding one object (a dict).
+def read_json_object(
+    path: str | Path, what: str, max_bytes: int | None = None, *, within: str | Path | None = None
+) -> dict[str, Any]:
+    """A JSON file holding one object (a dict), read by :func:`read_text`.
 
     Raises:
-        InputFileError: missing, unreadable, not JSON, or not an object.
+        InputFileError: missing, not a regular file, too big, unreadable, not JSON, or not an
+            object.
     """
-    text = read_text(path, what)
+    text = read_text(path, what, max_bytes, within=within)
     try:
         data = json.loads(text)
     except (json.JSONDecodeError, RecursionError) as err:
@@ -106,6 +117,91 @@ def read_json_object(path: str | Path, what: str) -> dict[str, Any]:
             f"{what} {str(path)!r} must hold a JSON object ({{...}}), not {type(data).__name__}"
         )
     return data
+
+
+# --------------------------------------------------------------------------- bounded reads
+
+MiB = 2**20
+MAX_TEXT_BYTES = 16 * MiB  # read_text's default bound: configs, arm files, run metadata
+
+
+class OversizedInputError(InputFileError, ValueError):
+    """An input file (or an ``.npz`` member) larger than the limit its reader sets."""
+
+
+def open_regular(
+    path: str | Path, what: str, max_bytes: int, *, within: str | Path | None = None
+) -> BinaryIO:
+    """``path`` opened for reading in binary, only if it is a regular file of at most
+    ``max_bytes`` bytes: a FIFO, a device (``/dev/zero``), a socket or a folder is refused
+    before a byte is read (opened non-blocking, then ``fstat``), so nothing blocks or reads
+    without end. The size is the one at opening; :func:`read_bytes` also bounds the read.
+
+    Args:
+        path: the file.
+        what: what it is, for the messages ("checkpoint metadata").
+        max_bytes: the largest size accepted.
+        within: a folder the file must lie in (a run directory): a link whose target lies
+            outside it is refused; None: links are followed wherever they go.
+
+    Raises:
+        MissingInputError: no such file.
+        OversizedInputError: larger than ``max_bytes``.
+        InputFileError: not a regular file, a link out of ``within``, or unreadable.
+    """
+    path = Path(path).expanduser()
+    name = f"{what} {str(path)!r}"
+    target, flags = path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0)
+    if within is not None:
+        target = Path(os.path.realpath(path))
+        if not target.is_relative_to(os.path.realpath(within)):
+            raise InputFileError(f"{name} is a link to {target}, outside {within}: refused")
+        flags |= getattr(os, "O_NOFOLLOW", 0)
+    try:
+        fd = os.open(target, flags)
+    except FileNotFoundError:
+        raise MissingInputError(f"{name} does not exist; check the path") from None
+    except OSError as err:
+        raise InputFileError(f"{name} cannot be opened: {err.strerror or err}") from err
+    try:
+        _check_regular(os.fstat(fd), name, max_bytes)
+        os.set_blocking(fd, True)
+        return os.fdopen(fd, "rb")
+    except BaseException:
+        os.close(fd)
+        raise
+
+
+def _check_regular(info: os.stat_result, name: str, max_bytes: int) -> None:
+    """Refuse an opened file that is not a regular file of at most ``max_bytes``."""
+    if stat.S_ISDIR(info.st_mode):
+        raise InputFileError(f"{name} is a folder, not a file; give the path of a file")
+    if not stat.S_ISREG(info.st_mode):
+        raise InputFileError(f"{name} is not a regular file (a FIFO, device or socket)")
+    if info.st_size > max_bytes:
+        raise _oversized(name, info.st_size, max_bytes)
+
+
+def read_bytes(
+    path: str | Path, what: str, max_bytes: int, *, within: str | Path | None = None
+) -> bytes:
+    """The bytes of a regular file of at most ``max_bytes``, opened by :func:`open_regular`
+    (same arguments and errors); a file that grows past the bound while read is refused too."""
+    with open_regular(path, what, max_bytes, within=within) as f:
+        try:
+            data = f.read(max_bytes + 1)
+        except OSError as err:
+            raise InputFileError(f"{what} {str(path)!r} cannot be read: {err.strerror}") from err
+    if len(data) > max_bytes:
+        raise _oversized(f"{what} {str(path)!r}", len(data), max_bytes)
+    return data
+
+
+def _oversized(name: str, size: int, limit: int) -> OversizedInputError:
+    return OversizedInputError(
+        f"{name} holds {size:,} bytes or more, over the limit of {limit:,} bytes: not a file "
+        "mjx_arm wrote, or a damaged one"
+    )
 
 
 def check_output(path: str | Path, what: str, suffixes: tuple[str, ...] = ()) -> Path:
@@ -177,12 +273,6 @@ def write_atomic(data: bytes, target: Path) -> None:
 
 
 # --------------------------------------------------------------------------- .npz files
-
-MiB = 2**20
-
-
-class OversizedInputError(InputFileError, ValueError):
-    """An input file (an ``.npz`` member) larger than the limit its reader sets."""
 
 
 def read_npz_members(
