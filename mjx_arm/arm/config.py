@@ -37,7 +37,7 @@ from mjx_arm.arm.chain import MAX_JOINTS, MIN_JOINTS, ArmConfigError, arm_chain,
 from mjx_arm.arm.chain import NAMED_EE_LINK as NAMED_EE_LINK
 from mjx_arm.arm.chain import jaw_joint as jaw_joint
 from mjx_arm.inputs import MissingInputError, read_text, require_file
-from mjx_arm.paths import default_arm_urdf
+from mjx_arm.paths import assets_dir, default_arm_urdf
 from mjx_arm.settings import config_fields
 from mjx_arm.urdf.convert_config import ConvertConfig
 from mjx_arm.urdf.meshes import PACKAGE_PREFIX, find_package_dir
@@ -48,6 +48,8 @@ ARM_FILE_SUFFIXES = (".toml", ".json")
 COLLISION_CHOICES = ("mesh", "capsule", "box")
 # The arms in assets/: the UR5e-class arm, and the same arm with a parallel-jaw gripper.
 SHIPPED_ARMS = ("ur5e.urdf", "ur5e_gripper.urdf")
+# The scene's pieces among the URDFs in assets/ (every other one is an arm, named by its stem).
+_SCENE_URDFS = ("table", "target_box")
 # The shipped arms' home pose: tool pointing down, about 0.37 m above the table, in front of the
 # base (UR joint conventions).
 SHIPPED_HOME_QPOS = (0.0, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0)
@@ -185,8 +187,13 @@ def load_arm(source: str | Path | ArmConfig | None) -> ArmConfig:
     if isinstance(source, ArmConfig):
         return source
     path = Path(source).expanduser()
+    if not path.exists() and str(source) in shipped_arm_names():
+        path = assets_dir() / f"{source}.urdf"
     if not path.exists():
-        raise MissingInputError(f"arm {str(source)!r}: no such URDF or arm file")
+        raise MissingInputError(
+            f"arm {str(source)!r}: no such URDF or arm file; give a path, or a shipped arm: "
+            + ", ".join(shipped_arm_names())
+        )
     if path.suffix.lower() not in ARM_FILE_SUFFIXES:
         return ArmConfig(urdf=str(require_file(path, "arm URDF").resolve()))
     text = read_text(path, "arm file")
@@ -200,6 +207,12 @@ def load_arm(source: str | Path | ArmConfig | None) -> ArmConfig:
     except ArmConfigError as err:
         raise ArmConfigError(f"{path}: {err}") from err
     return arm.replace(urdf=_arm_file_urdf(arm.urdf, path)) if arm.urdf else arm
+
+
+def shipped_arm_names() -> tuple[str, ...]:
+    """The short names ``--arm`` takes for the arms in ``assets/`` (their URDFs' stems:
+    ``ur5e``, ``ur5e_gripper``, ...; the scene's table and box are not arms)."""
+    return tuple(sorted(p.stem for p in assets_dir().glob("*.urdf") if p.stem not in _SCENE_URDFS))
 
 
 def _arm_file_urdf(urdf: str, arm_file: Path) -> str:

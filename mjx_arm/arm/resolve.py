@@ -99,7 +99,7 @@ def task_for_arm(task: TaskConfig, arm: ArmInfo) -> TaskConfig:
         raise TaskFitError(
             f"task {task.task!r} needs an arm with a gripper (prismatic fingers, or a linkage "
             f"coupled by <mimic> to one driven joint); {arm.urdf} has none. Try "
-            "--arm assets/ur5e_gripper.urdf"
+            "--arm ur5e_gripper (a shipped arm)"
         )
     if len(task.home_qpos) not in (0, arm.n_joints):
         raise TaskFitError(

@@ -190,7 +190,8 @@ def _add_eval_arm(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--arm",
-        help="the arm: a URDF or an arm file (.toml/.json) (default: the arm the policy was "
+        help="the arm: a URDF, an arm file (.toml/.json) or a shipped arm's name (ur5e, "
+        "ur5e_gripper, ...) (default: the arm the policy was "
         "trained on; a policy run on another arm is an error)",
     )
     add_repair_arguments(p, "the arm (a policy trained with repairs records them)")

@@ -119,7 +119,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--episodes", type=int_in(1, 100_000), default=20, help="episodes per run (default: 20)"
     )
     p.add_argument(
-        "--arm", help="a URDF or an arm file (default: the arm the policy was trained on)"
+        "--arm",
+        help="a URDF, an arm file or a shipped arm's name (ur5e, ur5e_gripper, ...) (default: "
+        "the arm the policy was trained on)",
     )
     p.add_argument(
         "--seed", type=seed_int, default=0, help="seed of the first episode (default: 0)"

@@ -235,7 +235,8 @@ def _add_config_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--arm",
         metavar="URDF_OR_FILE",
-        help="the arm: a URDF, or an arm file (.toml/.json: urdf, ee_link, joints, home_qpos, "
+        help="the arm: a URDF, a shipped arm's name (ur5e, ur5e_gripper, ...), or an arm file "
+        "(.toml/.json: urdf, ee_link, joints, home_qpos, "
         "ft_joint) (default: the shipped UR5e-class arm)",
     )
     p.add_argument(
