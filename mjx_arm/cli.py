@@ -25,6 +25,7 @@ from pathlib import Path
 from mjx_arm.inputs import InputError
 from mjx_arm.jax_cache import enable_compilation_cache
 from mjx_arm.names import EXIT_INVALID, EXIT_OK
+from mjx_arm.urdf.repair_args import add_repair_arguments
 
 __all__ = [
     "EXIT_INVALID",
@@ -56,11 +57,34 @@ class OneLineParser(argparse.ArgumentParser):
 
     def parse_args(self, args=None, namespace=None):  # type: ignore[override]
         """As ``ArgumentParser.parse_args``; unknown arguments are reported by the parser of
-        the subcommand they were given to, so the line points at that command's help."""
+        the subcommand they were given to, so the line points at that command's help. A
+        command group given nothing (``mjx-arm``, ``mjx-arm bench``) prints its help on
+        stderr instead, with exit code 2."""
+        bare = self._bare_group(sys.argv[1:] if args is None else list(args))
+        if bare is not None:
+            bare.print_help(sys.stderr)
+            bare.exit(EXIT_INVALID)
         parsed, extra = self.parse_known_args(args, namespace)
         if extra:
             self._owner(parsed).error(f"unrecognized arguments: {' '.join(extra)}")
         return parsed
+
+    def _subcommands(self) -> dict[str, argparse.ArgumentParser]:
+        """This parser's subcommands by name ({} for a command)."""
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                return dict(action.choices)
+        return {}
+
+    def _bare_group(self, argv: list[str]) -> OneLineParser | None:
+        """The command group ``argv`` names without a subcommand: this parser for no
+        arguments, a group's parser for its name alone; else None."""
+        if not self._subcommands():
+            return None
+        if not argv:
+            return self
+        chosen = self._subcommands().get(argv[0]) if len(argv) == 1 else None
+        return chosen if isinstance(chosen, OneLineParser) and chosen._subcommands() else None
 
     def _owner(self, parsed: argparse.Namespace) -> argparse.ArgumentParser:
         """The parser of the subcommand named in ``parsed``, else this one."""
@@ -89,13 +113,15 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from mjx_arm.arm.config import load_arm
     from mjx_arm.demo import run_demo
     from mjx_arm.inputs import check_folder
+    from mjx_arm.urdf.repair_args import given_repair_flags, with_repair_arguments
 
     if args.out:
         check_folder(args.out, "--out")
-    if args.arm:
-        load_arm(args.arm)  # a missing or broken arm file fails before any work
+    arm = None
+    if args.arm or given_repair_flags(args):  # a missing or broken arm file fails here
+        arm = with_repair_arguments(load_arm(args.arm), args)
     enable_compilation_cache()
-    run_demo(args.out, quick=args.quick, arm=args.arm)
+    run_demo(args.out, quick=args.quick, arm=arm)
     return EXIT_OK
 
 
@@ -109,13 +135,16 @@ def _add_demo(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--arm",
-        help="the arm: a URDF or an arm file (.toml/.json) (default: the shipped UR5e-class arm)",
+        help="the arm: a URDF, an arm file (.toml/.json) or a shipped arm's name "
+        "(default: the shipped UR5e-class arm, ur5e)",
     )
+    add_repair_arguments(p, "the arm")
     p.set_defaults(func=cmd_demo)
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every subcommand, in the order of the pipeline."""
+    from mjx_arm import __version__
     from mjx_arm.arm import cli as arm_cli
     from mjx_arm.bench import cli as bench_cli
     from mjx_arm.evaluate import cli as evaluate_cli
@@ -128,6 +157,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="mjx-arm",
         description="Train and check 6-DoF arm control policies (URDF -> MJCF -> MJX + Brax PPO).",
     )
+    parser.add_argument("--version", action="version", version=f"mjx-arm {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for package in (urdf_cli, arm_cli, train_cli, policy_cli, evaluate_cli):
         package.register(sub)

@@ -60,6 +60,8 @@ class DemoSettings:
 
 
 TASK = "reach"  # what the demo trains; the MJCF it writes is this task's model
+# The file that marks a folder as the demo's: the demo replaces its own files only.
+MARKER = ".mjx_arm_demo"
 FULL = DemoSettings(300_000, 6, 50, 10, 640, 480)
 QUICK = DemoSettings(122_880, 4, 20, 2, 320, 240)
 
@@ -95,6 +97,7 @@ def validate_and_convert(
     from mjx_arm.arm.model_io import task_convert_config
     from mjx_arm.task.config import task_config
     from mjx_arm.urdf import to_mjcf
+    from mjx_arm.urdf.errors import report_error
     from mjx_arm.urdf.validate import validate
 
     arm = arm or ArmConfig()
@@ -106,8 +109,8 @@ def validate_and_convert(
         default_limits=arm.default_limits(),
     )
     echo(f"{urdf}: {len(report.errors)} errors, {len(report.warnings)} warnings")
-    if not report.ok:
-        raise DemoError(f"{urdf} does not validate:\n{report.format()}")
+    if not report.ok:  # the line names the fix: a repair flag the demo takes, where one is
+        raise report_error(DemoError, report)
     mjcf = out / f"{urdf.stem}_{task}.xml"
     mjcf.write_text(to_mjcf(urdf, task_convert_config(task_config(task), arm_info(arm))))
     model = mujoco.MjModel.from_xml_path(str(mjcf))
@@ -259,11 +262,47 @@ def default_out() -> Path:
     return Path("runs") / f"demo-{time.strftime('%Y%m%d-%H%M%S')}"
 
 
+def demo_files(urdf_stem: str) -> tuple[str, ...]:
+    """The names the demo writes into its folder (``urdf_stem``: the arm URDF's stem)."""
+    engines = eval_engines()
+    return (
+        f"{urdf_stem}_{TASK}.xml",
+        "run",
+        "policy.npz",
+        "policy.onnx",
+        *(f"eval_{engine}.json" for engine in engines),
+        f"episodes_{REFERENCE_ENGINE}.mp4",
+        f"trajectory_{REFERENCE_ENGINE}.npz",
+        "replay.png",
+        "summary.json",
+    )
+
+
+def claim_out(out: Path, urdf_stem: str) -> None:
+    """Make ``out`` the demo's folder, marked by :data:`MARKER`: refuse a folder that holds a
+    demo run, or a file of a name the demo writes that no demo wrote (no marker there).
+
+    Raises:
+        DemoError: ``out`` holds a run, or a file the demo would replace that is not its own.
+    """
+    if (out / "run" / "checkpoints").exists():
+        raise DemoError(f"{out} already holds a demo run; choose another --out")
+    if not (out / MARKER).is_file():
+        taken = [name for name in demo_files(urdf_stem) if (out / name).exists()]
+        if taken:
+            raise DemoError(
+                f"{out} holds {', '.join(taken)}, which the demo would replace and did not "
+                "write; pass a fresh folder with --out"
+            )
+    out.mkdir(parents=True, exist_ok=True)
+    (out / MARKER).write_text("a folder of mjx-arm demo's outputs\n")
+
+
 def run_demo(
     out: str | Path | None = None,
     quick: bool = False,
     echo: Callable[[str], None] = print,
-    arm: str | Path | None = None,
+    arm: str | Path | ArmConfig | None = None,
 ) -> dict[str, Any]:
     """Run the demo into ``out``; print and return its summary (also in ``out/summary.json``).
 
@@ -275,19 +314,18 @@ def run_demo(
             policy on the arm it recorded: this one.
 
     Raises:
-        DemoError: ``out`` already holds a training run, or the arm's URDF is invalid.
+        DemoError: ``out`` already holds a training run or a file the demo did not write
+            (:func:`claim_out`), or the arm's URDF is invalid.
     """
     from mjx_arm.arm.config import load_arm
 
     arm_config = load_arm(arm) if arm else None
     settings = QUICK if quick else FULL
     out = Path(out) if out is not None else default_out()
-    if (out / "run" / "checkpoints").exists():
-        raise DemoError(f"{out} already holds a demo run; choose another --out")
-    out.mkdir(parents=True, exist_ok=True)
+    claim_out(out, (arm_config or load_arm(None)).urdf_path.stem)
     log = _Log(echo)
     summary: dict[str, Any] = {"out": str(out), "quick": quick, "settings": vars(settings)}
-    summary["arm"] = str(arm) if arm else "shipped"
+    summary["arm"] = arm_config.urdf if arm_config else "shipped"
     summary.update(_steps(out, settings, log, arm_config))
     summary["timings_s"] = log.timings
     summary["wall_seconds"] = round(time.monotonic() - log.start, 1)

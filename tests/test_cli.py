@@ -51,10 +51,20 @@ def test_subcommand_help(command: str, capsys):
     assert f"mjx-arm {command}" in capsys.readouterr().out
 
 
-def test_no_command_is_a_usage_error(capsys):
-    assert _exit_code([]) == 2
-    err = capsys.readouterr().err
-    assert err == "error: the following arguments are required: COMMAND (see: mjx-arm --help)\n"
+@pytest.mark.parametrize(("argv", "names"), [([], ("train", "eval")), (["bench"], ("parity",))])
+def test_a_command_group_without_its_command_prints_its_help(argv, names, capsys):
+    assert _exit_code(argv) == 2  # a usage error, help instead of an error line
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert captured.err.startswith(f"usage: {' '.join(['mjx-arm', *argv])} ")
+    assert "error:" not in captured.err and all(name in captured.err for name in names)
+
+
+def test_version(capsys):
+    from mjx_arm import __version__
+
+    assert _exit_code(["--version"]) == 0
+    assert capsys.readouterr().out == f"mjx-arm {__version__}\n"
 
 
 def test_validate_the_shipped_arm(capfd):
@@ -117,3 +127,20 @@ def test_short_run_says_why_it_has_no_speed() -> None:
     assert "nan" not in line.lower() and "3 or more evaluations" in line and "0.250" in line
     full = SimpleNamespace(**{**vars(short), "compile_seconds": 4.0, "steps_per_second": 1500.0})
     assert "compile 4.0 s, 1,500 steps/s" in done_line(full)
+
+
+def test_a_shipped_arm_is_named_by_its_short_name(tmp_path: Path, capsys, monkeypatch):
+    from mjx_arm.arm.config import load_arm, shipped_arm_names
+    from mjx_arm.paths import asset
+
+    assert {"ur5e", "ur5e_gripper"} <= set(shipped_arm_names())
+    assert not {"table", "target_box"} & set(shipped_arm_names())  # the scene's pieces
+    assert load_arm("ur5e_gripper") == load_arm(asset("ur5e_gripper.urdf"))
+    assert _exit_code(["arm", "ur5e_gripper"]) == EXIT_OK
+    assert "assets/ur5e_gripper.urdf" in capsys.readouterr().out
+    assert _exit_code(["arm", "ur5f"]) == 2
+    assert "give a path, or a shipped arm: ur5e, " in capsys.readouterr().err
+    mine = tmp_path / "ur5e_gripper"  # a file of that name in the working folder wins
+    mine.write_text(ARM_URDF.read_text())
+    monkeypatch.chdir(tmp_path)
+    assert load_arm("ur5e_gripper").urdf == str(mine.resolve())

@@ -8,7 +8,7 @@ from pathlib import Path
 import mujoco
 import pytest
 
-from mjx_arm.cli import EXIT_INVALID, EXIT_OK, main
+from mjx_arm.cli import EXIT_INVALID, EXIT_OK, build_parser, main
 from mjx_arm.replay import rendering_available
 
 
@@ -123,3 +123,45 @@ def test_demo_quick_on_another_arm(tmp_path: Path):
     recorded = load_policy(out / "policy.npz").metadata["arm"]  # the policy records its arm
     assert Path(recorded["config"]["urdf"]).name == "ur5e_gripper.urdf"
     assert set(summary["eval"]) == {"mujoco", "pybullet", "mjx"}
+
+
+def test_demo_takes_the_repair_flags(tmp_path: Path, capsys):
+    """A URDF that needs --repair-inertia: the demo names the flag, takes it, and its first
+    step then validates the repaired arm and writes its model."""
+    from test_repairs import _broken_urdf
+
+    from mjx_arm.arm.config import load_arm
+    from mjx_arm.demo import validate_and_convert
+
+    urdf = _broken_urdf(tmp_path)
+    assert main(["demo", "--quick", "--out", str(tmp_path / "o"), "--arm", str(urdf)]) == (
+        EXIT_INVALID
+    )
+    assert "--repair-inertia" in capsys.readouterr().err
+    args = build_parser().parse_args(["demo", "--arm", str(urdf), "--repair-inertia"])
+    assert args.repair_inertia
+    lines: list[str] = []
+    arm = load_arm(urdf).replace(repair_inertia=True)  # what cmd_demo hands run_demo
+    result = validate_and_convert(tmp_path / "o", lines.append, arm)
+    assert "0 errors" in lines[0] and Path(result["mjcf"]).is_file()
+
+
+@pytest.mark.parametrize("name", ["ur5e_reach.xml", "replay.png", "policy.npz"])
+def test_demo_never_replaces_a_file_it_did_not_write(tmp_path: Path, name: str, capsys):
+    mine = tmp_path / name
+    mine.write_bytes(b"the user's own file")
+    assert main(["demo", "--quick", "--out", str(tmp_path)]) == EXIT_INVALID
+    err = capsys.readouterr().err
+    assert f"holds {name}, which the demo would replace and did not write" in err
+    assert "pass a fresh folder with --out" in err
+    assert mine.read_bytes() == b"the user's own file"
+
+
+def test_demo_takes_a_folder_of_other_files_and_marks_it(tmp_path: Path):
+    from mjx_arm.demo import MARKER, claim_out
+
+    (tmp_path / "notes.txt").write_text("mine")
+    claim_out(tmp_path, "ur5e")  # no name the demo writes: taken
+    assert (tmp_path / MARKER).is_file()
+    (tmp_path / "replay.png").write_bytes(b"from an earlier demo")  # the demo's own folder
+    claim_out(tmp_path, "ur5e")

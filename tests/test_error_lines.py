@@ -71,8 +71,7 @@ def test_an_unknown_option_of_every_subcommand_is_one_line(command: str, capsys)
     assert line.endswith(f"(see: mjx-arm {command} --help)")
 
 
-BAD_ARGVS = [
-    [],
+BAD_ARGVS = [  # ([] and ["bench"] print their help: test_cli.py)
     ["trian"],
     ["convert"],
     ["convert", str(ARM_URDF)],
