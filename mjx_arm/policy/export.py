@@ -154,6 +154,7 @@ def policy_metadata(config: Mapping[str, Any], checkpoint: Path, run_dir: Path) 
         "action_size": n_actions,
         "activation": brax_activation(),
         "distribution": "tanh_normal",
+        "obs_clip": _obs_clip(config),
         "action_scale": task.action_scale,
         "v_max": list(record["v_max"]),
         "joint_speeds": task.joint_speeds(record["v_max"]).tolist(),
@@ -162,6 +163,15 @@ def policy_metadata(config: Mapping[str, Any], checkpoint: Path, run_dir: Path) 
         "ctrl_dt": task.ctrl_dt,
         "config": dict(config),
     }
+
+
+def _obs_clip(config: Mapping[str, Any]) -> float:
+    """The bound training clipped normalised observations to (0: none; runs before the
+    setting had none)."""
+    train = config.get("train")
+    normalizer = train.get("normalizer") if isinstance(train, dict) else None
+    clip = normalizer.get("clip", 0.0) if isinstance(normalizer, dict) else 0.0
+    return float(clip) if isinstance(clip, int | float) and not isinstance(clip, bool) else 0.0
 
 
 def _table(config: Mapping[str, Any], key: str, run_dir: Path) -> dict[str, Any]:

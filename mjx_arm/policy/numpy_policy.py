@@ -134,6 +134,9 @@ def _metadata_problems(meta: Mapping[str, Any]) -> list[str]:
         problems.append(f"unknown activation {activation!r}; known: {sorted(ACTIVATIONS)}")
     if meta.get("distribution", "tanh_normal") != "tanh_normal":
         problems.append(f"unsupported distribution {meta.get('distribution')!r}")
+    clip = meta.get("obs_clip", 0.0)  # files before obs_clip: no clip
+    if not _is_number(clip) or clip < 0:
+        problems.append("obs_clip must be a finite number >= 0")
     if not isinstance(meta.get("config", {}), Mapping):
         problems.append("config must be a table")
     if not isinstance(meta.get("task", ""), str):
@@ -364,10 +367,14 @@ class NumpyPolicy(BasePolicy):
         self.layers = check_arrays(arrays, self.metadata, "the policy")
         self.mean = np.asarray(arrays["obs_mean"], dtype=np.float32)
         self.std = np.asarray(arrays["obs_std"], dtype=np.float32)
+        self.clip = float(self.metadata.get("obs_clip", 0.0))
 
     def distribution_params(self, state: np.ndarray) -> np.ndarray:
-        """Normaliser then MLP: ``(N, 22)`` -> ``(N, 2 * action_size)``, float32."""
+        """Normaliser (clipped to ``+-obs_clip`` where the file sets one) then MLP: ``(N, 22)``
+        -> ``(N, 2 * action_size)``, float32."""
         hidden = (np.asarray(state, dtype=np.float32) - self.mean) / self.std
+        if self.clip > 0:
+            hidden = np.clip(hidden, -self.clip, self.clip)
         last = len(self.layers) - 1
         for i, (kernel, bias) in enumerate(self.layers):
             hidden = hidden @ kernel + bias

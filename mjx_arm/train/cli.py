@@ -52,6 +52,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     enable_compilation_cache()
     config = _run_config(args)
     run_dir = Path(named) if named else _default_run_dir(args, config.task)
+    if getattr(args, "check_repeat", False):
+        return check_repeat(config, run_dir, args.quiet)
     if group.joined:
         config = config.replace(devices=0)  # every process trains on all of its devices
     if group.leader:
@@ -61,6 +63,22 @@ def cmd_train(args: argparse.Namespace) -> int:
         print(done_line(result))
         print(result.compile_summary)
     return EXIT_OK
+
+
+def check_repeat(config: TrainConfig, run_dir: Path, quiet: bool = False) -> int:
+    """Train ``config`` twice, in ``run_dir/repeat-a`` and ``repeat-b``, and print where the
+    two runs part (:func:`~mjx_arm.train.repeat.compare_runs`). Returns 0 when they are
+    identical, 1 when they differ."""
+    from mjx_arm.train.ppo import train
+    from mjx_arm.train.repeat import compare_runs
+
+    runs = [run_dir / "repeat-a", run_dir / "repeat-b"]
+    for i, run in enumerate(runs):
+        print(f"repeat: run {i + 1} of 2 in {run}")
+        print(done_line(train(config, run, quiet=quiet)))
+    report = compare_runs(*runs)
+    print(report.line())
+    return EXIT_OK if report.identical else 1
 
 
 def _run_config(args: argparse.Namespace) -> TrainConfig:
@@ -149,6 +167,8 @@ def config_from_args(args: argparse.Namespace):
         overrides.insert(0, f"task={args.task.lower()}")
     if args.backend:
         overrides.insert(0, f"backend={args.backend}")
+    if getattr(args, "deterministic", False):
+        overrides.append("deterministic=true")
     config = load_config(args.preset or DEFAULT_PRESET, args.config, overrides)
     config = _with_arm(config, args.arm, args.ee_link)
     return config.replace(arm=with_repair_arguments(config.arm, args))
@@ -203,9 +223,11 @@ def done_line(result) -> str:
         speed = f"compile {result.compile_seconds:.1f} s, {result.steps_per_second:,.0f} steps/s"
     else:
         speed = "compile time and steps/s need 3 or more evaluations"
-    return f"done: {result.steps} steps in {result.train_seconds:.1f} s ({speed}), " + (
-        f"eval success {success:.3f}"
-    )
+    evals = f"last eval success {success:.3f} at step {result.steps:,}"
+    if result.best is not None:
+        best, step = result.best
+        evals += f", best {best:.3f} at step {step:,}"
+    return f"done: {result.steps:,} steps in {result.train_seconds:.1f} s ({speed}); {evals}"
 
 
 def _add_config_arguments(p: argparse.ArgumentParser) -> None:
@@ -245,6 +267,12 @@ def _add_config_arguments(p: argparse.ArgumentParser) -> None:
         "chain of revolute joints)",
     )
     add_repair_arguments(p, "the arm, saved with the run")
+    p.add_argument(
+        "--deterministic",
+        action="store_true",
+        help="the same seed, config, GPU model, device count and versions give the same run, "
+        "bit for bit (deterministic XLA ops and Warp atomics; a CPU run always is)",
+    )
     p.add_argument("--config", help="JSON file with training config fields")
     add_set_argument(
         p,
@@ -291,6 +319,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--run-dir", help="run directory (default: runs/TASK-TIMESTAMP)")
     p.add_argument("--resume", metavar="RUN_DIR", help="continue the run in RUN_DIR")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--check-repeat",
+        action="store_true",
+        help="train the config twice (RUN_DIR/repeat-a and repeat-b) and report the first "
+        "step where the runs differ (exit 0: identical, 1: they differ); give a short budget "
+        "with --set num_timesteps=N",
+    )
     _add_host_arguments(p)
     p.set_defaults(func=cmd_train)
     w = sub.add_parser(

@@ -23,12 +23,20 @@ from mjx_arm.paths import asset
 from mjx_arm.settings import check_range, check_types, config_fields, set_path, split_setting
 from mjx_arm.task.config import TaskConfig, task_config
 from mjx_arm.task.registry import get_task, is_task, task_names
+from mjx_arm.train.normalizer import NormalizerConfig
+from mjx_arm.train.schedule import ScheduleConfig
 from mjx_arm.train.task_settings import set_task_field, task_changes
 
 PARTITIONS = ("auto", "xla", "per_device")
 
 # Nested sections of the config: name -> type (``--set physics.impl=warp``).
-SECTIONS = {"physics": PhysicsConfig, "randomization": RandomizationConfig, "arm": ArmConfig}
+SECTIONS = {
+    "physics": PhysicsConfig,
+    "randomization": RandomizationConfig,
+    "arm": ArmConfig,
+    "schedule": ScheduleConfig,
+    "normalizer": NormalizerConfig,
+}
 
 # Adam's update of a weight is about learning_rate in size whatever the gradient; the networks'
 # weights start near 0.1, so a rate above 1 can never train.
@@ -57,7 +65,9 @@ class TrainConfig:
         num_updates_per_batch: epochs over each rollout batch (the seed's n_epochs = 10).
         learning_rate, discounting, gae_lambda, clipping_epsilon, vf_loss_coefficient,
             max_grad_norm, entropy_cost, reward_scaling: PPO settings.
+        schedule: how the learning rate moves (constant, or adapted to a KL target).
         normalize_observations: running mean/std normalisation of observations.
+        normalizer: its std floor and clip.
         policy_hidden, value_hidden: MLP layer sizes.
         num_evals: evaluations over the run (metrics are written at each).
         num_eval_envs: envs per evaluation (one episode each).
@@ -73,6 +83,8 @@ class TrainConfig:
             with ``params_step`` in the checkpoint's meta.json, so the run's policy is the
             best it evaluated rather than wherever PPO drifted last.
         seed: PRNG seed.
+        deterministic: the same seed, config, GPU model and versions give the same run, bit
+            for bit (:mod:`mjx_arm.train.determinism`: deterministic XLA ops and Warp atomics).
         devices: local devices to train on (0: all of them). The env batch is split evenly
             over them, so ``num_envs`` and ``batch_size`` must be multiples of the count.
         partition: how the batched physics is spread over the devices: "xla" (XLA partitions
@@ -101,7 +113,9 @@ class TrainConfig:
     max_grad_norm: float = 0.5
     entropy_cost: float = 1e-3
     reward_scaling: float = 0.1
+    schedule: ScheduleConfig = field(default_factory=ScheduleConfig)
     normalize_observations: bool = True
+    normalizer: NormalizerConfig = field(default_factory=NormalizerConfig)
     policy_hidden: tuple[int, ...] = (128, 128, 128)
     value_hidden: tuple[int, ...] = (256, 256, 256)
     num_evals: int = 10
@@ -111,6 +125,7 @@ class TrainConfig:
     stop_at_success: float = 0.0
     keep_best: bool = True
     seed: int = 0
+    deterministic: bool = False
     devices: int = 0
     partition: str = "auto"
 
@@ -218,17 +233,9 @@ class TrainConfig:
                 )
 
 
-_POSITIVE_INTS = (
-    "num_timesteps",
-    "num_envs",
-    "unroll_length",
-    "batch_size",
-    "num_minibatches",
-    "num_updates_per_batch",
-    "num_evals",
-    "num_eval_envs",
-    "checkpoint_every",
-    "env_state_every",
+_POSITIVE_INTS = tuple(
+    "num_timesteps num_envs unroll_length batch_size num_minibatches num_updates_per_batch "
+    "num_evals num_eval_envs checkpoint_every env_state_every".split()
 )
 MAX_BATCH = 2**20  # envs or sequences in one batch: beyond any accelerator's memory
 MAX_LAYER = 2**14  # units in one hidden layer
@@ -238,14 +245,10 @@ MAX_LAYER = 2**14  # units in one hidden layer
 # randomisation.
 SEED = TrainConfig()
 
-# Fastest to a solved task on one GPU. The physics steps 8192 envs at once (Warp's throughput
-# flattens out above that), and each 10-step rollout (81,920 transitions) feeds 4 epochs of 32
-# minibatches: about 1,560 gradient steps per million env steps. An earlier setting took 16
-# sequences of 1,024 per update and 4 epochs (390 gradient steps per million): gentle Touch sat
-# at zero success for 40M+ steps on most seeds. The policy's exploration noise only shrinks
-# with gradient steps, and it must shrink until a press can stay in the 1-50 N band for three
-# steps (docs/tasks/touch.md). Discount 0.97: these tasks end in under 2 s when solved.
-# Runs stop once an evaluation reaches 0.97, so a run ends with a policy at that level.
+# Fastest to a solved task on one GPU: 8192 envs (Warp's throughput flattens out above that),
+# each 10-step rollout (81,920 transitions) feeding 4 epochs of 32 minibatches, about 1,560
+# gradient steps per million env steps (16 minibatches of 1,024 left gentle Touch at zero
+# success for 40M+ steps on most seeds). Discount 0.97: these tasks end in under 2 s when solved.
 FAST = TrainConfig(
     num_timesteps=10_000_000,
     num_envs=8192,

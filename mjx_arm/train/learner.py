@@ -41,6 +41,8 @@ from mjx_arm.inputs import ConfigError
 from mjx_arm.train.config import TrainConfig
 from mjx_arm.train.losses import init_params, loss_and_grad
 from mjx_arm.train.networks import make_networks
+from mjx_arm.train.normalizer import update as normalizer_update
+from mjx_arm.train.schedule import adapted_rate, current_rate, make_optimizer, with_rate
 
 ENV_AXIS = "envs"
 # What the loss needs from each transition besides the policy's extras (Brax's names).
@@ -144,9 +146,7 @@ class Learner:
         self.observation_size = observation_size
         self.network = make_networks(config, observation_size, action_size)
         self.make_policy = ppo_networks.make_inference_fn(self.network)
-        self.optimizer = optax.chain(
-            optax.clip_by_global_norm(config.max_grad_norm), optax.adam(config.learning_rate)
-        )
+        self.optimizer = make_optimizer(config.learning_rate, config.max_grad_norm, config.schedule)
         self._loss_and_grad = loss_and_grad(config, self.network)
         self.replicated = NamedSharding(mesh, P())
 
@@ -235,7 +235,9 @@ class Learner:
 
     def _update_step(self, env_steps: int, state: TrainingState, data: Any, key_sgd: jax.Array):
         """The PPO update of one training step on ``data``: ``(state, mean metrics)``."""
-        normalizer = running_statistics.update(state.normalizer_params, data.observation)
+        normalizer = normalizer_update(
+            state.normalizer_params, data.observation, self.config.normalizer
+        )
         (optimizer_state, params, _), metrics = jax.lax.scan(
             functools.partial(self._sgd_epoch, data=data, normalizer=normalizer),
             (state.optimizer_state, state.params, key_sgd),
@@ -290,13 +292,21 @@ class Learner:
         return (optimizer_state, params, key), metrics
 
     def _minibatch_step(self, carry: tuple, batch: Any, normalizer: Any):
-        """One gradient step on one minibatch ``(batch_size, T, ...)``."""
+        """One gradient step on one minibatch ``(batch_size, T, ...)``; with an adaptive
+        schedule the rate is first moved by the minibatch's KL (:mod:`mjx_arm.train.schedule`)."""
         optimizer_state, params, key = carry
         key, key_loss = jax.random.split(key)
         (_, metrics), grads = self._loss_and_grad(params, normalizer, batch, key_loss)
+        schedule = self.config.schedule
+        if schedule.adaptive:
+            rate = current_rate(optimizer_state, self.config.learning_rate)
+            optimizer_state = with_rate(
+                optimizer_state, adapted_rate(rate, metrics["kl_mean"], schedule)
+            )
+        metrics["learning_rate"] = current_rate(optimizer_state, self.config.learning_rate)
+        metrics["grad_norm"] = optax.global_norm(grads)
         updates, optimizer_state = self.optimizer.update(grads, optimizer_state)
         params = optax.apply_updates(params, updates)
-        metrics["learning_rate"] = jnp.asarray(self.config.learning_rate)
         return (optimizer_state, params, key), metrics
 
 

@@ -4,10 +4,10 @@ exported policy against the training code."""
 from __future__ import annotations
 
 from brax.training import types as brax_types
-from brax.training.acme import running_statistics
 from brax.training.agents.ppo import networks as ppo_networks
 
 from mjx_arm.train.config import TrainConfig
+from mjx_arm.train.normalizer import normalize_fn
 
 
 def make_networks(
@@ -21,7 +21,7 @@ def make_networks(
         action_size: size of the action (6 for the shipped arm).
     """
     normalize = (
-        running_statistics.normalize
+        normalize_fn(config.normalizer)
         if config.normalize_observations
         else brax_types.identity_observation_preprocessor
     )

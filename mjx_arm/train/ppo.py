@@ -52,6 +52,7 @@ class TrainResult:
     steps_per_second: float
     compile_report: dict[str, Any] = field(default_factory=dict)
     compile_summary: str = ""
+    best: tuple[float, int] | None = None  # (success, step) of the best evaluation
 
 
 def full_config(
@@ -117,6 +118,10 @@ def train(
             without a usable checkpoint.
     """
     config.validate()
+    if config.deterministic:  # before any device is touched (mjx_arm.train.determinism)
+        from mjx_arm.train.determinism import enable
+
+        enable()
     config = devices_for_physics(config)
     config.check_devices(len(train_devices(config.devices)))
     setup = resolve_run_task(config)
@@ -274,6 +279,7 @@ def _result(
         sps,
         record,
         report.summary(),
+        progress.best[:2] if progress.best is not None else None,
     )
 
 

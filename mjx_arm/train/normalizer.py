@@ -1,0 +1,64 @@
+"""The running observation normaliser's settings: a floor under each dimension's std, and a
+bound on the normalised value.
+
+Brax's normaliser divides by each observation dimension's running std, floored at 1e-6, and
+leaves the result unbounded. A dimension that is constant in the first rollouts (the wrist
+force of Touch reads exactly 0 until the tool first touches something) then gets a std of 1e-6,
+and the first reading of a few newtons enters the policy as millions: the rollout's actions
+saturate and the measured KL between the rollout's policy and the updated one reaches 1e13
+(measured on the C MuJoCo backend), which also drives a KL-adaptive learning rate to its floor.
+A std floor and a clip bound the damage; the policy file records the clip so that exported
+policies normalise exactly as training did.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from brax.training.acme import running_statistics
+
+from mjx_arm.settings import check_range, check_types, config_fields
+
+# Brax's own floor: what a run without these settings used.
+BRAX_STD_FLOOR = 1e-6
+
+
+@dataclass(frozen=True)
+class NormalizerConfig:
+    """Observation normalisation. Saved with every run (``config.json``).
+
+    Attributes:
+        std_floor: the smallest std a dimension is divided by (Brax: 1e-6).
+        clip: normalised values are clipped to ``[-clip, clip]``; 0 leaves them unbounded.
+    """
+
+    std_floor: float = BRAX_STD_FLOOR
+    clip: float = 0.0
+
+    def __post_init__(self) -> None:
+        check_types(self, "normalizer.")
+        check_range(self, ("std_floor",), above=0, prefix="normalizer.")
+        check_range(self, ("clip",), low=0, prefix="normalizer.")
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict."""
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> NormalizerConfig:
+        """Inverse of :meth:`to_dict`; unknown keys are an error."""
+        return cls(**config_fields(cls, data, "normalizer config"))
+
+
+def normalize_fn(config: NormalizerConfig) -> Callable:
+    """Brax's ``running_statistics.normalize`` with this config's clip (none when 0)."""
+    return functools.partial(running_statistics.normalize, max_abs_value=config.clip or None)
+
+
+def update(state: Any, observations: Any, config: NormalizerConfig) -> Any:
+    """The normaliser's state after ``observations`` ``(..., obs_size)``, its std floored."""
+    return running_statistics.update(state, observations, std_min_value=config.std_floor)
