@@ -84,6 +84,8 @@ def train_seed(
     items = [f"task={config.task}", f"backend={config.backend}", *overrides, f"seed={seed}"]
     if config.devices:
         items.append(f"devices={config.devices}")
+    if config.deterministic:
+        items.append("deterministic=true")
     train_config = load_config(config.preset, None, items)
     if config.arm:
         train_config = train_config.replace(arm=load_arm(config.arm))
@@ -122,6 +124,7 @@ def seed_command(
     command = [sys.executable, "-m", "mjx_arm.cli", "train", "--task", config.task]
     command += ["--preset", config.preset, "--backend", config.backend, "--devices", "1"]
     command += ["--set", *overrides, f"seed={seed}", "--run-dir", str(run_dir), "--quiet"]
+    command += ["--deterministic"] if config.deterministic else []
     return command + (["--arm", config.arm] if config.arm else [])
 
 

@@ -52,6 +52,9 @@ class SeedsConfig:
         "on a CPU: local devices of each seed's run",
     )
     arm: str = setting("", "the arm: a URDF or an arm file (.toml/.json); '' is the shipped arm")
+    deterministic: bool = setting(
+        False, "train each seed deterministically (train --deterministic): a seed repeats"
+    )
 
     def __post_init__(self) -> None:
         check_range(self, "threshold", low=0, high=1)
@@ -81,3 +84,12 @@ class SeedRun:
     @property
     def solved(self) -> bool:
         return self.time_to_threshold is not None
+
+    @property
+    def last_success(self) -> float:
+        """The success of the run's last evaluation (NaN without one)."""
+        return self.curve[-1][2] if self.curve else float("nan")
+
+    def collapsed(self, threshold: float) -> bool:
+        """Whether the run reached ``threshold`` and its last evaluation fell below it."""
+        return self.best_success >= threshold and not self.last_success >= threshold

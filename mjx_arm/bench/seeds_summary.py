@@ -53,15 +53,42 @@ def quartiles(times: list[float | None]) -> dict[str, float | None]:
     return out
 
 
+def wilson_interval(successes: int, trials: int, z: float = 1.96) -> tuple[float, float]:
+    """The Wilson score interval of a binomial proportion (95% for ``z`` 1.96): what the solve
+    rate of the population of seeds lies in, given ``successes`` of ``trials`` seeds."""
+    if trials == 0:
+        return (math.nan, math.nan)
+    p, n = successes / trials, trials
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return (max(0.0, centre - half), min(1.0, centre + half))
+
+
+def percentile_time(times: list[float | None], q: float) -> float | None:
+    """The ``q`` quantile (0-1) of times, a missing time counting as infinite (None there)."""
+    if not times:
+        return None
+    values = np.sort([math.inf if t is None else t for t in times])
+    value = float(np.quantile(values, q, method="higher"))
+    return value if math.isfinite(value) else None
+
+
 def summarize(runs: list[SeedRun], threshold: float) -> dict[str, Any]:
-    """Fraction of seeds solved, time quartiles over all seeds and over the warm ones."""
+    """Fraction of seeds solved with its 95% interval, time quartiles and 90th percentile over
+    all seeds and over the warm ones, steps to the threshold, and the runs that collapsed
+    (reached the threshold, then ended under it)."""
     times = [r.time_to_threshold for r in runs]
     steps = [r.steps_to_threshold for r in runs if r.steps_to_threshold is not None]
+    solved = sum(r.solved for r in runs)
     return {
         "threshold": threshold,
         "seeds": len(runs),
-        "solved": sum(r.solved for r in runs),
-        "fraction_solved": sum(r.solved for r in runs) / len(runs) if runs else math.nan,
+        "solved": solved,
+        "fraction_solved": solved / len(runs) if runs else math.nan,
+        "fraction_solved_ci95": wilson_interval(solved, len(runs)),
+        "collapsed": [r.seed for r in runs if r.collapsed(threshold)],
+        "time_to_threshold_p90_all": percentile_time(times, 0.9),
+        "time_to_threshold_p90_warm": percentile_time(times[1:], 0.9),
         "time_to_threshold_all": quartiles(times),
         "time_to_threshold_warm": quartiles(times[1:]),
         "median_steps_to_threshold": float(np.median(steps)) if steps else None,
@@ -107,9 +134,16 @@ def _quartile_text(q: dict[str, float | None]) -> str:
 
 def summary_lines(summary: dict[str, Any]) -> str:
     """The summary as markdown list lines."""
+    low, high = summary.get("fraction_solved_ci95", (math.nan, math.nan))
+    p90 = summary.get("time_to_threshold_p90_warm")
+    collapsed = summary.get("collapsed", [])
     return (
         f"- solved (evaluation success >= {summary['threshold']:.2f}): "
-        f"{summary['solved']} of {summary['seeds']} seeds\n"
+        f"{summary['solved']} of {summary['seeds']} seeds (95% interval {low:.2f}-{high:.2f}); "
+        f"collapsed (reached it, ended under it): {len(collapsed)}"
+        f"{' (seeds ' + ', '.join(map(str, collapsed)) + ')' if collapsed else ''}\n"
+        f"- 90th percentile of the time to {summary['threshold']:.2f}, warm seeds: "
+        f"{'not reached' if p90 is None else f'{p90:.1f} s'}\n"
         f"- time to {summary['threshold']:.2f}, all seeds: "
         f"{_quartile_text(summary['time_to_threshold_all'])}\n"
         f"- time to {summary['threshold']:.2f}, warm seeds (all but the first): "
