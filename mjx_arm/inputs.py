@@ -188,8 +188,11 @@ def read_bytes(
     """The bytes of a regular file of at most ``max_bytes``, opened by :func:`open_regular`
     (same arguments and errors); a file that grows past the bound while read is refused too."""
     with open_regular(path, what, max_bytes, within=within) as f:
-        try:
-            data = f.read(max_bytes + 1)
+        try:  # the size at opening first: read(n) allocates n bytes however short the file
+            size = os.fstat(f.fileno()).st_size
+            data = f.read(size + 1)
+            if len(data) > size:  # it grew since: on, up to the bound
+                data += f.read(max(0, max_bytes + 1 - len(data)))
         except OSError as err:
             raise InputFileError(f"{what} {str(path)!r} cannot be read: {err.strerror}") from err
     if len(data) > max_bytes:
