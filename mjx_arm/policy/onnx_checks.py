@@ -17,6 +17,13 @@ A shape that inference cannot bound is refused rather than guessed: a size compu
 operator without a shape function (a custom domain), or a control-flow operator (``Loop``, ``If``,
 ``Scan``: their trip count and body shapes come from data). An exported policy is a plain MLP, all
 of whose shapes are fixed but the batch, so none of these rules refuses it.
+
+Around these checks: before the file is parsed, its encoding is walked and a graph of too many
+nodes or initializers, too much structure, or model-local functions is refused
+(:mod:`mjx_arm.policy.onnx_wire`); once parsed, every value must be defined once and every output
+named once, tensors must be stored in the file (no external data), a sparse initializer's dense
+size counts against the element limit; and once shapes are inferred, the graph's estimated work
+per action must be under :data:`mjx_arm.policy.onnx_work.MAX_WORK_PER_ROW`.
 """
 
 from __future__ import annotations
@@ -25,6 +32,8 @@ import json
 from typing import Any
 
 from mjx_arm.policy.numpy_policy import PolicyFileError, check_metadata
+from mjx_arm.policy.onnx_wire import OnnxGraphLimitError
+from mjx_arm.policy.onnx_work import check_work
 
 METADATA_KEY = "mjx_arm"
 ACTION, PARAMS = "action", "distribution_params"
@@ -37,10 +46,6 @@ MAX_FILE_BYTES = 256 * 2**20
 
 class OnnxContractError(PolicyFileError):
     """An ONNX graph whose inputs or outputs are not those of the policy contract."""
-
-
-class OnnxGraphLimitError(PolicyFileError):
-    """An ONNX graph with a tensor above the element limit or of a shape that cannot be bounded."""
 
 
 class OnnxRunError(PolicyFileError):
@@ -153,6 +158,8 @@ def _value_shapes(model: Any) -> dict[str, list | None]:
         shapes[v.name] = _dims(tensor.shape) if has_shape else None
     for t in graph.initializer:
         shapes[t.name] = list(t.dims)
+    for sparse in graph.sparse_initializer:  # its dense size: onnxruntime densifies it
+        shapes[sparse.values.name] = list(sparse.dims)
     return shapes
 
 
@@ -173,13 +180,8 @@ def _row_elements(dims: list | None, batch: str | int | None) -> int | None:
     return count if batches <= 1 else None
 
 
-def check_bounded(onnx: Any, model: Any, input_name: str, source: str) -> None:
-    """Refuse a graph with control flow, a tensor whose shape inference cannot bound, or one of
-    more than :data:`MAX_TENSOR_ELEMENTS` elements per batch row (see the module docstring).
-
-    Raises:
-        OnnxGraphLimitError: naming the tensor, its shape, and the limit.
-    """
+def _refuse_subgraphs(onnx: Any, model: Any, source: str) -> None:
+    """Refuse a node that runs a subgraph (``Loop``, ``If``, ``Scan``: control flow)."""
     graph_attr = (onnx.AttributeProto.GRAPH, onnx.AttributeProto.GRAPHS)
     for node in model.graph.node:
         if any(a.type in graph_attr for a in node.attribute):
@@ -187,6 +189,21 @@ def check_bounded(onnx: Any, model: Any, input_name: str, source: str) -> None:
                 f"{source}: operator {node.op_type} {node.name or list(node.output)} runs a "
                 "subgraph, whose sizes come from data; a policy graph has no control flow"
             )
+
+
+def check_bounded(onnx: Any, model: Any, input_name: str, source: str) -> int:
+    """Refuse a graph with control flow, a tensor whose shape inference cannot bound, one of
+    more than :data:`MAX_TENSOR_ELEMENTS` elements per batch row, or more estimated work per
+    action than :data:`~mjx_arm.policy.onnx_work.MAX_WORK_PER_ROW` (see the module docstring).
+
+    Returns:
+        The graph's estimated work per batch row (:func:`~mjx_arm.policy.onnx_work.check_work`).
+
+    Raises:
+        OnnxGraphLimitError: naming the tensor, its shape, and the limit; OnnxWorkLimitError
+            (one) naming the estimated work and the heaviest node.
+    """
+    _refuse_subgraphs(onnx, model, source)
     try:
         inferred = onnx.shape_inference.infer_shapes(model, strict_mode=True, data_prop=True)
     except Exception as exc:  # onnx raises InferenceError, ValidationError, RuntimeError
@@ -196,17 +213,57 @@ def check_bounded(onnx: Any, model: Any, input_name: str, source: str) -> None:
     symbolic = len(input_dims) == 2 and isinstance(input_dims[0], str)
     batch = input_dims[0] if symbolic else None
     names = list(shapes) + [o for n in inferred.graph.node for o in n.output if o]
-    for name in dict.fromkeys(names):
-        dims = shapes.get(name)
-        rows = _row_elements(dims, batch)
-        if rows is None:
-            raise OnnxGraphLimitError(
-                f"{source}: tensor {name!r} has a shape that cannot be bounded before running "
-                f"({dims if dims is not None else 'unknown'}): sizes computed from data, an "
-                "operator without shape inference, or a second batch dimension are refused"
-            )
-        if rows > MAX_TENSOR_ELEMENTS:
-            raise OnnxGraphLimitError(
-                f"{source}: tensor {name!r} of shape {dims} holds {rows} elements per batch row, "
-                f"over the limit of {MAX_TENSOR_ELEMENTS} (2^24); refused before allocation"
+    rows = {name: _bounded_rows(shapes.get(name), batch, name, source) for name in names}
+    return check_work(inferred.graph.node, shapes, lambda n: rows.get(n, 0), source)
+
+
+def _bounded_rows(dims: list | None, batch: str | None, name: str, source: str) -> int:
+    """Elements per batch row of the tensor ``name`` of shape ``dims``, checked.
+
+    Raises:
+        OnnxGraphLimitError: a shape that cannot be bounded, or over the element limit.
+    """
+    rows = _row_elements(dims, batch)
+    if rows is None:
+        raise OnnxGraphLimitError(
+            f"{source}: tensor {name!r} has a shape that cannot be bounded before running "
+            f"({dims if dims is not None else 'unknown'}): sizes computed from data, an "
+            "operator without shape inference, or a second batch dimension are refused"
+        )
+    if rows > MAX_TENSOR_ELEMENTS:
+        raise OnnxGraphLimitError(
+            f"{source}: tensor {name!r} of shape {dims} holds {rows} elements per batch row, "
+            f"over the limit of {MAX_TENSOR_ELEMENTS} (2^24); refused before allocation"
+        )
+    return rows
+
+
+def check_definitions(onnx: Any, model: Any, source: str) -> None:
+    """Every graph output named once, every value defined once (by an input, an initializer
+    or one node), every tensor's numbers in the file itself (no external data).
+
+    Raises:
+        OnnxContractError: an output named twice; PolicyFileError: a value defined twice, or
+            a tensor stored outside the file.
+    """
+    graph = model.graph
+    outputs = [v.name for v in graph.output]
+    twice = sorted({n for n in outputs if outputs.count(n) > 1})
+    if twice:
+        raise OnnxContractError(f"{source}: the graph names the output(s) {twice} more than once")
+    tensors = [*graph.initializer, *(s.values for s in graph.sparse_initializer)]
+    names = {t.name for t in graph.initializer}
+    defined = [v.name for v in graph.input if v.name not in names] + [t.name for t in tensors]
+    defined += [o for node in graph.node for o in node.output if o]
+    seen: set[str] = set()
+    for name in defined:
+        if name in seen:
+            raise PolicyFileError(f"{source}: the graph defines the value {name!r} twice")
+        seen.add(name)
+    external = onnx.TensorProto.EXTERNAL
+    for tensor in tensors:
+        if tensor.data_location == external or len(tensor.external_data):
+            raise PolicyFileError(
+                f"{source}: tensor {tensor.name!r} keeps its numbers in another file; a policy "
+                "file holds its own (export it again: mjx-arm export RUN_DIR -o POLICY)"
             )

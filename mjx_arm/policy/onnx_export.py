@@ -19,9 +19,10 @@ from typing import Any
 
 import numpy as np
 
-from mjx_arm.inputs import InputError, write_atomic
+from mjx_arm.inputs import InputError, read_bytes, write_atomic
 from mjx_arm.policy import onnx_checks as checks
 from mjx_arm.policy.numpy_policy import BasePolicy, PolicyFileError
+from mjx_arm.policy.onnx_wire import check_encoding
 
 OPSET = 17
 IR_VERSION = 8  # readable by onnxruntime >= 1.10
@@ -131,30 +132,31 @@ def write_onnx(path: str | Path, arrays: Mapping[str, np.ndarray], metadata: Map
 
 
 def read_checked_model(path: str | Path) -> tuple[bytes, dict[str, Any], str, int]:
-    """Read an ONNX policy and check it before onnxruntime opens it
-    (:mod:`mjx_arm.policy.onnx_checks`: contract, element limit, bounded shapes).
+    """Read an ONNX policy and check it before onnxruntime opens it: the file's size (read
+    under :data:`~mjx_arm.policy.onnx_checks.MAX_FILE_BYTES`), its encoding before parsing
+    (:mod:`mjx_arm.policy.onnx_wire`: entries, structure, no local functions), then the parsed
+    graph (:mod:`mjx_arm.policy.onnx_checks`: definitions, contract, element limit, bounded
+    shapes, estimated work).
 
     Returns:
         (the file's bytes, its checked metadata, the input's name, the input's rank).
 
     Raises:
-        PolicyFileError: not an ONNX policy; OnnxContractError: other inputs or outputs;
-            OnnxGraphLimitError: a tensor above the limit or of unbounded shape.
+        OversizedInputError: a file over the size limit; PolicyFileError: not an ONNX policy;
+            OnnxContractError: other inputs or outputs; OnnxGraphLimitError: over a limit
+            (OnnxSizeError before parsing, OnnxWorkLimitError on the work) or a shape that
+            cannot be bounded.
     """
     onnx = _require("onnx")
     path = Path(path)
-    size = path.stat().st_size
-    if size > checks.MAX_FILE_BYTES:
-        raise checks.OnnxGraphLimitError(
-            f"{path} is {size} bytes, over the limit of {checks.MAX_FILE_BYTES // 2**20} MiB "
-            "for an ONNX policy"
-        )
-    data = path.read_bytes()
+    data = read_bytes(path, "ONNX policy", checks.MAX_FILE_BYTES)
+    check_encoding(onnx, data, str(path))
     try:
         model = onnx.load_model_from_string(data)
     except Exception as exc:  # protobuf's DecodeError and onnx's own errors
         raise PolicyFileError(f"cannot read {path} as an ONNX model: {exc}") from exc
     metadata = checks.model_metadata(model, str(path))
+    checks.check_definitions(onnx, model, str(path))
     name, rank = checks.check_contract(onnx, model, metadata, str(path))
     checks.check_bounded(onnx, model, name, str(path))
     return data, metadata, name, rank
