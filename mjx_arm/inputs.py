@@ -286,12 +286,15 @@ def read_npz_members(
     max_member_bytes: int,
     max_total_bytes: int,
     error: type[Exception] = InputFileError,
+    max_member_elements: int | None = None,
 ) -> dict[str, Any]:
     """The arrays of an ``.npz`` file, read without trusting it: only the members ``wanted``
     accepts (None: all), each checked before anything is allocated (its size in the zip
     directory, then the shape and dtype its ``.npy`` header declares) against
     ``max_member_bytes``, and all the read members together against ``max_total_bytes``;
-    no pickled objects.
+    no pickled objects. ``max_member_elements`` (None: no limit) bounds each member's element
+    count too, from its header: a reader that widens what it reads (uint8 or bool to float64
+    takes eight times the bytes) bounds what the bytes alone do not.
 
     Raises:
         OversizedInputError: a member or the total over its limit (with its declared size).
@@ -307,7 +310,9 @@ def read_npz_members(
             infos = [i for i in infos if wanted is None or wanted(i.filename[:-4])]
             _check_sizes(path, what, infos, max_member_bytes, max_total_bytes)
             return {
-                i.filename[:-4]: _read_member(archive, i, path, what, max_member_bytes, error)
+                i.filename[:-4]: _read_member(
+                    archive, i, path, what, max_member_bytes, error, max_member_elements
+                )
                 for i in infos
             }
     except (OversizedInputError, error):
@@ -337,10 +342,17 @@ def _check_sizes(path: Path, what: str, infos: list, member_limit: int, total_li
 
 
 def _read_member(
-    archive: Any, info: Any, path: Path, what: str, limit: int, error: type[Exception]
+    archive: Any,
+    info: Any,
+    path: Path,
+    what: str,
+    limit: int,
+    error: type[Exception],
+    max_elements: int | None = None,
 ) -> Any:
     """One ``.npy`` member, allocated only once its header's shape and dtype fit the bytes the
-    zip directory states (already checked against the limits); pickled objects are refused."""
+    zip directory states (already checked against the limits) and its element count
+    ``max_elements``; pickled objects are refused."""
     import numpy as np
     from numpy.lib import format as npy
 
@@ -352,6 +364,11 @@ def _read_member(
         if dtype.hasobject:
             raise error(f"{path}: {member} holds pickled Python objects, refused")
         declared = math.prod(shape) * dtype.itemsize
+        if max_elements is not None and math.prod(shape) > max_elements:
+            raise OversizedInputError(
+                f"{path}: {member} (shape {shape}, {dtype}) holds {math.prod(shape):,} elements, "
+                f"over the limit of {max_elements:,} for a {what}: a damaged or hostile file"
+            )
         if declared > limit:
             raise _too_big(path, what, f"{member} (shape {shape}, {dtype})", declared, limit)
         if declared > info.file_size:
