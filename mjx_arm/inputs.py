@@ -21,6 +21,7 @@ import json
 import math
 import os
 import stat
+import sys
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -132,10 +133,9 @@ class OversizedInputError(InputFileError, ValueError):
 def open_regular(
     path: str | Path, what: str, max_bytes: int, *, within: str | Path | None = None
 ) -> BinaryIO:
-    """``path`` opened for reading in binary, only if it is a regular file of at most
-    ``max_bytes`` bytes: a FIFO, a device (``/dev/zero``), a socket or a folder is refused
-    before a byte is read (opened non-blocking, then ``fstat``), so nothing blocks or reads
-    without end. The size is the one at opening; :func:`read_bytes` also bounds the read.
+    """``path`` opened to read (binary) only if it is a regular file of at most ``max_bytes``:
+    a FIFO, a device (``/dev/zero``), a socket or a folder is refused before a byte is read
+    (opened non-blocking, then ``fstat``). The size is the one at opening (see read_bytes).
 
     Args:
         path: the file.
@@ -287,14 +287,12 @@ def read_npz_members(
     max_total_bytes: int,
     error: type[Exception] = InputFileError,
     max_member_elements: int | None = None,
+    within: str | Path | None = None,
 ) -> dict[str, Any]:
-    """The arrays of an ``.npz`` file, read without trusting it: only the members ``wanted``
-    accepts (None: all), each checked before anything is allocated (its size in the zip
-    directory, then the shape and dtype its ``.npy`` header declares) against
-    ``max_member_bytes``, and all the read members together against ``max_total_bytes``;
-    no pickled objects. ``max_member_elements`` (None: no limit) bounds each member's element
-    count too, from its header: a reader that widens what it reads (uint8 or bool to float64
-    takes eight times the bytes) bounds what the bytes alone do not.
+    """The arrays of an ``.npz`` (opened by :func:`open_regular`, ``within`` as there), read
+    without trust: the members ``wanted`` accepts (None: all), each checked before allocation
+    (zip size, ``.npy`` header) against ``max_member_bytes`` and ``max_member_elements`` (None:
+    none; for readers that widen uint8), all against ``max_total_bytes``; no pickles.
 
     Raises:
         OversizedInputError: a member or the total over its limit (with its declared size).
@@ -305,7 +303,8 @@ def read_npz_members(
 
     path = Path(path)
     try:
-        with zipfile.ZipFile(path) as archive:
+        stream = open_regular(path, what, sys.maxsize, within=within)
+        with stream, zipfile.ZipFile(stream) as archive:
             infos = [i for i in archive.infolist() if i.filename.endswith(".npy")]
             infos = [i for i in infos if wanted is None or wanted(i.filename[:-4])]
             _check_sizes(path, what, infos, max_member_bytes, max_total_bytes)
@@ -317,6 +316,8 @@ def read_npz_members(
             }
     except (OversizedInputError, error):
         raise
+    except InputFileError as err:  # missing, or not a regular file: as open_regular names it
+        raise error(str(err)) from err
     except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as err:
         raise error(
             f"cannot read {path} as a {what} .npz (truncated or not such a file?): "

@@ -10,11 +10,13 @@ import pytest
 
 from mjx_arm.inputs import (
     InputFileError,
+    MiB,
     MissingInputError,
     OversizedInputError,
     open_regular,
     read_bytes,
     read_json_object,
+    read_npz_members,
     read_text,
 )
 
@@ -58,3 +60,11 @@ def test_within_refuses_a_link_out_of_the_folder_and_keeps_one_inside(tmp_path: 
         read_json_object(run / "out.json", "config", within=run)
     assert read_json_object(run / "out.json", "config") == {}  # no folder given: followed
     assert read_json_object(run / "link.json", "config", within=run) == {"a": 1}
+
+
+def test_an_npz_that_is_a_fifo_is_refused_unread(tmp_path: Path) -> None:
+    """zipfile would block on opening a FIFO with no writer."""
+    fifo = tmp_path / "resume.npz"
+    os.mkfifo(fifo)
+    with pytest.raises(InputFileError, match="not a regular file"):
+        read_npz_members(fifo, "resume state", max_member_bytes=MiB, max_total_bytes=MiB)
