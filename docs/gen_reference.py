@@ -13,7 +13,7 @@ from typing import Any
 from mjx_arm.inputs import ConfigError
 from mjx_arm.task import get_task, task_names
 from mjx_arm.task.observation import obs_layout
-from mjx_arm.train.config import PRESETS, preset_config
+from mjx_arm.train.presets import PRESETS, preset_config
 
 TASK_FIELDS = (
     "ctrl_dt", "sim_dt", "action_scale", "episode_steps", "success_distance", "force_band",

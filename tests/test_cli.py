@@ -122,11 +122,31 @@ def test_short_run_says_why_it_has_no_speed() -> None:
         compile_seconds=nan,
         steps_per_second=nan,
         metrics={"eval/episode_success": 0.25},
+        best=None,
     )
     line = done_line(short)
     assert "nan" not in line.lower() and "3 or more evaluations" in line and "0.250" in line
     full = SimpleNamespace(**{**vars(short), "compile_seconds": 4.0, "steps_per_second": 1500.0})
     assert "compile 4.0 s, 1,500 steps/s" in done_line(full)
+
+
+def test_the_done_line_gives_the_last_and_the_best_evaluation() -> None:
+    """A run that ended under its best says both, with their steps."""
+    from types import SimpleNamespace
+
+    from mjx_arm.train.cli import done_line
+
+    result = SimpleNamespace(
+        steps=30_900_000,
+        train_seconds=80.0,
+        compile_seconds=30.0,
+        steps_per_second=7.4e5,
+        metrics={"eval/episode_success": 0.0},
+        best=(0.963, 26_600_000),
+    )
+    line = done_line(result)
+    assert "last eval success 0.000 at step 30,900,000" in line
+    assert "best 0.963 at step 26,600,000" in line
 
 
 def test_a_shipped_arm_is_named_by_its_short_name(tmp_path: Path, capsys, monkeypatch):

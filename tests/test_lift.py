@@ -14,7 +14,7 @@ from mjx_arm.task import lift as lift_lib
 from mjx_arm.task.grip import ObjectStart
 from mjx_arm.task.lift import LIFT_HEIGHT, lift_config
 from mjx_arm.task.observation import obs_size
-from mjx_arm.train.config import preset_config
+from mjx_arm.train.presets import preset_config
 from mjx_arm.urdf.scene_shapes import CUBE_HALF
 
 GRIPPER = str(asset("ur5e_gripper.urdf"))

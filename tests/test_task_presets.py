@@ -17,7 +17,8 @@ import pytest
 
 from mjx_arm.inputs import ConfigError
 from mjx_arm.task import task_config
-from mjx_arm.train.config import PRESETS, TrainConfig, preset_config
+from mjx_arm.train.config import TrainConfig
+from mjx_arm.train.presets import PRESETS, preset_config
 
 REPO = Path(__file__).resolve().parents[1].as_posix()
 SNAPSHOT = json.loads((Path(__file__).parent / "data" / "preset_configs.json").read_text())

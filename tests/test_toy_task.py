@@ -141,7 +141,7 @@ def test_the_toy_scene_is_built_from_its_declaration() -> None:
 
 
 def test_the_toy_budget_reaches_its_preset() -> None:
-    from mjx_arm.train.config import FAST, preset_config
+    from mjx_arm.train.presets import FAST, preset_config
 
     cpu = preset_config("cpu", "hover")
     assert (

@@ -136,7 +136,7 @@ def test_presets_take_the_task_changes() -> None:
     """Touch gets its own budget in the fast and cpu presets; Reach keeps the preset's base;
     a later ``task=`` override decides which task's preset applies, and --set wins over both."""
     from mjx_arm.task.touch import TOUCH
-    from mjx_arm.train.config import CPU, FAST
+    from mjx_arm.train.presets import CPU, FAST
 
     touch = load_config("fast", None, ["task=touch"])
     assert touch.num_timesteps == TOUCH.budgets["fast"].num_timesteps

@@ -125,7 +125,7 @@ def _default_run_dir(args: argparse.Namespace, task: str | None = None) -> Path:
     """``runs/TASK-TIMESTAMP`` (the task of the flags, else of the preset)."""
     import time
 
-    from mjx_arm.train.config import preset_config
+    from mjx_arm.train.presets import preset_config
 
     task = task or args.task or preset_config(args.preset or DEFAULT_PRESET).task
     return Path("runs") / f"{task}-{time.strftime('%Y%m%d-%H%M%S')}"
@@ -171,6 +171,7 @@ def config_from_args(args: argparse.Namespace):
         overrides.append("deterministic=true")
     config = load_config(args.preset or DEFAULT_PRESET, args.config, overrides)
     config = _with_arm(config, args.arm, args.ee_link)
+    config = config.scaled_for_devices(args.devices or 1)  # --devices N grows the batch
     return config.replace(arm=with_repair_arguments(config.arm, args))
 
 

@@ -16,13 +16,12 @@ from pathlib import Path
 from typing import Any
 
 from mjx_arm.arm.config import ArmConfig
-from mjx_arm.envs.physics_config import LATENCY, SELECTED, PhysicsConfig, RandomizationConfig
+from mjx_arm.envs.physics_config import PhysicsConfig, RandomizationConfig
 from mjx_arm.inputs import MAX_SEED, ConfigError, MissingInputError, read_json_object
-from mjx_arm.names import BACKENDS, PRESET_NAMES
-from mjx_arm.paths import asset
+from mjx_arm.names import BACKENDS
 from mjx_arm.settings import check_range, check_types, config_fields, set_path, split_setting
 from mjx_arm.task.config import TaskConfig, task_config
-from mjx_arm.task.registry import get_task, is_task, task_names
+from mjx_arm.task.registry import is_task, task_names
 from mjx_arm.train.normalizer import NormalizerConfig
 from mjx_arm.train.schedule import ScheduleConfig
 from mjx_arm.train.task_settings import set_task_field, task_changes
@@ -87,6 +86,9 @@ class TrainConfig:
             for bit (:mod:`mjx_arm.train.determinism`: deterministic XLA ops and Warp atomics).
         devices: local devices to train on (0: all of them). The env batch is split evenly
             over them, so ``num_envs`` and ``batch_size`` must be multiples of the count.
+        scale_with_devices: ``train --devices N`` (N > 1) multiplies ``num_envs``,
+            ``batch_size`` and ``num_timesteps`` by N (:meth:`scaled_for_devices`): each GPU
+            keeps the preset's envs and minibatch share, and a run takes as many updates.
         partition: how the batched physics is spread over the devices: "xla" (XLA partitions
             the jitted env graph), "per_device" (``shard_map``: each device steps its own
             envs; needed for MuJoCo Warp, whose kernels XLA cannot partition) or "auto"
@@ -127,6 +129,7 @@ class TrainConfig:
     seed: int = 0
     deterministic: bool = False
     devices: int = 0
+    scale_with_devices: bool = True
     partition: str = "auto"
 
     def __post_init__(self) -> None:
@@ -153,6 +156,17 @@ class TrainConfig:
     def samples_per_update(self) -> int:
         """Env steps consumed by one PPO update (one rollout batch)."""
         return self.batch_size * self.num_minibatches * self.unroll_length
+
+    def scaled_for_devices(self, count: int) -> TrainConfig:
+        """The config for ``count`` devices: envs, minibatch size and budget times ``count``
+        where ``scale_with_devices`` (else unchanged)."""
+        if not self.scale_with_devices or count < 2:
+            return self
+        return self.replace(
+            num_envs=self.num_envs * count,
+            batch_size=self.batch_size * count,
+            num_timesteps=self.num_timesteps * count,
+        )
 
     def replace(self, **changes: Any) -> TrainConfig:
         """A copy with fields changed."""
@@ -233,98 +247,20 @@ class TrainConfig:
                 )
 
 
-_POSITIVE_INTS = tuple(
-    "num_timesteps num_envs unroll_length batch_size num_minibatches num_updates_per_batch "
-    "num_evals num_eval_envs checkpoint_every env_state_every".split()
+_POSITIVE_INTS = (
+    "num_timesteps",
+    "num_envs",
+    "unroll_length",
+    "batch_size",
+    "num_minibatches",
+    "num_updates_per_batch",
+    "num_evals",
+    "num_eval_envs",
+    "checkpoint_every",
+    "env_state_every",
 )
 MAX_BATCH = 2**20  # envs or sequences in one batch: beyond any accelerator's memory
 MAX_LAYER = 2**14  # units in one hidden layer
-
-# The seed document's PPO settings mapped onto a GPU batch, on the seed document's task (Touch
-# succeeds on the first in-band step; no force or speed terms: PRESET_VARIANTS) and without
-# randomisation.
-SEED = TrainConfig()
-
-# Fastest to a solved task on one GPU: 8192 envs (Warp's throughput flattens out above that),
-# each 10-step rollout (81,920 transitions) feeding 4 epochs of 32 minibatches, about 1,560
-# gradient steps per million env steps (16 minibatches of 1,024 left gentle Touch at zero
-# success for 40M+ steps on most seeds). Discount 0.97: these tasks end in under 2 s when solved.
-FAST = TrainConfig(
-    num_timesteps=10_000_000,
-    num_envs=8192,
-    unroll_length=10,
-    batch_size=256,
-    num_minibatches=32,
-    num_updates_per_batch=4,
-    learning_rate=1e-3,
-    discounting=0.97,
-    entropy_cost=1e-3,
-    num_evals=21,
-    num_eval_envs=1024,
-    stop_at_success=0.97,
-)
-
-# A small CPU run: the README's main job and the CI learning test (Reach); Touch takes a larger
-# batch and budget (its Task.budgets).
-CPU = TrainConfig(
-    num_timesteps=300_000,
-    num_envs=64,
-    unroll_length=10,
-    batch_size=64,
-    num_minibatches=8,
-    num_updates_per_batch=4,
-    learning_rate=1e-3,
-    discounting=0.97,
-    num_evals=6,
-    num_eval_envs=64,
-)
-
-# ``fast`` trained under a randomisation chosen by measurement, per task (Task.budgets):
-# Touch under :data:`mjx_arm.envs.physics_config.LATENCY`, Lift under ``SELECTED`` (why: see
-# there). Evaluation during training stays nominal. Its own preset, beside ``fast`` rather than
-# in it: it costs more than the 1.5x of ``fast``'s steps to solve that a default may cost
-# (Touch about 2.4x, Lift about 1.6x; docs/robustness.md). Reach takes LATENCY, not measured.
-ROBUST_FAST = FAST.replace(randomization=LATENCY)
-
-PRESETS = {"seed": SEED, "fast": FAST, "cpu": CPU, "robust": ROBUST_FAST}
-assert tuple(PRESETS) == PRESET_NAMES
-
-# The task variant a preset picks (the task's default variant elsewhere).
-PRESET_VARIANTS = {"seed": "seed"}
-
-# The training draws a task's budget names (mjx_arm.task.spec.Budget.randomization).
-RANDOMIZATIONS = {"latency": LATENCY, "selected": SELECTED}
-
-
-def preset_config(name: str, task: str | None = None, variant: str | None = None) -> TrainConfig:
-    """Preset ``name`` for ``task`` (default: the preset's own task), with the task's budget
-    for that preset (:attr:`mjx_arm.task.spec.Task.budgets`), its default arm and its preset
-    of ``variant`` (None: the variant the preset picks, else the task's default).
-
-    Raises:
-        ConfigError: an unknown preset or task, or a variant the task does not have.
-    """
-    if name not in PRESETS:
-        raise ConfigError(f"unknown preset {name!r}; choose one of {sorted(PRESETS)}")
-    config = PRESETS[name]
-    task = task or config.task
-    if not is_task(task):
-        raise ConfigError(f"task must be one of {list(task_names())}, got {task!r}")
-    spec = get_task(task)
-    budget = spec.budgets.get(name)
-    changes = budget.changes() if budget else {}
-    if "randomization" in changes:
-        changes["randomization"] = _randomization(changes["randomization"])
-    if spec.default_arm:
-        changes["arm"] = ArmConfig(urdf=str(asset(spec.default_arm)))
-    settings = task_changes(task, None, {"variant": variant or PRESET_VARIANTS.get(name)})
-    return config.replace(task=task, task_settings=settings, **changes)
-
-
-def _randomization(name: str) -> RandomizationConfig:
-    if name not in RANDOMIZATIONS:
-        raise ConfigError(f"unknown randomization {name!r}; choose one of {list(RANDOMIZATIONS)}")
-    return RANDOMIZATIONS[name]
 
 
 def apply_overrides(config: TrainConfig, items: list[str]) -> TrainConfig:
@@ -378,6 +314,8 @@ def load_config(
         data = data.get("train", data)
         if not isinstance(data, dict):
             raise ConfigError(f"config file {str(file)!r}: 'train' must be a table of fields")
+    from mjx_arm.train.presets import preset_config
+
     overrides = overrides or []
     variant = _named({}, overrides, "task.variant")
     config = preset_config(preset, _named(data, overrides, "task"), variant)

@@ -1,0 +1,103 @@
+"""Training presets: named starting points of a :class:`~mjx_arm.train.config.TrainConfig`.
+
+``--preset`` picks one; a task changes a preset's budget for itself (its ``budgets``), and
+``--set`` changes any field on top (:func:`mjx_arm.train.config.load_config`). What each preset
+is for, and how ``fast`` was chosen, is in docs/training.md.
+"""
+
+from __future__ import annotations
+
+from mjx_arm.arm.config import ArmConfig
+from mjx_arm.envs.physics_config import LATENCY, SELECTED, RandomizationConfig
+from mjx_arm.inputs import ConfigError
+from mjx_arm.names import PRESET_NAMES
+from mjx_arm.paths import asset
+from mjx_arm.task.registry import get_task, is_task, task_names
+from mjx_arm.train.config import TrainConfig
+from mjx_arm.train.task_settings import task_changes
+
+# The seed document's PPO settings mapped onto a GPU batch, on the seed document's task (Touch
+# succeeds on the first in-band step; no force or speed terms: PRESET_VARIANTS) and without
+# randomisation.
+SEED = TrainConfig()
+
+# Fastest to a solved task on one GPU: 8192 envs (Warp's throughput flattens out above that),
+# each 10-step rollout (81,920 transitions) feeding 4 epochs of 32 minibatches, about 1,560
+# gradient steps per million env steps (16 minibatches of 1,024 left gentle Touch at zero
+# success for 40M+ steps on most seeds). Discount 0.97: these tasks end in under 2 s when solved.
+FAST = TrainConfig(
+    num_timesteps=10_000_000,
+    num_envs=8192,
+    unroll_length=10,
+    batch_size=256,
+    num_minibatches=32,
+    num_updates_per_batch=4,
+    learning_rate=1e-3,
+    discounting=0.97,
+    entropy_cost=1e-3,
+    num_evals=21,
+    num_eval_envs=1024,
+    stop_at_success=0.97,
+)
+
+# A small CPU run: the README's main job and the CI learning test (Reach); Touch takes a larger
+# batch and budget (its Task.budgets).
+CPU = TrainConfig(
+    num_timesteps=300_000,
+    num_envs=64,
+    unroll_length=10,
+    batch_size=64,
+    num_minibatches=8,
+    num_updates_per_batch=4,
+    learning_rate=1e-3,
+    discounting=0.97,
+    num_evals=6,
+    num_eval_envs=64,
+)
+
+# ``fast`` trained under a randomisation chosen by measurement, per task (Task.budgets):
+# Touch under :data:`mjx_arm.envs.physics_config.LATENCY`, Lift under ``SELECTED`` (why: see
+# there). Evaluation during training stays nominal. Its own preset, beside ``fast`` rather than
+# in it: it costs more than the 1.5x of ``fast``'s steps to solve that a default may cost
+# (Touch about 2.4x, Lift about 1.6x; docs/robustness.md). Reach takes LATENCY, not measured.
+ROBUST_FAST = FAST.replace(randomization=LATENCY)
+
+PRESETS = {"seed": SEED, "fast": FAST, "cpu": CPU, "robust": ROBUST_FAST}
+assert tuple(PRESETS) == PRESET_NAMES
+
+# The task variant a preset picks (the task's default variant elsewhere).
+PRESET_VARIANTS = {"seed": "seed"}
+
+# The training draws a task's budget names (mjx_arm.task.spec.Budget.randomization).
+RANDOMIZATIONS = {"latency": LATENCY, "selected": SELECTED}
+
+
+def preset_config(name: str, task: str | None = None, variant: str | None = None) -> TrainConfig:
+    """Preset ``name`` for ``task`` (default: the preset's own task), with the task's budget
+    for that preset (:attr:`mjx_arm.task.spec.Task.budgets`), its default arm and its preset
+    of ``variant`` (None: the variant the preset picks, else the task's default).
+
+    Raises:
+        ConfigError: an unknown preset or task, or a variant the task does not have.
+    """
+    if name not in PRESETS:
+        raise ConfigError(f"unknown preset {name!r}; choose one of {sorted(PRESETS)}")
+    config = PRESETS[name]
+    task = task or config.task
+    if not is_task(task):
+        raise ConfigError(f"task must be one of {list(task_names())}, got {task!r}")
+    spec = get_task(task)
+    budget = spec.budgets.get(name)
+    changes = budget.changes() if budget else {}
+    if "randomization" in changes:
+        changes["randomization"] = _randomization(changes["randomization"])
+    if spec.default_arm:
+        changes["arm"] = ArmConfig(urdf=str(asset(spec.default_arm)))
+    settings = task_changes(task, None, {"variant": variant or PRESET_VARIANTS.get(name)})
+    return config.replace(task=task, task_settings=settings, **changes)
+
+
+def _randomization(name: str) -> RandomizationConfig:
+    if name not in RANDOMIZATIONS:
+        raise ConfigError(f"unknown randomization {name!r}; choose one of {list(RANDOMIZATIONS)}")
+    return RANDOMIZATIONS[name]
