@@ -19,6 +19,7 @@
 #   bash benchmarks/gpu_suite.sh jobs         # one seeds run per ARM:TASK:SEED item of JOBS
 #   bash benchmarks/gpu_suite.sh scaling-gpus # 1, 2, 4 GPUs: steps/s per GPU, Touch time to 0.95
 #   bash benchmarks/gpu_suite.sh seeds-gpus   # Touch seeds one per GPU against one after another
+#   bash benchmarks/gpu_suite.sh campaign     # one seeds benchmark per GPU at once (JOBS), bounded
 #
 # Results (JSON and markdown) go to $OUT (default: benchmarks/results/gpu); the runs, their logs
 # and the exported policies (.npz) to $WORK (default: runs/gpu_suite), never under
@@ -124,6 +125,26 @@ cold-arm)
     --arm "$ROBOTS/${ARM:-ur_description/urdf/ur5_robot.urdf}" --arm-tasks reach touch \
     --child-timeout 170 --results-dir "$OUT" --name cold_start_fast_arm \
     2>&1 | tee "$WORK/log_cold_arm.txt"
+  ;;
+campaign)
+  # One `bench seeds` per GPU, all at once: JOBS holds one "GPU|NAME|TASK|SEEDS|SETS" per line
+  # (SETS: a --set list, "-" for the preset as shipped). Each stops after LIMIT seconds; the
+  # runs' metrics, configs and start-up reports, and every report, go into $OUT/NAME.tar.gz.
+  while IFS='|' read -r gpu name task seeds sets; do
+    [ -z "$gpu" ] && continue
+    set_args=(); [ "$sets" != "-" ] && read -r -a set_args <<< "--set $sets"
+    CUDA_VISIBLE_DEVICES=$gpu timeout "${LIMIT:-500}" python3 -m mjx_arm.cli bench seeds \
+      --task "$task" --preset "${PRESET:-fast}" --seeds "$seeds" "${set_args[@]}" \
+      --name "$name" --runs "$WORK/$name" --out "$WORK/$name/report" ${EXTRA:-} \
+      > "$WORK/$name.log" 2>&1 &
+  done <<< "${JOBS:?one GPU|NAME|TASK|SEEDS|SETS per line}"
+  wait
+  for dir in "$WORK"/*/; do
+    name=$(basename "$dir")
+    (cd "$WORK" && find "$name" "$name.log" \( -name metrics.csv -o -name config.json \
+      -o -name compile.json -o -name '*.log' -o -path '*/report/*' \) -print0 2>/dev/null \
+      | tar --null -czf "$OUT/$name.tar.gz" -T -)
+  done
   ;;
 sweep)
   # Candidate changes to the fast preset, each trained on SWEEP_SEEDS (exploration: the
