@@ -108,3 +108,147 @@ def _reference_message(action: Any) -> str:
     with pytest.raises(InvalidActionError) as info:
         check_action(action, (-np.ones(6, np.float32), np.ones(6, np.float32)))
     return str(info.value)
+
+
+# --------------------------------------------------------------------------- reset options
+
+CPU_ENGINES = [p for p in ENGINES if p.values[0] != "batch"]
+BAD_TARGETS = {
+    "nan": [np.nan, np.nan, np.nan],
+    "inf": [np.inf, 0.0, 0.3],
+    "two numbers": [0.5, 0.1],
+    "matrix": [[0.5, 0.1, 0.3]],
+    "strings": ["0.5", "0.1", "0.3"],
+    "complex": np.full(3, 0.5 + 1j),
+    "out of the observation's bound": [5.0, 0.0, 0.3],
+}
+
+
+@pytest.mark.parametrize("engine", [p.values[0] for p in CPU_ENGINES])
+def test_reset_targets_the_contract_cannot_take_are_refused(engine: str) -> None:
+    """NaN gave NaN observations; each bad target is now a named error, and the env still
+    resets to a good target afterwards (every observation inside the space)."""
+    from mjx_arm.envs.guards import InvalidResetOptionError
+
+    made = _make(engine)
+    try:
+        for name, target in BAD_TARGETS.items():
+            with pytest.raises(InvalidResetOptionError, match=r"options\['target'\]"):
+                made.reset(seed=0, options={"target": target})
+            assert issubclass(InvalidResetOptionError, ValueError), name
+        obs, info = made.reset(seed=0, options={"target": (0.5, 0.1, 0.04)})
+        assert made.observation_space.contains(obs)
+        assert np.isfinite(info["distance"])
+    finally:
+        made.close()
+
+
+def test_reset_object_options_of_a_gripper_task_are_checked() -> None:
+    from mjx_arm.envs.guards import InvalidResetOptionError
+    from mjx_arm.envs.mujoco_env import MujocoArmEnv
+    from mjx_arm.paths import asset
+
+    made = MujocoArmEnv(task_config("lift"), asset("ur5e_gripper.urdf"))
+    bad = {
+        "object_mass": [np.nan, 0.0, -1.0, "heavy"],
+        "object_friction": [np.inf, -0.5],
+        "object_quat": [np.zeros(4), [1.0, 0.0, 0.0], [np.nan, 0, 0, 1]],
+    }
+    try:
+        for key, values in bad.items():
+            for value in values:
+                with pytest.raises(InvalidResetOptionError, match=rf"options\['{key}'\]"):
+                    made.reset(seed=0, options={key: value})
+        obs, _ = made.reset(seed=0, options={"object_mass": 0.1, "object_friction": 0.8})
+        assert made.observation_space.contains(obs)
+    finally:
+        made.close()
+
+
+def test_make_vec_of_zero_envs_is_a_clear_error() -> None:
+    from mjx_arm.inputs import ConfigError
+
+    for bad in (0, -2, 1.5, True):
+        with pytest.raises(ConfigError, match=r"num_envs must be a whole number >= 1, got"):
+            gym.make_vec("mjx_arm/Touch-v0", num_envs=bad, vectorization_mode="vector_entry_point")
+
+
+# --------------------------------------------------------------------------- threads
+
+
+@pytest.mark.parametrize("engine", [p.values[0] for p in CPU_ENGINES])
+def test_a_second_thread_inside_the_env_is_a_named_error(engine: str, monkeypatch) -> None:
+    """Thread A is held inside ``step`` (its physics waits on an event); thread B's ``step``,
+    ``reset`` and ``render`` raise ConcurrentEnvUseError at once; A then finishes its step."""
+    import threading
+
+    from mjx_arm.envs.guards import ConcurrentEnvUseError
+
+    made = _make(engine)
+    made.reset(seed=0)
+    inside, release = threading.Event(), threading.Event()
+    physics_step = made._physics_step
+
+    def held(n: int) -> None:
+        inside.set()
+        assert release.wait(30)
+        physics_step(n)
+
+    monkeypatch.setattr(made, "_physics_step", held)
+    results: list = []
+    first = threading.Thread(target=lambda: results.append(made.step(np.zeros(6))))
+    first.start()
+    try:
+        assert inside.wait(30)
+        for call in (lambda: made.step(np.zeros(6)), lambda: made.reset(seed=1), made.render):
+            with pytest.raises(ConcurrentEnvUseError, match=r"while another thread is inside"):
+                call()
+    finally:
+        release.set()
+        first.join(30)
+    assert len(results) == 1 and made.observation_space.contains(results[0][0])
+    assert issubclass(ConcurrentEnvUseError, RuntimeError)
+    made.close()
+
+
+def test_two_threads_stepping_one_env_do_not_crash_the_process() -> None:
+    """Two threads step one CPU MuJoCo env 2,000 times each (mj_step releases the GIL, so they
+    overlap): before the guard this crashed the interpreter (SIGSEGV / SIGBUS); now each
+    overlapping call is a ConcurrentEnvUseError and the process exits normally."""
+    import subprocess
+    import sys
+    import textwrap
+
+    script = textwrap.dedent(
+        """
+        import threading
+        import numpy as np
+        from mjx_arm.envs.guards import ConcurrentEnvUseError
+        from mjx_arm.envs.mujoco_env import MujocoArmEnv
+
+        env = MujocoArmEnv()
+        env.reset(seed=0)
+        counts = {"steps": 0, "refused": 0}
+
+        def work():
+            for _ in range(2000):
+                try:
+                    env.step(np.zeros(6))
+                    counts["steps"] += 1
+                except ConcurrentEnvUseError:
+                    counts["refused"] += 1
+
+        threads = [threading.Thread(target=work) for _ in range(2)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        print(counts["steps"], counts["refused"])
+        """
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    steps, refused = map(int, done.stdout.split())
+    assert steps + refused == 4000 and steps >= 2000

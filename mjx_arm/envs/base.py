@@ -16,6 +16,10 @@ After ``close()`` every call that needs the physics (``reset``, ``step``, ``appl
 Gymnasium's vector envs do: ``close()`` frees the engine (PyBullet's server is gone), so an env
 that went on working in one engine and failed in another would hide a use-after-close bug.
 ``close()`` itself may be called again.
+
+One thread at a time: a second thread that calls ``reset``, ``step``, ``render``,
+``get_ee_pose`` or ``apply_action`` while another is inside raises ``ConcurrentEnvUseError``
+(a RuntimeError, :mod:`mjx_arm.envs.guards`) instead of crashing the engine.
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ import numpy as np
 from mjx_arm.arm.config import ArmConfig
 from mjx_arm.arm.info import ArmInfo
 from mjx_arm.arm.resolve import ArmTask, as_arm_task
+from mjx_arm.envs.guards import SingleThreadEnv, reset_overrides
 from mjx_arm.envs.scalar.codegen import Scorer, step_scorers
 from mjx_arm.envs.scalar.state import ScalarState, finite
 from mjx_arm.envs.scalar.step import StepInput
@@ -77,7 +82,7 @@ class PhysicsReading(NamedTuple):
 _Evaluation = tuple[dict[str, np.ndarray], float, bool, dict[str, Any]]
 
 
-class BaseRobotEnv(gym.Env):
+class BaseRobotEnv(SingleThreadEnv, gym.Env):
     """An arm task with the contract's spaces, reward and success rule.
 
     Args:
@@ -178,9 +183,11 @@ class BaseRobotEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Start an episode: home pose plus noise, a new target, both from the seeded generator.
 
-        ``options``: ``target`` (the target body's position, m) and, for a gripper task,
-        ``object_quat`` (the object's orientation, w x y z), ``object_mass`` (kg) and
-        ``object_friction`` replace the drawn ones.
+        ``options``: ``target`` (the target body's position, m, within the observation's
+        +-2 m) and, for a gripper task, ``object_quat`` (the object's orientation, w x y z),
+        ``object_mass`` (kg) and ``object_friction`` replace the drawn ones; a value of the
+        wrong shape, NaN or out of range raises
+        :class:`~mjx_arm.envs.guards.InvalidResetOptionError`.
         """
         self._ensure_open("reset")
         super().reset(seed=seed)
@@ -189,11 +196,7 @@ class BaseRobotEnv(gym.Env):
         qpos = sampling.initial_qpos(np, u[:n], self.task)
         body = sampling.target_body_pos(np, u[n:], self.task)
         obj = self.task_spec.object_start(np, u[n:], self.task)
-        if options and "target" in options:
-            body = np.asarray(options["target"], dtype=np.float64)
-        if obj is not None and options:
-            changes = {k: options[f"object_{k}"] for k in obj._fields if f"object_{k}" in options}
-            obj = obj._replace(**{k: np.asarray(v, dtype=np.float64) for k, v in changes.items()})
+        body, obj = reset_overrides(options, body, obj)
         self._physics_reset(qpos, body, obj)
         self._reading = reading = self._physics_read()
         _, state, d, force = self._measure(reading)

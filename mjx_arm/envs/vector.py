@@ -32,6 +32,7 @@ from mjx_arm.envs.backend import (
 from mjx_arm.envs.base import InvalidActionError, check_action
 from mjx_arm.envs.mjx_physics import batched_where
 from mjx_arm.envs.physics_config import PhysicsConfig
+from mjx_arm.inputs import ConfigError
 from mjx_arm.task import observation as obs_lib
 from mjx_arm.task.config import TaskConfig, task_config
 
@@ -50,6 +51,7 @@ class ArmVectorEnv(VectorEnv):
             the shipped arm); None with an ArmTask.
 
     Raises:
+        ConfigError: ``num_envs`` is not a whole number >= 1 (a ValueError).
         InsufficientMemoryError: the batch would not fit in the host's available memory
             (checked before anything of the batch is allocated).
     """
@@ -67,7 +69,7 @@ class ArmVectorEnv(VectorEnv):
         physics: PhysicsConfig | None = None,
         arm=None,
     ) -> None:
-        self.num_envs = num_envs
+        self.num_envs = check_num_envs(num_envs)
         self.env = make_batched_env(task, backend, physics, batch_size=num_envs, arm=arm)
         self.task, n = self.env.task, self.env.action_size
         if state_on_host(self.env):
@@ -189,6 +191,17 @@ class ArmVectorEnv(VectorEnv):
             "diverged": m["diverged"] > 0,
         }
         return info
+
+
+def check_num_envs(num_envs: Any) -> int:
+    """``num_envs`` checked to be a whole number >= 1 (Python's or numpy's; not a bool).
+
+    Raises:
+        ConfigError: anything else (zero envs have nothing to step or stack).
+    """
+    if isinstance(num_envs, bool) or not isinstance(num_envs, int | np.integer) or num_envs < 1:
+        raise ConfigError(f"num_envs must be a whole number >= 1, got {num_envs!r}")
+    return int(num_envs)
 
 
 def make_vector_env(
