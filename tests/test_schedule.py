@@ -1,0 +1,118 @@
+"""The KL-adaptive learning rate, the normaliser's floor and clip, and the device scaling, each
+against hand-worked values."""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from mjx_arm.inputs import ConfigError
+from mjx_arm.train.config import load_config
+from mjx_arm.train.normalizer import NormalizerConfig, normalize_fn, update
+from mjx_arm.train.schedule import (
+    ScheduleConfig,
+    adapted_rate,
+    current_rate,
+    make_optimizer,
+    with_rate,
+)
+
+ADAPTIVE = ScheduleConfig(kind="adaptive", desired_kl=0.01, factor=1.5, minimum=1e-5, maximum=1e-2)
+
+
+@pytest.mark.parametrize(
+    ("kl", "expected"),
+    [
+        (0.05, 1e-3 / 1.5),  # above 2 x target: divided
+        (0.02, 1e-3),  # at the band's edge: kept
+        (0.01, 1e-3),  # on target: kept
+        (0.004, 1e-3 * 1.5),  # below target / 2: multiplied
+        (0.0, 1e-3),  # nothing measured: kept
+    ],
+)
+def test_the_kl_rule_moves_the_rate_by_its_factor(kl: float, expected: float) -> None:
+    rate = adapted_rate(jnp.float32(1e-3), jnp.float32(kl), ADAPTIVE)
+    assert float(rate) == pytest.approx(expected, rel=1e-6)
+
+
+def test_the_adaptive_rate_stays_within_its_bounds() -> None:
+    assert float(adapted_rate(jnp.float32(1.2e-5), jnp.float32(1.0), ADAPTIVE)) == pytest.approx(
+        1e-5
+    )
+    assert float(adapted_rate(jnp.float32(9e-3), jnp.float32(1e-4), ADAPTIVE)) == pytest.approx(
+        1e-2
+    )
+
+
+def test_the_rate_lives_in_the_optimiser_state_and_steps_with_it() -> None:
+    params = {"w": jnp.ones(3)}
+    grads = {"w": jnp.full(3, 0.1)}
+    optimizer = make_optimizer(1e-3, 0.5, ADAPTIVE)
+    state = optimizer.init(params)
+    assert float(current_rate(state, 1e-3)) == pytest.approx(1e-3)
+    state = with_rate(state, 2e-3)
+    assert float(current_rate(state, 1e-3)) == pytest.approx(2e-3)
+    updates, _ = optimizer.update(grads, state)
+    # Adam's first step moves each weight by about the rate
+    np.testing.assert_allclose(np.asarray(updates["w"]), -2e-3, rtol=1e-3)
+
+
+def test_a_constant_schedule_keeps_adams_plain_state() -> None:
+    optimizer = make_optimizer(1e-3, 0.5, ScheduleConfig())
+    state = optimizer.init({"w": jnp.ones(2)})
+    assert not hasattr(state[1], "hyperparams")
+    assert float(current_rate(state, 3e-4)) == pytest.approx(3e-4)
+
+
+def test_bad_schedule_and_normalizer_settings_are_named() -> None:
+    with pytest.raises(ConfigError, match=r"schedule\.kind"):
+        load_config("cpu", None, ["schedule.kind=cosine"])
+    with pytest.raises(ConfigError, match=r"schedule\.factor"):
+        load_config("cpu", None, ["schedule.factor=1"])
+    with pytest.raises(ConfigError, match=r"normalizer\.clip"):
+        load_config("cpu", None, ["normalizer.clip=-1"])
+
+
+def test_the_std_floor_and_clip_bound_a_dimension_that_was_constant() -> None:
+    """A dimension that read 0 in every first observation (a wrist force before any touch):
+    Brax's floor (1e-6) turns a 5 N reading into millions, a floor of 0.01 and a clip of 10
+    into 10."""
+    from brax.training.acme import running_statistics, specs
+
+    spec = specs.Array((2,), jnp.dtype("float32"))
+    first = jnp.array([[0.0, 1.0], [0.0, -1.0]] * 8)
+    touch = jnp.array([[5.0, 0.0]])
+    brax = NormalizerConfig()
+    state = update(running_statistics.init_state(spec), first, brax)
+    assert float(normalize_fn(brax)(touch, state)[0, 0]) > 1e6
+    bounded = NormalizerConfig(std_floor=0.01, clip=10.0)
+    state = update(running_statistics.init_state(spec), first, bounded)
+    assert float(normalize_fn(bounded)(touch, state)[0, 0]) == pytest.approx(10.0)
+
+
+def test_devices_scale_the_envs_minibatch_and_budget() -> None:
+    config = load_config("fast", None, ["task=touch"])
+    two = config.scaled_for_devices(2)
+    assert (two.num_envs, two.batch_size) == (2 * config.num_envs, 2 * config.batch_size)
+    assert two.num_timesteps == 2 * config.num_timesteps
+    assert two.num_minibatches == config.num_minibatches
+    assert config.scaled_for_devices(1) == config
+    kept = config.replace(scale_with_devices=False)
+    assert kept.scaled_for_devices(4) == kept
+
+
+def test_the_seeds_summary_gives_an_interval_and_collapses() -> None:
+    from mjx_arm.bench.seeds_config import SeedRun
+    from mjx_arm.bench.seeds_summary import summarize, wilson_interval
+
+    low, high = wilson_interval(29, 30)
+    assert low == pytest.approx(0.8333, abs=1e-3) and high == pytest.approx(0.9941, abs=1e-3)
+    nan = float("nan")
+    solved = SeedRun(1, 0.97, 0.97, 10, 20.0, 10, 30.0, 5.0, 1e5, [(20.0, 10, 0.97)])
+    collapsed = SeedRun(2, 0.96, 0.96, 10, 25.0, 20, 40.0, 5.0, 1e5, [(25.0, 10, 0.96)])
+    collapsed.curve.append((40.0, 20, 0.0))
+    failed = SeedRun(3, 0.1, 0.1, None, None, 20, 50.0, nan, nan, [(50.0, 20, 0.1)])
+    summary = summarize([solved, collapsed, failed], 0.95)
+    assert summary["solved"] == 2 and summary["collapsed"] == [2]
+    assert summary["time_to_threshold_p90_all"] is None  # the failed seed is in the top 10%
