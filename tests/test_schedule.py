@@ -116,3 +116,25 @@ def test_the_seeds_summary_gives_an_interval_and_collapses() -> None:
     summary = summarize([solved, collapsed, failed], 0.95)
     assert summary["solved"] == 2 and summary["collapsed"] == [2]
     assert summary["time_to_threshold_p90_all"] is None  # the failed seed is in the top 10%
+
+
+def test_an_exported_policy_clips_as_training_did(tmp_path) -> None:
+    """A policy file with ``obs_clip``: the numpy runtime and the ONNX graph both clip the
+    normalised observation, and agree (float32 rounding) on an observation far outside it."""
+    pytest.importorskip("onnxruntime")
+    import onnx
+
+    from input_fuzz.corpus import build
+    from mjx_arm.policy import load
+    from mjx_arm.policy.numpy_policy import read_npz, write_npz
+    from mjx_arm.policy.onnx_export import build_model
+
+    arrays, meta = read_npz(build(tmp_path / "corpus").policy)
+    meta = {**meta, "obs_clip": 2.0}
+    onnx.save(build_model(arrays, meta), str(tmp_path / "clipped.onnx"))
+    clipped = load(tmp_path / "clipped.onnx")
+    far = np.asarray(arrays["obs_mean"]) + 1e4 * np.asarray(arrays["obs_std"])
+    edge = np.asarray(arrays["obs_mean"]) + 2.0 * np.asarray(arrays["obs_std"])
+    np.testing.assert_allclose(clipped(far), clipped(edge), atol=1e-5)
+    numpy_policy = load(write_npz(tmp_path / "clipped.npz", arrays, meta))
+    np.testing.assert_allclose(numpy_policy(far), clipped(far), atol=1e-5)

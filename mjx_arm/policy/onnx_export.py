@@ -56,7 +56,10 @@ def build_model(arrays: Mapping[str, np.ndarray], metadata: Mapping[str, Any]):
         slice_ends=np.array([action_size], np.int64),
         slice_axes=np.array([1], np.int64),
     )
-    nodes = _nodes(helper, n_layers, metadata["activation"])
+    clip = float(metadata.get("obs_clip", 0.0))
+    if clip > 0:  # the normalised observation clipped as in training
+        inits.update(clip_low=np.array(-clip, np.float32), clip_high=np.array(clip, np.float32))
+    nodes = _nodes(helper, n_layers, metadata["activation"], clip > 0)
     obs_size = int(inits["obs_mean"].shape[0])
     n_params = int(inits[f"bias_{n_layers - 1}"].shape[0])
     graph = helper.make_graph(
@@ -81,13 +84,17 @@ def build_model(arrays: Mapping[str, np.ndarray], metadata: Mapping[str, Any]):
     return model
 
 
-def _nodes(helper: Any, n_layers: int, activation: str) -> list:
-    """The graph's nodes: normalise the observation, ``n_layers`` dense layers (``activation``
-    between them), then ``tanh`` of the first ``action_size`` outputs (the mean)."""
+def _nodes(helper: Any, n_layers: int, activation: str, clip: bool = False) -> list:
+    """The graph's nodes: normalise the observation (then clip it to ``clip_low``,
+    ``clip_high`` where ``clip``), ``n_layers`` dense layers (``activation`` between them), then
+    ``tanh`` of the first ``action_size`` outputs (the mean)."""
+    normalised = "normalised" if clip else "h0"
     nodes = [
         helper.make_node("Sub", [INPUT, "obs_mean"], ["centred"]),
-        helper.make_node("Div", ["centred", "obs_std"], ["h0"]),
+        helper.make_node("Div", ["centred", "obs_std"], [normalised]),
     ]
+    if clip:
+        nodes.append(helper.make_node("Clip", [normalised, "clip_low", "clip_high"], ["h0"]))
     for i in range(n_layers):
         last = i == n_layers - 1
         nodes.append(helper.make_node("MatMul", [f"h{i}", f"kernel_{i}"], [f"mm{i}"]))
