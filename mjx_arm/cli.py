@@ -228,13 +228,18 @@ def _cut(text: str, chars: int) -> str:
 
 def report_folders(args: argparse.Namespace) -> list[Path]:
     """Where an error report may go, in order of preference: the folder the command writes
-    into (``--out`` or the run folder) when it exists, ``$XDG_STATE_HOME/mjx_arm/errors``
-    (default ``~/.local/state/mjx_arm/errors``), then ``mjx_arm-errors`` in the temp folder."""
+    into (``--out`` or the run folder; a ``run_dir`` only where it is a run directory, never
+    a folder of the user's that ``train`` refused) when it exists,
+    ``$XDG_STATE_HOME/mjx_arm/errors`` (default ``~/.local/state/mjx_arm/errors``), then
+    ``mjx_arm-errors`` in the temp folder."""
+    from mjx_arm.train.rundir import is_run_dir
+
     folders = []
     for name in _OUT_FOLDERS:
         value = getattr(args, name, None)
-        if isinstance(value, str | Path) and Path(value).expanduser().is_dir():
-            folders.append(Path(value).expanduser())
+        folder = Path(value).expanduser() if isinstance(value, str | Path) else None
+        if folder and folder.is_dir() and (name != "run_dir" or is_run_dir(folder)):
+            folders.append(folder)
     state = os.environ.get("XDG_STATE_HOME") or str(Path.home() / ".local" / "state")
     folders.append(Path(state) / "mjx_arm" / "errors")
     folders.append(Path(tempfile.gettempdir()) / "mjx_arm-errors")

@@ -45,6 +45,7 @@ def find_checkpoint(run_dir: str | Path, step: int | None = None) -> Path:
         FileNotFoundError: no run directory, no checkpoint, or none at ``step`` (each an
             :class:`~mjx_arm.inputs.InputError`).
     """
+    from mjx_arm.train.checkpoints import checkpoint_step, unusable_reason, usable_checkpoints
     from mjx_arm.train.rundir import RunDir
 
     run_dir = Path(run_dir)
@@ -57,29 +58,24 @@ def find_checkpoint(run_dir: str | Path, step: int | None = None) -> Path:
     if step is None:
         latest = run.latest_checkpoint()
         if latest is None:
-            raise MissingInputError(f"no usable checkpoint in {run.checkpoints}")
+            why = unusable_reason(run.checkpoints)
+            raise MissingInputError(f"no usable checkpoint in {run.checkpoints}{why}")
         return latest
-    folder = run.checkpoint_dir(int(step))
-    if not (folder / "meta.json").exists():
+    found = {checkpoint_step(p): p for p in usable_checkpoints(run.checkpoints)}
+    if int(step) not in found:
         raise MissingInputError(
-            f"no checkpoint at step {step} in {run.checkpoints}; "
+            f"no usable checkpoint at step {step} in {run.checkpoints}; "
             f"steps available: {available_steps(run_dir)}"
         )
-    return folder
+    return found[int(step)]
 
 
 def available_steps(run_dir: str | Path) -> list[int]:
-    """Steps of every checkpoint in ``run_dir``, ascending."""
-    from mjx_arm.train.checkpoints import CHECKPOINT_PREFIX
+    """Steps of every usable checkpoint in ``run_dir``, ascending (a folder whose name is not
+    ``step_`` and a number, ``step_abc``, is none)."""
+    from mjx_arm.train.checkpoints import checkpoint_step, usable_checkpoints
 
-    folder = Path(run_dir) / "checkpoints"
-    if not folder.exists():
-        return []
-    return sorted(
-        int(p.name[len(CHECKPOINT_PREFIX) :])
-        for p in folder.iterdir()
-        if p.name.startswith(CHECKPOINT_PREFIX) and (p / "meta.json").exists()
-    )
+    return [checkpoint_step(p) for p in usable_checkpoints(Path(run_dir) / "checkpoints")]
 
 
 def _field(obj: Any, name: str) -> Any:
@@ -193,7 +189,7 @@ def load_run(run_dir: str | Path, step: int | None = None):
 
     run_dir = Path(run_dir)
     checkpoint = find_checkpoint(run_dir, step)
-    config = read_json_object(run_dir / "config.json", "run config")
+    config = read_json_object(run_dir / "config.json", "run config", within=run_dir)
     with warnings.catch_warnings():  # orbax: "Sharding info not provided when restoring"
         warnings.filterwarnings("ignore", message="Sharding info not provided")
         params = RunDir.load_params(checkpoint)

@@ -15,7 +15,9 @@ new keys and reset envs.
 
 Nothing is lost: a save that fails (a full disk) or is killed leaves the checkpoints before it
 whole and the newest of them the latest, and a checkpoint that cannot be read is a named
-:class:`CheckpointError`.
+:class:`CheckpointError`. A checkpoint's files are read only as regular files inside its run
+directory (``RUN_DIR``, two folders up), ``meta.json`` with a size bound; a folder under
+``checkpoints/`` whose name is not ``step_`` and a number is not a checkpoint.
 """
 
 from __future__ import annotations
@@ -30,11 +32,12 @@ from typing import Any
 
 import numpy as np
 
-from mjx_arm.inputs import InputFileError, read_json_object
+from mjx_arm.inputs import InputFileError, MiB, read_json_object
 
 CHECKPOINT_PREFIX = "step_"
 PARTIAL, OLD = ".partial-", ".old-"
 PARAMS_FILES = "params_files"  # meta.json: each params file's size and hash, checked on load
+MAX_META_BYTES = 4 * MiB  # a meta.json holds a few kB
 
 
 class CheckpointError(InputFileError):
@@ -160,55 +163,105 @@ def _damage(folder: Path) -> str:
     return ""
 
 
+def checkpoint_step(folder: Path) -> int | None:
+    """The step a checkpoint folder's name gives (``step_N``, or ``.old-step_N`` left by a
+    killed save), or None for any other name (``step_abc``)."""
+    digits = folder.name.removeprefix(OLD).removeprefix(CHECKPOINT_PREFIX)
+    named = folder.name.removeprefix(OLD).startswith(CHECKPOINT_PREFIX)
+    return int(digits) if named and digits.isascii() and digits.isdigit() else None
+
+
 def usable(folder: Path) -> bool:
-    """Whether a checkpoint folder is complete: ``meta.json`` with a step, and params."""
-    try:
-        step = json.loads((folder / "meta.json").read_text()).get("step")
-    except (OSError, ValueError, AttributeError, RecursionError):
+    """Whether a checkpoint folder is complete: a step in its name, ``meta.json`` with a step
+    (:func:`load_meta`), and params."""
+    if checkpoint_step(folder) is None:
         return False
-    ok_step = isinstance(step, int) and not isinstance(step, bool) and step >= 0
-    return ok_step and (folder / "params").is_dir()
+    try:
+        load_meta(folder)
+    except CheckpointError:
+        return False
+    return (folder / "params").is_dir()
 
 
 def latest_checkpoint(checkpoints: Path) -> Path | None:
     """The newest usable checkpoint folder under ``checkpoints`` (:func:`usable`), or None.
 
     A save killed between moving an old checkpoint of the same step aside and renaming the new
-    one into place left the old one as ``.old-step_N``: it is moved back first.
+    one into place left the old one as ``.old-step_N``: it is moved back first, or, where the
+    run directory cannot be written (read-only), read where it lies.
     """
     if not checkpoints.is_dir():
         return None
+    stranded = []
     for old in checkpoints.glob(f"{OLD}{CHECKPOINT_PREFIX}*"):
         target = old.with_name(old.name.removeprefix(OLD))
         if not target.exists():
-            os.replace(old, target)
-    found = usable_checkpoints(checkpoints)
-    return found[-1] if found else None
+            try:
+                os.replace(old, target)
+            except OSError:  # a read-only run directory
+                stranded.append(old)
+    found = usable_checkpoints(checkpoints) + [p for p in stranded if usable(p)]
+    return max(found, key=checkpoint_step) if found else None
 
 
 def usable_checkpoints(checkpoints: Path) -> list[Path]:
     """Every usable checkpoint folder under ``checkpoints`` (:func:`usable`), oldest first."""
     if not checkpoints.is_dir():
         return []
-    return sorted(
-        p for p in checkpoints.iterdir() if p.name.startswith(CHECKPOINT_PREFIX) and usable(p)
-    )
+    found = [p for p in checkpoints.iterdir() if p.name.startswith(CHECKPOINT_PREFIX)]
+    return sorted((p for p in found if usable(p)), key=checkpoint_step)
+
+
+def unusable_reason(checkpoints: Path) -> str:
+    """Why the newest folder named as a checkpoint under ``checkpoints`` is not usable, as
+    ``" (step_N: why)"`` for a message ("" where none is named so, or it is usable)."""
+    folders = checkpoints.iterdir() if checkpoints.is_dir() else []
+    named = [p for p in folders if checkpoint_step(p) is not None]
+    if not named:
+        return ""
+    newest = max(named, key=checkpoint_step)
+    try:
+        load_meta(newest)
+    except CheckpointError as err:
+        return f" ({newest.name}: {err})"
+    return "" if (newest / "params").is_dir() else f" ({newest.name} has no params/ folder)"
 
 
 def load_meta(folder: Path) -> dict[str, Any]:
-    """The ``meta.json`` of a checkpoint folder.
+    """The ``meta.json`` of a checkpoint folder: a regular file inside the run directory, of
+    at most :data:`MAX_META_BYTES`.
 
     Raises:
-        CheckpointError: missing, not JSON, or without a whole-number ``step``.
+        CheckpointError: missing, not such a file, not JSON, or without a whole-number
+            ``step``.
     """
+    path = folder / "meta.json"
     try:
-        meta = read_json_object(folder / "meta.json", "checkpoint metadata")
+        meta = read_json_object(path, "checkpoint metadata", MAX_META_BYTES, within=run_of(folder))
     except InputFileError as err:
         raise CheckpointError(str(err)) from err
     step = meta.get("step")
     if not isinstance(step, int) or isinstance(step, bool) or step < 0:
-        raise CheckpointError(f"{folder / 'meta.json'}: 'step' must be a whole number >= 0")
+        raise CheckpointError(f"{path}: 'step' must be a whole number >= 0")
     return meta
+
+
+def run_of(folder: Path) -> Path:
+    """The run directory of a checkpoint folder (``RUN_DIR/checkpoints/step_N``)."""
+    return folder.absolute().parent.parent
+
+
+def _foreign(params: Path) -> str:
+    """The first entry under ``params`` that is neither a folder nor a regular file (a FIFO,
+    a device) or that links out of the run directory, described ("" where there is none)."""
+    root = os.path.realpath(run_of(params.parent))
+    for path in params.rglob("*"):
+        target = Path(os.path.realpath(path))
+        if not target.is_relative_to(root):
+            return f"params/{path.relative_to(params)} is a link to {target}, out of the run"
+        if not (target.is_dir() or target.is_file()):
+            return f"params/{path.relative_to(params)} is not a regular file"
+    return ""
 
 
 def load_params(folder: Path) -> Any:
@@ -221,7 +274,7 @@ def load_params(folder: Path) -> Any:
     path = (folder / "params").resolve()
     if not path.is_dir():
         raise CheckpointError(f"checkpoint {folder} has no params/ folder; it is incomplete")
-    damage = _damage(folder)  # checked first: orbax's threads print tracebacks on a bad file
+    damage = _foreign(folder / "params") or _damage(folder)  # before orbax reads a byte
     if damage:
         raise CheckpointError(
             f"checkpoint {folder} cannot be read: {damage}; delete it to use the one before"

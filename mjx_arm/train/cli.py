@@ -34,6 +34,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     from mjx_arm.train import launch
     from mjx_arm.train.distributed import Hosts, ProcessGroup
     from mjx_arm.train.ppo import train
+    from mjx_arm.train.rundir import claim
 
     if args.resume:
         _check_resume_flags(args)
@@ -44,6 +45,8 @@ def cmd_train(args: argparse.Namespace) -> int:
         plan = launch.plan(hosts, args.devices, per_gpu=_per_gpu(args))
         if plan.spawns:  # one run directory, named, for every process
             run_dir = Path(named) if named else _default_run_dir(args)
+            if not args.resume:  # checked (rundir.claim) before the processes write logs/
+                claim(run_dir)
             print(f"run directory: {run_dir}")
             argv = _child_argv(sys.argv[1:], run_dir, bool(named))
             return launch.run(plan, argv, run_dir / "logs")
@@ -317,7 +320,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         description=cmd_train.__doc__,
     )
     _add_config_arguments(p)
-    p.add_argument("--run-dir", help="run directory (default: runs/TASK-TIMESTAMP)")
+    p.add_argument(
+        "--run-dir",
+        help="run directory: a new or empty folder, or one an earlier mjx-arm train wrote "
+        "(default: runs/TASK-TIMESTAMP)",
+    )
     p.add_argument("--resume", metavar="RUN_DIR", help="continue the run in RUN_DIR")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument(

@@ -364,7 +364,7 @@ def saved_config(run_dir: str | Path) -> TrainConfig:
             f"--resume {str(run_dir)!r} is not a run directory (no config.json): no checkpoint "
             "to resume from"
         )
-    saved = read_json_object(path, "run config").get("train")
+    saved = read_json_object(path, "run config", within=run_dir).get("train")
     if not isinstance(saved, dict):
         raise ConfigError(f"{path} has no 'train' table: not the config of a training run")
     try:

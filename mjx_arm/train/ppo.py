@@ -27,7 +27,12 @@ from mjx_arm.engines import CONVERTER_ENGINE
 from mjx_arm.envs.backend import make_batched_env, resolve_backend
 from mjx_arm.inputs import ConfigError, MissingInputError
 from mjx_arm.task.config import TaskConfig
-from mjx_arm.train.checkpoints import CheckpointError, latest_checkpoint, restore_brax_params
+from mjx_arm.train.checkpoints import (
+    CheckpointError,
+    latest_checkpoint,
+    restore_brax_params,
+    unusable_reason,
+)
 from mjx_arm.train.compile_report import CompileReport
 from mjx_arm.train.config import TrainConfig
 from mjx_arm.train.distributed import barrier, is_leader
@@ -37,7 +42,7 @@ from mjx_arm.train.loop import Callbacks, resolve_partition, run_ppo
 from mjx_arm.train.memory import check_training_memory
 from mjx_arm.train.progress import Solved, Stopped, _Progress
 from mjx_arm.train.resume import has_resume_state, newest_whole_state
-from mjx_arm.train.rundir import RunDir, RunDirError
+from mjx_arm.train.rundir import RunDir, RunDirError, claim
 
 
 @dataclass
@@ -106,7 +111,7 @@ def train(
 
     Args:
         config: the resolved training config.
-        run_dir: the run directory (created if missing).
+        run_dir: the run directory (a new run's: new, empty or a run's, rundir.claim).
         resume: continue from the newest checkpoint in ``run_dir`` (on any device count).
         quiet: no progress bar.
         stop_after: stop after this many trained epochs (0: train the whole run); the
@@ -131,7 +136,7 @@ def train(
         barrier("run directory ready")
         step_offset, restore = _start_point(None, config, resume, Path(run_dir))
         return _train(None, config, setup, step_offset, restore, True, stop_after)
-    run = RunDir(run_dir)
+    run = RunDir(run_dir if resume else claim(run_dir))  # a new run: never a user's folder
     run.check_writable()  # before the lock file and any compilation (a full disk)
     with run.lock():
         step_offset, restore = _start_point(run, config, resume)
@@ -185,7 +190,8 @@ def _start_point(
             )
         return 0, None
     if latest is None:
-        raise CheckpointError(f"no checkpoint to resume from in {folder}")
+        why = unusable_reason(folder / "checkpoints")
+        raise CheckpointError(f"no checkpoint to resume from in {folder}{why}")
     step_offset = int(RunDir.load_meta(latest)["step"])
     if step_offset >= config.num_timesteps:
         raise ConfigError(

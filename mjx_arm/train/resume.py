@@ -187,14 +187,15 @@ def _read_npz(path: Path, expected_bytes: int) -> dict[str, np.ndarray]:
     is allocated (:func:`~mjx_arm.inputs.read_npz_members`).
 
     Raises:
-        ResumeStateError: missing, not an npz (a file cut short included), holding pickled
-            objects, or declaring more bytes than its template holds.
+        ResumeStateError: missing, not a regular file inside the run directory, not an npz (a
+            file cut short included), holding pickled objects, or declaring more bytes than
+            its template holds.
     """
     limit = expected_bytes + MiB
     try:
         return read_npz_members(
             path, "resume state", max_member_bytes=limit, max_total_bytes=limit,
-            error=ResumeStateError,
+            error=ResumeStateError, within=path.absolute().parents[2],  # the run directory
         )  # fmt: skip
     except OversizedInputError as err:
         raise ResumeStateError(
