@@ -152,3 +152,55 @@ def test_non_finite_weights_are_refused_at_load(corpus: Corpus, tmp_path: Path, 
             load(path)
     assert "bias_0 holds NaN" in _fails(["eval", str(path), "--episodes", "1"], capsys)
     assert issubclass(OversizedInputError, InputError)
+
+
+METADATA_FAULTS = {
+    "an observation key the env lacks": (
+        lambda m: m["obs_layout"][0].__setitem__(0, "bogus_key"),
+        "reads observation keys the env does not give: 'bogus_key' (7)",
+    ),
+    "an unknown task": (
+        lambda m: m.update(task="fly"),
+        "names task 'fly', not a registered task (reach, touch",
+    ),
+    "a text ctrl_dt": (
+        lambda m: m.update(ctrl_dt="fast"),
+        "ctrl_dt must be a number of seconds > 0, not 'fast'",
+    ),
+    "a key named twice": (
+        lambda m: m["obs_layout"][1].__setitem__(0, "ee_pose"),
+        "obs_layout names a key twice",
+    ),
+    "another task than its training config's": (
+        lambda m: m.update(task="touch"),
+        "names task 'touch', its training config 'reach'",
+    ),
+    "another ctrl_dt than its training task's": (
+        lambda m: m.update(ctrl_dt=0.05),
+        "records ctrl_dt 0.05 s, its training task",
+    ),
+}
+
+
+@pytest.mark.parametrize("suffix", [".npz", ".onnx"])
+@pytest.mark.parametrize("fault", list(METADATA_FAULTS))
+def test_metadata_eval_cannot_honour_is_a_named_error(corpus, tmp_path, capsys, fault, suffix):
+    """Keys the env lacks were a traceback in the first step; an unknown task, a text
+    ctrl_dt or metadata disagreeing with the training config ran to exit 0."""
+    import copy
+
+    if suffix == ".onnx" and corpus.onnx is None:
+        pytest.skip("onnx or onnxruntime is not installed")
+    arrays, meta = read_npz(corpus.policy)
+    meta = copy.deepcopy(meta)
+    change, message = METADATA_FAULTS[fault]
+    change(meta)
+    path = tmp_path / f"policy{suffix}"
+    if suffix == ".onnx":
+        from mjx_arm.policy.onnx_export import write_onnx
+
+        write_onnx(path, arrays, meta)
+    else:
+        write_npz(path, arrays, meta)
+    line = _fails(["eval", str(path), "--episodes", "1"], capsys)
+    assert message in line and len(line) < 300, line

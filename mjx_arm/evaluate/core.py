@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from mjx_arm import engines
+from mjx_arm.evaluate.fit import check_obs_layout, check_recorded_task
 from mjx_arm.evaluate.runners import Policy, check_policy_arm, run_batched, run_episodes
 from mjx_arm.evaluate.stats import EvalRun, summarize
 from mjx_arm.inputs import ConfigError, MissingInputError
@@ -65,6 +66,7 @@ def eval_task(policy: Any, name: str | None = None) -> tuple[TaskConfig, list[st
 
     trained_dict = getattr(policy, "config", {}).get("task")
     if trained_dict is None:
+        check_recorded_task(policy, None)
         return task_config(name or "touch"), ["the policy names no training task"]
     if not isinstance(trained_dict, dict):
         raise PolicyFileError("the policy's config.task is not a table: a damaged policy file")
@@ -72,6 +74,7 @@ def eval_task(policy: Any, name: str | None = None) -> tuple[TaskConfig, list[st
         trained = TaskConfig.from_dict(trained_dict)
     except ConfigError as err:
         raise PolicyFileError(f"the policy's training task is not usable: {err}") from err
+    check_recorded_task(policy, trained)
     if name is None or name == trained.task:
         return trained, []
     dynamics = {k: getattr(trained, k) for k in DYNAMICS_FIELDS}
@@ -263,15 +266,17 @@ def _run_batch(
 def check_policy_fits(policy: Any, task: TaskConfig, arm: Any) -> None:
     """Check that ``policy`` was trained on ``arm`` (an :class:`~mjx_arm.arm.info.ArmInfo`;
     :func:`~mjx_arm.evaluate.runners.check_policy_arm`) and takes the observation and gives
-    the action of ``task`` on it.
+    the action of ``task`` on it (sizes, and the observation keys its metadata names:
+    :func:`~mjx_arm.evaluate.fit.check_obs_layout`).
 
     Raises:
         ArmMismatchError: another arm's policy.
-        PolicyFileError: its layer sizes do not fit (another task's policy).
+        PolicyFileError: its layer sizes or observation keys do not fit (another task's
+            policy, or a damaged file).
     """
     from mjx_arm.envs.base import action_size
     from mjx_arm.policy import PolicyFileError
-    from mjx_arm.task.observation import obs_size
+    from mjx_arm.task.observation import obs_layout, obs_size
 
     check_policy_arm(policy, arm)
     want = (obs_size(arm.n_joints, task.spec.extra_obs), action_size(arm, task))
@@ -282,6 +287,8 @@ def check_policy_fits(policy: Any, task: TaskConfig, arm: Any) -> None:
             f"on {arm.urdf.name} has {want[0]} and {want[1]}: pass the task (--task) and arm "
             "(--arm) it was trained on"
         )
+    layout = obs_layout(arm.n_joints, task.spec.extra_obs)
+    check_obs_layout(policy, layout, f"{task.task} on {arm.urdf.name}")
 
 
 def _check_engine(engine: str) -> None:

@@ -117,6 +117,8 @@ def _metadata_problems(meta: Mapping[str, Any]) -> list[str]:
     )
     if not layout or not pairs:
         problems.append("obs_layout must list [name, size] pairs")
+    elif len({e[0] for e in layout}) != len(layout):
+        problems.append("obs_layout names a key twice")
     if not _is_int(meta.get("action_size"), 1):
         problems.append("action_size must be a whole number >= 1")
     if not _is_number(meta.get("action_scale")):
@@ -141,6 +143,8 @@ def _metadata_problems(meta: Mapping[str, Any]) -> list[str]:
         problems.append("config must be a table")
     if not isinstance(meta.get("task", ""), str):
         problems.append("task must be a text")
+    if "ctrl_dt" in meta and not (_is_number(meta["ctrl_dt"]) and meta["ctrl_dt"] > 0):
+        problems.append(f"ctrl_dt must be a number of seconds > 0, not {meta['ctrl_dt']!r:.40}")
     return problems + _arm_problems(meta.get("arm", {}), v_max)
 
 
