@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from input_fuzz.corpus import CHECKPOINT_STEP, Corpus, build
-from mjx_arm.cli import main, report_folders
+from mjx_arm.cli import build_parser, main, report_folders
 from mjx_arm.inputs import (
     InputFileError,
     MiB,
@@ -348,3 +348,43 @@ def test_a_refused_run_dir_gets_no_error_report(tmp_path: Path) -> None:
     run_dir = claim(tmp_path / "run")
     assert mine not in report_folders(argparse.Namespace(run_dir=str(mine)))
     assert report_folders(argparse.Namespace(run_dir=str(run_dir)))[0] == run_dir
+
+
+# --------------------------------------------------------------------------- bench outputs
+
+
+def test_no_bench_command_defaults_into_the_committed_results() -> None:
+    """Every ``bench`` command's --out defaults to none: a new runs/bench/KIND-TIMESTAMP."""
+    bench = _subparsers(build_parser())["bench"]
+    commands = _subparsers(bench)
+    assert set(commands) == {"parity", "grasp", "transfer", "robustness", "seeds"}
+    for name, parser in commands.items():
+        out = next(a for a in parser._actions if a.dest == "out")
+        assert out.default is None, name
+        assert f"runs/bench/{name}-TIMESTAMP" in out.help and "benchmarks/results" in out.help
+
+
+def _subparsers(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
+    action = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return dict(action.choices)
+
+
+def test_bench_from_a_clone_leaves_the_committed_results_alone(
+    tmp_path: Path, monkeypatch, capsys
+) -> None:
+    """Run where a clone's benchmarks/results/grasp/grasp.json lies: the report goes to a new
+    runs/bench/grasp-TIMESTAMP folder; with --out naming the committed folder, there."""
+    committed = tmp_path / "benchmarks" / "results" / "grasp"
+    committed.mkdir(parents=True)
+    (committed / "grasp.json").write_text('{"committed": true}')
+    monkeypatch.chdir(tmp_path)
+    assert main(["bench", "grasp", "--engines", "mujoco"]) == 0
+    assert (committed / "grasp.json").read_text() == '{"committed": true}'
+    (made,) = (tmp_path / "runs" / "bench").iterdir()
+    assert made.name.startswith("grasp-") and sorted(p.name for p in made.iterdir()) == [
+        "grasp.json",
+        "grasp.md",
+    ]
+    assert f"wrote {Path('runs', 'bench', made.name, 'grasp.json')}" in capsys.readouterr().out
+    assert main(["bench", "grasp", "--engines", "mujoco", "--out", str(committed)]) == 0
+    assert json.loads((committed / "grasp.json").read_text())["starts"]

@@ -24,11 +24,9 @@ from mjx_arm.settings import add_set_argument
 if TYPE_CHECKING:
     from mjx_arm.bench.seeds_config import SeedsConfig
 
-PARITY_OUT = Path("benchmarks/results/parity")
-TRANSFER_OUT = Path("benchmarks/results/transfer")
-SEEDS_OUT = Path("benchmarks/results/seeds")
-GRASP_OUT = Path("benchmarks/results/grasp")
-ROBUSTNESS_OUT = Path("benchmarks/results/robustness")
+# Where a bench command writes without --out: a new folder per run, named as train names its
+# runs; the committed benchmarks/results/ is written only where --out names it.
+BENCH_RUNS = Path("runs") / "bench"
 
 
 def _enable_jax_cache() -> None:
@@ -53,6 +51,25 @@ def _check_arm(arm: str) -> None:
         from mjx_arm.arm.info import validated_arm_info
 
         validated_arm_info(arm, engines.CONVERTER_ENGINE)
+
+
+def _out(args: argparse.Namespace, kind: str) -> Path:
+    """``args.out``, set to ``runs/bench/KIND-TIMESTAMP`` where ``--out`` is not given, and
+    checked (:func:`~mjx_arm.inputs.check_folder`) before any work.
+
+    Raises:
+        OutputPathError: ``--out`` is a file, or no writable folder can hold it.
+    """
+    if args.out is None:
+        args.out = BENCH_RUNS / f"{kind}-{time.strftime('%Y%m%d-%H%M%S')}"
+    return check_folder(args.out, "--out")
+
+
+def _out_help(kind: str) -> str:
+    return (
+        f"output folder (default: a new {BENCH_RUNS}/{kind}-TIMESTAMP; the committed results: "
+        f"--out benchmarks/results/{kind})"
+    )
 
 
 def _print_paths(paths: list[Path]) -> None:
@@ -90,7 +107,7 @@ def cmd_parity(args: argparse.Namespace) -> int:
     from mjx_arm.bench.results import environment_metadata
 
     config = from_arguments(ParityConfig.quick() if args.quick else ParityConfig(), args)
-    check_folder(args.out, "--out")
+    _out(args, "parity")
     _check_pictures(args, "--plot", "--grasp-video")
     _check_arm(config.arm)
     if _on_jax(config.engines):
@@ -133,7 +150,7 @@ def cmd_grasp(args: argparse.Namespace) -> int:
     """
     from mjx_arm.bench.results import environment_metadata
 
-    check_folder(args.out, "--out")
+    _out(args, "grasp")
     _check_pictures(args, "--video")
     _enable_jax_cache()
     meta = environment_metadata(accelerator=_on_jax(args.engines))
@@ -157,7 +174,7 @@ def cmd_transfer(args: argparse.Namespace) -> int:
     from mjx_arm.evaluate import eval_task, resolve_policy
 
     config = from_arguments(TransferConfig(), args)
-    check_folder(args.out, "--out")
+    _out(args, "transfer")
     _check_pictures(args, "--plot")
     _check_arm(config.arm)
     policy, source = resolve_policy(args.policy)
@@ -196,7 +213,7 @@ def cmd_seeds(args: argparse.Namespace) -> int:
     from mjx_arm.train.launch import visible_gpus
 
     config = from_arguments(SeedsConfig(), args)
-    check_folder(args.out, "--out")
+    _out(args, "seeds")
     _check_pictures(args, "--plot")
     runs_dir = _runs_folder(args.runs, config)
     gpus = _seed_gpus(visible_gpus(), config.devices)
@@ -264,7 +281,7 @@ def cmd_robustness(args: argparse.Namespace) -> int:
 
     base = RobustnessConfig.quick() if args.quick else RobustnessConfig()
     config = from_arguments(base, args)
-    check_folder(args.out, "--out")
+    _out(args, "robustness")
     _check_pictures(args, "--plot")
     policy, source = resolve_policy(args.policy)
     arm = eval_arm(policy, args.arm or None)
@@ -305,9 +322,7 @@ def _add_robustness(commands) -> None:
     p.add_argument("--arm", default="", help="the arm file or URDF (default: the policy's)")
     p.add_argument("--name", help="file stem (default: robustness_TASK)")
     p.add_argument("--plot", action="store_true", help="also write NAME.png (success per point)")
-    p.add_argument(
-        "--out", type=Path, default=ROBUSTNESS_OUT, help=f"output folder ({ROBUSTNESS_OUT})"
-    )
+    p.add_argument("--out", type=Path, help=_out_help("robustness"))
 
 
 def _add_parity(commands) -> None:
@@ -325,7 +340,7 @@ def _add_parity(commands) -> None:
         help="with --grasp: one video of the pick from the table per engine (grasp_ENGINE.mp4)",
     )
     p.add_argument("--plot", action="store_true", help="also write the three PNG plots")
-    p.add_argument("--out", type=Path, default=PARITY_OUT, help=f"output folder ({PARITY_OUT})")
+    p.add_argument("--out", type=Path, help=_out_help("parity"))
 
 
 def _add_grasp(commands) -> None:
@@ -337,7 +352,7 @@ def _add_grasp(commands) -> None:
     parity = engines.engine_names("parity")
     p.add_argument("--engines", nargs="+", choices=parity, default=list(parity))
     p.add_argument("--video", action="store_true", help="film the pick from the table per engine")
-    p.add_argument("--out", type=Path, default=GRASP_OUT, help=f"output folder ({GRASP_OUT})")
+    p.add_argument("--out", type=Path, help=_out_help("grasp"))
 
 
 def register(sub) -> None:
@@ -350,7 +365,8 @@ def register(sub) -> None:
         "bench",
         help="benchmarks: engine parity, policy transfer, training over seeds",
         description="Engine benchmarks that write a markdown table and JSON (PNG plots with "
-        "--plot, into a folder outside benchmarks/results).",
+        "--plot, into a folder outside benchmarks/results) into --out, by default a new "
+        "runs/bench/KIND-TIMESTAMP.",
     )
     commands = bench.add_subparsers(dest="bench_command", required=True, metavar="BENCH")
     _add_parity(commands)
@@ -361,7 +377,7 @@ def register(sub) -> None:
     p.add_argument("--trained-on", default="", help="where the policy was trained (text)")
     p.add_argument("--name", help="file stem (default: transfer_TASK)")
     p.add_argument("--plot", action="store_true", help="also write NAME.png")
-    p.add_argument("--out", type=Path, default=TRANSFER_OUT, help=f"output folder ({TRANSFER_OUT})")
+    p.add_argument("--out", type=Path, help=_out_help("transfer"))
 
     _add_robustness(commands)
 
@@ -372,4 +388,4 @@ def register(sub) -> None:
     p.add_argument("--name", help="file stem (default: seeds_TASK_PRESET)")
     p.add_argument("--plot", action="store_true", help="also write NAME.png (success curves)")
     p.add_argument("--runs", type=Path, help="where the runs go (default: runs/seeds-...)")
-    p.add_argument("--out", type=Path, default=SEEDS_OUT, help=f"output folder ({SEEDS_OUT})")
+    p.add_argument("--out", type=Path, help=_out_help("seeds"))
