@@ -25,16 +25,20 @@ import numpy as np
 
 from mjx_arm.inputs import (
     ConfigError,
-    InputError,
     InputFileError,
     MiB,
     read_json_object,
-    read_npz_members,
     require_file,
     write_atomic,
 )
 from mjx_arm.task.config import TaskConfig, task_config
 from mjx_arm.task.observation import decode_joints, n_joints_of, obs_size, obs_slices
+from mjx_arm.trajectory_files import (
+    TrajectoryError,
+    check_steps,
+    read_trajectory_members,
+    run_config_of,
+)
 from mjx_arm.video import VideoWriter as VideoWriter  # moved; importable here as before
 from mjx_arm.video import write_video
 
@@ -59,29 +63,22 @@ FORCE_AXIS_MIN_N = 5.0
 # --------------------------------------------------------------------------- files
 
 
-class TrajectoryError(InputError, ValueError):
-    """A file that is not a usable trajectory (not an .npz, keys missing, bad shapes)."""
-
-
 def load_trajectory(path: str | Path) -> dict[str, Any]:
     """Arrays of a trajectory ``.npz`` (and its ``task`` config, when the file holds one),
-    checked: the required keys, one length, numeric finite values, an observation layout.
+    checked: the required keys, one length, numeric finite values, an observation layout;
+    read under bounds (:mod:`mjx_arm.trajectory_files`: bytes, elements, steps).
 
     Raises:
         TrajectoryError: not a readable trajectory file.
     """
     path = require_file(path, "trajectory file")
-    traj: dict[str, Any] = read_npz_members(
-        path,
-        "trajectory",
-        TRAJECTORY_KEYS.__contains__,
-        max_member_bytes=TRAJECTORY_MEMBER_BYTES,
-        max_total_bytes=TRAJECTORY_TOTAL_BYTES,
-        error=TrajectoryError,
+    traj = read_trajectory_members(
+        path, TRAJECTORY_KEYS, TRAJECTORY_MEMBER_BYTES, TRAJECTORY_TOTAL_BYTES
     )
     missing = [k for k in REQUIRED_KEYS if k not in traj]
     if missing:
         raise TrajectoryError(f"{path} is not a trajectory file: it lacks {missing}")
+    check_steps(path, {k: v for k, v in traj.items() if not k.endswith("_config")})
     _check_arrays(path, traj)
     if "task_config" in traj:
         try:
@@ -135,7 +132,8 @@ def trajectory_task(path: str | Path, traj: dict[str, Any], name: str | None = N
     """The task a trajectory was recorded in: ``(TaskConfig, where it came from)``.
 
     Order: the ``name`` given; the file's own ``task_config``; the ``config.json`` of the run
-    directory a ``checkpoints/step_N/transitions.npz`` sits in; else Touch.
+    directory a ``checkpoints/step_N/transitions.npz`` sits in
+    (:func:`~mjx_arm.trajectory_files.run_config_of`); else Touch.
 
     Raises:
         TrajectoryError: the file's task config, or its run's, is not usable.
@@ -146,9 +144,8 @@ def trajectory_task(path: str | Path, traj: dict[str, Any], name: str | None = N
             return task, "the trajectory file"
     if name is not None:
         return task_config(name), "--task"
-    parents = Path(path).resolve().parents
-    config = parents[2] / "config.json" if len(parents) > 2 else None
-    if config is not None and config.is_file():
+    config = run_config_of(path)
+    if config is not None:
         try:
             saved = read_json_object(config, "run config")
         except InputFileError as err:

@@ -74,7 +74,7 @@ def test_a_huge_declared_shape_is_refused_before_allocation(corpus: Corpus, tmp_
     tracemalloc.stop()
     assert "kernel_0.npy" in _fails(["eval", str(bomb), "--episodes", "1"], capsys)
     traj = _with_member(corpus.trajectory, tmp_path / "traj.npz", "obs", _header(HUGE))
-    with pytest.raises(OversizedInputError, match=r"'obs.npy'.*over the limit of 512 MiB"):
+    with pytest.raises(OversizedInputError, match=r"'obs.npy'.*1,000,000,000,000 elements, over"):
         load_trajectory(traj)
 
 
@@ -204,3 +204,75 @@ def test_metadata_eval_cannot_honour_is_a_named_error(corpus, tmp_path, capsys, 
         write_npz(path, arrays, meta)
     line = _fails(["eval", str(path), "--episodes", "1"], capsys)
     assert message in line and len(line) < 300, line
+
+
+def _zeros_npz(path: Path, members: dict[str, tuple[tuple[int, ...], str]]) -> Path:
+    """An .npz whose members are zero arrays of the given (shape, dtype), streamed through
+    the compressor (no array of that size is ever made here)."""
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as z:
+        for name, (shape, descr) in members.items():
+            with z.open(f"{name}.npy", "w", force_zip64=True) as member:
+                member.write(_header(shape, descr))
+                left = int(np.prod(shape)) * np.dtype(descr).itemsize
+                chunk = bytes(2**22)
+                while left > 0:
+                    member.write(chunk[: min(left, len(chunk))])
+                    left -= len(chunk)
+    return path
+
+
+def test_ten_million_steps_of_uint8_are_refused_before_unpacking(tmp_path: Path, capsys):
+    """10 M steps of uint8 and bool arrays: 257 kB packed, 260 MB unpacked, which the byte
+    limits let through and replay widened to 3.35 GB; the element limit refuses the first
+    member from its header."""
+    from mjx_arm.trajectory_files import TRAJECTORY_MEMBER_ELEMENTS
+
+    steps = 10_000_000
+    path = _zeros_npz(
+        tmp_path / "long.npz",
+        {
+            "obs": ((steps, 22), "|u1"),
+            "reward": ((steps,), "|b1"),
+            "ee_pos": ((steps, 3), "|u1"),
+            "contact_force": ((steps,), "|u1"),
+        },
+    )
+    assert path.stat().st_size < 2**20
+    tracemalloc.start()
+    with pytest.raises(
+        OversizedInputError, match=rf"over the limit of {TRAJECTORY_MEMBER_ELEMENTS:,}"
+    ):
+        load_trajectory(path)
+    assert tracemalloc.get_traced_memory()[1] < 20 * 2**20
+    tracemalloc.stop()
+    line = _fails(["replay", str(path), "-o", str(tmp_path / "plot.png")], capsys)
+    assert "elements, over the limit" in line and not (tmp_path / "plot.png").exists()
+
+
+def test_more_steps_than_a_trajectory_holds_are_refused(tmp_path: Path):
+    """250,000 steps: each array under the element limit, the steps over theirs."""
+    from mjx_arm.trajectory_files import TRAJECTORY_MAX_STEPS
+
+    steps = 250_000
+    path = _zeros_npz(
+        tmp_path / "steps.npz",
+        {
+            "obs": ((steps, 22), "<f4"),
+            "reward": ((steps,), "<f4"),
+            "ee_pos": ((steps, 3), "<f4"),
+            "contact_force": ((steps,), "<f4"),
+        },
+    )
+    with pytest.raises(TrajectoryError, match=rf"holds 250,000 steps, over the limit of "
+                       rf"{TRAJECTORY_MAX_STEPS:,}"):  # fmt: skip
+        load_trajectory(path)
+
+
+def test_a_task_config_text_over_its_limit_is_refused(corpus: Corpus, tmp_path: Path):
+    """A trajectory's ``task_config`` is a JSON text of a few kB; 4 MiB of it is refused
+    before it is unpacked, far below the arrays' limits."""
+    big = _with_member(
+        corpus.trajectory, tmp_path / "text.npz", "task_config", _header((), "<U1048576")
+    )
+    with pytest.raises(OversizedInputError, match=r"'task_config.npy'.*over the limit of 1 MiB"):
+        load_trajectory(big)

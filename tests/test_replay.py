@@ -133,6 +133,22 @@ def test_task_comes_from_the_file_or_the_run_directory(transitions: Path, tmp_pa
     assert trajectory_task(path, load_trajectory(path), "touch")[0].task == "touch"
 
 
+def test_a_config_json_of_no_run_is_not_read(tmp_path: Path, capsys):
+    """A trajectory two folders below an unrelated config.json (one replay would refuse), and
+    one laid out like a checkpoint's but without its meta.json: neither reads that file; the
+    plot is drawn with the default task."""
+    (tmp_path / "config.json").write_text('{"task": {"task": "no such task"}}')
+    rows = _synthetic()
+    for where in ("a/b/t.npz", "checkpoints/step_1/transitions.npz"):
+        path = tmp_path / where
+        path.parent.mkdir(parents=True)
+        np.savez_compressed(path, **rows)  # no task_config of its own
+        task, source = trajectory_task(path, load_trajectory(path))
+        assert task.task == "touch" and source.startswith("default"), where
+        assert main(["replay", str(path), "-o", str(tmp_path / "p.png")]) == EXIT_OK
+        assert "config.json" not in capsys.readouterr().out
+
+
 def test_replay_rejects_other_files(tmp_path: Path, capsys):
     np.savez(tmp_path / "x.npz", reward=np.zeros(3))
     assert main(["replay", str(tmp_path / "x.npz"), "-o", str(tmp_path / "p.png")]) == EXIT_INVALID
