@@ -27,6 +27,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, BinaryIO
 
+from mjx_arm.zip_directory import checked_directory
+
 
 class InputError(Exception):
     """An input (file, setting, argument) that cannot be used; the message names it, says what
@@ -304,7 +306,7 @@ def read_npz_members(
     path = Path(path)
     try:
         stream = open_regular(path, what, sys.maxsize, within=within)
-        with stream, zipfile.ZipFile(stream) as archive:
+        with stream, zipfile.ZipFile(checked_directory(stream)) as archive:
             infos = [i for i in archive.infolist() if i.filename.endswith(".npy")]
             infos = [i for i in infos if wanted is None or wanted(i.filename[:-4])]
             _check_sizes(path, what, infos, max_member_bytes, max_total_bytes)

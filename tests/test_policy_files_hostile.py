@@ -276,3 +276,25 @@ def test_a_task_config_text_over_its_limit_is_refused(corpus: Corpus, tmp_path: 
     )
     with pytest.raises(OversizedInputError, match=r"'task_config.npy'.*over the limit of 1 MiB"):
         load_trajectory(big)
+
+
+def test_a_zip_directory_of_too_many_members_is_refused_before_it_is_read(tmp_path, capsys):
+    """100,000 empty members (zipfile writes a zip64 end record past 65,535): opening it
+    cost about 550 bytes of memory per member (a million: 545 MB, 10 s); the end record's
+    counts refuse it first, for a policy and a trajectory alike."""
+    from mjx_arm.zip_directory import MAX_ENTRIES
+
+    path = tmp_path / "many.npz"
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_STORED) as z:
+        for i in range(100_000):
+            z.writestr(f"{i}.npy", b"")
+    tracemalloc.start()
+    with pytest.raises(
+        PolicyFileError, match=rf"lists 100,000 members .* limits of {MAX_ENTRIES:,}"
+    ):
+        load(path)
+    assert tracemalloc.get_traced_memory()[1] < 2 * 2**20
+    tracemalloc.stop()
+    with pytest.raises(TrajectoryError, match="its zip directory lists 100,000 members"):
+        load_trajectory(path)
+    assert "zip directory lists 100,000" in _fails(["eval", str(path), "--episodes", "1"], capsys)
