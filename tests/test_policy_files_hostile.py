@@ -298,3 +298,11 @@ def test_a_zip_directory_of_too_many_members_is_refused_before_it_is_read(tmp_pa
     with pytest.raises(TrajectoryError, match="its zip directory lists 100,000 members"):
         load_trajectory(path)
     assert "zip directory lists 100,000" in _fails(["eval", str(path), "--episodes", "1"], capsys)
+
+
+def test_a_policy_metadata_text_over_its_limit_is_refused(corpus: Corpus, tmp_path: Path):
+    """The metadata is a JSON text parsed whole: 4 MiB of it is refused before unpacking,
+    far below the weights' limit (256 MiB of "[0,0,...]" parses to gigabytes)."""
+    big = _with_member(corpus.policy, tmp_path / "meta.npz", "metadata", _header((), "<U1048576"))
+    with pytest.raises(OversizedInputError, match=r"'metadata.npy'.*over the limit of 1 MiB"):
+        load(big)

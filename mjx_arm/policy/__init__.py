@@ -31,18 +31,29 @@ from mjx_arm.policy.numpy_policy import (
 # would unpack to gigabytes before it is unpacked. Members a policy does not use are never read.
 POLICY_MEMBER_BYTES = 256 * MiB
 POLICY_TOTAL_BYTES = 512 * MiB
+# The metadata member, a JSON text of a few kB: parsed whole, so bounded on its own (a 256 MiB
+# text of "[0,0,...]" would parse to gigabytes of Python numbers).
+POLICY_METADATA_BYTES = MiB
 
 
 def read_policy_members(path: Path, wanted: Callable[[str], bool]) -> dict[str, Any]:
-    """The members ``wanted`` of a policy .npz, each checked against the limits above."""
-    return read_npz_members(
-        path,
-        "policy",
-        wanted,
-        max_member_bytes=POLICY_MEMBER_BYTES,
-        max_total_bytes=POLICY_TOTAL_BYTES,
-        error=PolicyFileError,
+    """The members ``wanted`` of a policy .npz, each checked against the limits above (the
+    metadata against :data:`POLICY_METADATA_BYTES`)."""
+    groups = (
+        (lambda k: k != "metadata" and wanted(k), POLICY_MEMBER_BYTES),
+        (lambda k: k == "metadata" and wanted(k), POLICY_METADATA_BYTES),
     )
+    members: dict[str, Any] = {}
+    for chosen, limit in groups:
+        members |= read_npz_members(
+            path,
+            "policy",
+            chosen,
+            max_member_bytes=limit,
+            max_total_bytes=POLICY_TOTAL_BYTES,
+            error=PolicyFileError,
+        )
+    return members
 
 
 __all__ = [
