@@ -306,3 +306,13 @@ def test_a_policy_metadata_text_over_its_limit_is_refused(corpus: Corpus, tmp_pa
     big = _with_member(corpus.policy, tmp_path / "meta.npz", "metadata", _header((), "<U1048576"))
     with pytest.raises(OversizedInputError, match=r"'metadata.npy'.*over the limit of 1 MiB"):
         load(big)
+
+
+def test_the_standalone_reader_bounds_members_by_the_zip_directory(corpus: Corpus, tmp_path):
+    """numpy_policy.read_npz on its own (numpy.load, as on a robot computer): a member that
+    unpacks to more than its limit is refused before numpy unpacks it."""
+    big = _with_member(corpus.policy, tmp_path / "meta.npz", "metadata", zeros=2 * 2**20)
+    with pytest.raises(PolicyFileError, match=r"'metadata.npy' unpacks to 2,097,2\d\d bytes"):
+        read_npz(big)
+    arrays, meta = read_npz(corpus.policy)  # an exported policy reads as before
+    assert meta["format"] == "mjx_arm.policy" and "kernel_0" in arrays

@@ -444,11 +444,26 @@ def read_npz(
     return arrays, metadata
 
 
+# What a member may unpack to in the standalone reader (the zip directory's sizes, checked
+# before numpy unpacks it): :mod:`mjx_arm.policy` reads with the same limits and more checks.
+MAX_MEMBER_BYTES, MAX_METADATA_BYTES = 256 * 2**20, 2**20
+
+
 def _np_load(path: Path) -> dict[str, np.ndarray]:
-    """The policy members of an ``.npz``, with ``numpy.load`` (no pickles)."""
+    """The policy members of an ``.npz``, with ``numpy.load`` (no pickles), each refused when
+    the zip directory says it unpacks to more than its limit."""
     try:
         with np.load(path, allow_pickle=False) as data:
+            for info in data.zip.infolist():
+                limit = MAX_METADATA_BYTES if info.filename == "metadata.npy" else MAX_MEMBER_BYTES
+                if is_policy_member(info.filename[:-4]) and info.file_size > limit:
+                    raise PolicyFileError(
+                        f"{path}: member {info.filename!r} unpacks to {info.file_size:,} bytes, "
+                        f"over the limit of {limit:,}: not an exported policy"
+                    )
             return {k: data[k] for k in data.files if is_policy_member(k)}
+    except PolicyFileError:
+        raise
     except (
         OSError,
         ValueError,
