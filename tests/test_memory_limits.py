@@ -100,3 +100,63 @@ def test_the_estimate_matches_the_rss_of_real_batches(num_envs: int):
     ratio = figures["grown"] / figures["estimate"]
     low, high = RSS_OVER_ESTIMATE
     assert low <= ratio <= high, figures
+
+
+# --------------------------------------------------------------------------- mesh side files
+
+# A child that validates URDFs under an address-space limit, each result and the peak resident
+# memory a JSON line. Validating a URDF without JAX peaks near 0.5 GB of address space; before
+# side files were checked, a glTF buffer or Collada texture on /dev/zero took 3.2-3.4 GB.
+MESH_CHILD = """
+import contextlib, io, json, resource, sys
+limit = int(sys.argv[1])
+resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+from mjx_arm.cli import main
+for path in sys.argv[2:]:
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(out):
+        code = main(["validate", path])
+    peak = [int(l.split()[1]) for l in open("/proc/self/status") if l.startswith("VmHWM")][0]
+    print(json.dumps([path, code, out.getvalue(), peak * 1024]), flush=True)
+"""
+MESH_ADDRESS_SPACE = 2 * 2**30
+MESH_PEAK_RSS = 2**30  # what a check may take at most, measured peak about 0.2 GB
+
+
+def _zero_device(path: Path) -> Path:
+    """A character device node at ``path`` that reads like /dev/zero (needs CAP_MKNOD)."""
+    import os
+    import stat
+
+    try:
+        os.mknod(path, stat.S_IFCHR | 0o600, os.makedev(1, 5))
+    except PermissionError:
+        pytest.skip("creating a device node needs CAP_MKNOD")
+    return path
+
+
+def test_side_files_on_a_zero_device_are_refused_under_an_address_space_limit(tmp_path):
+    from test_mesh_side_files import TETRA, collada_with_texture, gltf_box, robot
+
+    for name in ("gltf", "dae", "obj"):
+        (tmp_path / name).mkdir()
+    _, buffers = gltf_box(tmp_path / "gltf")
+    buffers[0].unlink()
+    _zero_device(buffers[0])
+    collada_with_texture(tmp_path / "dae" / "box.dae", "skin.png")
+    _zero_device(tmp_path / "dae" / "skin.png")
+    (tmp_path / "obj" / "tetra.obj").write_bytes(b"mtllib side.mtl\n" + TETRA)
+    _zero_device(tmp_path / "obj" / "side.mtl")
+    meshes = {"gltf": "box.gltf", "dae": "box.dae", "obj": "tetra.obj"}
+    paths = [robot(tmp_path / name, mesh, name=name) for name, mesh in meshes.items()]
+    argv = [sys.executable, "-c", MESH_CHILD, str(MESH_ADDRESS_SPACE), *map(str, paths)]
+    done = subprocess.run(argv, capture_output=True, text=True, timeout=180)
+    lines = [json.loads(line) for line in done.stdout.splitlines()]
+    results = {Path(path).stem: (code, out, peak) for path, code, out, peak in lines}
+    assert done.returncode == 0 and len(results) == len(meshes), done.stderr[-2000:]
+    device = "which is a character device, not a regular file"
+    gltf, obj, dae = results["gltf"], results["obj"], results["dae"]
+    assert gltf[0] == 2 and f"names buffer 'gltf_buffer_0.bin', {device}" in gltf[1], gltf[1]
+    assert obj[0] == 2 and f"names material library 'side.mtl', {device}" in obj[1], obj[1]
+    assert dae[0] == 0, dae[1]  # the converter reads no texture, PyBullet neither
+    assert all(peak < MESH_PEAK_RSS for _, _, peak in results.values()), results

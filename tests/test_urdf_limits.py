@@ -150,7 +150,7 @@ def test_a_mesh_file_over_the_size_limit_is_refused_before_it_is_read(tmp_path):
             f.write(b"\0" * 84)
             f.truncate(size)  # a sparse file: no disk space used
     assert mesh_problem(at_limit) is None
-    assert mesh_problem(over) == "is 32.0 MiB, above the 32 MiB a mesh file may have"
+    assert mesh_problem(over).problem == "is 32.0 MiB, above the 32 MiB a mesh file may have"
     (error,) = _static(mesh_urdf(tmp_path / "over.urdf", "over.stl")).errors
     assert "above the 32 MiB a mesh file may have" in error.problem
 
@@ -202,9 +202,9 @@ def test_obj_faces_and_vertices_are_counted_by_their_lines(tmp_path):
         return path
 
     assert mesh_problem(obj("a.obj", 3, MAX_MESH_FACES)) is None
-    assert "faces, more than" in mesh_problem(obj("b.obj", 3, MAX_MESH_FACES + 1))
+    assert "faces, more than" in mesh_problem(obj("b.obj", 3, MAX_MESH_FACES + 1)).problem
     assert mesh_problem(obj("c.obj", MAX_MESH_VERTICES, 1)) is None
-    assert "vertices, more than" in mesh_problem(obj("d.obj", MAX_MESH_VERTICES + 1, 1))
+    assert "vertices, more than" in mesh_problem(obj("d.obj", MAX_MESH_VERTICES + 1, 1)).problem
     assert count_problem(MAX_MESH_FACES, MAX_MESH_VERTICES) is None
 
 

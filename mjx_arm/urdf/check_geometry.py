@@ -30,8 +30,10 @@ from mjx_arm.urdf.mesh_convert import (
     mesh_bounds,
     missing_packages,
 )
+from mjx_arm.urdf.mesh_files import short_path
 from mjx_arm.urdf.mesh_limits import mesh_problem, path_problem
-from mjx_arm.urdf.meshes import AssetPathError, is_file, resolve_asset
+from mjx_arm.urdf.mesh_side_files import texture_problem
+from mjx_arm.urdf.meshes import AssetPathError, is_file, not_regular, resolve_asset
 from mjx_arm.urdf.model import rpy_to_matrix
 from mjx_arm.urdf.readers import UrdfReader
 
@@ -63,18 +65,26 @@ def _check_geometry(
 
 
 def _check_textures(tree: _Tree, package_dirs: Mapping[str, str], out: _Findings) -> None:
-    """Every ``<texture filename>`` (PyBullet loads them) stays inside its folder."""
+    """Every ``<texture filename>`` (PyBullet loads them) stays inside its folder and, where
+    it is there, is an image safe to decode (:func:`texture_problem`)."""
     owners = [(_link(n), e) for n, e in tree.links.items()]
-    owners += [(f"material {m.get('name', '')!r}", m) for m in tree.root.findall("material")]
+    owners += [(f"material {m.get('name', '')[:40]!r}", m) for m in tree.root.findall("material")]
     for element, elem in owners:
         for texture in elem.iter("texture"):
             filename = texture.get("filename")
             if filename is None:
                 continue
+            shown = short_path(filename)
             try:
-                resolve_asset(filename, tree.path, package_dirs)
+                path = resolve_asset(filename, tree.path, package_dirs)
             except AssetPathError as exc:
-                out.error(2, element, f"has texture {filename!r}: it {exc.problem}", exc.fix)
+                out.error(2, element, f"has texture {shown!r}: it {exc.problem}", exc.fix)
+                continue
+            problem = texture_problem(path) if path.exists() else None
+            if problem is not None:
+                out.error(
+                    2, element, f"has texture {shown!r}, which {problem.problem}", problem.fix
+                )
 
 
 def _check_shape(
@@ -173,8 +183,9 @@ def _check_mesh(
             "set filename to the mesh file (relative to the URDF, or package://...)",
         )
         return None
-    convert = _check_mesh_format(link, role, filename, readers, out)
     resolved = _resolve_mesh(path, link, role, filename, package_dirs, out)
+    filename = short_path(filename)  # the name in messages: its tail
+    convert = _check_mesh_format(link, role, filename, readers, out)
     scale = _numbers(shape.get("scale", "1 1 1"), 3)
     if scale is None:
         out.error(
@@ -211,18 +222,14 @@ def _mesh_file_usable(
             out.error(
                 2,
                 _link(link),
-                f"has <{role}> mesh {filename[-60:]!r}, which {too_long}",
+                f"has <{role}> mesh {filename!r}, which {too_long}",
                 "move the meshes to a folder with a shorter path",
             )
             return False
-    too_large = mesh_problem(resolved)
-    if too_large:
-        out.error(
-            2,
-            _link(link),
-            f"has <{role}> mesh {filename!r}, which {too_large}",
-            "simplify the mesh (e.g. a quadric decimation in MeshLab or Blender)",
-        )
+    problem = mesh_problem(resolved)
+    if problem:
+        text = f"has <{role}> mesh {filename!r}, which {problem.problem}"
+        out.error(2, _link(link), text, problem.fix)
         return False
     return True
 
@@ -267,8 +274,7 @@ def _converted_box(
         _link(link),
         f"{cannot}: converted to STL with trimesh, cached in {default_cache_dir()} "
         "(ConvertConfig.mesh_cache_dir sets another folder)",
-        "nothing needed; to skip the conversion, save the mesh as binary .stl or .obj and "
-        "point filename at it",
+        "nothing needed (to skip the conversion: save the mesh as binary .stl or .obj)",
     )
     return box
 
@@ -289,7 +295,7 @@ def _check_mesh_format(
         out.warning(
             2,
             _link(link),
-            f"has <visual> mesh {filename!r} in format {suffix or '(none)'}, which "
+            f"has <visual> mesh {filename!r} in format {suffix[:16] or '(none)'}, which "
             f"{reader.label} cannot read: the converter leaves this visual out (it only draws)",
             f"convert the mesh to .stl or .obj to see it in {reader.label}'s renderer",
         )
@@ -303,7 +309,7 @@ def _check_mesh_format(
             2,
             _link(link),
             f"has <{role}> mesh {filename!r} in format "
-            f"{suffix or '(none)'}, which {_labels(blind)} cannot read",
+            f"{suffix[:16] or '(none)'}, which {_labels(blind)} cannot read",
             "convert the mesh to .stl or .obj (for example with trimesh or meshlab) and "
             "point filename at it",
         )
@@ -334,16 +340,26 @@ def _converter_installed(link: str, filename: str, suffix: str, who: str, out: _
 def _resolve_mesh(
     path: Path, link: str, role: str, filename: str, package_dirs: Mapping[str, str], out: _Findings
 ) -> Path | None:
+    shown = short_path(filename)
     try:
         resolved = resolve_asset(filename, path, package_dirs)
     except AssetPathError as exc:
-        out.error(2, _link(link), f"has <{role}> mesh {filename!r}: it {exc.problem}", exc.fix)
+        out.error(2, _link(link), f"has <{role}> mesh {shown!r}: it {exc.problem}", exc.fix)
+        return None
+    kind = not_regular(resolved)
+    if kind:
+        out.error(
+            2,
+            _link(link),
+            f"has <{role}> mesh {shown!r}: {short_path(resolved)} is {kind}, not a regular file",
+            "point filename at a regular mesh file (a FIFO, device or socket is never read)",
+        )
         return None
     if not is_file(resolved):
         out.error(
             2,
             _link(link),
-            f"has <{role}> mesh {filename!r}: file {resolved} does not exist",
+            f"has <{role}> mesh {shown!r}: file {short_path(resolved)} does not exist",
             "correct the filename or add the mesh file",
         )
         return None

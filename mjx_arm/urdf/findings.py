@@ -8,6 +8,7 @@ length, and mesh paths, sizes and face counts.
 
 from __future__ import annotations
 
+import re
 import xml.etree.ElementTree as ET
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
@@ -16,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from mjx_arm.engines import engine_names
+from mjx_arm.urdf.mesh_files import short_path
 
 
 class _EngineChoices(Mapping[str, tuple[str, ...]]):
@@ -77,6 +79,22 @@ MAX_MESH_VERTICES = 3 * MAX_MESH_FACES
 # 10,000,084 bytes; an OBJ of as many faces with 100,000 vertices, normals and texture
 # coordinates, as trimesh writes it, is 19.8 MiB.
 MAX_MESH_BYTES = 32 * 2**20
+# Files a mesh names (mjx_arm.urdf.mesh_side_files): an OBJ's material libraries and their
+# textures (PyBullet reads both), a glTF's buffers, a .zae archive's members. Each is read only
+# when it is a regular file of at most MAX_MESH_BYTES, and all of one mesh's together (for a
+# .zae: what its members unpack to, declared and actual) at most MAX_SIDE_BYTES.
+MAX_SIDE_BYTES = MAX_MESH_BYTES
+# Members of a .zae archive (a Collada file and its textures: a handful).
+MAX_ZAE_MEMBERS = 256
+# Pixels of a texture an OBJ's material library names. PyBullet decodes it when it loads the
+# URDF, at about 6 bytes a pixel: a 187 KB PNG of 8,000 x 8,000 pixels took PyBullet's peak
+# memory from 80 MB to 456 MB (PyBullet 3.2.7). 4096 x 4096 is the usual largest texture.
+MAX_TEXTURE_PIXELS = 4096 * 4096
+# Bytes of Collada geometry, counted once per instance of it in the scene: trimesh copies a
+# geometry for every <instance_geometry>, also through nested <instance_node>s, so a 6 KB file
+# that instances a box through 30 levels of two <instance_node>s each asks for 2**30 copies
+# (1,024 copies took trimesh 0.8 s). A file that uses each geometry once is within it by its size.
+MAX_INSTANCED_BYTES = MAX_MESH_BYTES
 # Longest name (robot, link, joint, material, ...) a URDF may use. PyBullet 3.2 segfaults while
 # loading a URDF whose joint name has 1,264 or more characters, or whose link name has 2,288
 # or more (robot names crash from 42,184; material names up to 70,000 do not). 256 leaves a
@@ -93,6 +111,8 @@ MAX_ATTRIBUTE_CHARS = 4096
 MAX_SIZE_RATIO = 1e5
 # Largest origin offset (m): a robot is metres across; beyond this, float rounding eats its shapes.
 MAX_OFFSET = 1e4
+# Longest line of a finding (Finding.line): indented by two in a report, under 300 characters.
+LINE_CHARS = 297
 
 # --------------------------------------------------------------------------- report types
 
@@ -121,10 +141,18 @@ class Finding:
         return self.line(with_file=True)
 
     def line(self, with_file: bool = False) -> str:
-        """``SEVERITY [layer] (file: )element: problem. Fix: fix`` on one line."""
+        """``SEVERITY [layer] (file: )element: problem. Fix: fix`` on one line of at most
+        :data:`LINE_CHARS` characters: a longer one has its paths shortened to their tails,
+        then its element, fix and problem cut (each ending in ``...``)."""
         problem, fix = self.problem.rstrip(". "), self.fix.rstrip(". ")
-        where = f"{self.file}: {self.element}" if with_file else self.element
-        return f"{self.severity.upper()} [{self.layer}] {where}: {problem}. Fix: {fix}"
+        where = f"{short_path(self.file)}: {self.element}" if with_file else self.element
+        text = f"{self.severity.upper()} [{self.layer}] {where}: {problem}. Fix: {fix}"
+        if len(text) <= LINE_CHARS:
+            return text
+        problem, fix = _PATH.sub(_tail, problem), _cut(_PATH.sub(_tail, fix), 110)
+        head = f"{self.severity.upper()} [{self.layer}] {_cut(where, 80)}: "
+        tail = f". Fix: {fix}"
+        return head + _cut(problem, LINE_CHARS - len(head) - len(tail)) + tail
 
 
 @dataclass(frozen=True)
@@ -177,6 +205,14 @@ class ValidationReport:
 def plural(n: int, noun: str) -> str:
     """``1 error``, ``2 errors``."""
     return f"{n} {noun}" + ("" if n == 1 else "s")
+
+
+# An absolute path of three or more folders, shortened to its tail on a long report line.
+_PATH = re.compile(r"(?:/[^\s'\"/;:,()\[\]]+){3,}")
+
+
+def _tail(match: re.Match) -> str:
+    return short_path(match.group(0), 40)
 
 
 def _cut(text: str, chars: int) -> str:

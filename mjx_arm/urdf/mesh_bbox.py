@@ -11,6 +11,9 @@ from pathlib import Path
 
 import numpy as np
 
+from mjx_arm.urdf.findings import MAX_MESH_BYTES
+from mjx_arm.urdf.mesh_files import UnsafeFileError, read_regular
+
 READ_FORMATS = frozenset({".stl", ".obj"})  # the formats whose bounding box is read
 _STL_RECORD = np.dtype([("normal", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")])
 
@@ -20,9 +23,8 @@ def _is_ascii_stl_at(path: str, mtime_ns: int, size: int) -> bool:
     """True for a text STL (``solid ...`` and no consistent binary header)."""
     del mtime_ns
     try:
-        with open(path, "rb") as f:
-            head = f.read(84)
-    except OSError:
+        head = read_regular(path, MAX_MESH_BYTES, head=84)
+    except (OSError, UnsafeFileError):
         return False
     binary = len(head) == 84 and size == 84 + 50 * int.from_bytes(head[80:84], "little")
     return not binary and head.lstrip().startswith(b"solid")
@@ -36,11 +38,11 @@ def _mesh_box_at(path: str, mtime_ns: int, size: int) -> np.ndarray | None:
     """
     del mtime_ns, size
     try:
-        data = Path(path).read_bytes()
+        data = read_regular(path, MAX_MESH_BYTES)
         suffix = Path(path).suffix.lower()
         vertices = _stl_vertices(data) if suffix == ".stl" else None
         vertices = _obj_vertices(data) if suffix == ".obj" else vertices
-    except (OSError, ValueError):
+    except (OSError, ValueError, UnsafeFileError):
         return None
     if vertices is None or len(vertices) == 0 or not np.all(np.isfinite(vertices)):
         return None

@@ -13,6 +13,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import importlib
+import io
 import logging
 import os
 import re
@@ -24,7 +25,10 @@ import numpy as np
 
 from mjx_arm.inputs import write_atomic
 from mjx_arm.urdf.errors import ConversionError, one_line
-from mjx_arm.urdf.mesh_limits import count_problem, mesh_problem
+from mjx_arm.urdf.findings import MAX_MESH_BYTES, MAX_MESH_FACES
+from mjx_arm.urdf.mesh_files import UnsafeFileError, read_regular, short_path
+from mjx_arm.urdf.mesh_limits import count_problem, data_problem
+from mjx_arm.urdf.mesh_side_files import trimesh_input
 
 # Mesh formats trimesh reads, with the modules each needs (import name -> pip name).
 CONVERTIBLE_FORMATS = frozenset({".dae", ".zae", ".ply", ".off", ".glb", ".gltf"})
@@ -41,6 +45,8 @@ _FIX = (
     "URDF's filename at it"
 )
 _FIX_LARGE = "simplify the mesh (e.g. a quadric decimation in MeshLab or Blender)"
+# Loaders of trimesh that take ``skip_materials`` (Collada's reads no texture given no file).
+_SKIPS_MATERIALS = frozenset({"obj", "ply", "gltf", "glb"})
 
 
 class MeshConvertError(ConversionError):
@@ -52,7 +58,7 @@ class MeshConvertError(ConversionError):
     """
 
     def __init__(self, path: Path, problem: str, fix: str) -> None:
-        super().__init__(f"{path}: {problem}; {fix}")
+        super().__init__(f"{short_path(path)}: {problem}; {fix}")
         self.problem, self.fix = problem, fix
 
 
@@ -151,9 +157,10 @@ def load_mesh(path: str | Path) -> Any:
             finite triangles.
     """
     source = Path(path)
-    too_large = mesh_problem(source)
-    if too_large:
-        raise MeshConvertError(source, f"the file {too_large}", _FIX_LARGE)
+    data = _read_bytes(source)
+    problem = data_problem(source, data)
+    if problem:
+        raise MeshConvertError(source, f"the file {problem.problem}", problem.fix)
     missing = missing_packages(source.suffix)
     if missing:
         raise MeshConvertError(
@@ -161,7 +168,7 @@ def load_mesh(path: str | Path) -> Any:
             f"converting a {source.suffix} mesh needs {' and '.join(missing)}, not installed",
             f"{INSTALL_HINT}, or convert the mesh to .stl or .obj yourself",
         )
-    loaded = _read(source)
+    loaded = _read(source, data)
     mesh = _concatenate(loaded, source)
     scale = _unit_scale(getattr(loaded, "units", None), source)
     if scale != 1.0:
@@ -176,35 +183,58 @@ def load_mesh(path: str | Path) -> Any:
     return mesh
 
 
-def _read(source: Path) -> Any:
-    """``trimesh.load`` quietly: trimesh's log records and pycollada's warnings are not shown."""
+def _read(source: Path, data: bytes) -> Any:
+    """``trimesh.load`` of the bytes ``data`` of ``source``, quietly (trimesh's log records and
+    pycollada's warnings are not shown), given only the side files it needs for the geometry
+    (:func:`~mjx_arm.urdf.mesh_side_files.trimesh_input`): no materials, no textures."""
     import trimesh
 
+    try:
+        data, file_type, files = trimesh_input(source, data)
+    except UnsafeFileError as exc:
+        raise MeshConvertError(source, f"the file {exc.problem}", exc.fix) from exc
     logger = logging.getLogger("trimesh")
     if not logger.handlers:  # a library's logger: no output unless the application asks for it
         logger.addHandler(logging.NullHandler())
+    options = {"skip_materials": True} if file_type in _SKIPS_MATERIALS else {}
+    resolver = trimesh.resolvers.ZipResolver(files)  # serves these files, and nothing else
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            return trimesh.load(str(source))
+            return trimesh.load(io.BytesIO(data), file_type, resolver=resolver, **options)
     except Exception as exc:  # trimesh and pycollada raise many kinds on broken files
-        problem = f"trimesh cannot read it ({type(exc).__name__}: {one_line(exc)})"
+        problem = f"trimesh cannot read it ({type(exc).__name__}: {one_line(exc)[:120]})"
         raise MeshConvertError(source, problem, _FIX) from exc
 
 
 def _concatenate(loaded: Any, source: Path) -> Any:
-    """One ``trimesh.Trimesh`` from a mesh or a scene (each geometry moved by its transform)."""
+    """One ``trimesh.Trimesh`` from a mesh or a scene: each instance of a geometry moved by its
+    transform, geometry only (no visuals: a texture is never decoded). A scene whose
+    instances hold more than MAX_MESH_FACES faces is refused before they are copied."""
     import trimesh
 
-    if isinstance(loaded, trimesh.Scene):
-        meshes = [g for g in loaded.dump() if isinstance(g, trimesh.Trimesh)]
-        if not meshes:
-            raise MeshConvertError(source, "the file holds no triangle mesh", _FIX)
-        return trimesh.util.concatenate(meshes)
     if isinstance(loaded, trimesh.Trimesh):
         return loaded
-    kind = type(loaded).__name__
-    raise MeshConvertError(source, f"the file holds a {kind}, not a triangle mesh", _FIX)
+    if not isinstance(loaded, trimesh.Scene):
+        kind = type(loaded).__name__
+        raise MeshConvertError(source, f"the file holds a {kind}, not a triangle mesh", _FIX)
+    parts, faces = [], 0
+    for node in loaded.graph.nodes_geometry:
+        transform, name = loaded.graph[node]
+        geometry = loaded.geometry.get(name)
+        if isinstance(geometry, trimesh.Trimesh):
+            faces += len(geometry.faces)
+            if faces > MAX_MESH_FACES:
+                problem = f"the scene instances more than the {MAX_MESH_FACES:,} faces MuJoCo reads"
+                raise MeshConvertError(source, problem, _FIX_LARGE)
+            parts.append((transform, geometry))
+    if not parts:
+        raise MeshConvertError(source, "the file holds no triangle mesh", _FIX)
+    meshes = [
+        trimesh.Trimesh(vertices=g.vertices, faces=g.faces, process=False).apply_transform(t)
+        for t, g in parts
+    ]
+    return trimesh.util.concatenate(meshes)
 
 
 def _unit_scale(units: str | None, source: Path) -> float:
@@ -233,11 +263,17 @@ def _write_atomic(mesh: Any, target: Path) -> None:
 
 
 def _content_hash(source: Path) -> str:
+    return hashlib.sha256(_HASH_SALT + _read_bytes(source)).hexdigest()[:20]
+
+
+def _read_bytes(source: Path) -> bytes:
+    """The bytes of the mesh file ``source``: a regular file of at most MAX_MESH_BYTES."""
     try:
-        data = source.read_bytes()
+        return read_regular(source, MAX_MESH_BYTES)
+    except UnsafeFileError as exc:
+        raise MeshConvertError(source, f"the file {exc.problem}", exc.fix) from exc
     except OSError as exc:
         raise MeshConvertError(source, f"the file cannot be read ({one_line(exc)})", _FIX) from exc
-    return hashlib.sha256(_HASH_SALT + data).hexdigest()[:20]
 
 
 def _stat(source: Path) -> os.stat_result:

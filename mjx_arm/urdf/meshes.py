@@ -14,6 +14,7 @@ from collections.abc import Mapping
 from pathlib import Path
 
 from mjx_arm.urdf.errors import ConversionError
+from mjx_arm.urdf.mesh_files import file_kind, short_path
 
 # MuJoCo reads STL, OBJ and its own MSH. Collada (.dae) is the usual ROS format that MuJoCo
 # cannot read (the converter turns it into STL: mjx_arm.urdf.mesh_convert).
@@ -98,14 +99,16 @@ def _inside(path: Path, roots: list[Path]) -> Path:
     try:
         resolved = path.resolve()
     except (OSError, RuntimeError, ValueError) as exc:  # a symbolic link loop, a bad name
-        raise AssetPathError(f"cannot be resolved: {exc}", "give a plain file path") from exc
+        problem = f"cannot be resolved: {type(exc).__name__}"
+        raise AssetPathError(problem, "give a plain file path") from exc
     if any(resolved.is_relative_to(root) for root in roots):
         return resolved
-    folders = " or ".join(str(root) for root in roots)
+    folders = " or ".join(short_path(root, 50) for root in roots[:2])
+    folders += f" or {len(roots) - 2} more" if len(roots) > 2 else ""
     raise AssetPathError(
-        f"points to {resolved}, outside {folders}",
-        "keep meshes and textures inside the URDF's folder, or inside a package folder passed "
-        "as package_dirs (CLI: --package NAME=DIR) and referred to as package://NAME/...",
+        f"points to {short_path(resolved, 50)}, outside {folders}",
+        "keep meshes and textures in the URDF's folder, or in a package folder given as "
+        "package_dirs (CLI: --package NAME=DIR) and named package://NAME/...",
     )
 
 
@@ -115,6 +118,17 @@ def is_file(path: Path) -> bool:
         return path.is_file()
     except (OSError, ValueError):
         return False
+
+
+def not_regular(path: Path) -> str:
+    """What ``path`` is when it is there but not a regular file ("a FIFO (named pipe)", "a
+    folder"), else "" (a regular file, or nothing there)."""
+    try:
+        mode = path.stat().st_mode
+    except (OSError, ValueError):
+        return ""
+    kind = file_kind(mode)
+    return "" if kind == "a regular file" else kind
 
 
 def _is_dir(path: Path) -> bool:
@@ -133,10 +147,15 @@ def existing_mesh(
         path = resolve_asset(filename, urdf_path, package_dirs)
     except AssetPathError as exc:
         raise ConversionError(
-            f"{urdf_path}: link {link!r}: mesh {filename!r} {exc.problem}; {exc.fix}"
+            f"{short_path(urdf_path)}: link {link!r}: mesh {short_path(filename)!r} "
+            f"{exc.problem}; {exc.fix}"
         ) from exc
-    if not is_file(path):
-        raise ConversionError(f"{urdf_path}: link {link!r}: mesh file {path} does not exist")
+    kind = not_regular(path)
+    if kind or not is_file(path):
+        what = f"is {kind}, not a regular file" if kind else "does not exist"
+        raise ConversionError(
+            f"{short_path(urdf_path)}: link {link!r}: mesh file {short_path(path)} {what}"
+        )
     return path
 
 
@@ -147,7 +166,8 @@ def resolve_mesh_filename(
     path = existing_mesh(filename, urdf_path, link, package_dirs)
     if path.suffix.lower() not in MUJOCO_MESH_FORMATS:
         raise ConversionError(
-            f"{urdf_path}: link {link!r}: mesh {path.name} is {path.suffix} which MuJoCo cannot "
+            f"{short_path(urdf_path)}: link {link!r}: mesh {short_path(path.name, 40)} is "
+            f"{path.suffix[:16]} which MuJoCo cannot "
             f"read; convert it to .stl or .obj (for example with trimesh or meshlab)"
         )
     return path
