@@ -11,9 +11,10 @@ import os
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 
-from input_fuzz.corpus import CHECKPOINT_STEP, Corpus, build
+from input_fuzz.corpus import CHECKPOINT_STEP, Corpus, brax_params, build
 from mjx_arm.cli import build_parser, main, report_folders
 from mjx_arm.inputs import (
     InputFileError,
@@ -161,6 +162,35 @@ def test_no_run_file_is_written_through_a_link(corpus: Corpus, tmp_path: Path) -
         run.check_writable()
     assert victim.read_text() == "step,x\n1,2\n"
     assert (run_dir / "other.csv").read_text() == "step,time,eval/episode_reward\n1,2,3\n"
+
+
+def test_a_save_deletes_nothing_through_a_checkpoint_link(tmp_path: Path) -> None:
+    """A save drops the older checkpoints' env state: never a file a link leads to."""
+    outside = tmp_path / "elsewhere"
+    outside.mkdir()
+    (outside / "env_state.npz").write_bytes(b"kept")
+    run = RunDir(tmp_path / "run")
+    run.checkpoints.mkdir()
+    run.checkpoint_dir(1).symlink_to(outside)
+    params = brax_params(22, 6, np.random.default_rng(0))
+    run.save_checkpoint(2, params, {"task": "reach"}, newest_only=("env_state.npz",))
+    assert (outside / "env_state.npz").read_bytes() == b"kept"
+
+
+def test_the_launcher_writes_no_process_log_through_a_link(tmp_path: Path, monkeypatch) -> None:
+    from mjx_arm.train import launch
+    from mjx_arm.train.distributed import ProcessGroup
+
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious")
+    logs = tmp_path / "run" / "logs"
+    logs.mkdir(parents=True)
+    (logs / "process_1.log").symlink_to(victim)
+    monkeypatch.setattr(launch.sys, "executable", "/bin/true")  # no training is started
+    groups = tuple(ProcessGroup("127.0.0.1:1", 2, i, 60) for i in (0, 1))
+    with pytest.raises(RunDirError, match=r"process log .* is a symbolic link"):
+        launch.run(launch.Plan(("0", "1"), groups), ["train"], logs, log=lambda _: None)
+    assert victim.read_text() == "precious"
 
 
 def test_a_users_folder_is_never_taken_for_a_new_run(tmp_path: Path, capsys) -> None:

@@ -174,6 +174,8 @@ def run(plan: Plan, argv: list[str], logs: Path, log=print) -> int:
     Returns:
         0 when every process succeeded, else the exit code of the first that failed.
     """
+    from mjx_arm.train.rundir import open_no_follow  # no log is written through a link
+
     logs.mkdir(parents=True, exist_ok=True)
     children: list[tuple[ProcessGroup, str, subprocess.Popen, Path | None]] = []
     pairs = zip(plan.gpus, plan.groups, strict=True)
@@ -187,7 +189,8 @@ def run(plan: Plan, argv: list[str], logs: Path, log=print) -> int:
                 children.append((group, gpu, subprocess.Popen(command, env=env), None))
                 continue
             path = logs / f"process_{group.process_id}.log"
-            with path.open("wb") as out:
+            flags = os.O_WRONLY | os.O_CREAT | os.O_TRUNC
+            with os.fdopen(open_no_follow(path, flags, "process log"), "wb") as out:
                 proc = subprocess.Popen(command, env=env, stdout=out, stderr=subprocess.STDOUT)
             children.append((group, gpu, proc, path))
         return _wait(children, log)

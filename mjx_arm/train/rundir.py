@@ -355,7 +355,7 @@ class RunDir:
         saved = ckpt.save_checkpoint(folder, step, params, meta, transitions, arrays)
         for name in newest_only:
             for old in self.checkpoints.glob(f"{CHECKPOINT_PREFIX}*/{name}"):
-                if old.parent != saved:
+                if old.parent != saved and not old.parent.is_symlink():  # never out of the run
                     old.unlink(missing_ok=True)
         return saved
 
