@@ -418,3 +418,16 @@ def test_bench_from_a_clone_leaves_the_committed_results_alone(
     assert f"wrote {Path('runs', 'bench', made.name, 'grasp.json')}" in capsys.readouterr().out
     assert main(["bench", "grasp", "--engines", "mujoco", "--out", str(committed)]) == 0
     assert json.loads((committed / "grasp.json").read_text())["starts"]
+
+
+def test_compile_reports_are_read_bounded_and_a_damaged_file_starts_afresh(tmp_path: Path) -> None:
+    run = RunDir(tmp_path / "run")
+    assert run.compile_reports() == []
+    run.save_compile_report({"compile_s": 3.0})
+    assert run.compile_reports() == [{"compile_s": 3.0}]
+    (run.path / "compile.json").unlink()
+    (run.path / "compile.json").symlink_to("/dev/zero")
+    assert run.compile_reports() == []
+    run.save_compile_report({"compile_s": 1.0})  # replaces the link, writes nothing through it
+    assert run.compile_reports() == [{"compile_s": 1.0}]
+    assert not (run.path / "compile.json").is_symlink()

@@ -133,14 +133,12 @@ def read_seed_run(
 ) -> SeedRun:
     """A seed's result from its run directory (trained by another process), times from
     ``start``."""
-    import json
+    from mjx_arm.train.rundir import RunDir
 
     curve = read_curve(run_dir, start) if (run_dir / "metrics.csv").is_file() else []
     hit = first_at(curve, config.threshold)
-    starts = json.loads((run_dir / "compile.json").read_text())
+    starts = RunDir(run_dir).compile_reports()
     report = starts[-1] if starts else {}
-    from mjx_arm.train.rundir import RunDir
-
     speeds = [r.get("training/sps", math.nan) for r in RunDir(run_dir).read_metrics()]
     speeds = [v for v in speeds if math.isfinite(v)]
     return SeedRun(

@@ -130,15 +130,18 @@ class RunDir:
     def save_compile_report(self, report: dict[str, Any]) -> None:
         """Add one start's compile report (:mod:`mjx_arm.train.compile_report`) to
         ``compile.json``: a list, one entry per start of the run (a resume adds one)."""
-        path = self.path / "compile.json"
-        try:  # a damaged report is started afresh
-            text = read_text(path, "compile report", within=self.path)
+        text = json.dumps([*self.compile_reports(), report], indent=2, sort_keys=True)
+        write_atomic(text.encode(), self.path / "compile.json")
+
+    def compile_reports(self) -> list[dict[str, Any]]:
+        """The compile reports of ``compile.json``, one per start (none where it is missing or
+        damaged: a bounded regular file of the run, a JSON list)."""
+        try:
+            text = read_text(self.path / "compile.json", "compile report", within=self.path)
             starts = json.loads(text)
         except (InputError, ValueError, RecursionError):
-            starts = []
-        starts = starts if isinstance(starts, list) else []
-        text = json.dumps([*starts, report], indent=2, sort_keys=True)
-        write_atomic(text.encode(), path)
+            return []
+        return [s for s in starts if isinstance(s, dict)] if isinstance(starts, list) else []
 
     @contextlib.contextmanager
     def lock(self) -> Iterator[None]:
@@ -181,12 +184,8 @@ class RunDir:
                 fcntl.flock(f, fcntl.LOCK_UN)
 
     def load_config(self) -> dict[str, Any]:
-        """Read ``config.json``.
-
-        Raises:
-            InputFileError: missing, not a regular file of the run, too big, or not a JSON
-                object.
-        """
+        """Read ``config.json`` (an InputFileError where it is missing, not a bounded regular
+        file of the run, or not a JSON object)."""
         return read_json_object(self.path / "config.json", "run config", within=self.path)
 
     # ------------------------------------------------------------------ metrics
@@ -320,11 +319,7 @@ class RunDir:
 
     def check_links(self) -> None:
         """Refuse a folder the run writes into (:data:`WRITTEN_FOLDERS`) that is a link out of
-        the run directory: a run writes inside its folder only.
-
-        Raises:
-            RunDirError: such a link, with its target.
-        """
+        the run directory (a :class:`RunDirError` naming its target)."""
         root = os.path.realpath(self.path)
         for name in WRITTEN_FOLDERS:
             target = Path(os.path.realpath(self.path / name))
