@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from mjx_arm.urdf.errors import ConversionError
-from mjx_arm.urdf.mesh_convert import default_cache_dir, load_mesh, write_atomic
+from mjx_arm.urdf.mesh_convert import default_cache_dir, load_mesh, read_mesh_bytes, write_atomic
 from mjx_arm.urdf.meshes import existing_mesh, resolve_asset
 from mjx_arm.urdf.repair import UrdfRepairs, repair_tree
 from mjx_arm.urdf.safe_xml import read_xml
@@ -109,7 +109,7 @@ def bullet_urdf(
     if repaired:  # (an unrepaired copy keeps its name)
         key.update(repairs.key())
     for path in sorted({str(p) for p in sources.values()}):
-        key.update(Path(path).read_bytes())
+        key.update(read_mesh_bytes(Path(path)))
     folder = (cache_dir or default_cache_dir()).expanduser().resolve()
     target = folder / f"{urdf.stem}_bullet_{key.hexdigest()[:16]}.urdf"
     if target.is_file():
@@ -140,7 +140,7 @@ def _absolute_paths(root: ET.Element, urdf: Path) -> None:
 def _eroded_file(mesh: ET.Element, source: Path, folder: Path) -> Path:
     """Write the eroded hull of ``source`` (scaled by the element's ``scale``) as an OBJ."""
     scale = np.array([float(v) for v in (mesh.get("scale") or "1 1 1").split()], np.float64)
-    tag = hashlib.sha256(_VERSION + source.read_bytes() + scale.tobytes()).hexdigest()[:16]
+    tag = hashlib.sha256(_VERSION + read_mesh_bytes(source) + scale.tobytes()).hexdigest()[:16]
     target = folder / f"{source.stem}_hull_{tag}.obj"
     if not target.is_file():
         vertices, faces = eroded_hull(load_mesh(source).vertices * scale, BULLET_URDF_MARGIN)

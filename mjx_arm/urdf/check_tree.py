@@ -7,6 +7,7 @@ from pathlib import Path
 
 from mjx_arm.urdf.findings import (
     JOINT_TYPES,
+    MAX_BYTES,
     MAX_CHAIN_LINKS,
     MAX_LINKS,
     MAX_NAME_CHARS,
@@ -19,6 +20,7 @@ from mjx_arm.urdf.findings import (
     _Tree,
     name_list,
 )
+from mjx_arm.urdf.mesh_files import UnsafeFileError, read_regular
 from mjx_arm.urdf.safe_xml import XmlError, read_xml
 
 # --------------------------------------------------------------------------- layer 1
@@ -341,8 +343,8 @@ def _check_line_lengths(path: Path, limit: int, label: str, out: _Findings) -> N
     whole (PyBullet cuts longer lines into pieces and silently changes names and values where
     it cuts: :data:`~mjx_arm.urdf.findings.MAX_LINE_BYTES`)."""
     try:
-        lines = path.read_bytes().split(b"\n")
-    except OSError:
+        lines = read_regular(path, MAX_BYTES, "URDF").split(b"\n")
+    except (OSError, UnsafeFileError):
         return  # layer 1 already reported an unreadable file
     long = [(i + 1, len(line)) for i, line in enumerate(lines) if len(line) > limit]
     if long:

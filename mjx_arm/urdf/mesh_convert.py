@@ -157,7 +157,7 @@ def load_mesh(path: str | Path) -> Any:
             finite triangles.
     """
     source = Path(path)
-    data = _read_bytes(source)
+    data = read_mesh_bytes(source)
     problem = data_problem(source, data)
     if problem:
         raise MeshConvertError(source, f"the file {problem.problem}", problem.fix)
@@ -263,11 +263,16 @@ def _write_atomic(mesh: Any, target: Path) -> None:
 
 
 def _content_hash(source: Path) -> str:
-    return hashlib.sha256(_HASH_SALT + _read_bytes(source)).hexdigest()[:20]
+    return hashlib.sha256(_HASH_SALT + read_mesh_bytes(source)).hexdigest()[:20]
 
 
-def _read_bytes(source: Path) -> bytes:
-    """The bytes of the mesh file ``source``: a regular file of at most MAX_MESH_BYTES."""
+def read_mesh_bytes(source: Path) -> bytes:
+    """The bytes of the mesh file ``source``: a regular file of at most MAX_MESH_BYTES
+    (:func:`~mjx_arm.urdf.mesh_files.read_regular`).
+
+    Raises:
+        MeshConvertError: not a regular file, too large, or unreadable.
+    """
     try:
         return read_regular(source, MAX_MESH_BYTES)
     except UnsafeFileError as exc:

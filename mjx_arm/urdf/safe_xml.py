@@ -25,6 +25,7 @@ from mjx_arm.urdf.errors import UrdfError
 
 # The limits live with the validator's others (names have a lower limit, MAX_NAME_CHARS).
 from mjx_arm.urdf.findings import MAX_ATTRIBUTE_CHARS, MAX_BYTES, MAX_DEPTH, MAX_ELEMENTS
+from mjx_arm.urdf.mesh_files import UnsafeFileError, read_regular
 
 __all__ = [
     "MAX_ATTRIBUTE_CHARS",
@@ -77,7 +78,9 @@ def read_xml(path: str | Path) -> ET.Element:
         size = path.stat().st_size
         if size > MAX_BYTES:
             raise XmlError("file", _too_large(size), "remove what the URDF does not need")
-        data = path.read_bytes()
+        data = read_regular(path, MAX_BYTES, "URDF")  # no FIFO, no file grown since the stat
+    except UnsafeFileError as exc:
+        raise XmlError("file", exc.problem, exc.fix) from exc
     except OSError as exc:
         raise XmlError(
             "file", f"cannot be read: {exc.strerror or exc}", "check the permissions"
