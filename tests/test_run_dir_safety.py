@@ -431,3 +431,17 @@ def test_compile_reports_are_read_bounded_and_a_damaged_file_starts_afresh(tmp_p
     run.save_compile_report({"compile_s": 1.0})  # replaces the link, writes nothing through it
     assert run.compile_reports() == [{"compile_s": 1.0}]
     assert not (run.path / "compile.json").is_symlink()
+
+
+def test_a_run_config_that_is_a_fifo_or_a_device_is_named(
+    corpus: Corpus, tmp_path: Path, capsys
+) -> None:
+    run_dir = _run(corpus, tmp_path)
+    (run_dir / "config.json").unlink()
+    os.mkfifo(run_dir / "config.json")
+    line = _fails(["export", str(run_dir), "-o", str(tmp_path / "p.npz")], capsys)
+    assert "run config" in line and "not a regular file" in line
+    (run_dir / "config.json").unlink()
+    (run_dir / "config.json").symlink_to("/dev/zero")
+    line = _fails(["train", "--resume", str(run_dir)], capsys)
+    assert "run config" in line and "outside" in line

@@ -11,6 +11,7 @@ Reading a checkpoint needs orbax (and so jax); running the exported file does no
 from __future__ import annotations
 
 import inspect
+import os
 import time
 import warnings
 from collections.abc import Callable, Mapping
@@ -49,7 +50,7 @@ def find_checkpoint(run_dir: str | Path, step: int | None = None) -> Path:
     from mjx_arm.train.rundir import RunDir
 
     run_dir = Path(run_dir)
-    if not (run_dir / "config.json").is_file():
+    if not run_dir.is_dir() or not os.path.lexists(run_dir / "config.json"):  # else: read, named
         raise MissingInputError(
             f"{run_dir} is not a run directory (no config.json); give the RUN_DIR that "
             "mjx-arm train wrote"

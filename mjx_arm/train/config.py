@@ -359,7 +359,7 @@ def saved_config(run_dir: str | Path) -> TrainConfig:
     if not run_dir.is_dir():
         raise MissingInputError(f"--resume {str(run_dir)!r}: no such run directory")
     path = run_dir / "config.json"
-    if not path.is_file():
+    if not (path.exists() or path.is_symlink()):  # anything else there: read, and named
         raise MissingInputError(
             f"--resume {str(run_dir)!r} is not a run directory (no config.json): no checkpoint "
             "to resume from"

@@ -147,7 +147,8 @@ def train(
 
 def _check_run_dir(run_dir: str | Path) -> None:
     """Check that ``run_dir`` is a run directory to resume (it holds a ``config.json``)."""
-    if not (Path(run_dir) / "config.json").is_file():
+    config = Path(run_dir) / "config.json"
+    if not (config.exists() or config.is_symlink()):  # anything else there is read, and named
         raise MissingInputError(
             f"cannot resume {run_dir}: no checkpoint, it is not a run directory (no "
             "config.json); give the RUN_DIR of an earlier mjx-arm train"
