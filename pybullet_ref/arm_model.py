@@ -135,7 +135,8 @@ class ArmIds:
             reports the F/T torque about this point.
         limits: the position limits of ``joints``.
         self_collision_off: arm link pairs whose contacts are disabled (empty: no self-collision).
-        finger, finger_lower, pads, gripper_start: see :func:`pybullet_ref.gripper.gripper_ids`.
+        finger, finger_lower, pads, pad_regions, gripper_start: see
+            :func:`pybullet_ref.gripper.gripper_ids`.
     """
 
     joints: tuple[int, ...]
@@ -151,6 +152,7 @@ class ArmIds:
     finger: int = -1
     finger_lower: float = 0.0
     pads: tuple[int, ...] = ()
+    pad_regions: tuple = ()
     gripper_start: tuple[tuple[int, float], ...] = ()
 
 

@@ -65,7 +65,7 @@ from mjx_arm.paths import asset
 from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.grip import ObjectStart
-from mjx_arm.urdf.repair import UrdfRepairs
+from mjx_arm.task.lift import cube_half
 from mjx_arm.urdf.scene import CAMERA_EYE, CAMERA_FOVY, CAMERA_TARGET
 from mjx_arm.urdf.scene_shapes import CUBE_HALF, CUBE_MASS
 from pybullet_ref.arm_model import (
@@ -77,9 +77,9 @@ from pybullet_ref.arm_model import (
 )
 from pybullet_ref.contact import SOFT, SceneContact
 from pybullet_ref.drive import ArmDrive, JointLimits
-from pybullet_ref.gripper import gripper_ids
-from pybullet_ref.hulls import bullet_urdf
+from pybullet_ref.gripper import gripper_ids, pad_forces
 from pybullet_ref.mimic import add_mimic_constraints
+from pybullet_ref.pads import bullet_arm_urdf
 from pybullet_ref.tool_contact import arm_contact
 from pybullet_ref.wrench import GRAVITY, ToolTare, contact_wrench, tared_wrench
 
@@ -125,7 +125,7 @@ class PybulletArmEnv(BaseRobotEnv):
     ) -> None:
         super().__init__(task, arm, render_mode, width, height)
         self.contact = arm_contact(contact, self.arm)
-        self._urdf = bullet_urdf(self.arm.urdf, repairs=UrdfRepairs.of(self.arm.config))
+        self._urdf = bullet_arm_urdf(self.arm)  # hulls eroded, repairs, pads fitted
         self._ee_offset = self.arm.ee_offset.copy() if np.any(self.arm.ee_offset) else None
         self.servo = joint_servo(self.arm, self.task.spec.servo_dt or self.task.sim_dt)
         self.self_collision = task_convert_config(self.task, self.arm).self_collision
@@ -222,7 +222,7 @@ class PybulletArmEnv(BaseRobotEnv):
         elif self.render_mode and self.task.spec.scene.marker:
             self._add_target_marker(position)
         if self.gripper is not None:
-            self.cube = self._add_cube(position, self._object)
+            self.cube = self._add_cube(position, self._object, cube_half(self.task))
 
     def _add_cube(self, position: list[float], obj: ObjectStart, half: float = CUBE_HALF) -> int:
         """The free cube of a gripper task: the MuJoCo scene's size (or ``half`` edge, m), the
@@ -358,7 +358,7 @@ class PybulletArmEnv(BaseRobotEnv):
         c = self.client
         closure = self.gripper.closure(c.getJointState(self.body, self.ids.finger)[0])
         pos, (x, y, z, w) = c.getBasePositionAndOrientation(self.cube)
-        pads = [sum(p[9] for p in contacts if p[3] == link) for link in self.ids.pads]
+        pads = pad_forces(c, self.body, contacts, self.ids.pads, self.ids.pad_regions)
         return np.array([closure, *pos, w, x, y, z, *pads])
 
     def _render_frame(self) -> np.ndarray:

@@ -39,7 +39,7 @@ def tool_mass(arm: ArmInfo) -> float:
 def _tool_mass_cached(config, mtime: float) -> float:
     del mtime  # part of the cache key only
     arm = arm_info(config)
-    task = task_for_arm(touch_config(), arm)
+    task = task_for_arm(touch_config(), arm, check=False)  # a measurement, not an env
     model = load_model(arm.urdf, arm.convert_config(sim_dt=task.sim_dt))
     data = mujoco.MjData(model)
     for name, q in zip(arm.joint_names, task.home_qpos, strict=True):

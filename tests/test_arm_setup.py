@@ -20,7 +20,8 @@ import pytest
 import mjx_arm  # noqa: F401  (registers the ids)
 from mjx_arm.arm.config import SHIPPED_HOME_QPOS, ArmConfig, load_arm, resolve_arm
 from mjx_arm.arm.info import arm_info, press_kv_factor, tool_down_solver
-from mjx_arm.arm.setup import arm_setup, grid_targets, task_verdict
+from mjx_arm.arm.setup import arm_setup, grid_targets
+from mjx_arm.arm.verdict import task_verdict
 from mjx_arm.cli import main
 from mjx_arm.paths import default_arm_urdf
 from mjx_arm.task import observation as obs_lib
@@ -168,12 +169,16 @@ def test_a_single_jaw_ends_the_arm_chain() -> None:
 
 @published
 def test_the_ee_point_moves_to_where_the_tool_touches() -> None:
-    """Z1: to its jaw's tips, 15 cm out along the tool axis; the Kinova's open hand: back to
-    its palm; the Panda keeps its TCP between the pads (it has a parallel gripper)."""
+    """Z1: to its closed jaw's tips, 15 cm out along the tool axis; the Kinova's open fingers
+    reach 5 cm past its palm beside the axis: its ee point is a fingertip's, the deepest point
+    of the tool, 10.5 cm off the axis (the axis kept); the Panda keeps its TCP between the pads
+    (its closed fingertips are 9.5 mm further, within GRIP_PRESS)."""
     z1 = arm_info(ArmConfig(urdf=str(Z1)))
     np.testing.assert_allclose(z1.ee_offset, [0.149, 0.0, 0.0], atol=0.005)
+    assert z1.tool_axis is None  # on the axis: the axis is found as before
     kinova = arm_info(ArmConfig(urdf=str(KINOVA)))
-    assert -0.05 < kinova.ee_offset[0] < -0.03 and abs(kinova.ee_offset[1:]).max() < 1e-6
+    np.testing.assert_allclose(kinova.ee_offset, [0.002, 0.105, 0.0], atol=0.005)
+    np.testing.assert_allclose(kinova.tool_axis, [1.0, 0.0, 0.0], atol=1e-6)
     assert not np.any(arm_info(ArmConfig(urdf=str(PANDA))).ee_offset)
     # whole micrometres, so another CPU's last bits do not change the arm's model hash
     for offset in (z1.ee_offset, kinova.ee_offset):
@@ -266,8 +271,8 @@ def test_check_says_what_an_arm_can_do_and_draws_it(tmp_path: Path, capsys) -> N
     out = capsys.readouterr().out
     lines = {line.split()[0]: line for line in out.splitlines() if line.startswith("  ")}
     assert "yes" in lines["reach"].split()[1]
-    assert lines["touch"].split()[1] == "no" and "meet the table first" in lines["touch"]
-    assert lines["lift"].split()[1] == "no" and "no parallel gripper" in lines["lift"]
+    assert lines["touch"].split()[1] == "yes"  # with a fingertip: the tool's deepest point
+    assert lines["lift"].split()[1] == "no" and "no gripper" in lines["lift"]
     assert picture.stat().st_size > 10_000 and picture.read_bytes()[:4] == b"\x89PNG"
 
 
@@ -284,22 +289,25 @@ def test_verdicts_of_published_arms() -> None:
 
 
 @published
-def test_a_tool_that_straddles_the_box_cannot_touch() -> None:
+def test_a_tool_that_straddles_the_box_presses_with_its_deepest_point() -> None:
     """The UR3 gripper URDF's finger blocks (6 cm apart) straddle the 5 cm box at one turn and
-    land on it at another: where the tool meets the box moves 4.75 cm along its axis (more than
-    the 1 cm the check allows), so Touch is refused with that reason and Reach stays open. A
-    tool with a face moves its contact by 3 mm or less (UR10, Panda, Z1)."""
+    land on it at another: on the tool axis, where the tool meets the box moves 4.75 cm as the
+    box turns (more than the 1 cm the check allows). So the ee point moves to the tool's
+    deepest point, a block's tip 3 cm off the axis: there the contact does not move with the
+    turn, and Touch is open. A tool with a face keeps its axis point, whose contact moves by
+    3 mm or less (UR10, Panda, Z1)."""
+    from mjx_arm.arm.points import CONTACT_SPREAD
+
     gripper = arm_info(ArmConfig(urdf=str(UR3.with_name("ur3_gripper.urdf"))))
+    np.testing.assert_allclose(gripper.ee_offset, [0.0604, 0.03, 0.0], atol=0.002)
     setup = arm_setup(gripper, task_config("touch"))
-    assert setup.contact_spread == pytest.approx(0.0475, abs=0.002)
-    ok, reason = task_verdict(gripper, task_config("touch"))
-    assert not ok and "straddle the box" in reason and "4.8 cm" in reason
+    assert setup.contact_spread < CONTACT_SPREAD and abs(setup.contact_offset) < 0.005
+    assert task_verdict(gripper, task_config("touch"))[0]
     assert task_verdict(gripper, task_config("reach"))[0]
     for urdf in (UR10, PANDA, Z1):
-        assert (
-            arm_setup(arm_info(ArmConfig(urdf=str(urdf))), task_config("touch")).contact_spread
-            < 0.003
-        )
+        arm = arm_info(ArmConfig(urdf=str(urdf)))
+        assert arm.tool_axis is None
+        assert arm_setup(arm, task_config("touch")).contact_spread < 0.003
 
 
 @published

@@ -263,7 +263,8 @@ def test_the_report_names_an_ee_point_that_fitted_capsules_move(
     is not where PyBullet (which keeps the meshes) presses: the report says by how much and
     gives the meshes' point to set. As shipped, the flange gets a box and nothing moves; the
     Panda's capsules move nothing either way."""
-    from mjx_arm.arm.info import _arm_info_cached, _solver_cached
+    from mjx_arm.arm.info import _arm_info_cached
+    from mjx_arm.arm.points import _solver_cached
     from mjx_arm.arm.report import describe
     from mjx_arm.urdf import collision_fit
 

@@ -5,7 +5,9 @@ and each task variant's config as they were while budgets sat in a ``(preset, ta
 the training config, reward weights in one list for every task and task settings in an untyped
 ``task_overrides`` dict. Since then a task declares its budgets, reward terms and scene in its
 own file and the settings are a typed ``TaskConfig``: every number must be the same. The only
-keys allowed to go are reward weights of terms a task no longer carries, and only at weight 0.
+keys allowed to go are reward weights of terms a task no longer carries, and only at weight 0;
+the only keys allowed to come are task fields added since, at their "from the arm" default
+(:data:`ADDED_FIELDS`).
 """
 
 from __future__ import annotations
@@ -35,12 +37,18 @@ def _portable(value):
     return json.loads(json.dumps(value).replace(f"{REPO}/", ""))
 
 
+# Task config fields added after the snapshot, with the value every preset leaves them at.
+ADDED_FIELDS = {"object_scale": 0.0}
+
+
 def _drop_zero_terms(before: dict, after: dict) -> dict:
-    """``before`` (a task config's dict) without the reward weights ``after`` lacks; each of
-    them must be 0."""
+    """``before`` (a task config's dict) without the reward weights ``after`` lacks, each of
+    them 0, and with :data:`ADDED_FIELDS` at their defaults where ``after`` has them."""
     dropped = {k: v for k, v in before["reward"].items() if k not in after["reward"]}
     assert all(v == 0 for v in dropped.values()), dropped
-    return {**before, "reward": {k: v for k, v in before["reward"].items() if k not in dropped}}
+    added = {k: v for k, v in ADDED_FIELDS.items() if k in after and k not in before}
+    reward = {k: v for k, v in before["reward"].items() if k not in dropped}
+    return {**before, **added, "reward": reward}
 
 
 def test_the_snapshot_covers_every_preset_and_shipped_task() -> None:

@@ -1,18 +1,21 @@
 """An arm's gripper, as every engine and task sees it: one driven joint, its ``<mimic>`` copies,
-its stroke, and where its pads hold an object."""
+its stroke, its pads (fitted boxes where they are meshes) and where they hold an object."""
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
-from mjx_arm.arm.config import ResolvedArm
+from mjx_arm.arm.config import ResolvedArm, is_shipped
 from mjx_arm.urdf.grippers import Follower, find_layout, grasp_centre, mimic_positions
+from mjx_arm.urdf.pad_fit import FittedPads
 
 
 @dataclass(frozen=True)
 class Gripper:
     """A gripper moved by one command: one driven joint, the others its ``<mimic>`` copies
-    (:mod:`mjx_arm.urdf.grippers`): prismatic fingers, or a linkage of revolute knuckles.
+    (:mod:`mjx_arm.urdf.grippers`): prismatic fingers, a linkage of revolute knuckles, or one
+    revolute jaw against a fixed one.
 
     Attributes:
         joint: the driven joint (its actuator takes the gripper command).
@@ -24,10 +27,15 @@ class Gripper:
             its lower and upper limit, or the other way round (the Panda's fingers close
             towards 0), whichever puts the pads farther apart open.
         followers: the ``<mimic>`` joints with their multiplier and offset.
-        linkage: a linkage gripper (revolute driven joint), not prismatic fingers.
+        linkage: the driven joint is revolute (a linkage or a jaw), not prismatic fingers.
         pad_opening: the pads' gap open minus closed (m), from the URDF's kinematics.
         pad_width: the pad's width across the closing direction (m).
         grasp_offset: where the pads hold an object, in the ee link's frame (m), ``(3,)``.
+        kind: "parallel", "linkage" or "jaw" (:data:`mjx_arm.urdf.grippers.KINDS`).
+        fitted: the pads fitted to their meshes (:mod:`mjx_arm.urdf.pad_fit`); empty where
+            every pad is made of primitives.
+        rests_closed: the gripper is held closed in the tasks that do not grip (Reach, Touch):
+            every arm's but the shipped gripper arm's, whose fingers stay at 0 (open).
     """
 
     joint: str
@@ -41,6 +49,14 @@ class Gripper:
     pad_opening: float = 0.0
     pad_width: float = 0.0
     grasp_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    kind: str = "parallel"
+    fitted: FittedPads = dataclasses.field(default_factory=FittedPads)
+    rests_closed: bool = True
+
+    @property
+    def rest_q(self) -> float:
+        """The driven joint's position in the tasks that do not grip: closed, or 0."""
+        return self.closed_q if self.rests_closed else 0.0
 
     @property
     def closing_sign(self) -> float:
@@ -54,7 +70,7 @@ class Gripper:
     @property
     def opening(self) -> float:
         """The widest gap (m) the two fingers open between them: each prismatic finger moves
-        by the stroke; a linkage's pads by what its kinematics give."""
+        by the stroke; a linkage's or a jaw's pads by what its kinematics give."""
         return self.pad_opening if self.linkage else 2.0 * self.stroke
 
     @property
@@ -69,7 +85,7 @@ class Gripper:
 
 def find_gripper(resolved: ResolvedArm) -> Gripper | None:
     """The arm's gripper (:func:`mjx_arm.urdf.grippers.find_layout`): parallel prismatic
-    fingers or a linkage, one joint driven; None where there is neither."""
+    fingers, a linkage or a jaw, one joint driven; None where there is none."""
     layout = find_layout(resolved.model, set(resolved.joint_names))
     if layout is None:
         return None
@@ -82,10 +98,13 @@ def find_gripper(resolved: ResolvedArm) -> Gripper | None:
         open_q=layout.open_q,
         closed_q=layout.closed_q,
         followers=layout.followers,
-        linkage=layout.kind == "linkage",
+        linkage=layout.kind != "parallel",
         pad_opening=layout.opening,
         pad_width=layout.pad_width,
         grasp_offset=tuple(
             float(v) for v in grasp_centre(resolved.model, layout, resolved.ee_link)
         ),
+        kind=layout.kind,
+        fitted=layout.fitted,
+        rests_closed=not is_shipped(resolved.config),
     )

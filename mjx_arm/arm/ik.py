@@ -29,6 +29,8 @@ TARGET_TILT = np.radians(15.0)  # a task target counts as reached tool-down with
 COLLISION_GROUP = 3  # the converter's group of collision shapes
 RAY_START = 0.5  # m: rays for the tool's surface start this far out along the tool axis
 PROTRUSION_TURNS = 6  # turns of the pressed square about the tool axis (over a quarter turn)
+DEEPEST_SPAN = 0.3  # m: the square searched for the tool's deepest point
+DEEPEST_RAYS = 61  # rays a side over it (5 mm apart)
 # Converged: within 1 mm of the point, the tool within 1 degree of vertical.
 POSITION_TOL = 1e-3
 TILT_TOL = np.radians(1.0)
@@ -231,15 +233,19 @@ class ToolDownSolver:
         joint_names: the n arm joints; the last one turns the tool (:func:`tool_axis`).
         lower, upper: the joints' limits (rad), ``(n,)`` each.
         site: the ee site.
+        tool: the tool axis in the ee site's frame, ``(3,)`` unit; None finds it
+            (:func:`tool_axis`).
     """
 
-    def __init__(self, model, joint_names, lower, upper, site: str = "ee") -> None:
+    def __init__(self, model, joint_names, lower, upper, site: str = "ee", tool=None) -> None:
         self.lower, self.upper = joint_box(np.asarray(lower), np.asarray(upper))
         self.middle = 0.5 * (self.lower + self.upper)
         up = np.array([0.0, 0.0, 1.0])
         self.ik = ToolDownIk(model, tuple(joint_names), site, self.lower, self.upper, up)
         self.last_joint = joint_names[-1]
-        self.ik.tool = tool_axis(self.ik, self.middle, self.last_joint)
+        if tool is None:
+            tool = tool_axis(self.ik, self.middle, self.last_joint)
+        self.ik.tool = np.asarray(tool, float)
         self._full_turn = (np.asarray(upper) - np.asarray(lower)) > 2 * math.pi + 1e-6
         self._static = model.body_weldid == 0
 
@@ -323,6 +329,33 @@ class ToolDownSolver:
                 reach = RAY_START - dist
                 best = reach if best is None else max(best, reach)
         return best
+
+    def deepest_point(self, q: np.ndarray) -> np.ndarray | None:
+        """The point of the tool that reaches furthest along the tool axis, in the ee site's
+        frame ``(3,)``, at ``q (n,)``: rays along the axis over a square :data:`DEEPEST_SPAN`
+        wide (:data:`DEEPEST_RAYS` a side), the deepest hit on a shape moved by the last arm
+        joint, the one nearest the axis among those within 1 mm of it; None where no ray hits
+        one."""
+        model, data = self.ik.model, self.ik.data
+        ee, axis = self.ik.pose(q)
+        rotation = data.site_xmat[self.ik.site_id].reshape(3, 3).copy()
+        across = np.linalg.svd(axis[None, :])[2][1:]
+        wrist = int(model.jnt_bodyid[model.joint(self.last_joint).id])
+        groups = np.zeros(6, np.uint8)
+        groups[COLLISION_GROUP] = 1
+        geom, hits = np.zeros(1, np.int32), []
+        steps = np.linspace(-0.5 * DEEPEST_SPAN, 0.5 * DEEPEST_SPAN, DEEPEST_RAYS)
+        for u in steps:
+            for v in steps:
+                start = ee + RAY_START * axis + u * across[0] + v * across[1]
+                dist = mujoco.mj_ray(model, data, start, -axis, groups, 0, -1, geom)
+                if dist >= 0 and _below(model, int(model.geom_bodyid[geom[0]]), wrist):
+                    hits.append((RAY_START - dist, math.hypot(u, v), u, v))
+        if not hits:
+            return None
+        deepest = max(h[0] for h in hits)
+        depth, _, u, v = min((h for h in hits if h[0] > deepest - 1e-3), key=lambda h: h[1])
+        return rotation.T @ (depth * axis + u * across[0] + v * across[1])
 
     def tool_contact(self, q: np.ndarray, half_width: float) -> tuple[float | None, float]:
         """:meth:`tool_protrusion` of the unturned square at ``q (n,)``, and its spread (m):

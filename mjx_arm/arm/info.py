@@ -1,4 +1,5 @@
-"""What every engine needs to know about the arm, read once from its config and URDF."""
+"""What every engine needs to know about the arm (:class:`~mjx_arm.arm.facts.ArmInfo`), read
+once from its config and URDF; its working points come from :mod:`mjx_arm.arm.points`."""
 
 from __future__ import annotations
 
@@ -6,7 +7,6 @@ import dataclasses
 import functools
 import hashlib
 import math
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -19,82 +19,16 @@ from mjx_arm.arm.config import (
     load_arm,
     resolve_arm,
 )
-from mjx_arm.arm.gripper import Gripper, find_gripper
-from mjx_arm.arm.ik import ToolDownSolver
-from mjx_arm.task.config import TaskConfig
-from mjx_arm.task.observation import JointCoding, joint_coding
-from mjx_arm.task.wrench import ToolInertia, tool_inertia
-from mjx_arm.urdf.convert_config import ConvertConfig
+from mjx_arm.arm.facts import ArmInfo
+from mjx_arm.arm.gripper import find_gripper
+from mjx_arm.arm.points import MIN_EE_OFFSET as MIN_EE_OFFSET
+from mjx_arm.arm.points import task_arm as task_arm
+from mjx_arm.arm.points import tool_down_solver, with_points
+from mjx_arm.task.wrench import tool_inertia
 
 # Poses drawn to measure an arm's reach (seeded: the same arm always gets the same scale).
 REACH_SAMPLES = 4096
 REACH_QUANTILE = 0.99
-
-
-@dataclass(frozen=True, eq=False)
-class ArmInfo:
-    """Joint names and limits, tool frames, home pose and reach of an arm of n joints.
-
-    Attributes:
-        config: the arm config as given (saved with runs and policy files).
-        urdf: path of the URDF.
-        joint_names: the n actuated joints, base to wrist (n from 5 to 7).
-        lower, upper: position limits (rad), shape ``(n,)``.
-        v_max: velocity limits (rad/s), shape ``(n,)``.
-        effort: torque limits (N m), shape ``(n,)``.
-        home_qpos: home joint angles (rad), shape ``(n,)``.
-        ee_link: the end-effector link.
-        ft_joint: the fixed joint of the F/T reading, or "" when it is taken at the last arm
-            joint; ft_link: the root link of the tool the reading weighs.
-        tool: mass properties of the tool below the F/T point.
-        reach_scale: the arm's horizontal reach over the shipped arm's (1.0 for the shipped
-            arm): task targets are drawn in a box scaled by it.
-        gripper: the parallel gripper's fingers, when the arm has one (:class:`Gripper`).
-        full_turn: which joints turn without limits (URDF ``continuous``), bool ``(n,)``.
-        kv_factor: the servos' velocity gain factor the arm's models are converted with
-            (the config's, else :func:`press_kv_factor`).
-        ee_offset: the ee point in the ee link's frame (m), ``(3,)`` (the config's, else
-            :func:`derive_ee_offset`).
-    """
-
-    config: ArmConfig
-    urdf: Path
-    joint_names: tuple[str, ...]
-    lower: np.ndarray
-    upper: np.ndarray
-    v_max: np.ndarray
-    effort: np.ndarray
-    home_qpos: np.ndarray
-    ee_link: str
-    ft_joint: str
-    ft_link: str
-    tool: ToolInertia
-    reach_scale: float
-    gripper: Gripper | None = None
-    full_turn: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, bool))
-    kv_factor: float = 1.0
-    ee_offset: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(3))
-
-    @property
-    def n_joints(self) -> int:
-        """Number of actuated joints."""
-        return len(self.joint_names)
-
-    def convert_config(self, **fields) -> ConvertConfig:
-        """Conversion settings that put the ee site and F/T sensors where this arm says, with
-        its servo gain; a linkage gripper starts closed (a gripper task opens it)."""
-        fields.setdefault("kv_factor", self.kv_factor)
-        fields.setdefault("ee_offset", tuple(float(v) for v in self.ee_offset))
-        if self.gripper is not None and self.gripper.linkage:  # Touch and Reach: held closed
-            closed = self.gripper.positions(self.gripper.closed_q)
-            fields.setdefault("rest_qpos", tuple(closed.items()))
-        return self.config.convert_config(self.ee_link, self.ft_joint, **fields)
-
-    def joint_coding(self, task: TaskConfig) -> JointCoding:
-        """How ``task``'s observation encodes this arm's joint angles (its ``joint_encoding``;
-        a full-turn joint is centred on ``task``'s home angle, which must be filled in)."""
-        home = task.home_qpos or tuple(self.home_qpos)
-        return joint_coding(task.joint_encoding, self.lower, self.upper, self.full_turn, home)
 
 
 def _info(resolved: ResolvedArm, reach: float, reference: float) -> ArmInfo:
@@ -138,65 +72,14 @@ def _arm_info_cached(arm: ArmConfig, mtime: float) -> ArmInfo:
     reach = reference if shipped else horizontal_reach(resolved)
     info = _info(resolved, reach, reference)
     if not arm.ee_offset and not is_shipped(arm):
-        info = _with_ee_offset(info, resolved, derive_ee_offset(info))
+        info = with_points(info)  # its tool point (Reach, Touch) and grip point (Lift)
     kv = arm.kv_factor or (1.0 if is_shipped(arm) else press_kv_factor(info))
     return dataclasses.replace(info, kv_factor=kv)
-
-
-def _with_ee_offset(info: ArmInfo, resolved: ResolvedArm, offset: np.ndarray) -> ArmInfo:
-    """``info`` with its ee point at ``offset (3,)`` in the ee link's frame."""
-    tool = tool_inertia(resolved.model, resolved.ft_link, resolved.ee_link, offset)
-    return dataclasses.replace(info, ee_offset=np.asarray(offset, float), tool=tool)
-
-
-# The smallest offset (m) derive_ee_offset moves the ee point by: closer, the link's origin is
-# the tool's working point already.
-MIN_EE_OFFSET = 0.005
-
-
-def derive_ee_offset(arm: ArmInfo) -> np.ndarray:
-    """The ee point in the ee link's frame, ``(3,)``: on the tool axis where the tool meets a
-    surface pressed against it (:meth:`~mjx_arm.arm.ik.ToolDownSolver.tool_protrusion` over
-    the Touch box's top face), so the ee point is where the tool touches (a jaw's tips, the
-    palm of an open hand). An arm with a parallel gripper keeps the link's origin (between the
-    pads: what Lift grasps around); a linkage gripper's is its grasp centre (between the pads
-    halfway closed); the link's origin stays where either is within :data:`MIN_EE_OFFSET`, as
-    does a tool that meets the surface within
-    :data:`MIN_EE_OFFSET` of it, or one with no shape near its axis. Rounded to 1 um: the
-    axis comes out of floating-point kinematics whose last bits differ between CPUs (a 1e-17
-    m component would change the model hash that policy files check).
-    """
-    from mjx_arm.urdf.scene_shapes import box_half_width
-
-    zero = np.zeros(3)
-    if arm.gripper is not None:
-        grasp = np.asarray(arm.gripper.grasp_offset) * arm.gripper.linkage
-        return np.round(grasp, 6) + 0.0 if np.linalg.norm(grasp) >= MIN_EE_OFFSET else zero
-    solver = tool_down_solver(arm)
-    reach = solver.tool_protrusion(solver.middle, box_half_width())
-    if reach is None or abs(reach) < MIN_EE_OFFSET:
-        return zero
-    return np.round(reach * solver.ik.tool, 6) + 0.0  # + 0.0: no negative zeros
 
 
 # The working height (m) of the ee point above the table at a home pose (mjx_arm.arm.setup).
 HOME_HEIGHT = 0.20
 KV_MIN = 0.25  # the lowest servo gain factor press_kv_factor gives
-
-
-def tool_down_solver(arm: ArmInfo) -> ToolDownSolver:
-    """The arm's :class:`~mjx_arm.arm.ik.ToolDownSolver` (one per arm, file version and ee
-    point): its model in the Reach scene with self-collision on, servo gain factor 1."""
-    return _solver_cached(arm, arm.urdf.stat().st_mtime, tuple(arm.ee_offset))
-
-
-@functools.cache
-def _solver_cached(arm: ArmInfo, mtime: float, ee_offset: tuple) -> ToolDownSolver:
-    from mjx_arm.urdf.convert import EE_SITE, load_model
-
-    config = arm.convert_config(scene="reach", self_collision=True, kv_factor=1.0)
-    model = load_model(arm.urdf, config)
-    return ToolDownSolver(model, arm.joint_names, arm.lower, arm.upper, EE_SITE)
 
 
 def press_force(arm: ArmInfo, q: np.ndarray | None = None) -> float:
@@ -346,6 +229,8 @@ def _model_hash_cached(config: ArmConfig, mtime: float) -> str:
     digest = hashlib.sha256(",".join(arm.joint_names).encode())
     if np.any(arm.ee_offset):  # (hashes of arms at the link's origin read as before)
         digest.update(np.char.mod("%.6g", np.asarray(arm.ee_offset)).tobytes())
+    if arm.grip_offset is not None and np.any(arm.grip_offset):  # Lift's ee point
+        digest.update(np.char.mod("%.6g", np.asarray(arm.grip_offset)).tobytes())
     for name in _HASHED_FIELDS:
         values = np.asarray(getattr(model, name), np.float64)
         digest.update(np.char.mod("%.6g", values.ravel()).tobytes())

@@ -5,6 +5,7 @@ Shared by the CPU MuJoCo env and the MJX env, so both read the same sites and se
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import mujoco
@@ -26,11 +27,15 @@ from mjx_arm.urdf.spec_edits import pad_sensor
 
 def task_convert_config(task: TaskConfig, arm: ArmInfo | None = None) -> ConvertConfig:
     """Conversion settings of a task model: the arm's ee and F/T point (default: the shipped
-    arm's), the task's scene, time step, servo step and solver iterations (where the task sets
-    them), no self-collision; a gripper task's finger pads get touch sensors."""
+    arm's), the task's scene (its cube at the task's ``object_scale``), time step, servo step
+    and solver iterations (where the task sets them), no self-collision; a gripper task's finger
+    pads get touch sensors."""
     arm = arm or arm_info()
     spec = task.spec
     pads = arm.gripper.pad_links if spec.gripper and arm.gripper else ()
+    scene = spec.scene
+    if scene.cube_half and task.object_scale:  # the task's cube (smaller for a small gripper)
+        scene = dataclasses.replace(scene, cube_half=scene.cube_half * task.object_scale)
     solver = {
         key: value
         for key, value in (
@@ -40,7 +45,7 @@ def task_convert_config(task: TaskConfig, arm: ArmInfo | None = None) -> Convert
         if value > 0
     }
     return arm.convert_config(
-        scene=spec.scene,
+        scene=scene,
         sim_dt=task.sim_dt,
         servo_dt=spec.servo_dt,
         pad_links=pads,

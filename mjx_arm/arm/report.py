@@ -11,7 +11,8 @@ from pathlib import Path
 import numpy as np
 
 from mjx_arm.arm.info import ArmInfo, arm_info, tool_down_solver
-from mjx_arm.arm.setup import ArmSetup, arm_setup, gripper_problem, task_verdict
+from mjx_arm.arm.setup import ArmSetup, arm_setup
+from mjx_arm.arm.verdict import gripper_problem, task_verdict
 from mjx_arm.inputs import write_atomic
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.urdf.repair import UrdfRepairs
@@ -41,8 +42,10 @@ def describe(arm: ArmInfo) -> str:
             f"{arm.gripper.opening * 100:.1f} cm"
         )
     )
-    if arm.gripper is not None and arm.gripper.linkage:
+    if arm.gripper is not None and arm.gripper.kind == "linkage":
         gripper = _linkage_lines(arm.gripper)
+    elif arm.gripper is not None and arm.gripper.kind == "jaw":
+        gripper = _jaw_lines(arm.gripper)
     lines += [
         f"F/T         {ft}; tool {arm.tool.mass:.3f} kg",
         f"gripper     {gripper}",
@@ -87,6 +90,17 @@ def _linkage_lines(gripper) -> str:
         f"{gripper.opening * 100:.1f} cm, pad width {gripper.pad_width * 100:.1f} cm, closes at "
         f"{gripper.pad_speed * 100:.0f} cm/s\n            followers ({len(gripper.followers)}, "
         f"<mimic>): {followers}"
+    )
+
+
+def _jaw_lines(gripper) -> str:
+    """What ``--check`` says of a one-jaw gripper: the driven jaw, the fixed jaw, sizes."""
+    moving, hand = gripper.pad_links[:2]
+    fitted = " (pads fitted to the meshes)" if gripper.fitted.boxes else ""
+    return (
+        f"jaw: {gripper.joint} turns {moving} ({gripper.open_q:g} open to "
+        f"{gripper.closed_q:g} closed) against the fixed jaw of {hand}{fitted}: opens "
+        f"{gripper.opening * 100:.1f} cm, fixed jaw {gripper.pad_width * 100:.1f} cm wide"
     )
 
 

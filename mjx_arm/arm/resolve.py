@@ -17,16 +17,18 @@ from typing import Any
 
 from mjx_arm.arm.config import ArmConfig, load_arm
 from mjx_arm.arm.info import ArmInfo, arm_info, validate_arm
+from mjx_arm.arm.points import task_arm
 from mjx_arm.arm.setup import arm_setup
+from mjx_arm.arm.verdict import task_verdict
 from mjx_arm.engines import CONVERTER_ENGINE
 from mjx_arm.inputs import ConfigError
 from mjx_arm.task.config import TaskConfig
 
 
 class TaskFitError(ConfigError):
-    """A task that does not fit the arm: a gripper task on an arm without a gripper, or a home
-    pose with another number of angles than the arm has joints (a named input error, and a
-    ``ValueError``)."""
+    """A task that does not fit the arm: a gripper task on an arm without a gripper, a home
+    pose with another number of angles than the arm has joints, or a task ``mjx-arm arm
+    --check`` says the arm cannot do (a named input error, and a ``ValueError``)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -34,9 +36,11 @@ class ArmTask:
     """A task on an arm, resolved once.
 
     Attributes:
-        arm: the arm's facts (:class:`~mjx_arm.arm.info.ArmInfo`), its URDF validated.
+        arm: the arm's facts (:class:`~mjx_arm.arm.info.ArmInfo`), its URDF validated, with
+            the task's ee point (:func:`~mjx_arm.arm.points.task_arm`).
         task: the task config with the arm's fields filled in: ``home_qpos`` ``(n,)``,
-            ``workspace_scale`` and ``episode_steps`` (:meth:`TaskConfig.for_arm`).
+            ``workspace_scale``, ``episode_steps`` and ``object_scale``
+            (:meth:`TaskConfig.for_arm`).
     """
 
     arm: ArmInfo
@@ -67,7 +71,7 @@ def resolve_task(
     config = load_arm(default_arm(task, arm))
     validate_arm(config, engine)
     info = arm_info(config)
-    return ArmTask(info, task_for_arm(task, info))
+    return ArmTask(task_arm(info, task), task_for_arm(task, info))
 
 
 def as_arm_task(
@@ -87,26 +91,42 @@ def as_arm_task(
     return task
 
 
-def task_for_arm(task: TaskConfig, arm: ArmInfo) -> TaskConfig:
+def task_for_arm(task: TaskConfig, arm: ArmInfo, check: bool = True) -> TaskConfig:
     """``task`` with the arm's setup (:func:`mjx_arm.arm.setup.arm_setup`: home pose,
-    workspace scale, episode length) filled in where it leaves them empty.
+    workspace scale, episode length, a gripper task's cube) filled in where it leaves them
+    empty.
+
+    Args:
+        task: the task config.
+        arm: the arm's facts.
+        check: refuse a task the arm cannot do (:func:`mjx_arm.arm.verdict.task_verdict`:
+            what ``mjx-arm arm --check`` says no to); False fills the setup in regardless (a
+            measurement on the arm, not an env).
 
     Raises:
-        TaskFitError: a gripper task on an arm without a parallel gripper, or a home pose
-            with another number of angles than the arm has joints.
+        TaskFitError: a gripper task on an arm without a gripper, a home pose with another
+            number of angles than the arm has joints, or (``check``) a task the arm cannot do.
     """
     if task.spec.gripper and arm.gripper is None:
         raise TaskFitError(
-            f"task {task.task!r} needs an arm with a gripper (prismatic fingers, or a linkage "
-            f"coupled by <mimic> to one driven joint); {arm.urdf} has none. Try "
-            "--arm ur5e_gripper (a shipped arm)"
+            f"task {task.task!r} needs an arm with a gripper (prismatic fingers, a linkage "
+            f"coupled by <mimic> to one driven joint, or one driven jaw); {arm.urdf} has none. "
+            "Try --arm assets/ur5e_gripper.urdf"
         )
     if len(task.home_qpos) not in (0, arm.n_joints):
         raise TaskFitError(
             f"home_qpos has {len(task.home_qpos)} angles; the arm has {arm.n_joints} joints"
         )
+    if check:
+        ok, why = task_verdict(arm, task)
+        if not ok:
+            raise TaskFitError(
+                f"{arm.urdf.name} cannot do {task.task}: {why} (mjx-arm arm URDF --check)"
+            )
     setup = arm_setup(arm, task)
-    return task.for_arm(setup.home_qpos, setup.workspace_scale, setup.episode_steps)
+    return task.for_arm(
+        setup.home_qpos, setup.workspace_scale, setup.episode_steps, setup.object_scale
+    )
 
 
 def default_arm(task: TaskConfig, arm: Any = None) -> Any:

@@ -25,7 +25,7 @@ of it is derived here, for a task config and an arm:
 
 An explicit ``home_qpos`` (the task config's or the arm file's) and the shipped arms' measured
 homes are kept as they are, with the reach scale; the area is still checked from them.
-:func:`task_verdict` says whether an arm can do a task and why not.
+:func:`mjx_arm.arm.verdict.task_verdict` says whether an arm can do a task and why not.
 """
 
 from __future__ import annotations
@@ -39,14 +39,21 @@ import numpy as np
 
 from mjx_arm.arm.ik import ToolDownSolver
 from mjx_arm.arm.info import HOME_HEIGHT, ArmInfo, tool_down_solver
+from mjx_arm.arm.points import task_arm
 from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
-from mjx_arm.urdf.scene_shapes import box_half_width, box_top_offset
+from mjx_arm.urdf.grippers import held_cube_half
+from mjx_arm.urdf.scene_shapes import CUBE_HALF, box_half_width
 
 # Fractions of the reach scale tried, nearest 1 first: smaller areas for arms that cannot hold
-# the tool down far out, larger ones for arms that cannot reach down near their base.
-SCALE_STEPS = (1.0, 0.9, 1.1, 0.8, 1.2, 0.7, 0.6, 0.5)
-HOME_HEIGHTS = (HOME_HEIGHT, 0.15, 0.10)  # m: the home heights tried, highest first
+# the tool down far out, larger ones for arms that cannot reach down near their base (or, as
+# the SO-101 with its 10 cm jaw, up near it: its Reach area covers at 1.3).
+SCALE_STEPS = (1.0, 0.9, 1.1, 0.8, 1.2, 0.7, 1.3, 0.6, 1.4, 0.5)
+# m: the home heights tried, highest first; an arm of a reach scale below 1 then tries them
+# times its reach scale, where that is lower (the SO-101, reach scale 0.38, holds its tool down
+# only up to about 8 cm)
+HOME_HEIGHTS = (HOME_HEIGHT, 0.15, 0.10)
+MIN_OBJECT_SCALE = 0.5  # a gripper that holds only a cube smaller than this fraction cannot Lift
 EPISODE_TIME_FACTOR = 2.0  # an episode lasts at least this many times the slowest motion
 
 
@@ -71,6 +78,7 @@ class ArmSetup:
             pressed square against it (m; negative: behind it; None: no shape on the axis).
         contact_spread: how much that changes as the box turns about the tool axis (m):
             shapes beside the axis that straddle the box at one turn and land on it at another.
+        object_scale: a gripper task's cube over the shipped one (:func:`object_scale`).
         notes: what the derivation had to do or could not do, one line each.
     """
 
@@ -87,6 +95,7 @@ class ArmSetup:
     tool_reach: float = 0.0
     contact_offset: float | None = 0.0
     contact_spread: float = 0.0
+    object_scale: float = 1.0
     notes: tuple[str, ...] = field(default=())
 
     @property
@@ -106,8 +115,22 @@ def grid_targets(task: TaskConfig) -> np.ndarray:
 
 
 def arm_setup(arm: ArmInfo, task: TaskConfig) -> ArmSetup:
-    """The setup of ``task`` on ``arm`` (cached per arm and task config; see the module)."""
-    return _setup_cached(arm, task)
+    """The setup of ``task`` on ``arm`` with the task's ee point
+    (:func:`~mjx_arm.arm.points.task_arm`) and cube (:func:`object_scale`), cached per arm and
+    task config; see the module."""
+    arm = task_arm(arm, task)
+    return _setup_cached(arm, task.replace(object_scale=object_scale(arm, task)))
+
+
+def object_scale(arm: ArmInfo, task: TaskConfig) -> float:
+    """``task``'s ``object_scale`` where it sets one, else the arm's: a gripper task's cube
+    shrinks so that the arm's gripper opens :data:`~mjx_arm.urdf.grippers.CUBE_CLEARANCE`
+    wider than it (:func:`~mjx_arm.urdf.grippers.held_cube_half`; 1.0 where the shipped cube
+    fits, and for the other tasks), never below :data:`MIN_OBJECT_SCALE`."""
+    if task.object_scale or not task.spec.gripper or arm.gripper is None:
+        return task.object_scale or 1.0
+    half = held_cube_half(arm.gripper.opening)
+    return float(np.clip(half / CUBE_HALF, MIN_OBJECT_SCALE, 1.0))
 
 
 @functools.cache
@@ -172,7 +195,8 @@ def _try_scale(arm: ArmInfo, solver: ToolDownSolver, task: TaskConfig, home: np.
     """
     points = grid_targets(task)
     low, high = points[:, :2].min(axis=0), points[:, :2].max(axis=0)
-    groups = [[home]] if home is not None else _home_groups(solver, 0.5 * (low + high))
+    centre = 0.5 * (low + high)
+    groups = [[home]] if home is not None else _home_groups(solver, centre, arm.reach_scale)
     best, best_rank = None, None
     for homes in groups:
         trial = _best_home(solver, task, points, homes)
@@ -196,14 +220,24 @@ def _best_home(solver: ToolDownSolver, task: TaskConfig, points: np.ndarray, hom
     return best
 
 
-def _home_groups(solver: ToolDownSolver, centre: np.ndarray) -> Iterator[list[np.ndarray]]:
-    """Tool-down homes over ``centre (2,)`` (x, y) at each of :data:`HOME_HEIGHTS` that has
+def _home_groups(
+    solver: ToolDownSolver, centre: np.ndarray, reach_scale: float
+) -> Iterator[list[np.ndarray]]:
+    """Tool-down homes over ``centre (2,)`` (x, y) at each of :func:`home_heights` that has
     any, highest first (a small arm, or a long tool, may not hold the tool down higher up);
     each height is solved only when asked for."""
-    for height in HOME_HEIGHTS:
+    for height in home_heights(reach_scale):
         homes = solver.homes(np.array([*centre, height]))
         if homes:
             yield homes
+
+
+def home_heights(reach_scale: float) -> tuple[float, ...]:
+    """The home heights (m) an arm of ``reach_scale`` tries, highest first:
+    :data:`HOME_HEIGHTS`, then (a reach scale below 1) those times the reach scale that are
+    lower than the lowest of them."""
+    scaled = [h * reach_scale for h in HOME_HEIGHTS if h * reach_scale < min(HOME_HEIGHTS)]
+    return HOME_HEIGHTS + tuple(scaled)
 
 
 def _travel_time(arm: ArmInfo, task: TaskConfig, q_home: np.ndarray, poses: list) -> float:
@@ -225,16 +259,7 @@ def _finish(arm, task, solver, q_home, source, scale, reached, targets, poses) -
     travel = _travel_time(arm, task, q_home, poses)
     needed = math.ceil(EPISODE_TIME_FACTOR * travel / task.ctrl_dt)
     steps = max(task.episode_steps, needed)
-    notes = []
-    if abs(scale - arm.reach_scale) > 1e-9:
-        change = "shrunk" if scale < arm.reach_scale else "grown"
-        notes.append(
-            f"task area {change} to {scale / arm.reach_scale:.0%} of the reach scale: at the "
-            "reach scale some targets are not reachable from home"
-        )
-    height = float(solver.ik.pose(np.asarray(q_home, float))[0][2])
-    if height < HOME_HEIGHT - 0.01:
-        notes.append(f"home {height:.2f} m above the table: none holds the tool down higher")
+    notes = _notes(arm, task, solver, q_home, scale)
     if reached < targets:
         notes.append(f"{targets - reached} of {targets} grid targets not reachable tool-down")
     if steps > task.episode_steps:
@@ -255,8 +280,36 @@ def _finish(arm, task, solver, q_home, source, scale, reached, targets, poses) -
         manipulability=solver.ik.manipulability(q_home),
         tool_reach=solver.tool_reach(q_home),
         **_contact(solver, q_home),
+        object_scale=task.object_scale,
         notes=tuple(notes),
     )
+
+
+def _notes(arm, task, solver, q_home, scale) -> list[str]:
+    """What scaling the derivation did: the task area, the home height, the cube."""
+    notes = []
+    if abs(scale - arm.reach_scale) > 1e-9:
+        change = "shrunk" if scale < arm.reach_scale else "grown"
+        notes.append(
+            f"task area {change} to {scale / arm.reach_scale:.0%} of the reach scale: at the "
+            "reach scale some targets are not reachable from home"
+        )
+    height = float(solver.ik.pose(np.asarray(q_home, float))[0][2])
+    if height < min(HOME_HEIGHTS) - 0.01:
+        notes.append(
+            f"home {height:.2f} m above the table: none holds the tool down at "
+            f"{min(HOME_HEIGHTS):.2f} m or higher (heights tried times the reach scale)"
+        )
+    elif height < HOME_HEIGHT - 0.01:
+        notes.append(f"home {height:.2f} m above the table: none holds the tool down higher")
+    if task.spec.gripper and task.object_scale < 1.0:
+        from mjx_arm.task.lift import cube_half
+
+        notes.append(
+            f"cube of {200 * cube_half(task):.1f} cm (x{task.object_scale:.2f}, mass "
+            f"x{task.object_scale**3:.2f}): the gripper opens {arm.gripper.opening * 100:.1f} cm"
+        )
+    return notes
 
 
 def _unreachable(arm, task, solver, scale, home, source) -> ArmSetup:
@@ -285,82 +338,3 @@ def _contact(solver, q: np.ndarray) -> dict[str, float | None]:
     """The ``contact_offset`` and ``contact_spread`` of an :class:`ArmSetup` at ``q (n,)``."""
     offset, spread = solver.tool_contact(q, box_half_width())
     return {"contact_offset": offset, "contact_spread": spread}
-
-
-MAX_EPISODE_SECONDS = 15.0  # an arm that needs a longer episode is too slow for the task
-# m: the most the tool's contact with the box top may move along its axis as the box turns
-# about it (the published arms with a tool face: 3 mm or less; the finger blocks of the UR
-# gripper URDFs, which straddle the box: 4.75 cm)
-CONTACT_SPREAD = 0.01
-CUBE_CLEARANCE = 0.01  # m: the gripper opens at least this much wider than the cube
-
-
-def task_verdict(arm: ArmInfo, task: TaskConfig) -> tuple[bool, str]:
-    """Whether ``arm`` can do ``task`` as derived, and why not (or a short summary)."""
-    if task.spec.gripper:
-        reason = gripper_problem(arm)
-        if reason:
-            return False, reason
-    setup = arm_setup(arm, task)
-    problem = press_problem(setup, task) if task.uses_contact and not task.spec.gripper else ""
-    if problem:
-        return False, problem
-    how = " with the tool down" if task.uses_contact else ""
-    if setup.reached == 0:
-        return False, "no tool-down pose over the task area (limits or reach block it)"
-    if not setup.covers_area:
-        missing = setup.targets - setup.reached
-        return False, f"{missing} of {setup.targets} targets out of reach{how}"
-    seconds = setup.episode_steps * task.ctrl_dt
-    if seconds > MAX_EPISODE_SECONDS:
-        return False, (
-            f"too slow: the farthest target takes {setup.travel_time:.1f} s from home at the "
-            f"task's joint speeds (an episode of {seconds:.0f} s)"
-        )
-    return True, (
-        f"every target reachable{how}; area x{setup.workspace_scale:.2f}, episode {seconds:.1f} s"
-    )
-
-
-def press_problem(setup: ArmSetup, task: TaskConfig) -> str:
-    """Why the tool cannot press the box top with the ee point on it ("" where it can): no
-    shape on the tool axis, a contact too far from the ee point, or shapes around it that
-    reach deeper than the box is tall (they meet the table first)."""
-    contact = setup.contact_offset
-    if contact is None:
-        return "no collision shape of the tool on its axis: nothing presses the box"
-    if abs(contact) >= task.success_distance:
-        return (
-            f"the tool meets the box {abs(contact) * 100:.1f} cm from the ee point, beyond the "
-            f"{task.success_distance * 100:.0f} cm success radius: set ee_offset in an arm file"
-        )
-    if setup.contact_spread > CONTACT_SPREAD:
-        return (
-            f"where the tool meets the box moves {setup.contact_spread * 100:.1f} cm along its "
-            "axis as the box turns about it (shapes beside the axis straddle the box at one "
-            "turn and land on it at another): a press's depth depends on the turn"
-        )
-    depth = setup.tool_reach - contact
-    if depth >= box_top_offset():
-        return (
-            f"shapes beside the tool axis reach {depth * 100:.1f} cm past where it meets the box "
-            f"(the box is {box_top_offset() * 100:.0f} cm tall): they meet the table first"
-        )
-    return ""
-
-
-def gripper_problem(arm: ArmInfo) -> str:
-    """Why the arm's gripper cannot hold the gripper tasks' cube ("" where it can)."""
-    from mjx_arm.urdf.scene_shapes import CUBE_HALF
-
-    if arm.gripper is None:
-        return (
-            "no parallel gripper (two prismatic fingers, one driven and the other its <mimic>, "
-            "or a mirrored pair) and no linkage (one driven revolute joint, the knuckles and "
-            "fingers its <mimic>)"
-        )
-    opening = arm.gripper.opening
-    if opening < 2 * CUBE_HALF + CUBE_CLEARANCE:
-        cube = 200 * CUBE_HALF
-        return f"the gripper opens {opening * 100:.1f} cm, too little for the {cube:.1f} cm cube"
-    return ""

@@ -122,6 +122,10 @@ class TaskConfig:
             z = 0.
         workspace_scale: the target box is scaled by this factor about the base; 0 takes the
             arm's reach over the shipped arm's (1.0 for the shipped arm). An env fills it in.
+        object_scale: a gripper task's object (Lift's cube) over its shipped size, edge and
+            mass alike (same density: the mass by its cube); 0 takes the arm's (1.0 but for a
+            gripper that opens too little for the shipped cube, :mod:`mjx_arm.arm.setup`). An
+            env fills it in.
         success_distance: d (m) below which the ee point counts as at the target.
         force_band: (min, max) contact force norm (N) of a successful touch.
         success_hold_steps: consecutive control steps the success condition must hold (near the
@@ -163,6 +167,7 @@ class TaskConfig:
     target_low: tuple[float, float, float] = (0.35, -0.25, 0.05)
     target_high: tuple[float, float, float] = (0.65, 0.25, 0.45)
     workspace_scale: float = 0.0
+    object_scale: float = 0.0
     success_distance: float = 0.05
     force_band: tuple[float, float] = (1.0, 50.0)
     success_hold_steps: int = 1
@@ -202,6 +207,8 @@ class TaskConfig:
             raise ConfigError("target_low must be <= target_high in x, y and z")
         if self.workspace_scale < 0:
             raise ConfigError("workspace_scale must be >= 0 (0: from the arm)")
+        if not 0 <= self.object_scale <= 1:
+            raise ConfigError("object_scale must be in [0, 1] (0: from the arm)")
         if self.success_hold_steps < 1:
             raise ConfigError("success_hold_steps must be >= 1")
         if not self.divergence_speed_factor > 1:
@@ -229,10 +236,14 @@ class TaskConfig:
         return low, tuple(scale * v for v in self.target_high)
 
     def for_arm(
-        self, home_qpos: tuple[float, ...], reach_scale: float, episode_steps: int = 0
+        self,
+        home_qpos: tuple[float, ...],
+        reach_scale: float,
+        episode_steps: int = 0,
+        object_scale: float = 1.0,
     ) -> TaskConfig:
-        """This config with the arm's home pose and workspace scale where it leaves them empty,
-        and an episode of at least ``episode_steps`` (0: as it is).
+        """This config with the arm's home pose, workspace scale and object scale where it
+        leaves them empty, and an episode of at least ``episode_steps`` (0: as it is).
 
         Raises:
             ValueError: a ``home_qpos`` given here that does not fit the arm's joint count.
@@ -245,6 +256,7 @@ class TaskConfig:
         return self.replace(
             home_qpos=home,
             workspace_scale=self.workspace_scale or reach_scale,
+            object_scale=self.object_scale or object_scale,
             episode_steps=max(self.episode_steps, episode_steps),
         )
 

@@ -1,11 +1,12 @@
 """Lift: pick the cube off the table with the gripper and hold it 10 cm up.
 
-The arm needs a gripper, parallel (``assets/ur5e_gripper.urdf``) or linkage
-(``assets/ur5e_2f85.urdf``). The action is the arm's joint velocities plus one entry for the
-driven finger or knuckle (positive closes). A free 4.5 cm cube rests on the
-table at a random spot and yaw; success is the cube at least :data:`LIFT_HEIGHT` above its resting
-height and held by both pads, for 10 control steps running. The gentle rules of Touch apply to the
-wrist reading: one above 100 N (the tool struck the table) ends the episode.
+The arm needs a gripper, parallel (``assets/ur5e_gripper.urdf``), linkage
+(``assets/ur5e_2f85.urdf``) or one revolute jaw against a fixed one (the SO-101's). The action
+is the arm's joint velocities plus one entry for the driven finger, knuckle or jaw (positive
+closes). A free 4.5 cm cube (smaller where the gripper opens less: :func:`cube_half`) rests on
+the table at a random spot and yaw; success is the cube at least :data:`LIFT_HEIGHT` above its
+resting height and held by both pads, for 10 control steps running. The gentle rules of Touch
+apply to the wrist reading: one above 100 N (the tool struck the table) ends the episode.
 """
 
 from __future__ import annotations
@@ -25,11 +26,10 @@ from mjx_arm.urdf.scene_shapes import CUBE_HALF, LIFT_SCENE, table_top_extent
 LIFT_HEIGHT = 0.10  # m above the resting height
 GRASP_FORCE = 0.5  # N on each pad: the pad presses the cube
 GRASP_RADIUS = 0.03  # m: the cube's centre within this of the ee point (between the pads)
-# m: ``cradle`` pays for closing the fingers while the cube's centre is this near the ee point:
-# between the pads (off centre by at most half the spare opening), not under fingers closed
-# on its top face (the ee point then sits at least a half edge and the pads' half height above
-# the centre)
-CRADLE_RADIUS = CUBE_HALF
+# ``cradle`` pays for closing the fingers while the cube's centre is within its half edge of
+# the ee point (:func:`cube_half`): between the pads (off centre by at most half the spare
+# opening), not under fingers closed on its top face (the ee point then sits at least a half
+# edge and the pads' half height above the centre)
 YAW_RANGE = 0.7853981633974483  # rad: the cube's yaw is drawn in +-pi/4 (a cube repeats per pi/2)
 CUBE_EDGE_MARGIN = 0.08  # m: the cube keeps this far from the table's edges
 # Each episode's cube: mass (kg) and sliding friction (of the cube and the pads), uniform. At
@@ -172,16 +172,18 @@ class Lift(Task):
         body = super().target_body_pos(xp, u3, cfg) * xp.asarray([1.0, 1.0, 0.0])
         low, high = table_top_extent(margin=CUBE_EDGE_MARGIN)
         body = xp.clip(body, xp.asarray([*low, 0.0]), xp.asarray([*high, 0.0]))
-        return body + xp.asarray([0.0, 0.0, CUBE_HALF])
+        return body + xp.asarray([0.0, 0.0, cube_half(cfg)])
 
     def object_start(self, xp: Any, u, cfg: TaskConfig) -> grip_lib.ObjectStart:
         """A yaw in +-:data:`YAW_RANGE` from the target's third draw (the table fixes the
-        height); mass and friction uniform in :data:`CUBE_MASS_RANGE` and
+        height); mass and friction uniform in :data:`CUBE_MASS_RANGE` (times the cube of the
+        config's ``object_scale``: a smaller cube of the same density) and
         :data:`FRICTION_RANGE` from the next two."""
         (m0, m1), (f0, f1) = CUBE_MASS_RANGE, FRICTION_RANGE
+        volume = (cfg.object_scale or 1.0) ** 3
         return grip_lib.ObjectStart(
             quat=grip_lib.yaw_quat(xp, (2.0 * u[..., 2] - 1.0) * YAW_RANGE),
-            mass=m0 + u[..., 3] * (m1 - m0),
+            mass=(m0 + u[..., 3] * (m1 - m0)) * volume,
             friction=f0 + u[..., 4] * (f1 - f0),
         )
 
@@ -201,7 +203,7 @@ class Lift(Task):
         """``height``: the cube's centre above its resting height (m); ``grasp``: 1 where both
         pads press the cube (each at least :data:`GRASP_FORCE`, its centre within
         :data:`GRASP_RADIUS` of the ee point), else 0; ``cradle``: the fingers' closure where
-        the cube's centre is within :data:`CRADLE_RADIUS` of the ee point (between the pads),
+        the cube's centre is within its half edge of the ee point (between the pads),
         else 0; ``stray``: 1 where a finger presses something (at least :data:`GRASP_FORCE`)
         while the cube's centre is not that near (a fingertip on the cube's top, a finger on
         the table or on a cube held off centre), else 0."""
@@ -209,8 +211,8 @@ class Lift(Task):
         offset = parts["object_pos"] - ee_pos
         gap = xp.sqrt(xp.vecdot(offset, offset))
         touching = parts["pad_force"] >= GRASP_FORCE
-        height = parts["object_pos"][..., 2] - CUBE_HALF
-        between = gap < CRADLE_RADIUS
+        height = parts["object_pos"][..., 2] - cube_half(cfg)
+        between = gap < cube_half(cfg)
         return {
             "height": height,
             "grasp": ((gap < GRASP_RADIUS) & touching.all(axis=-1)) * 1.0,
@@ -244,6 +246,12 @@ class Lift(Task):
 
 
 LIFT = Lift()
+
+
+def cube_half(cfg: TaskConfig) -> float:
+    """Half the edge (m) of ``cfg``'s cube: the shipped :data:`CUBE_HALF` times its
+    ``object_scale`` (an arm whose gripper opens less holds a smaller cube)."""
+    return CUBE_HALF * (cfg.object_scale or 1.0)
 
 
 def lift_config(**overrides: Any) -> TaskConfig:

@@ -10,6 +10,10 @@ that keeps the meshes. ``capsule`` therefore keeps a capsule only where it stays
 :data:`CAPSULE_BULGE` of the mesh across its axis; elsewhere the mesh gets a fitted box, which
 a flat part fills (its ends along the axis may round off past the mesh: those ends overlap the
 neighbouring links at the joints).
+
+A gripper's pads are fitted first (:func:`fit_pads`): a pad whose collision is a mesh gets the
+box :mod:`mjx_arm.urdf.pad_fit` fits to it, the box PyBullet's copy of the URDF gets too
+(:mod:`pybullet_ref.pads`), so MuJoCo, MJX and PyBullet press the object with the same pad.
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ import mujoco
 import numpy as np
 
 from mjx_arm.urdf.errors import ConversionError
+from mjx_arm.urdf.pad_fit import PAD_GEOM_SUFFIX, REST_MESH_SUFFIX, FittedPads
 
 COLLISION_SHAPES = {
     "mesh": None,
@@ -92,3 +97,65 @@ def capsule_bulge(model: mujoco.MjModel, geom: int, mesh: str) -> float:
     radius = float(model.geom_size[geom][0])
     across = vertices[:, :2]
     return float(np.max(np.concatenate([radius - across.max(axis=0), radius + across.min(axis=0)])))
+
+
+def fit_pads(spec: mujoco.MjSpec, pads: FittedPads | None) -> None:
+    """Replace the collision meshes of each fitted pad link of ``spec`` by its fitted box
+    (named ``LINK`` + :data:`~mjx_arm.urdf.pad_fit.PAD_GEOM_SUFFIX`) and the kept parts of its
+    cut meshes (new meshes ``LINK`` + :data:`~mjx_arm.urdf.pad_fit.REST_MESH_SUFFIX` + a
+    number, each collided through its hull), with the replaced geoms' contact settings."""
+    if pads is None:
+        return
+    for link in sorted(pads.replaced):
+        body = spec.body(link)
+        if body is None:
+            raise ConversionError(f"pad link {link!r} is not a body of the model")
+        meshes = [g for g in body.geoms if g.type == mujoco.mjtGeom.mjGEOM_MESH and _collides(g)]
+        if not meshes:
+            continue
+        template = meshes[0]
+        box = pads.box(link)
+        if box is not None:
+            quat = np.zeros(4)
+            mujoco.mju_mat2Quat(quat, np.ascontiguousarray(box.rotation).ravel())
+            added = _pad_geom(body, template, mujoco.mjtGeom.mjGEOM_BOX)
+            added.name = f"{link}{PAD_GEOM_SUFFIX}"
+            added.pos, added.quat, added.size = list(box.centre), list(quat), list(box.half)
+        rests = [vertices for name, vertices in pads.rests if name == link]
+        for i, vertices in enumerate(rests):
+            mesh = spec.add_mesh()
+            mesh.name = f"{link}{REST_MESH_SUFFIX}{i}"
+            mesh.uservert = np.asarray(vertices, float).ravel().tolist()
+            _pad_geom(body, template, mujoco.mjtGeom.mjGEOM_MESH).meshname = mesh.name
+        for geom in meshes:
+            spec.delete(geom)
+    _exclude_hand(spec, pads)
+
+
+def _exclude_hand(spec: mujoco.MjSpec, pads: FittedPads) -> None:
+    """No contacts between a fitted pad and the gripper's other links (its hand and every link
+    below the hand): a box around a finger overlaps the knuckles it turns with."""
+    hand = spec.body(pads.hand) if pads.hand else None
+    if hand is None:
+        return
+    below, stack = [], [hand]
+    while stack:
+        body = stack.pop()
+        below.append(body.name)
+        stack.extend(body.bodies)
+    for link in sorted(pads.replaced):
+        for other in below:
+            if other != link:
+                exclude = spec.add_exclude()
+                exclude.bodyname1, exclude.bodyname2 = link, other
+
+
+def _pad_geom(body: mujoco.MjsBody, template: mujoco.MjsGeom, kind) -> mujoco.MjsGeom:
+    """A new collision geom of ``kind`` on ``body`` with ``template``'s contact settings."""
+    geom = body.add_geom()
+    geom.type = kind
+    for attribute in ("contype", "conaffinity", "condim", "group", "priority", "margin", "gap"):
+        setattr(geom, attribute, getattr(template, attribute))
+    geom.friction = list(template.friction)
+    geom.solref, geom.solimp = list(template.solref), list(template.solimp)
+    return geom

@@ -8,6 +8,7 @@ import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+from mjx_arm.urdf.pad_fit import FittedPads
 from mjx_arm.urdf.scene_shapes import NO_SCENE, SCENES, SceneSpec
 
 # Collision bit masks. Scene geoms (table, target box) never collide with each other. Arm geoms
@@ -61,6 +62,9 @@ class ConvertConfig:
             keeps the 240 Hz gains) sets it, so a finer step changes the integration only.
         pad_links: links that get a touch sensor ``LINK_touch`` over their collision box (the
             finger pads of a gripper): the sum of the normal contact forces on the link (N).
+        pads: a gripper's pads fitted to their meshes (:mod:`mjx_arm.urdf.pad_fit`): their
+            links' collision meshes are replaced by the fitted boxes and the kept parts of cut
+            meshes (:func:`mjx_arm.urdf.collision_fit.fit_pads`); None keeps the URDF's.
         rest_qpos: joints the model starts at other than 0 (``qpos0``), ``(name, position)``
             pairs: a linkage gripper held closed (:func:`mjx_arm.urdf.convert.load_model`).
         solver_iterations: constraint solver iterations (few, for MJX speed). On an H200 the
@@ -98,6 +102,7 @@ class ConvertConfig:
     sim_dt: float = 1.0 / 240.0
     servo_dt: float = 0.0
     pad_links: tuple[str, ...] = ()
+    pads: FittedPads | None = None
     rest_qpos: tuple[tuple[str, float], ...] = ()
     solver_iterations: int = 2
     ls_iterations: int = 4

@@ -10,7 +10,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from mjx_arm.urdf.collision_fit import fit_collision_primitives
+from mjx_arm.urdf.collision_fit import fit_collision_primitives, fit_pads
 from mjx_arm.urdf.convert_config import ConvertConfig
 from mjx_arm.urdf.errors import ConversionError, one_line
 from mjx_arm.urdf.inertia import inertia_problem
@@ -67,6 +67,7 @@ def _edit_spec(spec: mujoco.MjSpec, model: RobotModel, config: ConvertConfig, pa
     _add_actuators(spec, actuated, model, config)
     ee_body, ft_body = _tool_bodies(spec, model, config, path)
     _add_sites_and_sensors(spec, model, ee_body, ft_body, config)
+    fit_pads(spec, config.pads)
     fit_collision_primitives(spec, config.collision)
     _set_contact_bits(spec, config.self_collision)
     if config.gravity_compensation:

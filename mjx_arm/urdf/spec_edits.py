@@ -21,6 +21,7 @@ from mjx_arm.urdf.convert_config import (
 )
 from mjx_arm.urdf.errors import ConversionError
 from mjx_arm.urdf.model import RobotModel
+from mjx_arm.urdf.pad_fit import PAD_GEOM_SUFFIX
 
 
 def _set_options(spec: mujoco.MjSpec, config: ConvertConfig) -> None:
@@ -203,11 +204,14 @@ def _add_pad_sensors(spec: mujoco.MjSpec, config: ConvertConfig, path: Path) -> 
     """A touch sensor on each of ``config.pad_links``: a box site :data:`PAD_MARGIN` larger
     than the link's collision boxes (one box around them all, in the link's frame), so every
     contact on the pad counts (MuJoCo's touch sensor sums the normal forces of the body's
-    contacts inside its site)."""
+    contacts inside its site). A link with a fitted pad box (:mod:`mjx_arm.urdf.pad_fit`) gets
+    the site around that box alone: a one-jaw gripper's hand carries its palm beside it."""
     for link in config.pad_links:
         body = spec.body(link)
         geoms = body.geoms if body is not None else []
         boxes = [g for g in geoms if g.type == mujoco.mjtGeom.mjGEOM_BOX and g.contype]
+        fitted = [g for g in boxes if g.name == f"{link}{PAD_GEOM_SUFFIX}"]
+        boxes = fitted or boxes
         if not boxes:
             raise ConversionError(f"{path}: pad link {link!r} needs a collision box")
         low, high = _boxes_extent(boxes)
