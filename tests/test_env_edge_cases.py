@@ -2,7 +2,9 @@
 env and the batched vector env (C MuJoCo backend, one env per batch). Real actions of any real
 dtype step; complex, string, object, ragged, wrongly shaped and NaN actions are an
 InvalidActionError with the same message for the same action; reset() and step() after close()
-are Gymnasium's ClosedEnvironmentError."""
+are Gymnasium's ClosedEnvironmentError. Reset options the contract cannot take (NaN, wrong
+shape, out of the observation's bound) are an InvalidResetOptionError, a batch of zero envs a
+ConfigError, and a second thread inside an env a ConcurrentEnvUseError (not a crash)."""
 
 from __future__ import annotations
 
