@@ -27,7 +27,12 @@ from PIL import Image
 from test_urdf_limits import mesh_urdf
 
 from mjx_arm.cli import main
-from mjx_arm.urdf.findings import MAX_INSTANCED_BYTES, MAX_SIDE_BYTES, MAX_TEXTURE_PIXELS
+from mjx_arm.urdf.findings import (
+    MAX_INSTANCED_BYTES,
+    MAX_SCENE_PARTS,
+    MAX_SIDE_BYTES,
+    MAX_TEXTURE_PIXELS,
+)
 from mjx_arm.urdf.mesh_convert import MeshConvertError, load_mesh
 from mjx_arm.urdf.mesh_files import UnsafeFileError, read_regular, short_path
 from mjx_arm.urdf.mesh_limits import mesh_problem, obj_problem
@@ -370,11 +375,39 @@ def nested_instances(path: Path, levels: int) -> Path:
 def test_a_collada_scene_instancing_its_geometry_2_to_the_30_times_is_refused_at_once(tmp_path):
     few = load_mesh(nested_instances(tmp_path / "few.dae", 3))
     assert len(few.faces) == 8 * 12  # 8 boxes of 12 triangles
+    at_limit = nested_instances(tmp_path / "at.dae", 12)  # 4,096 instances: read (about 4 s)
+    assert len(load_mesh(at_limit).faces) == MAX_SCENE_PARTS * 12
+    over = nested_instances(tmp_path / "over.dae", 13)
+    with pytest.raises(MeshConvertError, match="holds 8,192 geometry instances, more than the"):
+        load_mesh(over)
     bomb = nested_instances(tmp_path / "bomb.dae", 30)
     assert bomb.stat().st_size < 10_000
-    with pytest.raises(MeshConvertError, match="instances its geometry to more than 32 MiB"):
+    with pytest.raises(MeshConvertError, match="holds 1,073,741,824 geometry instances"):
         load_mesh(bomb)
-    assert MAX_INSTANCED_BYTES == 32 * 2**20
+
+
+def test_a_large_collada_geometry_instanced_past_the_byte_bound_is_refused(tmp_path):
+    """40 instances of a 1.4 MB sphere: few instances, but 56 MB of geometry to copy."""
+    sphere = trimesh.creation.icosphere(subdivisions=5)  # 20,480 faces
+    text = trimesh.exchange.dae.export_collada(sphere)
+    text = text.decode() if isinstance(text, bytes) else text
+    start = text.index("<instance_geometry")
+    end = text.index("</instance_geometry>", start) + len("</instance_geometry>")
+    text = text[:start] + text[start:end] * 40 + text[end:]
+    (tmp_path / "spheres.dae").write_text(text)
+    assert 40 * len(text) > MAX_INSTANCED_BYTES
+    with pytest.raises(MeshConvertError, match="instances its geometry to more than 32 MiB"):
+        load_mesh(tmp_path / "spheres.dae")
+
+
+def test_a_gltf_of_more_nodes_than_the_part_limit_is_refused_before_trimesh_reads_it(tmp_path):
+    gltf, _ = gltf_box(tmp_path)
+    header = json.loads(gltf.read_text())
+    header["nodes"] = [{"mesh": 0}] * (MAX_SCENE_PARTS + 1)  # trimesh: about 2 ms a node
+    header["scenes"] = [{"nodes": list(range(MAX_SCENE_PARTS + 1))}]
+    gltf.write_text(json.dumps(header))
+    with pytest.raises(MeshConvertError, match="holds 4,097 nodes, more than the 4,096"):
+        load_mesh(gltf)
 
 
 def zae(path: Path, members: dict[str, bytes]) -> Path:

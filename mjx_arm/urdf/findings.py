@@ -95,6 +95,11 @@ MAX_TEXTURE_PIXELS = 4096 * 4096
 # that instances a box through 30 levels of two <instance_node>s each asks for 2**30 copies
 # (1,024 copies took trimesh 0.8 s). A file that uses each geometry once is within it by its size.
 MAX_INSTANCED_BYTES = MAX_MESH_BYTES
+# Parts of one mesh file trimesh reads: a Collada file's geometries and their instances, a
+# glTF's nodes, mesh primitives and accessors. trimesh takes about 0.8 ms a part (1,024 Collada
+# instances: 0.8 s; 20,000 glTF nodes: 10 s and 190 MB; 200,000 nodes, a 3.5 MB file: 60 s and
+# 1.1 GB). The most among the 262 Collada meshes of example-robot-data 6.0 is 269.
+MAX_SCENE_PARTS = 4096
 # Longest name (robot, link, joint, material, ...) a URDF may use. PyBullet 3.2 segfaults while
 # loading a URDF whose joint name has 1,264 or more characters, or whose link name has 2,288
 # or more (robot names crash from 42,184; material names up to 70,000 do not). 256 leaves a

@@ -10,11 +10,16 @@ Which reader opens which side file (measured with MuJoCo 3.x, PyBullet 3.2.7, tr
   block on a FIFO, read ``/dev/zero`` without end or decode a small image to gigabytes). A side
   file that is not there is no error: the readers leave it out.
 - glTF (``.gltf``, ``.glb``): trimesh needs its buffers; they are read here under the same
-  rules and handed to trimesh, which is given nothing else (no images).
+  rules and handed to trimesh, which is given nothing else (no images). Its nodes, mesh
+  primitives and accessors are at most :data:`~mjx_arm.urdf.findings.MAX_SCENE_PARTS` each.
 - Collada (``.dae``): trimesh is given no side file at all (the converter needs geometry, not
   textures; PyBullet's reader opens no texture either). Its scene may instance one geometry many
-  times over: the geometry bytes counted per instance are bounded by
-  :data:`~mjx_arm.urdf.findings.MAX_INSTANCED_BYTES` before trimesh reads it.
+  times over: before trimesh reads it, its geometries and their instances are counted
+  (at most ``MAX_SCENE_PARTS``) and the geometry bytes counted per instance are bounded by
+  :data:`~mjx_arm.urdf.findings.MAX_INSTANCED_BYTES`.
+
+With these bounds, what trimesh parses is at most 32 MiB and a few thousand parts, so its time
+and memory are bounded too (measured in ``docs/troubleshooting.md``).
 - ``.zae`` (a zipped Collada file): at most :data:`~mjx_arm.urdf.findings.MAX_ZAE_MEMBERS`
   members, whose declared sizes together stay within ``MAX_SIDE_BYTES``; only the Collada
   member is unpacked, and no more bytes than it declared are taken from it.
@@ -35,6 +40,7 @@ from typing import NamedTuple
 from mjx_arm.urdf.findings import (
     MAX_INSTANCED_BYTES,
     MAX_MESH_BYTES,
+    MAX_SCENE_PARTS,
     MAX_SIDE_BYTES,
     MAX_TEXTURE_PIXELS,
     MAX_ZAE_MEMBERS,
@@ -57,6 +63,7 @@ __all__ = [
 # MTL statements that name a texture file (the name is the rest of the line, after options).
 _TEXTURE_KEYS = frozenset({"bump", "disp", "decal", "refl", "norm"})
 _FIX_EXPORT = "export the mesh again (e.g. from Blender or MeshLab)"
+_BIG = 2**62  # a cap on sums that could otherwise grow without end (2**30 instances and more)
 
 
 class MeshProblem(NamedTuple):
@@ -189,9 +196,16 @@ def trimesh_input(source: Path, data: bytes) -> tuple[bytes, str, dict[str, byte
 
 def _gltf_buffers(source: Path, data: bytes) -> dict[str, bytes]:
     """The external buffers of a glTF (``.gltf`` text or ``.glb``), each read with
-    :func:`read_regular`, all together within ``MAX_SIDE_BYTES``."""
+    :func:`read_regular`, all together within ``MAX_SIDE_BYTES``, after its nodes, mesh
+    primitives and accessors are checked against MAX_SCENE_PARTS."""
+    header = _gltf_header(data)
+    for key in ("nodes", "accessors"):
+        _check_parts(source, len(_items(header, key)), key)
+    primitives = [_items(mesh, "primitives") for mesh in _items(header, "meshes")]
+    _check_parts(source, sum(map(len, primitives)), "mesh primitives")
+    uris = [b.get("uri") for b in _items(header, "buffers")]
     files: dict[str, bytes] = {}
-    for uri in _buffer_uris(data):
+    for uri in [u for u in uris if isinstance(u, str) and u and not u.startswith("data:")]:
         try:
             path = side_path(source, uri)
             if path is None:
@@ -204,25 +218,28 @@ def _gltf_buffers(source: Path, data: bytes) -> dict[str, bytes]:
             continue  # unreadable: trimesh names it
         total = sum(len(b) for b in files.values())
         if total > MAX_SIDE_BYTES:
-            problem = _together(total, "buffers")
-            raise UnsafeFileError(source, problem, _FIX_EXPORT)
+            raise UnsafeFileError(source, _together(total, "buffers"), _FIX_EXPORT)
     return files
 
 
-def _buffer_uris(data: bytes) -> list[str]:
-    """The ``uri`` of each buffer a glTF names that is a file, not inline ``data:``; [] when
-    the JSON cannot be read (trimesh then names what is wrong)."""
+def _gltf_header(data: bytes) -> dict:
+    """The JSON of a glTF (``.gltf`` text, or a ``.glb``'s JSON chunk); {} when it cannot be
+    read (trimesh then names what is wrong)."""
     text = data
     if data[:4] == b"glTF" and len(data) >= 20:  # binary glTF: header, then the JSON chunk
         length, kind = struct.unpack_from("<I4s", data, 12)
         text = data[20 : 20 + length] if kind == b"JSON" else b""
     try:
         header = json.loads(text)
-        buffers = header.get("buffers", []) if isinstance(header, dict) else []
-        uris = [b.get("uri") for b in buffers if isinstance(b, dict)]
-    except (ValueError, RecursionError, AttributeError):
-        return []
-    return [u for u in uris if isinstance(u, str) and u and not u.startswith("data:")]
+    except (ValueError, RecursionError):
+        return {}
+    return header if isinstance(header, dict) else {}
+
+
+def _items(parent: object, key: str) -> list[dict]:
+    """The objects of the list ``parent[key]`` (a glTF's nodes, ...); [] where there is none."""
+    items = parent.get(key) if isinstance(parent, dict) else None
+    return [item for item in items if isinstance(item, dict)] if isinstance(items, list) else []
 
 
 def _zae_collada(source: Path, data: bytes) -> bytes:
@@ -265,31 +282,41 @@ _ATTR = re.compile(rb"""\b(id|url)\s*=\s*["']#?([^"']*)["']""")
 
 
 def _check_instances(source: Path, data: bytes) -> None:
-    """Refuse a Collada scene whose geometry, counted once per instance (through nested
-    nodes and ``<instance_node>``s), exceeds MAX_INSTANCED_BYTES, before trimesh reads it."""
+    """Refuse a Collada file with more than MAX_SCENE_PARTS geometries or instances of them,
+    or whose geometry counted once per instance (through nested nodes and
+    ``<instance_node>``s) exceeds MAX_INSTANCED_BYTES, before trimesh reads it."""
     sizes, children, roots = _collada_graph(data)
-    weights: dict[str, int] = {}
+    _check_parts(source, len(sizes), "geometries")
+    weights: dict[str, tuple[int, int]] = {}
 
-    def weight(node: str, depth: int) -> int:
+    def weight(node: str, depth: int) -> tuple[int, int]:
+        """Bytes and instances of geometry under ``node`` (each capped just above its limit)."""
         if node in weights:
             return weights[node]
         if depth > 64:  # a cycle, or nesting no reader follows
             raise UnsafeFileError(source, "nests its nodes in a cycle or too deep", _FIX_EXPORT)
-        total = 0
+        size = count = 0
         for kind, target in children.get(node, ()):
-            total += sizes.get(target, 0) if kind == b"g" else weight(target, depth + 1)
-            if total > MAX_INSTANCED_BYTES:
-                break
-        weights[node] = total
-        return total
+            more = (sizes.get(target, 0), 1) if kind == b"g" else weight(target, depth + 1)
+            size, count = min(size + more[0], _BIG), min(count + more[1], _BIG)
+        weights[node] = size, count
+        return size, count
 
-    total = sum(weight(root, 0) for root in roots)
-    if total > MAX_INSTANCED_BYTES:
+    found = [weight(root, 0) for root in roots]
+    _check_parts(source, sum(count for _, count in found), "geometry instances")
+    if sum(size for size, _ in found) > MAX_INSTANCED_BYTES:
         problem = (
             f"instances its geometry to more than {MAX_INSTANCED_BYTES / MIB:.0f} MiB "
             "(each <instance_geometry> and <instance_node> copies it)"
         )
         raise UnsafeFileError(source, problem, "instance each geometry a few times at most")
+
+
+def _check_parts(source: Path, count: int, what: str) -> None:
+    """At most MAX_SCENE_PARTS ``what`` (nodes, geometries) in one mesh file."""
+    if count > MAX_SCENE_PARTS:
+        problem = f"holds {count:,} {what}, more than the {MAX_SCENE_PARTS:,} a mesh may have"
+        raise UnsafeFileError(source, problem, "merge the parts into one mesh")
 
 
 def _collada_graph(data: bytes) -> tuple[dict[str, int], dict[str, list], list[str]]:
