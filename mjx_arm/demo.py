@@ -32,7 +32,6 @@ from mjx_arm.names import engine_label
 if TYPE_CHECKING:
     from mjx_arm.arm.config import ArmConfig
     from mjx_arm.evaluate import EvalRun
-    from mjx_arm.task.config import TaskConfig
 
 
 class DemoError(InputError, RuntimeError):
@@ -241,14 +240,18 @@ def evaluate_engines(
 
 
 def plot_episode(
-    run: EvalRun, task: TaskConfig, out: Path, echo: Callable[[str], None]
+    run: EvalRun, policy_path: str, out: Path, echo: Callable[[str], None]
 ) -> dict[str, Any]:
-    """Save the reference engine's longest episode as a trajectory and plot it."""
+    """Save the reference engine's longest episode of the policy at ``policy_path`` as a
+    trajectory (with the policy's task and arm) and plot it."""
+    from mjx_arm.evaluate import eval_arm, eval_task
+    from mjx_arm.policy import load
     from mjx_arm.replay import replay, save_trajectory
 
-    traj_path = save_trajectory(
-        out / f"trajectory_{REFERENCE_ENGINE}.npz", run.longest_trajectory(), task
-    )
+    policy = load(policy_path)
+    path = out / f"trajectory_{REFERENCE_ENGINE}.npz"
+    task, arm = eval_task(policy)[0], eval_arm(policy)
+    traj_path = save_trajectory(path, run.longest_trajectory(), task, arm)
     summary = replay(traj_path, out / "replay.png")
     echo(f"wrote {traj_path} ({summary['steps']} steps) and {summary['plot']}")
     return {"trajectory": str(traj_path), "plot": summary["plot"]}
@@ -357,16 +360,9 @@ def _steps(out: Path, settings: DemoSettings, log: _Log, arm: ArmConfig | None) 
     summary["eval"], run = evaluate_engines(Path(summary["export"]["npz"]), out, settings, echo)
     log.done("evaluate")
     log.step("replay", "5/5 plot the longest MuJoCo episode")
-    summary["replay"] = plot_episode(run, _task_of(summary["export"]["npz"]), out, echo)
+    summary["replay"] = plot_episode(run, summary["export"]["npz"], out, echo)
     log.done("replay")
     return summary
-
-
-def _task_of(policy_path: str) -> TaskConfig:
-    from mjx_arm.evaluate import eval_task
-    from mjx_arm.policy import load
-
-    return eval_task(load(policy_path))[0]
 
 
 def _video_line(result: dict[str, Any]) -> str:

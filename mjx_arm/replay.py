@@ -3,12 +3,14 @@
 A trajectory file is an ``.npz`` with, per control step ``t`` (``T`` steps):
 
 - ``obs (T, 22)``: the flat observation the action was computed from (joint angles at
-  ``[:, 7:13]``, target point at ``[:, 13:16]``);
+  ``[:, 7:13]``, target point at ``[:, 13:16]``, on a 6-joint arm);
 - ``action (T, 6)``, ``reward (T,)``, ``done (T,)``;
-- ``ee_pos (T, 3)`` and ``contact_force (T,)`` (force norm, N) after the step.
+- ``ee_pos (T, 3)`` and ``contact_force (T,)`` (force norm, N) after the step;
+- ``task_config`` and ``arm_config``: the task and arm it was recorded on, as JSON.
 
-Training writes one into each checkpoint (``transitions.npz``); ``mjx-arm eval --trajectory``
-writes one per run. The video is drawn by MuJoCo: each frame sets the joint angles and the
+Training writes one into each checkpoint (``transitions.npz``; its arm is the run's, in
+``config.json``); ``mjx-arm eval --trajectory`` writes one per run. The video is drawn by
+MuJoCo on the arm the trajectory was recorded on: each frame sets the joint angles and the
 target of ``obs[t]`` in the CPU MuJoCo env's model and renders it from the scene camera.
 """
 
@@ -16,7 +18,7 @@ from __future__ import annotations
 
 import io
 import json
-import os
+import warnings
 from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -40,9 +42,11 @@ from mjx_arm.trajectory_files import (
     run_config_of,
 )
 from mjx_arm.video import VideoWriter as VideoWriter  # moved; importable here as before
-from mjx_arm.video import write_video
+from mjx_arm.video import fit_framebuffer as fit_framebuffer
+from mjx_arm.video import rendering_available, write_video
 
 if TYPE_CHECKING:
+    from mjx_arm.arm.config import ArmConfig
     from mjx_arm.arm.resolve import ArmTask
 
 REQUIRED_KEYS = ("obs", "reward", "ee_pos", "contact_force")
@@ -50,7 +54,7 @@ REQUIRED_KEYS = ("obs", "reward", "ee_pos", "contact_force")
 # to, each and together. A checkpoint's transitions.npz holds about 13 KiB; a million recorded
 # steps of 30 float64 observations are 240 MiB. The limits stop a file that would unpack to
 # gigabytes before it is unpacked.
-TRAJECTORY_KEYS = frozenset((*REQUIRED_KEYS, "action", "done", "task_config"))
+TRAJECTORY_KEYS = frozenset((*REQUIRED_KEYS, "action", "done", "task_config", "arm_config"))
 TRAJECTORY_MEMBER_BYTES = 512 * MiB
 TRAJECTORY_TOTAL_BYTES = 1024 * MiB
 DEFAULT_WIDTH, DEFAULT_HEIGHT = 800, 600
@@ -117,11 +121,16 @@ def _check_arrays(path: Path, traj: dict[str, Any]) -> None:
         )
 
 
-def save_trajectory(path: str | Path, rows: dict[str, np.ndarray], task: TaskConfig) -> Path:
-    """Write a trajectory ``.npz`` (the arrays plus the task config as JSON)."""
+def save_trajectory(
+    path: str | Path, rows: dict[str, np.ndarray], task: TaskConfig, arm: ArmConfig | None = None
+) -> Path:
+    """Write a trajectory ``.npz``: the arrays, the task config and (when given) the config of
+    the arm it was recorded on, each as JSON."""
     path = Path(path)
     payload = {k: np.asarray(v) for k, v in rows.items()}
     payload["task_config"] = np.array(json.dumps(task.to_dict()))
+    if arm is not None:
+        payload["arm_config"] = np.array(json.dumps(arm.to_dict()))
     buffer = io.BytesIO()
     np.savez_compressed(buffer, **payload)
     write_atomic(buffer.getvalue(), path)
@@ -166,6 +175,43 @@ def _task_from(data: Any, where: str) -> TaskConfig:
         return TaskConfig.from_dict(data)
     except (ConfigError, TypeError) as err:
         raise TrajectoryError(f"{where}: not a usable task config: {err}") from err
+
+
+def trajectory_arm(path: str | Path, traj: dict[str, Any], source: Any = None):
+    """The arm a trajectory was recorded on, ``(ArmConfig, where it came from)``, checked to
+    have the joints its observations hold.
+
+    Order: ``source`` (``--arm``: a URDF, an arm file or a shipped arm's name); the file's own
+    ``arm_config``; the arm in the ``config.json`` of the run whose checkpoint holds the file
+    (:func:`~mjx_arm.trajectory_files.run_config_of`); else the shipped arm. A recorded shipped
+    arm is this install's copy.
+
+    Raises:
+        TrajectoryError: a recorded arm that is not an arm config, or an arm of other joints.
+        MissingInputError: the recorded arm's URDF is not on this machine.
+    """
+    from mjx_arm.arm.config import ArmConfigError, load_arm, recorded_arm, resolve_arm
+
+    where, record = "default (the shipped arm): the file names no arm", "{}"
+    config = run_config_of(path)
+    if "arm_config" in traj:
+        where, record = "the trajectory file", str(traj["arm_config"])
+    elif config is not None:  # the run's arm record: its config, joints, model hash
+        saved = read_json_object(config, "run config").get("arm", {})
+        saved = saved.get("config", saved) if isinstance(saved, dict) else saved
+        where, record = str(config), json.dumps(saved)
+    try:
+        arm = recorded_arm(json.loads(record), f"{path} was recorded on") if not source else None
+    except (ArmConfigError, TypeError, ValueError, RecursionError) as err:
+        raise TrajectoryError(f"{path} ({where}): not a usable arm config: {err}") from err
+    arm = arm or load_arm(source)
+    recorded, joints = state_layout(traj["obs"].shape[1])[0], len(resolve_arm(arm).joints)
+    if recorded != joints:
+        raise TrajectoryError(
+            f"{path} was recorded on an arm of {recorded} joints; {arm.urdf_path.name} has "
+            f"{joints}: pass the arm it was recorded on (--arm)"
+        )
+    return arm, "--arm" if source else where
 
 
 # --------------------------------------------------------------------------- plot
@@ -213,7 +259,9 @@ def plot_trajectory(
             ax.axvline(drop, color="tab:red", linestyle="--", linewidth=1)
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
+    with warnings.catch_warnings():  # a small figure keeps matplotlib's layout, silently
+        warnings.filterwarnings("ignore", "Tight layout not applied", UserWarning)
+        fig.tight_layout()
     output = Path(output)
     buffer = io.BytesIO()
     fig.savefig(buffer, dpi=DPI, format="png")
@@ -280,30 +328,6 @@ def _plot_position(ax, steps: np.ndarray, traj: dict[str, Any]) -> None:
 # --------------------------------------------------------------------------- video
 
 
-def rendering_available() -> tuple[bool, str]:
-    """Whether MuJoCo can render off screen here: ``(ok, reason when not)``."""
-    try:
-        import mujoco
-
-        model = mujoco.MjModel.from_xml_string("<mujoco><worldbody/></mujoco>")
-        with mujoco.Renderer(model, 8, 8) as renderer:
-            renderer.render()
-    except Exception as exc:  # no EGL/OSMesa/GLFW, no display, driver errors
-        backend = os.environ.get("MUJOCO_GL", "default")
-        return False, (
-            f"MuJoCo cannot render off screen here (MUJOCO_GL={backend}; "
-            f"{type(exc).__name__}: {exc}); install EGL (e.g. apt-get install libegl1) "
-            "or OSMesa and set MUJOCO_GL=egl or osmesa"
-        )
-    return True, ""
-
-
-def fit_framebuffer(model: Any, width: int, height: int) -> None:
-    """Grow a MuJoCo model's off-screen framebuffer to hold ``width`` x ``height`` frames."""
-    model.vis.global_.offwidth = max(int(model.vis.global_.offwidth), int(width))
-    model.vis.global_.offheight = max(int(model.vis.global_.offheight), int(height))
-
-
 def render_frames(
     traj: dict[str, Any],
     task: TaskConfig | ArmTask,
@@ -333,8 +357,8 @@ def render_frames(
         env.close()
         raise TrajectoryError(
             f"the trajectory's observations have {np.shape(traj['obs'])[-1]} entries; "
-            f"{task.task} on {env.arm.urdf.name} has {width}: pass the task it was recorded in "
-            "(--task)"
+            f"{task.task} on {env.arm.urdf.name} has {width}: pass the task (--task) and the "
+            "arm (--arm) it was recorded on"
         )
     try:
         for obs in np.asarray(traj["obs"], dtype=np.float64):
@@ -374,12 +398,14 @@ def replay(
     width: int = DEFAULT_WIDTH,
     height: int = DEFAULT_HEIGHT,
     task_name: str | None = None,
+    arm: Any = None,
 ) -> dict[str, Any]:
-    """Plot a trajectory and optionally render its video.
+    """Plot a trajectory and optionally render its video, drawing the arm it was recorded on
+    (:func:`trajectory_arm`; ``arm``: a URDF, an arm file or a shipped arm's name instead).
 
     Returns:
-        A summary: the files written, the step count, the largest reward drop, the task used,
-        and a note when the video was skipped.
+        A summary: the files written, the step count, the largest reward drop, the task and
+        (with a video) the arm used, and a note when the video was skipped.
     """
     traj = load_trajectory(path)
     task, task_source = trajectory_task(path, traj, task_name)
@@ -399,8 +425,10 @@ def replay(
     if video is not None:
         ok, reason = rendering_available()
         if ok:
-            fps = 1.0 / task.ctrl_dt
-            summary["frames"] = write_video(video, render_frames(traj, task, width, height), fps)
+            config, summary["arm_from"] = trajectory_arm(path, traj, arm)
+            summary["arm"] = str(config.urdf_path)
+            frames = render_frames(traj, task, width, height, config)
+            summary["frames"] = write_video(video, frames, 1.0 / task.ctrl_dt)
             summary["video"] = str(video)
         else:
             summary["video_note"] = f"video skipped: {reason}"

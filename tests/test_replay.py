@@ -166,3 +166,66 @@ def test_no_renderer_skips_the_video_with_a_note(tmp_path: Path):
     assert done.returncode == 0, done.stderr
     assert "video skipped" in done.stdout and "MUJOCO_GL=no-such-backend" in done.stdout
     assert png.is_file() and not video.exists()
+
+
+ROBOTS = Path(__import__("sysconfig").get_paths()["purelib"]) / (
+    "cmeel.prefix/share/example-robot-data/robots"
+)
+needs_robots = pytest.mark.skipif(
+    not ROBOTS.is_dir(), reason="example-robot-data is not installed (pip install -e '.[test]')"
+)
+
+
+def _recorded_on(urdf: Path, path: Path, steps: int = 4) -> list[np.ndarray]:
+    """Record ``steps`` steps of Reach on ``urdf`` in CPU MuJoCo into the trajectory ``path``
+    (with its task and arm, as eval --trajectory writes it); the env's own frames of them."""
+    from mjx_arm.evaluate import make_eval_env, run_episode
+
+    env = make_eval_env(reach_config(), "mujoco", True, 160, 120, arm=urdf)
+    frames: list[np.ndarray] = []
+    action = np.linspace(-0.8, 0.8, env.action_space.shape[0]).astype(np.float32)
+    try:
+        _, traj = run_episode(
+            lambda obs: action, env, 3, lambda: len(frames) < steps and frames.append(env.render())
+        )
+    finally:
+        env.close()
+    rows = {k: v[:steps] for k, v in traj.items()}
+    save_trajectory(path, rows, env.unwrapped.task, env.unwrapped.arm.config)
+    return frames
+
+
+@needs_render
+@needs_robots
+@pytest.mark.parametrize(
+    "name", ["panda_description/urdf/panda.urdf", "ur_description/urdf/ur5_robot.urdf"]
+)
+def test_replay_draws_the_arm_the_trajectory_was_recorded_on(name: str, tmp_path: Path, capsys):
+    """A 7-joint Panda, and a 6-joint UR5 of another make than the shipped UR5e: the video is
+    of that arm, frame for frame what the env drew (within 1 of 255 levels on average), and
+    --arm draws another arm."""
+    from mjx_arm.replay import render_frames, trajectory_arm
+
+    urdf, path = ROBOTS / name, tmp_path / "t.npz"
+    drawn = _recorded_on(urdf, path)
+    video = tmp_path / "v.mp4"
+    argv = ["replay", str(path), "-o", str(tmp_path / "p.png"), "--video", str(video)]
+    assert main([*argv, "--width", "160", "--height", "120"]) == EXIT_OK
+    assert f"arm: {urdf} (from the trajectory file)" in capsys.readouterr().out
+    traj = load_trajectory(path)
+    arm, where = trajectory_arm(path, traj)
+    assert arm.urdf_path == urdf and where == "the trajectory file"
+    task = trajectory_task(path, traj)[0]
+    frames = list(render_frames(traj, task, 160, 120, arm))
+    assert len(frames) == len(drawn) == 4
+    for replayed, own in zip(frames, drawn, strict=True):
+        assert np.abs(replayed.astype(float) - own).mean() < 1.0
+    if "ur5" in name:  # the shipped UR5e at the same angles draws another picture
+        ur5e, where = trajectory_arm(path, traj, "ur5e")
+        assert where == "--arm" and ur5e.urdf_path.name == "ur5e.urdf"
+        other = next(iter(render_frames(traj, task, 160, 120, ur5e)))
+        assert np.abs(other.astype(float) - drawn[0]).mean() > 5.0
+    else:  # the 7-joint arm's file on a 6-joint arm: a named error, not a traceback
+        assert main([*argv, "--arm", "ur5e"]) == EXIT_INVALID
+        err = capsys.readouterr().err
+        assert "recorded on an arm of 7 joints; ur5e.urdf has 6" in err and "--arm" in err

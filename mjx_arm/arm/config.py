@@ -215,6 +215,27 @@ def shipped_arm_names() -> tuple[str, ...]:
     return tuple(sorted(p.stem for p in assets_dir().glob("*.urdf") if p.stem not in _SCENE_URDFS))
 
 
+def recorded_arm(record: dict[str, Any], what: str = "the arm was recorded on") -> ArmConfig:
+    """The arm a run, a policy or a trajectory recorded (an :meth:`ArmConfig.to_dict` dict),
+    its URDF found on this machine: a shipped arm recorded where this package lived
+    elsewhere (``assets/NAME.urdf``) is this install's copy.
+
+    Raises:
+        ArmConfigError: not an arm config.
+        MissingInputError: its URDF is not on this machine (``what``: the message's start).
+    """
+    arm = ArmConfig.from_dict(record)
+    urdf = Path(arm.urdf)
+    if urdf.parent.name in ("assets", "_assets") and urdf.stem in shipped_arm_names():
+        arm = arm.replace(urdf=str(assets_dir() / urdf.name))
+    if not arm.urdf_path.is_file():
+        raise MissingInputError(
+            f"{what} {arm.urdf}, which is not on this machine; pass the same arm's URDF or "
+            "arm file with --arm"
+        )
+    return arm
+
+
 def _arm_file_urdf(urdf: str, arm_file: Path) -> str:
     """The absolute path of an arm file's ``urdf`` entry, checked to be a file."""
     if urdf.startswith(PACKAGE_PREFIX):

@@ -13,10 +13,12 @@ from mjx_arm.arm.model_io import EE_QUAT as _EE_QUAT
 from mjx_arm.arm.model_io import GripReader, SensorReader, arm_model, as_slice
 from mjx_arm.arm.resolve import ArmTask
 from mjx_arm.envs.base import DEFAULT_HEIGHT, DEFAULT_WIDTH, BaseRobotEnv, PhysicsReading
+from mjx_arm.envs.camera import task_camera
 from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.grip import ObjectStart
 from mjx_arm.urdf.scene import TARGET_BODY
+from mjx_arm.video import scene_option
 
 _NO_GRIP = PhysicsReading._field_defaults["grip"]  # the reading's grip without a gripper
 
@@ -116,8 +118,22 @@ class MujocoArmEnv(BaseRobotEnv):
                 max(vis.offheight, self.height),
             )
             self._renderer = mujoco.Renderer(self.model, self.height, self.width)
-        self._renderer.update_scene(self.data, camera="main")
+            self._aim_camera()
+        self._renderer.update_scene(self.data, camera="main", scene_option=self._scene_option)
         return self._renderer.render().copy()
+
+    def _aim_camera(self) -> None:
+        """Frame the arm and the task area (:func:`~mjx_arm.envs.camera.task_camera`, as the
+        PyBullet env does) with the scene's camera, and draw the arm's collision shapes where
+        it has no visual ones (:func:`~mjx_arm.video.scene_option`)."""
+        view = task_camera(self.arm_task, self.width / self.height)
+        camera = self.model.camera("main").id
+        self.model.cam_pos[camera] = view.eye
+        self.model.cam_quat[camera] = view.quat()
+        self.model.cam_fovy[camera] = view.fovy
+        self.data.cam_xpos[camera] = view.eye  # as the next step's kinematics will put it
+        self.data.cam_xmat[camera] = view.axes().T.ravel()
+        self._scene_option = scene_option(self.model)
 
     def close(self) -> None:
         """Free the renderer."""

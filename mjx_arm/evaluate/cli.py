@@ -59,7 +59,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     )
     result = {"policy": str(source), **result, "notes": notes + result["notes"]}
     print(format_summary(result))
-    _write_eval(args, result, run.trajectory, task)
+    _write_eval(args, result, run.trajectory, task, arm)
     return EXIT_OK
 
 
@@ -76,16 +76,17 @@ def _check_contact(contact: str | None) -> None:
 
 
 def _write_eval(
-    args: argparse.Namespace, result: dict[str, Any], trajectory: Any, task: Any
+    args: argparse.Namespace, result: dict[str, Any], trajectory: Any, task: Any, arm: Any
 ) -> None:
-    """Save what eval's arguments ask for (the first episode's ``trajectory`` of ``task``, the
-    ``result`` as JSON) and print where, then the result without its episodes as one JSON line."""
+    """Save what eval's arguments ask for (the first episode's ``trajectory`` of ``task`` on
+    ``arm``, the ``result`` as JSON) and print where, then the result without its episodes as
+    one JSON line."""
     import json
 
     from mjx_arm.replay import save_trajectory
 
     if args.trajectory:
-        print(f"trajectory: {save_trajectory(args.trajectory, trajectory, task)}")
+        print(f"trajectory: {save_trajectory(args.trajectory, trajectory, task, arm)}")
     if result["video"]:
         print(f"video: {result['video']}")
     if args.output:
@@ -119,22 +120,27 @@ def cmd_replay(args: argparse.Namespace) -> int:
     """Plot a trajectory (reward, ee x/y/z, contact force; the largest reward drop marked).
 
     Reads transitions.npz from a checkpoint or a file written by mjx-arm eval --trajectory;
-    with --video, renders each step's joint angles and target through MuJoCo.
+    with --video, renders each step's joint angles and target through MuJoCo, on the arm the
+    trajectory was recorded on (--arm draws another arm of as many joints).
     """
     from mjx_arm.replay import replay
 
     check_output(args.output, "-o", (".png",))
     if args.video:
         check_output(args.video, "--video", VIDEO_SUFFIXES)
-    summary = replay(args.trajectory, args.output, args.video, args.width, args.height, args.task)
+    summary = replay(
+        args.trajectory, args.output, args.video, args.width, args.height, args.task, args.arm
+    )
     drop = summary["largest_reward_drop_step"]
+    drop = "none" if drop is None else f"at step {drop}"
     print(
         f"{summary['steps']} steps, return {summary['return']:.2f}, task {summary['task']} "
-        f"(from {summary['task_from']}), largest reward drop at step {drop}"
+        f"(from {summary['task_from']}), largest reward drop {drop}"
     )
     print(f"plot: {summary['plot']}")
     if summary["video"]:
         print(f"video: {summary['video']} ({summary['frames']} frames)")
+        print(f"arm: {summary['arm']} (from {summary['arm_from']})")
     if "video_note" in summary:
         print(summary["video_note"])
     return EXIT_OK
@@ -227,6 +233,11 @@ def _add_replay(sub: argparse._SubParsersAction) -> None:
         type=str.lower,
         choices=task_names(),
         help="scene to render (default: from the file or its run directory)",
+    )
+    p.add_argument(
+        "--arm",
+        help="the arm to draw: a URDF, an arm file or a shipped arm's name (default: the arm "
+        "the trajectory was recorded on, from the file or its run directory)",
     )
     p.set_defaults(func=cmd_replay)
 

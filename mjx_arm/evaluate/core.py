@@ -16,7 +16,7 @@ from mjx_arm import engines
 from mjx_arm.evaluate.fit import check_obs_layout, check_recorded_task
 from mjx_arm.evaluate.runners import Policy, check_policy_arm, run_batched, run_episodes
 from mjx_arm.evaluate.stats import EvalRun, summarize
-from mjx_arm.inputs import ConfigError, MissingInputError
+from mjx_arm.inputs import ConfigError
 from mjx_arm.names import engine_label, env_id
 from mjx_arm.task.config import TaskConfig, task_config
 
@@ -122,25 +122,16 @@ def eval_arm(policy: Any, source: str | Path | None = None) -> Any:
         FileNotFoundError: the recorded arm's URDF is not on this machine (pass ``source``; a
             :class:`~mjx_arm.inputs.MissingInputError`).
     """
-    from mjx_arm.arm.config import ARM_FILE_SUFFIXES, SHIPPED_ARMS, ArmConfig, load_arm
-    from mjx_arm.paths import asset
+    from mjx_arm.arm.config import ARM_FILE_SUFFIXES, ArmConfig, load_arm, recorded_arm
 
     record = getattr(policy, "metadata", {}).get("arm") or {}
-    arm = ArmConfig.from_dict(record.get("config", {}))
     if source is not None:
         given = load_arm(source)
         if Path(source).suffix.lower() in ARM_FILE_SUFFIXES or not record:
             return given
+        arm = ArmConfig.from_dict(record.get("config", {}))
         return arm.replace(urdf=given.urdf)  # the recorded arm, its URDF found elsewhere
-    recorded = Path(arm.urdf)
-    if arm.urdf and recorded.parent.name == "assets" and recorded.name in SHIPPED_ARMS:
-        arm = arm.replace(urdf=str(asset(recorded.name)))
-    if not arm.urdf_path.is_file():
-        raise MissingInputError(
-            f"the policy was trained on {arm.urdf}, which is not on this machine; pass the "
-            "same arm's URDF or arm file with --arm"
-        )
-    return arm
+    return recorded_arm(record.get("config", {}), "the policy was trained on")
 
 
 def evaluate(
