@@ -106,7 +106,7 @@ def _child(args: argparse.Namespace) -> dict:
 def _config(preset: str, task: str, backend: str, arm: str, sets: list[str]):
     """The training config of a start (``tiny``: the CPU preset with :data:`TINY`)."""
     from mjx_arm.arm.config import load_arm
-    from mjx_arm.train.config import load_config
+    from mjx_arm.train.presets import load_config
 
     items = [f"task={task}", f"backend={backend}"]
     if preset == "tiny":

@@ -69,8 +69,8 @@ def brax_training_sps(run_dir: Path) -> float | None:
 
 def run_task(task: str, args: argparse.Namespace, start: float) -> dict:
     """Train one task and return its timings."""
-    from mjx_arm.train.config import load_config
     from mjx_arm.train.ppo import train
+    from mjx_arm.train.presets import load_config
     from mjx_arm.train.rundir import RunDir
 
     overrides = [f"task={task}", f"backend={args.backend}", *args.set]

@@ -104,7 +104,7 @@ def _task(arm):
 def write_run(run_dir: Path, arm) -> Path:
     """A run directory as ``mjx-arm train`` leaves it after its first checkpoint."""
     from mjx_arm.arm.info import arm_record
-    from mjx_arm.train.config import load_config
+    from mjx_arm.train.presets import load_config
     from mjx_arm.train.rundir import RunDir
 
     settings = [f"{k}={v}" for k, v in TRAIN_SETTINGS.items() if not isinstance(v, list)]

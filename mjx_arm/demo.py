@@ -129,8 +129,8 @@ def train_reach(
     """Train Reach (preset cpu, backend auto) on ``arm`` (default: the shipped arm) into
     ``run_dir``; returns Brax's TrainResult."""
     from mjx_arm.envs.backend import resolve_backend
-    from mjx_arm.train.config import load_config
     from mjx_arm.train.ppo import train
+    from mjx_arm.train.presets import load_config
 
     config = load_config(
         "cpu",

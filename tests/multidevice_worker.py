@@ -18,9 +18,9 @@ from jax.sharding import NamedSharding
 from jax.sharding import PartitionSpec as P
 
 from mjx_arm.task import OBS_SIZE
-from mjx_arm.train.config import load_config
 from mjx_arm.train.learner import ENV_AXIS, Learner, make_mesh
 from mjx_arm.train.ppo import train
+from mjx_arm.train.presets import load_config
 from mjx_arm.train.resume import has_resume_state
 from mjx_arm.train.rundir import RunDir
 

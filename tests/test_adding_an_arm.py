@@ -92,8 +92,8 @@ def test_resolving_in_the_env_gives_the_same_numbers(long_arm) -> None:
 
 
 def test_a_task_that_does_not_fit_the_arm_is_refused_before_any_env(tmp_path: Path) -> None:
-    from mjx_arm.train.config import load_config
     from mjx_arm.train.ppo import resolve_run_task
+    from mjx_arm.train.presets import load_config
 
     with pytest.raises(TaskFitError, match="needs an arm with a gripper"):
         resolve_task(lift_config(), _long_arm(tmp_path))

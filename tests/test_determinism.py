@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from mjx_arm.train.config import load_config
+from mjx_arm.train.presets import load_config
 from mjx_arm.train.repeat import TIMING_COLUMNS, compare_runs
 
 TINY = {
@@ -105,3 +105,20 @@ def test_two_runs_are_identical_on_the_c_backend(tmp_path: Path) -> None:
 def test_two_runs_are_identical_on_mjx_jax_on_the_cpu(tmp_path: Path) -> None:
     """MJX's JAX physics under XLA's CPU backend (minutes: the MJX graph compiles on the CPU)."""
     _repeat(tmp_path, "mjx", {"physics.impl": "jax", "num_timesteps": "1280"})
+
+
+def test_a_deterministic_run_steps_jax_physics_where_warp_would_run(monkeypatch) -> None:
+    """physics.impl=auto on a GPU (Warp) becomes jax; warp by name is a named error."""
+    from mjx_arm.envs import physics_config
+    from mjx_arm.inputs import ConfigError
+    from mjx_arm.train import determinism
+
+    monkeypatch.setattr(
+        physics_config, "resolve_impl", lambda impl: "warp" if impl == "auto" else impl
+    )
+    monkeypatch.setattr("mjx_arm.envs.backend.resolve_backend", lambda backend: "mjx")
+    config = load_config("fast", None, ["task=touch", "deterministic=true"])
+    assert determinism.deterministic_physics(config).physics.impl == "jax"
+    warp = config.replace(physics=config.physics.replace(impl="warp"))
+    with pytest.raises(ConfigError, match=r"physics\.impl=jax"):
+        determinism.deterministic_physics(warp)

@@ -169,7 +169,7 @@ def test_train_config_fields_are_checked_by_type_and_range(data: dict, message: 
     ],
 )
 def test_set_items_name_the_item(item: str, message: str) -> None:
-    from mjx_arm.train.config import load_config
+    from mjx_arm.train.presets import load_config
 
     with pytest.raises(ConfigError, match=message):
         load_config("cpu", None, ["task=reach", item])
@@ -379,7 +379,7 @@ def test_mujoco_data_that_cannot_be_allocated_is_a_config_error() -> None:
 @pytest.mark.parametrize("task", [{"a": 1}, ["touch"], 3])
 def test_a_config_file_task_of_the_wrong_kind_is_a_config_error(tmp_path: Path, task) -> None:
     from mjx_arm.inputs import ConfigError
-    from mjx_arm.train.config import load_config
+    from mjx_arm.train.presets import load_config
 
     path = tmp_path / "config.json"
     path.write_text(json.dumps({"task": task}))

@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from mjx_arm.train import ppo
-from mjx_arm.train.config import load_config
+from mjx_arm.train.presets import load_config
 from mjx_arm.train.rundir import RunDir, RunDirError
 
 EPOCHS = 12

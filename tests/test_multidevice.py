@@ -16,9 +16,10 @@ from pathlib import Path
 import jax
 import pytest
 
-from mjx_arm.train.config import TrainConfig, load_config
+from mjx_arm.train.config import TrainConfig
 from mjx_arm.train.learner import local_devices
 from mjx_arm.train.loop import resolve_partition
+from mjx_arm.train.presets import load_config
 
 WORKER = Path(__file__).with_name("multidevice_worker.py")
 LEARN_STEPS = 160_000  # the cpu preset reaches 100% Reach success at ~123k steps (2 devices)

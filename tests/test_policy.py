@@ -35,8 +35,8 @@ JAX_MODULES = ("jax", "jaxlib", "brax", "flax", "orbax", "optax")
 def trained_run_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A run directory with a small trained Reach policy, trained once per test session."""
     if "run" not in _RUN:
-        from mjx_arm.train.config import load_config
         from mjx_arm.train.ppo import train
+        from mjx_arm.train.presets import load_config
 
         run_dir = tmp_path_factory.mktemp("policy_run") / "run"
         train(load_config("cpu", overrides=TRAIN_OVERRIDES), run_dir, quiet=True)

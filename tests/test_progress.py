@@ -17,8 +17,8 @@ from mjx_arm.train.compile_report import (
     expected_compile,
     remember_compile,
 )
-from mjx_arm.train.config import load_config
 from mjx_arm.train.learner import EpochSizes
+from mjx_arm.train.presets import load_config
 from mjx_arm.train.progress import CompileClock, compiling_text, planned_steps
 
 

@@ -23,8 +23,8 @@ from tiny_run import EPOCH_STEPS, EPOCHS, SETTINGS
 from mjx_arm.cli import main
 from mjx_arm.inputs import InputError
 from mjx_arm.names import EXIT_INVALID
-from mjx_arm.train.config import load_config
 from mjx_arm.train.ppo import train
+from mjx_arm.train.presets import load_config
 from mjx_arm.train.resume import ENV_STATE_FILE, RESUME_FILE, ResumeStateError
 from mjx_arm.train.rundir import RunDir
 

@@ -299,7 +299,7 @@ def test_robust_preset_is_the_measured_training():
     """The ``robust`` preset is exactly the ``fast`` preset with the ``--set`` items that the
     GPU runs of ``benchmarks/results/robustness/{latency_gpu,selected_gpu,robust_seeds}``
     trained with (Touch with twice fast's budget)."""
-    from mjx_arm.train.config import load_config
+    from mjx_arm.train.presets import load_config
 
     latency = [
         "randomization.enabled=true",

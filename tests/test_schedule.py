@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from mjx_arm.inputs import ConfigError
-from mjx_arm.train.config import load_config
 from mjx_arm.train.normalizer import NormalizerConfig, normalize_fn, update
+from mjx_arm.train.presets import load_config
 from mjx_arm.train.schedule import (
     ScheduleConfig,
     adapted_rate,

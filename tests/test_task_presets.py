@@ -112,7 +112,7 @@ DOCUMENTED = [
 def test_documented_task_settings_work(preset: str, items: list[str]) -> None:
     """Each documented ``--set task.*`` lands in the typed task settings, on top of the preset
     of the variant it names, and survives a save and load."""
-    from mjx_arm.train.config import load_config
+    from mjx_arm.train.presets import load_config
 
     config = load_config(preset, None, items)
     settings = config.task_config()
@@ -127,7 +127,7 @@ def test_documented_task_settings_work(preset: str, items: list[str]) -> None:
 
 def test_task_settings_refuse_what_the_task_lacks() -> None:
     """A reward term of another task, an unknown field and a foreign variant are errors."""
-    from mjx_arm.train.config import load_config
+    from mjx_arm.train.presets import load_config
 
     with pytest.raises(ConfigError, match=r"unknown reward key 'task\.reward\.lift'"):
         load_config("fast", None, ["task=touch", "task.reward.lift=1"])

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from mjx_arm.inputs import ConfigError
-from mjx_arm.train.config import load_config
 from mjx_arm.train.ppo import train
+from mjx_arm.train.presets import load_config
 from mjx_arm.train.rundir import RunDir
 
 REACH_SUCCESS_THRESHOLD = 0.8

@@ -77,8 +77,8 @@ def train_seed(
         start: ``time.time()`` the seed's times count from (default: now).
     """
     from mjx_arm.arm.config import load_arm
-    from mjx_arm.train.config import load_config
     from mjx_arm.train.ppo import train
+    from mjx_arm.train.presets import load_config
     from mjx_arm.train.rundir import RunDir
 
     items = [f"task={config.task}", f"backend={config.backend}", *overrides, f"seed={seed}"]
@@ -261,7 +261,7 @@ def check_seed_settings(
     config: SeedsConfig, overrides: tuple[str, ...] = (), devices: int | None = None
 ) -> None:
     """Check everything the seeds' trainings take before the first starts: the preset with
-    the task, backend and ``overrides`` (:func:`~mjx_arm.train.config.load_config`), the
+    the task, backend and ``overrides`` (:func:`~mjx_arm.train.presets.load_config`), the
     device count of each seed's run (``devices``; default: ``config.devices`` local devices)
     and the arm.
 
@@ -271,8 +271,8 @@ def check_seed_settings(
     from mjx_arm.arm.info import validated_arm_info
     from mjx_arm.arm.resolve import default_arm
     from mjx_arm.engines import CONVERTER_ENGINE
-    from mjx_arm.train.config import load_config
     from mjx_arm.train.learner import local_devices
+    from mjx_arm.train.presets import load_config
 
     items = [f"task={config.task}", f"backend={config.backend}", *overrides]
     train_config = load_config(config.preset, None, items)

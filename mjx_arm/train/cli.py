@@ -138,7 +138,8 @@ def _per_gpu(args: argparse.Namespace) -> bool:
     """Whether ``--devices`` GPUs train in a process each (the physics from the flags alone,
     without loading the arm: :func:`~mjx_arm.train.launch.per_gpu_wanted`)."""
     from mjx_arm.train import launch
-    from mjx_arm.train.config import load_config, saved_config
+    from mjx_arm.train.config import saved_config
+    from mjx_arm.train.presets import load_config
 
     if args.devices is None or args.devices < 2:
         return launch.process_per_gpu()
@@ -161,7 +162,7 @@ def config_from_args(args: argparse.Namespace):
     """The training config of ``train``'s (or ``warmup``'s) flags: the preset for the task,
     then ``--config``, ``--set``, ``--devices``, ``--backend``, ``--arm``, ``--ee-link`` and the
     repair flags (``--repair-inertia``, ...: the arm config's fields, saved with the run)."""
-    from mjx_arm.train.config import load_config
+    from mjx_arm.train.presets import load_config
 
     overrides = list(args.set or [])
     if args.devices is not None:
@@ -255,8 +256,9 @@ def _add_config_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--devices",
         type=nonnegative_int,
-        help="devices of this host to train on, the env batch split evenly over them: on a "
-        "GPU host one process per GPU (default: all; also on --resume, which may change it)",
+        help="devices of this host to train on: N > 1 multiplies the preset's envs, minibatch "
+        "size and budget by N, split evenly over them; on a GPU host one process per GPU "
+        "(default: all; also on --resume, which keeps the run's totals)",
     )
     p.add_argument(
         "--arm",
@@ -271,11 +273,17 @@ def _add_config_arguments(p: argparse.ArgumentParser) -> None:
         "chain of revolute joints)",
     )
     add_repair_arguments(p, "the arm, saved with the run")
+    _add_setting_arguments(p)
+
+
+def _add_setting_arguments(p: argparse.ArgumentParser) -> None:
+    """The flags that change the preset's settings (``train`` and ``warmup``)."""
     p.add_argument(
         "--deterministic",
         action="store_true",
         help="the same seed, config, GPU model, device count and versions give the same run, "
-        "bit for bit (deterministic XLA ops and Warp atomics; a CPU run always is)",
+        "bit for bit (XLA's deterministic ops; MJX steps its JAX physics, not MuJoCo Warp; "
+        "a CPU run always repeats)",
     )
     p.add_argument("--config", help="JSON file with training config fields")
     add_set_argument(

@@ -304,7 +304,7 @@ class Learner:
                 optimizer_state, adapted_rate(rate, metrics["kl_mean"], schedule)
             )
         metrics["learning_rate"] = current_rate(optimizer_state, self.config.learning_rate)
-        metrics["grad_norm"] = optax.global_norm(grads)
+        metrics["grad_norm"] = optax.tree_utils.tree_norm(grads)
         updates, optimizer_state = self.optimizer.update(grads, optimizer_state)
         params = optax.apply_updates(params, updates)
         return (optimizer_state, params, key), metrics

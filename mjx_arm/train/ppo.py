@@ -122,13 +122,7 @@ def train(
         InputError: a bad config, a run directory that cannot take the run, or (to resume) one
             without a usable checkpoint.
     """
-    config.validate()
-    if config.deterministic:  # before any device is touched (mjx_arm.train.determinism)
-        from mjx_arm.train.determinism import enable
-
-        enable()
-    config = devices_for_physics(config)
-    config.check_devices(len(train_devices(config.devices)))
+    config = _checked(config)
     setup = resolve_run_task(config)
     if resume:
         _check_run_dir(run_dir)
@@ -143,6 +137,20 @@ def train(
         run.truncate_metrics(step_offset)  # rows a killed run wrote after its last checkpoint
         barrier("run directory ready")
         return _train(run, config, setup, step_offset, restore, quiet, stop_after)
+
+
+def _checked(config: TrainConfig) -> TrainConfig:
+    """``config`` validated, on the physics and devices it can train on here; a deterministic
+    run's switches set before any device is touched (:mod:`mjx_arm.train.determinism`)."""
+    config.validate()
+    if config.deterministic:
+        from mjx_arm.train.determinism import deterministic_physics, enable
+
+        config = deterministic_physics(config)
+        enable()
+    config = devices_for_physics(config)
+    config.check_devices(len(train_devices(config.devices)))
+    return config
 
 
 def _check_run_dir(run_dir: str | Path) -> None:

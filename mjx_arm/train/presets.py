@@ -1,19 +1,22 @@
 """Training presets: named starting points of a :class:`~mjx_arm.train.config.TrainConfig`.
 
 ``--preset`` picks one; a task changes a preset's budget for itself (its ``budgets``), and
-``--set`` changes any field on top (:func:`mjx_arm.train.config.load_config`). What each preset
-is for, and how ``fast`` was chosen, is in docs/training.md.
+``--set`` changes any field on top (:func:`load_config`: the preset, then a config file, then
+``--set``). What each preset is for, and how ``fast`` was chosen, is in docs/training.md.
 """
 
 from __future__ import annotations
 
+from pathlib import Path
+from typing import Any
+
 from mjx_arm.arm.config import ArmConfig
 from mjx_arm.envs.physics_config import LATENCY, SELECTED, RandomizationConfig
-from mjx_arm.inputs import ConfigError
+from mjx_arm.inputs import ConfigError, read_json_object
 from mjx_arm.names import PRESET_NAMES
 from mjx_arm.paths import asset
 from mjx_arm.task.registry import get_task, is_task, task_names
-from mjx_arm.train.config import TrainConfig
+from mjx_arm.train.config import SECTIONS, TrainConfig, apply_overrides
 from mjx_arm.train.task_settings import task_changes
 
 # The seed document's PPO settings mapped onto a GPU batch, on the seed document's task (Touch
@@ -101,3 +104,66 @@ def _randomization(name: str) -> RandomizationConfig:
     if name not in RANDOMIZATIONS:
         raise ConfigError(f"unknown randomization {name!r}; choose one of {list(RANDOMIZATIONS)}")
     return RANDOMIZATIONS[name]
+
+
+def _named(data: dict[str, Any], overrides: list[str], key: str) -> str | None:
+    """The value of ``key`` (``task`` or ``task.variant``) a config file or the overrides name
+    (the last override wins), or None."""
+    value = data.get(key)
+    for item in overrides:
+        name, _, text = item.partition("=")
+        if name.strip() == key:
+            value = text.strip()
+    if value is not None and not isinstance(value, str):
+        what = key.rpartition(".")[2]  # task or variant
+        raise ConfigError(f"{key} must be a {what}'s name (a string), not {type(value).__name__}")
+    return value
+
+
+def load_config(
+    preset: str = "seed", file: str | Path | None = None, overrides: list[str] | None = None
+) -> TrainConfig:
+    """Resolve a config: the preset for the task named (:func:`preset_config`), then a JSON
+    file, then ``--set`` overrides.
+
+    Raises:
+        InputError: the file cannot be read, or a field (of the file or an override) is
+            unknown, of the wrong type or out of range; the message names the file or item.
+    """
+    data: dict[str, Any] = {}
+    if file is not None:
+        data = read_json_object(file, "config file")
+        data = data.get("train", data)
+        if not isinstance(data, dict):
+            raise ConfigError(f"config file {str(file)!r}: 'train' must be a table of fields")
+    overrides = overrides or []
+    variant = _named({}, overrides, "task.variant")
+    config = preset_config(preset, _named(data, overrides, "task"), variant)
+    if file is not None:
+        config = _merge_file(config, data, file)
+    config = apply_overrides(config, overrides)
+    config.validate()
+    return config
+
+
+def _merge_file(config: TrainConfig, data: dict[str, Any], file: str | Path) -> TrainConfig:
+    """``config`` with the fields of a config file (sections merged field by field; the
+    file's ``task_settings`` are changes to the preset's, its ``task_overrides`` changes to
+    the task's default preset, as before ``task_settings`` existed)."""
+    merged = config.to_dict()
+    if "task_settings" in data and "task_overrides" in data:
+        raise ConfigError(f"config file {str(file)!r}: give task_settings or task_overrides")
+    for key, value in data.items():
+        if key in SECTIONS and isinstance(value, dict):
+            merged[key] = {**merged[key], **value}
+        elif key == "task_settings":
+            merged["task_overrides"] = value
+        elif key == "task_overrides":
+            merged.pop("task_settings")
+            merged[key] = value
+        else:
+            merged[key] = value
+    try:
+        return TrainConfig.from_dict(merged)
+    except ConfigError as err:
+        raise ConfigError(f"config file {str(file)!r}: {err}") from err
