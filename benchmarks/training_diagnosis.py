@@ -1,0 +1,142 @@
+"""Why Touch seeds fail: the PPO figures of solving and failing seeds, side by side.
+
+Reads the seed run directories of one or more campaigns (each a folder of ``bench seeds`` runs,
+``*-seedN/metrics.csv``, as ``gpu_suite.sh campaign`` leaves them) and writes ``NAME.json`` and
+``NAME.md``: per campaign and seed, whether the seed reached the threshold, its best and last
+evaluation, and what its training logged: the largest and the median per-epoch KL between the
+rollout's policy and the updated one, the epochs whose KL passed 1 (an update that replaced the
+policy rather than nudged it), the median clip fraction, the learning rate, the policy's std
+and the value function's explained variance at the end, and the evaluation's touch and
+overforce figures at the end.
+
+    python -m benchmarks.training_diagnosis --campaign "as shipped=runs/tune_base" \\
+        --campaign "std floor + clip=runs/tune_clip" --out benchmarks/results/seeds/tuning
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmarks.common import environment_metadata, save_results
+
+SEED_DIR = re.compile(r"seed(?P<seed>\d+)$")
+SPIKE_KL = 1.0  # a per-epoch mean KL above this: the update replaced the policy
+
+
+def _rows(run: Path) -> list[dict[str, float]]:
+    with (run / "metrics.csv").open(newline="") as f:
+        return [
+            {k: float(v) if v not in ("", None) else math.nan for k, v in r.items()}
+            for r in csv.DictReader(f)
+        ]
+
+
+def _col(rows: list[dict[str, float]], name: str) -> np.ndarray:
+    values = np.array([r.get(name, math.nan) for r in rows], dtype=float)
+    return values[np.isfinite(values)]
+
+
+def seed_record(run: Path, threshold: float) -> dict[str, Any]:
+    """What one seed's run logged, condensed (see the module docstring)."""
+    rows = _rows(run)
+    trained = [r for r in rows if math.isfinite(r.get("training/kl_mean", math.nan))]
+    success = _col(rows, "eval/episode_success")
+    kl = _col(trained, "training/kl_mean")
+    hit = next(
+        (int(r["step"]) for r in rows if r.get("eval/episode_success", 0) >= threshold), None
+    )
+    last = rows[-1]
+    return {
+        "seed": int(SEED_DIR.search(run.name)["seed"]),
+        "solved": hit is not None,
+        "steps_to_threshold": hit,
+        "best_success": float(success.max()) if success.size else math.nan,
+        "last_success": float(success[-1]) if success.size else math.nan,
+        "last_step": int(last["step"]),
+        "kl_max": float(kl.max()) if kl.size else math.nan,
+        "kl_median": float(np.median(kl)) if kl.size else math.nan,
+        "kl_spikes": [int(r["step"]) for r in trained if r["training/kl_mean"] > SPIKE_KL],
+        "clip_fraction_median": float(np.median(_col(trained, "training/clip_fraction"))),
+        "learning_rate_last": last.get("training/learning_rate", math.nan),
+        "policy_std_last": last.get("training/policy_dist_mean_std", math.nan),
+        "explained_variance_last": last.get("training/explained_variance", math.nan),
+        "touching_last": last.get("eval/episode_touching", math.nan),
+        "overforce_last": last.get("eval/episode_overforce", math.nan),
+        "settings": json.loads((run / "config.json").read_text())["train"]["schedule"]
+        | json.loads((run / "config.json").read_text())["train"]["normalizer"],
+    }
+
+
+def campaign(label: str, folder: Path, threshold: float) -> dict[str, Any]:
+    """Every seed run under ``folder``, with the campaign's counts."""
+    runs = sorted(p for p in folder.iterdir() if p.is_dir() and SEED_DIR.search(p.name))
+    seeds = [seed_record(r, threshold) for r in runs if (r / "metrics.csv").is_file()]
+    solved = [s for s in seeds if s["solved"]]
+    failed = [s for s in seeds if not s["solved"]]
+    return {
+        "label": label,
+        "seeds": seeds,
+        "solved": len(solved),
+        "count": len(seeds),
+        "spiking_seeds_solved": sum(bool(s["kl_spikes"]) for s in solved),
+        "spiking_seeds_failed": sum(bool(s["kl_spikes"]) for s in failed),
+    }
+
+
+def markdown(campaigns: list[dict[str, Any]], threshold: float) -> str:
+    """One table per campaign."""
+    lines = []
+    for c in campaigns:
+        lines += [f"## {c['label']}: {c['solved']} of {c['count']} seeds at {threshold}", ""]
+        lines += [
+            "| seed | solved | best | last | KL max | KL median | epochs with KL > 1 | clip "
+            "fraction (median) | lr (last) | std (last) | explained variance (last) |",
+            "|---|---|---|---|---|---|---|---|---|---|---|",
+        ]
+        for s in c["seeds"]:
+            lines.append(
+                f"| {s['seed']} | {'yes' if s['solved'] else 'no'} | {s['best_success']:.3f} | "
+                f"{s['last_success']:.3f} | {s['kl_max']:.3g} | {s['kl_median']:.3g} | "
+                f"{len(s['kl_spikes'])} | {s['clip_fraction_median']:.3f} | "
+                f"{s['learning_rate_last']:.2g} | {s['policy_std_last']:.3f} | "
+                f"{s['explained_variance_last']:.3f} |"
+            )
+        lines.append("")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--campaign", action="append", required=True, help="LABEL=FOLDER")
+    parser.add_argument("--threshold", type=float, default=0.95)
+    parser.add_argument("--device", default="", help="the device the runs trained on (text)")
+    parser.add_argument("--name", default="diagnosis_touch_fast")
+    parser.add_argument("--out", type=Path, default=Path("runs/diagnosis"))
+    args = parser.parse_args()
+    campaigns = []
+    for item in args.campaign:
+        label, _, folder = item.partition("=")
+        campaigns.append(campaign(label, Path(folder), args.threshold))
+    text = markdown(campaigns, args.threshold)
+    payload = {
+        "meta": environment_metadata(),
+        "runs_device": args.device,
+        "threshold": args.threshold,
+        "spike_kl": SPIKE_KL,
+        "campaigns": campaigns,
+    }
+    for path in save_results(args.name, payload, f"# Touch seeds side by side\n\n{text}", args.out):
+        print(f"wrote {path}")
+    print(text)
+
+
+if __name__ == "__main__":
+    main()
