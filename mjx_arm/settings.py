@@ -20,6 +20,7 @@ import json
 import math
 import types
 import typing
+from collections.abc import Callable
 from typing import Any
 
 from mjx_arm.inputs import ConfigError
@@ -152,6 +153,89 @@ def describe(config: Any, prefix: str = "") -> list[str]:
 def add_set_argument(parser: argparse.ArgumentParser, help_text: str) -> None:
     """Add ``--set KEY=VALUE ...`` (repeatable; the values collect into ``args.set``)."""
     parser.add_argument("--set", action="extend", nargs="+", metavar="KEY=VALUE", help=help_text)
+
+
+def add_field_flags(
+    parser: argparse.ArgumentParser, config: Callable[[], type], names: tuple[str, ...]
+) -> None:
+    """Add ``--NAME VALUE`` for each field in ``names`` of the dataclass ``config()`` returns
+    (called only when a flag is given or its help shown: a config module may be slow to
+    import): a shortcut for ``--set NAME=VALUE``, its value checked as the class checks it, its
+    help the field's entry in the ``Attributes:`` of the class's docstring.
+    :func:`field_flag_settings` turns the flags given into settings."""
+    for name in names:
+        parser.add_argument(
+            f"--{name.replace('_', '-')}",
+            action=_FieldFlag,
+            dest=f"field_{name}",
+            metavar=name.upper(),
+            config=config,
+            field=name,
+        )
+
+
+def field_flag_settings(args: argparse.Namespace, names: tuple[str, ...]) -> list[str]:
+    """``NAME=VALUE`` of each flag of :func:`add_field_flags` given in ``args``."""
+    given = {name: getattr(args, f"field_{name}", None) for name in names}
+    return [f"{name}={value}" for name, value in given.items() if value is not None]
+
+
+class LazyHelpAction(argparse._StoreAction):
+    """A stored option whose help is made by ``help_text()`` when it is shown, for a help
+    read from a module that is slow to import (argparse builds every command's parser)."""
+
+    def __init__(self, *args: Any, help_text: Callable[[], str], **kwargs: Any) -> None:
+        self._help_text = help_text
+        super().__init__(*args, **kwargs)
+
+    @property
+    def help(self) -> str:  # type: ignore[override]
+        return self._help_text()
+
+    @help.setter
+    def help(self, _value: object) -> None:  # argparse sets it; the property gives it
+        pass
+
+
+class LinesHelpFormatter(argparse.HelpFormatter):
+    """argparse's help, each line of a help text wrapped on its own (a help may list its
+    choices one per line)."""
+
+    def _split_lines(self, text: str, width: int) -> list[str]:
+        wrap = super()._split_lines  # (a comprehension has no super() of its own)
+        return [part for line in text.splitlines() for part in wrap(line, width)]
+
+
+class _FieldFlag(LazyHelpAction):
+    """The ``--NAME VALUE`` of a config field (:func:`add_field_flags`): the value, checked as
+    the config class checks the field (type and range), is kept as its text; the help is read
+    from the class when shown."""
+
+    def __init__(self, *args: Any, config: Callable[[], type], field: str, **kwargs: Any):
+        self._config, self._field = config, field
+        super().__init__(*args, help_text=self._field_help, **kwargs)
+
+    def _field_help(self) -> str:
+        doc = attribute_doc(self._config(), self._field)
+        return f"{doc} Short for --set {self._field}=VALUE (default: the preset's)"
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        try:  # the field's type and range, as the config class checks them
+            set_path(self._config()(), [self._field], values)
+        except ConfigError as err:
+            parser.error(f"argument {option_string}: {err}")
+        setattr(namespace, self.dest, values)
+
+
+def attribute_doc(cls: type, name: str) -> str:
+    """The text of ``name`` in the ``Attributes:`` section of ``cls``'s docstring, its lines
+    joined ("" when it has none)."""
+    import inspect
+    import re
+
+    doc = inspect.cleandoc(cls.__doc__ or "")
+    found = re.search(rf"^ +{re.escape(name)}: (.+(?:\n {{8,}}\S.*)*)", doc, re.MULTILINE)
+    return " ".join(found.group(1).split()) if found else ""
 
 
 def config_fields(

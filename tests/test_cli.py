@@ -13,6 +13,7 @@ import mujoco
 import pytest
 
 from mjx_arm.cli import EXIT_OK, build_parser, main
+from mjx_arm.inputs import ConfigError
 
 ARM_URDF = Path(__file__).resolve().parents[1] / "assets" / "ur5e.urdf"
 
@@ -164,3 +165,59 @@ def test_a_shipped_arm_is_named_by_its_short_name(tmp_path: Path, capsys, monkey
     mine.write_text(ARM_URDF.read_text())
     monkeypatch.chdir(tmp_path)
     assert load_arm("ur5e_gripper").urdf == str(mine.resolve())
+
+
+def _train_args(*argv: str) -> argparse.Namespace:
+    return build_parser().parse_args(["train", *argv])
+
+
+def test_train_seed_is_the_config_field(capsys):
+    """--seed N is --set seed=N through the typed config: checked as the field is, last word
+    over --set, and refused with --resume like every flag that changes the config."""
+    from mjx_arm.settings import attribute_doc
+    from mjx_arm.train.cli import _check_resume_flags, config_from_args
+    from mjx_arm.train.config import TrainConfig
+
+    assert config_from_args(_train_args("--preset", "cpu", "--seed", "7")).seed == 7
+    assert config_from_args(_train_args("--preset", "cpu")).seed == TrainConfig().seed
+    assert config_from_args(_train_args("--set", "seed=3", "--seed", "9")).seed == 9
+    for bad, message in (("x", "'x' is not an integer"), ("-1", "seed must be >= 0")):
+        assert _exit_code(["train", "--seed", bad]) == 2
+        assert f"error: argument --seed: {message}" in capsys.readouterr().err
+    with pytest.raises(ConfigError, match="--seed would be ignored"):
+        _check_resume_flags(_train_args("--resume", "r", "--seed", "1"))
+    assert _exit_code(["train", "--help"]) == 0
+    shown = " ".join(capsys.readouterr().out.split())
+    assert f"--seed SEED {attribute_doc(TrainConfig, 'seed')} Short for --set seed=VALUE" in shown
+
+
+def test_train_help_lists_each_preset_on_a_line(capsys):
+    from mjx_arm.names import PRESET_NAMES
+    from mjx_arm.train.presets import PRESETS
+
+    assert _exit_code(["train", "--help"]) == 0
+    lines = [line.strip() for line in capsys.readouterr().out.splitlines()]
+    for name in PRESET_NAMES:
+        config = PRESETS[name]
+        start = f"{name}: {config.num_envs:,} envs, {config.num_timesteps / 1e6:g}M env steps:"
+        assert sum(line.startswith(start) for line in lines) == 1, name
+
+
+def test_a_gpu_preset_on_a_cpu_says_how_long_first(tmp_path: Path, capsys):
+    import jax
+
+    from mjx_arm.train.cli import CPU_STEPS_PER_S, _start_lines, config_from_args
+
+    if jax.default_backend() != "cpu":
+        pytest.skip("an accelerator is present: no note")
+    config = config_from_args(_train_args())  # no flags: the seed preset
+    _start_lines(tmp_path, config, "seed")
+    captured = capsys.readouterr()
+    assert captured.out == f"run directory: {tmp_path}\n"
+    minutes = round(config.num_timesteps / CPU_STEPS_PER_S / 60)
+    assert captured.err.startswith("note: preset seed is meant for a GPU: 2,048 envs")
+    assert f"would take {minutes} min or more" in captured.err
+    assert "--preset cpu --backend mujoco" in captured.err
+    for preset in ("cpu", None):  # the cpu preset, a resumed run: no note
+        _start_lines(tmp_path, config, preset)
+        assert capsys.readouterr().err == ""

@@ -11,7 +11,13 @@ from mjx_arm import names
 from mjx_arm.inputs import ConfigError, nonnegative_int, positive_int
 from mjx_arm.jax_cache import enable_compilation_cache
 from mjx_arm.names import EXIT_OK
-from mjx_arm.settings import add_set_argument
+from mjx_arm.settings import (
+    LazyHelpAction,
+    LinesHelpFormatter,
+    add_field_flags,
+    add_set_argument,
+    field_flag_settings,
+)
 from mjx_arm.task.registry import task_names
 from mjx_arm.urdf.repair_args import add_repair_arguments, with_repair_arguments
 
@@ -19,6 +25,19 @@ if TYPE_CHECKING:
     from mjx_arm.train.config import TrainConfig
 
 DEFAULT_PRESET = "seed"
+# Fields of the training config that are flags of their own: --seed N is --set seed=N.
+FIELD_FLAGS = ("seed",)
+# What each preset is for (its size is read from the preset; docs/training.md says more).
+PRESET_USES = {
+    "seed": "the seed document's PPO settings, for a GPU",
+    "fast": "fastest to a solved task on one GPU",
+    "cpu": "a small run for a CPU, with --backend mujoco",
+    "robust": "fast under randomised physics, for transfer; for a GPU",
+}
+# Env steps per second the cpu preset trains at on a 2-core CPU on the C MuJoCo backend
+# (benchmarks/results/seeds/seeds_reach_cpu_c_backend.json: 2,008 for Reach); a GPU preset's
+# larger networks and epochs are not faster.
+CPU_STEPS_PER_S = 2000
 
 
 def cmd_train(args: argparse.Namespace) -> int:
@@ -60,12 +79,34 @@ def cmd_train(args: argparse.Namespace) -> int:
     if group.joined:
         config = config.replace(devices=0)  # every process trains on all of its devices
     if group.leader:
-        print(f"run directory: {run_dir}")
+        _start_lines(run_dir, config, None if args.resume else args.preset or DEFAULT_PRESET)
     result = train(config, run_dir, resume=bool(args.resume), quiet=args.quiet or not group.leader)
     if group.leader:
         print(done_line(result))
         print(result.compile_summary)
     return EXIT_OK
+
+
+def _start_lines(run_dir: Path, config: TrainConfig, preset: str | None) -> None:
+    """The lines a run starts with: its folder, and, before a GPU preset trains on a CPU, how
+    long it would take at the CPU rate measured (:data:`CPU_STEPS_PER_S`) and what to run
+    instead, on stderr (not for the cpu preset, a resumed run: ``preset`` None, or on an
+    accelerator)."""
+    import sys
+
+    import jax
+
+    print(f"run directory: {run_dir}")
+    if preset in (None, "cpu") or jax.default_backend() != "cpu":
+        return
+    minutes = config.num_timesteps / CPU_STEPS_PER_S / 60
+    print(
+        f"note: preset {preset} is meant for a GPU: {config.num_envs:,} envs, "
+        f"{config.num_timesteps:,} env steps. On a 2-core CPU the cpu preset trains about "
+        f"{CPU_STEPS_PER_S:,} env steps/s, so this run would take {minutes:.0f} min or more, "
+        "plus compiling. For a CPU: --preset cpu --backend mujoco (Reach in about 2 min)",
+        file=sys.stderr,
+    )
 
 
 def check_repeat(config: TrainConfig, run_dir: Path, quiet: bool = False) -> int:
@@ -114,6 +155,7 @@ def _check_resume_flags(args: argparse.Namespace) -> None:
         "--ee-link": args.ee_link,
         "--config": args.config,
         "--set": args.set,
+        **{f"--{name}": getattr(args, f"field_{name}", None) for name in FIELD_FLAGS},
     }
     given = [flag for flag, value in flags.items() if value] + given_repair_flags(args)
     if given:
@@ -173,6 +215,7 @@ def config_from_args(args: argparse.Namespace):
         overrides.insert(0, f"backend={args.backend}")
     if getattr(args, "deterministic", False):
         overrides.append("deterministic=true")
+    overrides += field_flag_settings(args, FIELD_FLAGS)
     config = load_config(args.preset or DEFAULT_PRESET, args.config, overrides)
     config = _with_arm(config, args.arm, args.ee_link)
     config = config.scaled_for_devices(args.devices or 1)  # --devices N grows the batch
@@ -244,9 +287,7 @@ def _add_config_arguments(p: argparse.ArgumentParser) -> None:
         help="task to train (default: the preset's)",
     )
     p.add_argument(
-        "--preset",
-        choices=names.PRESET_NAMES,
-        help=f"hyperparameter preset (default: {DEFAULT_PRESET})",
+        "--preset", choices=names.PRESET_NAMES, action=LazyHelpAction, help_text=preset_help
     )
     p.add_argument(
         "--backend",
@@ -278,6 +319,7 @@ def _add_config_arguments(p: argparse.ArgumentParser) -> None:
 
 def _add_setting_arguments(p: argparse.ArgumentParser) -> None:
     """The flags that change the preset's settings (``train`` and ``warmup``)."""
+    add_field_flags(p, _train_config_class, FIELD_FLAGS)
     p.add_argument(
         "--deterministic",
         action="store_true",
@@ -291,6 +333,24 @@ def _add_setting_arguments(p: argparse.ArgumentParser) -> None:
         "override config fields (KEY=VALUE ...; repeatable); task.FIELD=... and "
         "task.reward.TERM=... for the task, physics.FIELD=..., randomization.FIELD=...",
     )
+
+
+def _train_config_class() -> type:
+    """The training config's class (imported when asked: it imports JAX and Brax)."""
+    from mjx_arm.train.config import TrainConfig
+
+    return TrainConfig
+
+
+def preset_help() -> str:
+    """``--preset``'s help: each preset on a line, with its envs, steps and use."""
+    from mjx_arm.train.presets import PRESETS
+
+    lines = [f"hyperparameter preset (default: {DEFAULT_PRESET}; a task may change its budget):"]
+    for name, config in PRESETS.items():
+        size = f"{config.num_envs:,} envs, {config.num_timesteps / 1e6:g}M env steps"
+        lines.append(f"  {name}: {size}: {PRESET_USES[name]}")
+    return "\n".join(lines)
 
 
 def _add_host_arguments(p: argparse.ArgumentParser) -> None:
@@ -326,6 +386,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "train",
         help="train a PPO policy (Brax) and write a run directory",
         description=cmd_train.__doc__,
+        formatter_class=LinesHelpFormatter,
     )
     _add_config_arguments(p)
     p.add_argument(
@@ -348,6 +409,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "warmup",
         help="fill the compilation caches for a task and arm ahead of time",
         description=cmd_warmup.__doc__,
+        formatter_class=LinesHelpFormatter,
     )
     _add_config_arguments(w)
     w.add_argument("--quiet", action="store_true", help="no progress bar")
