@@ -163,3 +163,77 @@ def test_eval_without_a_renderer_notes_the_skipped_video(policy_path: Path, tmp_
     assert result["video"] is None and run.frames == 0
     assert result["notes"] == ["video skipped: no EGL (test)"]
     assert not (tmp_path / "v.mp4").exists()
+
+
+# --------------------------------------------------------------------------- the eval command
+
+
+def test_cli_eval_prints_a_table_and_json_only_when_asked(policy_path: Path, capsys):
+    argv = ["eval", str(policy_path), "--episodes", "3"]
+    assert main(argv) == EXIT_OK
+    out = capsys.readouterr().out
+    assert "success rate" in out and not any(line.startswith("{") for line in out.splitlines())
+    assert main([*argv, "--json"]) == EXIT_OK
+    (line,) = capsys.readouterr().out.splitlines()  # one JSON line, nothing else
+    result = json.loads(line)
+    assert result["episodes"] == 3 and "per_episode" not in result
+
+
+@needs_render
+def test_cli_eval_films_the_first_episodes_and_says_which(
+    policy_path: Path, tmp_path: Path, capsys
+):
+    import imageio.v3 as iio
+
+    video, output = tmp_path / "v.mp4", tmp_path / "r.json"
+    argv = ["eval", str(policy_path), "--episodes", "3", "--seed", "4", "--video", str(video)]
+    argv += ["--width", "160", "--height", "120", "-o", str(output)]
+    for extra, filmed in (([], 3), (["--video-episodes", "1"], 1)):  # default: every one of 3
+        assert main([*argv, *extra]) == EXIT_OK
+        result = json.loads(output.read_text())
+        frames = sum(e["steps"] + 1 for e in result["per_episode"][:filmed])  # reset + steps
+        assert result["video_frames"] == frames == len(iio.imread(video))
+        assert result["video_episodes"] == filmed
+        seeds = "seeds 4-6" if filmed == 3 else "seed 4"
+        shown = f"video: {video} (the first {filmed} of 3 episodes ({seeds}), {frames} frames)"
+        assert shown in capsys.readouterr().out
+
+
+def test_cli_eval_of_the_batched_env_takes_a_backend_and_shows_its_compile(
+    policy_path: Path, tmp_path: Path, capsys
+):
+    output = tmp_path / "mjx.json"
+    argv = ["eval", str(policy_path), "--engine", "mjx", "--backend", "mujoco"]
+    assert main([*argv, "--episodes", "4", "-o", str(output)]) == EXIT_OK
+    result = json.loads(output.read_text())
+    assert result["engine"] == "mjx" and result["backend"] == "mujoco"
+    captured = capsys.readouterr()
+    assert "mjx (backend mujoco), task reach: 4 episodes" in captured.out
+    err = captured.err.splitlines()
+    assert err[0] == "compiling the batched env (4 envs, backend mujoco) ..."
+    assert any(
+        line.startswith("compiled the batched env (4 envs, backend mujoco) in ") for line in err
+    )
+
+
+def test_compile_clock_speaks_while_it_waits() -> None:
+    import io
+    import time
+
+    from mjx_arm.jax_cache import CompileClock
+
+    stream = io.StringIO()
+    clock = CompileClock("a program", "hint", every=0.05, stream=stream)
+    time.sleep(0.3)
+    seconds = clock.stop()
+    assert clock.stop() >= seconds  # a second stop says nothing more
+    lines = stream.getvalue().splitlines()
+    assert lines[0] == "compiling a program (hint) ..."
+    assert sum(line.startswith("  still compiling a program: ") for line in lines) >= 2
+    assert lines[-1] == f"compiled a program in {seconds:.0f} s"
+    assert sum(line.startswith("compiled") for line in lines) == 1
+
+
+def test_eval_on_another_task_names_what_it_kept_in_words(policy_path: Path) -> None:
+    _, notes = eval_task(load(policy_path), "touch")
+    assert notes and "{" not in notes[0] and "with ctrl_dt " in notes[0]

@@ -24,16 +24,18 @@ from mjx_arm.urdf.repair_args import add_repair_arguments
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
 MAX_EPISODES = 100_000
+DEFAULT_VIDEO_EPISODES = 10  # episodes --video films unless --video-episodes says otherwise
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
     """Evaluate a policy file or a run directory (newest checkpoint) on one engine.
 
     Prints the success rate with its 95% Wilson interval, the mean return, the mean steps to
-    success and the mean peak contact force, and saves them as JSON with -o. CPU engines reset
-    episode i with seed + i, so mujoco and pybullet see the same episodes.
+    success and the mean peak contact force (--json: as JSON instead), and saves them as JSON
+    with -o. CPU engines reset episode i with seed + i, so mujoco and pybullet see the same
+    episodes; --video films the first episodes (--video-episodes).
     """
-    from mjx_arm.evaluate import eval_arm, eval_task, evaluate, format_summary, resolve_policy
+    from mjx_arm.evaluate import eval_arm, eval_task, evaluate, resolve_policy
     from mjx_arm.urdf.repair_args import with_repair_arguments
 
     _check_eval_outputs(args)
@@ -41,9 +43,12 @@ def cmd_eval(args: argparse.Namespace) -> int:
     policy, source = resolve_policy(args.policy, args.step)
     task, notes = eval_task(policy, args.task)
     arm = with_repair_arguments(eval_arm(policy, args.arm), args)
+    backend = None
     if args.engine in engines.batch_engines():  # the batched JAX env
+        from mjx_arm.envs.backend import resolve_backend
+
         enable_compilation_cache()
-        _warn_mjx_on_cpu()
+        backend = resolve_backend(args.backend)
     result, run = evaluate(
         policy,
         args.engine,
@@ -53,12 +58,13 @@ def cmd_eval(args: argparse.Namespace) -> int:
         args.video,
         args.width,
         args.height,
+        backend=backend,
+        video_episodes=args.video_episodes or min(args.episodes, DEFAULT_VIDEO_EPISODES),
         impl=args.impl,
         arm=arm,
         contact=args.pybullet_contact,
     )
     result = {"policy": str(source), **result, "notes": notes + result["notes"]}
-    print(format_summary(result))
     _write_eval(args, result, run.trajectory, task, arm)
     return EXIT_OK
 
@@ -78,21 +84,39 @@ def _check_contact(contact: str | None) -> None:
 def _write_eval(
     args: argparse.Namespace, result: dict[str, Any], trajectory: Any, task: Any, arm: Any
 ) -> None:
-    """Save what eval's arguments ask for (the first episode's ``trajectory`` of ``task`` on
-    ``arm``, the ``result`` as JSON) and print where, then the result without its episodes as
-    one JSON line."""
+    """Print the result (a few lines; --json: one JSON line without the episodes) and save
+    what eval's arguments ask for (the first episode's ``trajectory`` of ``task`` on ``arm``,
+    the ``result`` as JSON), saying where."""
     import json
 
+    from mjx_arm.evaluate import format_summary
     from mjx_arm.replay import save_trajectory
 
+    if args.json:
+        print(json.dumps({k: v for k, v in result.items() if k != "per_episode"}))
+    else:
+        print(format_summary(result))
+    say = (lambda text: print(text, file=sys.stderr)) if args.json else print
     if args.trajectory:
-        print(f"trajectory: {save_trajectory(args.trajectory, trajectory, task, arm)}")
+        say(f"trajectory: {save_trajectory(args.trajectory, trajectory, task, arm)}")
     if result["video"]:
-        print(f"video: {result['video']}")
+        say(f"video: {result['video']} ({video_contents(result)})")
     if args.output:
         write_atomic(json.dumps(result, indent=2).encode(), Path(args.output))
-        print(f"results: {args.output}")
-    print(json.dumps({k: v for k, v in result.items() if k != "per_episode"}))
+        say(f"results: {args.output}")
+
+
+def video_contents(result: dict[str, Any]) -> str:
+    """What an evaluation's video shows: its episodes (their seeds) and frames."""
+    frames, episodes = result["video_frames"], result["video_episodes"]
+    if result["engine"] in engines.batch_engines():
+        return f"env 0's episode, re-rendered in CPU MuJoCo, {frames} frames"
+    seeds = (
+        f"seed {result['seed']}"
+        if episodes == 1
+        else (f"seeds {result['seed']}-{result['seed'] + episodes - 1}")
+    )
+    return f"the first {episodes} of {result['episodes']} episodes ({seeds}), {frames} frames"
 
 
 def _check_eval_outputs(args: argparse.Namespace) -> None:
@@ -103,17 +127,6 @@ def _check_eval_outputs(args: argparse.Namespace) -> None:
         check_output(args.trajectory, "--trajectory", (".npz",))
     if args.output:
         check_output(args.output, "-o")
-
-
-def _warn_mjx_on_cpu() -> None:
-    import jax
-
-    if jax.default_backend() == "cpu":
-        print(
-            "note: --engine mjx runs MJX (JAX) on the CPU here: compiling takes minutes and "
-            "stepping is about 100x slower than C MuJoCo",
-            file=sys.stderr,
-        )
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
@@ -165,9 +178,16 @@ def _add_eval_run(p: argparse.ArgumentParser) -> None:
         "--engine",
         choices=engines.eval_engines(),
         default="mujoco",
-        help="mujoco or pybullet (Gymnasium env, CPU) or mjx (the batched MJX env; "
-        "on a CPU it still runs MJX, only slowly: minutes to compile, about "
-        "100x slower than C MuJoCo) (default: mujoco)",
+        help="mujoco or pybullet (Gymnasium env, CPU) or mjx (the batched JAX env, on the "
+        "physics of --backend) (default: mujoco)",
+    )
+    p.add_argument(
+        "--backend",
+        choices=names.BACKENDS,
+        default="auto",
+        help="physics of --engine mjx: mjx (MJX: on a GPU; on a CPU minutes to compile), "
+        "mujoco (C MuJoCo: seconds on a CPU), auto (mjx on an accelerator, else mujoco; the "
+        "default, as train and the demo)",
     )
     p.add_argument(
         "--impl",
@@ -210,11 +230,18 @@ def _add_eval_arm(p: argparse.ArgumentParser) -> None:
 
 def _add_eval_outputs(p: argparse.ArgumentParser) -> None:
     """eval's video, trajectory and JSON outputs."""
-    p.add_argument("--video", help="video of the first episode (.mp4 or .gif)")
+    p.add_argument("--video", help="video of the first episodes (.mp4 or .gif)")
+    p.add_argument(
+        "--video-episodes",
+        type=int_in(1, MAX_EPISODES),
+        help=f"episodes --video films (default: {DEFAULT_VIDEO_EPISODES}, or every episode "
+        "when fewer; --engine mjx films env 0's episode)",
+    )
     p.add_argument("--width", type=pixels, default=640, help="video width (default: 640)")
     p.add_argument("--height", type=pixels, default=480, help="video height (default: 480)")
     p.add_argument("--trajectory", help="save the first episode as a trajectory .npz (replay)")
     p.add_argument("-o", "--output", help="JSON file for the results")
+    p.add_argument("--json", action="store_true", help="print the results as one JSON line instead")
 
 
 def _add_replay(sub: argparse._SubParsersAction) -> None:

@@ -49,7 +49,8 @@ def resolve_policy(source: str | Path, step: int | None = None) -> tuple[Any, st
         return load(source), str(source)
     with tempfile.TemporaryDirectory(prefix="mjx_arm_eval_") as folder:
         policy = load(export_policy(source, Path(folder) / "policy.npz", step))
-    return policy, f"{source} (checkpoint step {policy.metadata['step']})"
+    step = policy.metadata.get("step")
+    return policy, f"{source} (checkpoint {'newest' if step is None else f'step {step:,}'})"
 
 
 def eval_task(policy: Any, name: str | None = None) -> tuple[TaskConfig, list[str]]:
@@ -78,7 +79,8 @@ def eval_task(policy: Any, name: str | None = None) -> tuple[TaskConfig, list[st
     if name is None or name == trained.task:
         return trained, []
     dynamics = {k: getattr(trained, k) for k in DYNAMICS_FIELDS}
-    note = f"policy trained on {trained.task}, evaluated on {name} (its preset; {dynamics})"
+    kept = ", ".join(f"{k} {v}" for k, v in dynamics.items())
+    note = f"policy trained on {trained.task}, evaluated on {name} (its preset, with {kept})"
     return task_config(name, **dynamics), [note]
 
 
@@ -236,6 +238,7 @@ def _finish(
     result.update(physics)
     result["wall_seconds"] = time.monotonic() - start
     result["video"] = str(video) if video is not None and run.frames else None
+    result["video_frames"], result["video_episodes"] = run.frames, run.filmed
     result["notes"] = run.notes
     result["per_episode"] = [asdict(e) for e in run.episodes]
     return result
@@ -251,6 +254,7 @@ def _run_batch(
     if options.video is not None:
         run.frames, note = _replay_video(run.trajectory, setup, options.video, *options.size)
         run.notes += [note] if note else []
+        run.filmed = int(run.frames > 0)
     return run
 
 

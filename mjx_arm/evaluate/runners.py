@@ -128,11 +128,12 @@ def run_episodes(
         Per-episode numbers and trajectories, the frame count and notes.
     """
     writer, notes = _open_video(env, video)
-    results, trajectories = [], []
+    results, trajectories, filmed = [], [], 0
     for i in range(episodes):
         capture = functools.partial(writer.capture, env) if writer and i < video_episodes else None
         try:
             stats, traj = run_episode(policy, env, seed + i, capture)
+            filmed += capture is not None
         except _RenderError as exc:  # the renderer failed: redo the episode without it
             notes.append(f"video stopped: {exc}")
             writer.close()
@@ -141,7 +142,7 @@ def run_episodes(
         results.append(stats)
         trajectories.append(traj)
     frames = writer.close() if writer is not None else 0
-    return EvalRun(results, trajectories, frames, notes)
+    return EvalRun(results, trajectories, frames, notes, filmed if frames else 0)
 
 
 class _RenderError(RuntimeError):
@@ -227,21 +228,39 @@ def run_batched(
     from mjx_arm.envs.physics_config import PhysicsConfig
     from mjx_arm.envs.vector import ArmVectorEnv
 
-    env = ArmVectorEnv(task, episodes, backend, PhysicsConfig(impl=impl), arm)
-    check_policy_arm(policy, env.env.arm)
-    obs, _ = env.reset(seed=seed)
-    acc = _BatchAccumulator(episodes)
-    rec = _Recorder()
-    while acc.active.any():
-        actions = np.asarray(policy(obs), dtype=np.float32).reshape(env.action_space.shape)
-        next_obs, rewards, terminated, truncated, info = env.step(actions)
-        if acc.active[0]:
-            final = info.get("final_obs", next_obs)
-            _record_first(rec, obs, (actions, rewards, terminated), final, info)
-        acc.add(rewards, terminated | truncated, info)
-        obs = next_obs
+    clock = _compile_clock(backend, episodes)  # its lines end once the first step ran
+    try:
+        env = ArmVectorEnv(task, episodes, backend, PhysicsConfig(impl=impl), arm)
+        check_policy_arm(policy, env.env.arm)
+        obs, _ = env.reset(seed=seed)
+        acc, rec = _BatchAccumulator(episodes), _Recorder()
+        while acc.active.any():
+            actions = np.asarray(policy(obs), dtype=np.float32).reshape(env.action_space.shape)
+            next_obs, rewards, terminated, truncated, info = env.step(actions)
+            clock.stop()
+            if acc.active[0]:
+                final = info.get("final_obs", next_obs)
+                _record_first(rec, obs, (actions, rewards, terminated), final, info)
+            acc.add(rewards, terminated | truncated, info)
+            obs = next_obs
+    finally:
+        clock.stop()
     env.close()
     return EvalRun(acc.episodes(), [rec.arrays()])
+
+
+def _compile_clock(backend: str, episodes: int):
+    """The :class:`~mjx_arm.jax_cache.CompileClock` of a batch of ``episodes`` envs on
+    ``backend``; on a CPU, MJX's says it takes minutes and what is faster."""
+    import jax
+
+    from mjx_arm.envs.backend import resolve_backend
+    from mjx_arm.jax_cache import CompileClock
+
+    name = resolve_backend(backend)
+    slow = name == "mjx" and jax.default_backend() == "cpu"
+    hint = "MJX on a CPU: a few minutes; --backend mujoco compiles in seconds" if slow else ""
+    return CompileClock(f"the batched env ({episodes} envs, backend {name})", hint)
 
 
 def _record_first(

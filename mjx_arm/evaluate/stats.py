@@ -43,12 +43,14 @@ class EvalRun:
             batched runner records env 0's only.
         frames: frames written to the video (0 without one).
         notes: what was skipped and why (e.g. no renderer).
+        filmed: episodes in the video, the first ones (0 without one).
     """
 
     episodes: list[EpisodeStats]
     trajectories: list[dict[str, np.ndarray]]
     frames: int = 0
     notes: list[str] = field(default_factory=list)
+    filmed: int = 0
 
     @property
     def trajectory(self) -> dict[str, np.ndarray]:
