@@ -174,8 +174,8 @@ def child_results(tmp_path_factory) -> dict:
 
 
 def _crashes_and_cr(root: Path) -> dict[str, Path]:
-    """The face index that crashed PyBullet, and the lone-CR OBJ of 400,000 faces that took it
-    minutes."""
+    """The face index that crashed PyBullet, and a lone-CR OBJ of 400,000 faces (PyBullet
+    reads it as one line: on 200,000 vertices it crashed)."""
     folder = root / "crash"
     folder.mkdir()
     (folder / "bad.obj").write_bytes(b"v 0 0 0\nv 0.1 0 0\nv 0 0.1 0\nf 1 2 99999999\n")
