@@ -232,21 +232,28 @@ def run_batched(
     try:
         env = ArmVectorEnv(task, episodes, backend, PhysicsConfig(impl=impl), arm)
         check_policy_arm(policy, env.env.arm)
-        obs, _ = env.reset(seed=seed)
-        acc, rec = _BatchAccumulator(episodes), _Recorder()
-        while acc.active.any():
-            actions = np.asarray(policy(obs), dtype=np.float32).reshape(env.action_space.shape)
-            next_obs, rewards, terminated, truncated, info = env.step(actions)
-            clock.stop()
-            if acc.active[0]:
-                final = info.get("final_obs", next_obs)
-                _record_first(rec, obs, (actions, rewards, terminated), final, info)
-            acc.add(rewards, terminated | truncated, info)
-            obs = next_obs
+        acc, rec = _run_first_episodes(policy, env, seed, clock)
     finally:
         clock.stop()
     env.close()
     return EvalRun(acc.episodes(), [rec.arrays()])
+
+
+def _run_first_episodes(policy: Policy, env: Any, seed: int, clock: Any) -> tuple:
+    """Step the vector ``env`` from a reset with ``seed`` until each env's first episode
+    ended (``clock`` stopped after the first step); (their numbers, env 0's recording)."""
+    obs, _ = env.reset(seed=seed)
+    acc, rec = _BatchAccumulator(env.num_envs), _Recorder()
+    while acc.active.any():
+        actions = np.asarray(policy(obs), dtype=np.float32).reshape(env.action_space.shape)
+        next_obs, rewards, terminated, truncated, info = env.step(actions)
+        clock.stop()
+        if acc.active[0]:
+            final = info.get("final_obs", next_obs)
+            _record_first(rec, obs, (actions, rewards, terminated), final, info)
+        acc.add(rewards, terminated | truncated, info)
+        obs = next_obs
+    return acc, rec
 
 
 def _compile_clock(backend: str, episodes: int):
