@@ -306,6 +306,7 @@ def test_a_material_library_outside_the_mesh_folder_is_refused(tmp_path):
 def test_a_missing_material_library_is_no_error_and_a_plain_one_passes(tmp_path):
     (tmp_path / "gone.obj").write_bytes(b"mtllib gone.mtl\n" + TETRA)
     assert mesh_problem(tmp_path / "gone.obj") is None  # every reader leaves it out
+    (tmp_path / "1").mkdir()  # a folder named like a word of the statement: no reader reads it
     (tmp_path / "tetra.mtl").write_bytes(b"newmtl a\nKd 1 0 0\nmap_Kd -s 1 1 1 skin.png\n")
     Image.new("RGB", (64, 64), (200, 30, 30)).save(tmp_path / "skin.png")
     (tmp_path / "tetra.obj").write_bytes(b"mtllib tetra.mtl\nusemtl a\n" + TETRA)

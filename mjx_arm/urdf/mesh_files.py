@@ -112,7 +112,8 @@ def too_large(size: int, limit: int, what: str) -> str:
 
 def side_path(mesh: Path, name: str) -> Path | None:
     """The file a mesh's reader opens for the side file ``name`` the mesh names, resolved
-    (symbolic links followed), or None when nothing is there.
+    (symbolic links followed), or None when nothing is there or only a folder (which every
+    reader fails to read, harmlessly).
 
     The readers join the name to the mesh's folder as text (PyBullet's OBJ reader: a name
     starting with ``/`` is inside the folder too), so this does the same.
@@ -123,7 +124,8 @@ def side_path(mesh: Path, name: str) -> Path | None:
     folder = mesh.parent.resolve()
     try:
         resolved = (folder / name.strip().lstrip("/")).resolve()
-        resolved.stat()
+        if stat.S_ISDIR(resolved.stat().st_mode):
+            return None
     except (OSError, RuntimeError, ValueError):  # missing, a link loop, a bad name
         return None
     if not resolved.is_relative_to(folder):
