@@ -186,9 +186,9 @@ def test_quick_parity_mujoco_and_pybullet(tmp_path: Path):
 @pytest.mark.slow
 @pytest.mark.pybullet
 def test_quick_parity_with_mjx(tmp_path: Path):
-    """All three engines; MJX on JAX compiles for minutes on a CPU. No --plot: the JSON and the
-    markdown only, which links no picture."""
-    result = _run_parity(tmp_path, "--impls", "jax")
+    """All three engines, named (--quick alone leaves MJX out on a CPU); MJX on JAX compiles
+    for minutes on a CPU. No --plot: the JSON and the markdown only, which links no picture."""
+    result = _run_parity(tmp_path, "--impls", "jax", "--engines", "mujoco", "mjx", "pybullet")
     assert ".png" not in (tmp_path / "parity.md").read_text()
     assert result["engines"] == ["mujoco", "mjx-jax", "pybullet"]
     _check_shapes(result, ParityConfig.quick())

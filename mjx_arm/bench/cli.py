@@ -22,6 +22,7 @@ from mjx_arm.names import EXIT_OK
 from mjx_arm.settings import add_set_argument
 
 if TYPE_CHECKING:
+    from mjx_arm.bench.parity_config import ParityConfig
     from mjx_arm.bench.seeds_config import SeedsConfig
 
 # Where a bench command writes without --out: a new folder per run, named as train names its
@@ -97,7 +98,8 @@ def cmd_parity(args: argparse.Namespace) -> int:
     while holding still, under a constant command and pressing, with the joint damping as
     converted and zeroed. Writes parity.md and parity.json into --out, with each goal met or
     missed (--plot: three PNG plots too, into an --out outside benchmarks/results). MJX on a
-    CPU takes several minutes (compilation); --quick is a small run. --grasp adds the grasp
+    CPU takes several minutes (compilation, its progress on stderr); --quick is a small run,
+    without MJX on a CPU unless --engines names it. --grasp adds the grasp
     check on the gripper arm (grasp.md, grasp.json): the same scripted pick of a cube in each
     engine, off the table and in the air, and its slip in the fingers over 2 s; --grasp-video
     films the pick off the table in each engine.
@@ -107,6 +109,7 @@ def cmd_parity(args: argparse.Namespace) -> int:
     from mjx_arm.bench.results import environment_metadata
 
     config = from_arguments(ParityConfig.quick() if args.quick else ParityConfig(), args)
+    config = _quick_on_cpu(config, args)
     _out(args, "parity")
     _check_pictures(args, "--plot", "--grasp-video")
     _check_arm(config.arm)
@@ -119,6 +122,26 @@ def cmd_parity(args: argparse.Namespace) -> int:
     if args.grasp:
         _print_paths(_grasp_report(config.engines, meta, args.out, args.grasp_video))
     return EXIT_OK
+
+
+def _quick_on_cpu(config: ParityConfig, args: argparse.Namespace) -> ParityConfig:
+    """``--quick`` on a CPU leaves the batch engines (MJX) out, which compile for minutes
+    there, unless ``--engines`` names them; says so on stderr."""
+    import dataclasses
+    import sys
+
+    import jax
+
+    batch = [name for name in config.engines if name in engines.batch_engines()]
+    if not (args.quick and args.engines is None and batch and jax.default_backend() == "cpu"):
+        return config
+    print(
+        f"note: --quick on a CPU leaves {', '.join(batch)} out (MJX compiles for minutes "
+        f"here); --engines {' '.join(config.engines)} compares them all",
+        file=sys.stderr,
+    )
+    kept = tuple(name for name in config.engines if name not in batch)
+    return dataclasses.replace(config, engines=kept)
 
 
 def _grasp_report(engines: tuple[str, ...], meta: dict, out: Path, video: bool) -> list[Path]:
@@ -330,7 +353,12 @@ def _add_parity(commands) -> None:
     from mjx_arm.bench.parity_config import ParityConfig
 
     p = _command(commands, cmd_parity, "engine parity: FK, divergence, force, jitter", ParityConfig)
-    p.add_argument("--quick", action="store_true", help="a small run (tests, a first look)")
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help="a small run (tests, a first look); on a CPU without MJX unless --engines names "
+        "it (MJX compiles for minutes there)",
+    )
     p.add_argument(
         "--grasp", action="store_true", help="also the grasp check on the gripper arm (grasp.md)"
     )

@@ -17,7 +17,6 @@ envs step.
 from __future__ import annotations
 
 import dataclasses
-import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
@@ -270,19 +269,29 @@ class MjxEngine:
 
     def fk(self, qpos: np.ndarray) -> np.ndarray:
         """ee point (m) at joint angles ``qpos (B, 6)`` by MJX's forward pass, ``(B, 3)``."""
-        return np.asarray(self._call(self._fk, np.asarray(qpos, np.float32)), np.float64)
+        ee = self._call("forward kinematics", self._fk, np.asarray(qpos, np.float32))
+        return np.asarray(ee, np.float64)
 
     def rollout(self, inputs: Inputs) -> Trace:
         """Play ``inputs`` open loop; the reads after every physics step."""
         fields = [f.name for f in dataclasses.fields(Inputs)]
         args = [np.asarray(getattr(inputs, k), np.float32) for k in fields]
-        return Trace(*(np.asarray(x, np.float64) for x in self._call(self._rollout, *args)))
+        out = self._call(f"{len(args[0])} rollouts", self._rollout, *args)
+        return Trace(*(np.asarray(x, np.float64) for x in out))
 
-    def _call(self, fn, *args):
-        """Compile ``fn`` for ``args`` (timed), then run it."""
-        start = time.perf_counter()
-        compiled = fn.lower(*args).compile()
-        self.compile_seconds += time.perf_counter() - start
+    def _call(self, what: str, fn, *args):
+        """Compile ``fn`` for ``args`` (timed, its progress said on stderr: a
+        :class:`~mjx_arm.jax_cache.CompileClock`), then run it."""
+        import jax
+
+        from mjx_arm.jax_cache import CompileClock
+
+        slow = jax.default_backend() == "cpu"
+        clock = CompileClock(f"{self.name}'s {what}", "MJX on a CPU: minutes" if slow else "")
+        try:
+            compiled = fn.lower(*args).compile()
+        finally:
+            self.compile_seconds += clock.stop()
         return compiled(*args)
 
     def close(self) -> None:
