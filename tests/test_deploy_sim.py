@@ -219,3 +219,54 @@ def test_cli_deploy_sim_rejects_bad_settings(policy_path: Path, capsys):
 def test_deploy_config_validates():
     with pytest.raises(ValueError, match="tau"):
         DeployConfig(tau=-0.1)
+
+
+# --------------------------------------------------------------------------- URScript: UR arms only
+
+ROBOTS = Path(__import__("sysconfig").get_paths()["purelib"]) / (
+    "cmeel.prefix/share/example-robot-data/robots"
+)
+
+
+def test_urscript_is_for_universal_robots_arms_only(tmp_path: Path, capsys, monkeypatch):
+    """The shipped arm and example-robot-data's UR5 are UR arms; the 7-joint Panda is not: no
+    URScript by default (a note says to write a JointTrajectory), --script refused."""
+    from mjx_arm.arm.info import arm_info
+    from mjx_arm.inputs import ConfigError
+    from mjx_arm.sim2real.cli import DEFAULT_SCRIPT, script_path
+    from mjx_arm.sim2real.deploy import ur_like
+
+    monkeypatch.chdir(tmp_path)
+    shipped = arm_info()
+    assert ur_like(shipped.joint_names)
+    assert script_path(None, shipped) == Path(DEFAULT_SCRIPT)
+    assert script_path("mine.script", shipped) == Path("mine.script")
+    if not ROBOTS.is_dir():
+        pytest.skip("example-robot-data is not installed")
+    assert ur_like(arm_info(ROBOTS / "ur_description/urdf/ur5_robot.urdf").joint_names)
+    panda = arm_info(ROBOTS / "panda_description/urdf/panda.urdf")
+    assert not ur_like(panda.joint_names)
+    assert script_path(None, panda) is None
+    err = capsys.readouterr().err
+    assert "note: no URScript: panda.urdf (7 joints" in err and "--trajectory" in err
+    with pytest.raises(ConfigError, match=r"Universal Robots' 6-joint arms only.*--trajectory"):
+        script_path("panda.script", panda)
+
+
+def test_deploy_sim_never_replaces_a_script_it_did_not_write(
+    policy_path: Path, tmp_path: Path, capsys, monkeypatch
+):
+    from mjx_arm.sim2real.cli import DEFAULT_SCRIPT
+
+    monkeypatch.chdir(tmp_path)
+    mine = tmp_path / DEFAULT_SCRIPT
+    mine.write_text("def my_own_program():\n  movej([0, 0, 0, 0, 0, 0])\nend\n")
+    before = mine.read_text()
+    assert main(["deploy-sim", str(policy_path), "--episodes", "1"]) == EXIT_INVALID
+    err = capsys.readouterr().err
+    assert f"{DEFAULT_SCRIPT} is there and mjx-arm did not write it" in err
+    assert "pass --script PATH" in err and mine.read_text() == before
+    mine.unlink()  # a fresh folder: deploy-sim writes it, and may replace its own
+    for _ in range(2):
+        assert main(["deploy-sim", str(policy_path), "--episodes", "1"]) == EXIT_OK
+        assert mine.read_text().startswith("def mjx_arm_servo():")

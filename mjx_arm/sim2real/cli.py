@@ -4,13 +4,23 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
 from mjx_arm import engines
-from mjx_arm.inputs import check_output, int_in, seed_int, write_atomic
+from mjx_arm.inputs import (
+    ConfigError,
+    OutputPathError,
+    check_output,
+    int_in,
+    seed_int,
+    write_atomic,
+)
 from mjx_arm.names import EXIT_OK
 from mjx_arm.settings import add_set_argument, apply_settings, describe
+
+DEFAULT_SCRIPT = "deploy_sim.script"  # where a UR arm's URScript goes without --script
 
 
 def cmd_deploy_sim(args: argparse.Namespace) -> int:
@@ -23,7 +33,8 @@ def cmd_deploy_sim(args: argparse.Namespace) -> int:
     against the commands) and its end-effector deviation from the velocity run, and writes the
     URScript (servoj) of the first episode.
     """
-    from mjx_arm.evaluate import resolve_policy
+    from mjx_arm.arm.info import arm_info
+    from mjx_arm.evaluate import eval_arm, resolve_policy
     from mjx_arm.sim2real.deploy import DeployConfig, deploy_sim, write_commands
 
     for flag, path, suffixes in (
@@ -35,13 +46,14 @@ def cmd_deploy_sim(args: argparse.Namespace) -> int:
             check_output(path, flag, suffixes)
     config = apply_settings(DeployConfig(), args.set or [])
     policy, source = resolve_policy(args.policy)
+    script = script_path(args.script, arm_info(eval_arm(policy, args.arm)))
     report = deploy_sim(policy, args.engine, args.episodes, args.seed, config, arm=args.arm)
-    write_commands(report, config, args.script, args.trajectory)
+    write_commands(report, config, script, args.trajectory)
     commands = report.pop("commands")
     report = {
         "policy": source,
         **report,
-        "script": args.script,
+        "script": None if script is None else str(script),
         "trajectory": args.trajectory,
         "script_episode": {"index": commands["index"], "seed": commands["seed"]},
         "script_steps": len(commands["commands"]),
@@ -51,6 +63,41 @@ def cmd_deploy_sim(args: argparse.Namespace) -> int:
         write_atomic(json.dumps(report, indent=2).encode(), Path(args.output))
         print(f"results: {args.output}")
     return EXIT_OK
+
+
+def script_path(given: str | None, arm: Any) -> Path | None:
+    """Where deploy-sim writes its URScript: ``--script``, else :data:`DEFAULT_SCRIPT` unless a
+    file there is not one mjx-arm wrote; on an arm URScript does not run (not a Universal
+    Robots arm: :func:`~mjx_arm.sim2real.deploy.ur_like`) nowhere, with a note saying what to
+    use instead.
+
+    Raises:
+        ConfigError: ``--script`` for an arm that is not a Universal Robots arm.
+        OutputPathError: the default file exists and mjx-arm did not write it.
+    """
+    from mjx_arm.sim2real.deploy import ur_like, written_urscript
+
+    if not ur_like(arm.joint_names):
+        instead = "write a ROS 2 JointTrajectory with --trajectory traj.json instead"
+        what = f"{arm.urdf.name} ({arm.n_joints} joints: {', '.join(arm.joint_names[:2])}, ...)"
+        if given:
+            raise ConfigError(
+                f"--script writes URScript, which runs on Universal Robots' 6-joint arms "
+                f"only; {what} is not one: {instead}"
+            )
+        print(
+            f"note: no URScript: {what} is not a Universal Robots arm; {instead}", file=sys.stderr
+        )
+        return None
+    if given:
+        return Path(given)
+    path = Path(DEFAULT_SCRIPT)
+    if path.exists() and not written_urscript(path):
+        raise OutputPathError(
+            f"{path} is there and mjx-arm did not write it; pass --script PATH to write the "
+            "URScript elsewhere (or to replace that file), or run in a fresh folder"
+        )
+    return path
 
 
 def format_report(report: dict[str, Any]) -> str:
@@ -129,8 +176,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_set_argument(p, "chain settings (defaults: " + ", ".join(describe(DeployConfig())) + ")")
     p.add_argument(
         "--script",
-        default="deploy_sim.script",
-        help="URScript file of the longest episode's commands (default: deploy_sim.script)",
+        help="URScript file of the longest episode's commands, for a Universal Robots arm "
+        f"(default: {DEFAULT_SCRIPT}, unless a file there is not one mjx-arm wrote; another "
+        "make of arm: none, use --trajectory)",
     )
     p.add_argument("--trajectory", help="also write them as a ROS 2 JointTrajectory JSON file")
     p.add_argument("-o", "--output", help="JSON file for the results")

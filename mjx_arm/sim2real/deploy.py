@@ -34,6 +34,34 @@ from mjx_arm.sim2real.position_env import EpisodeCommands, make_position_env
 from mjx_arm.sim2real.settings import DeployConfig
 from mjx_arm.task.config import TaskConfig
 
+# Universal Robots' joint names, base to wrist: URScript's servoj drives these six joints.
+UR_JOINTS = (
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "elbow_joint",
+    "wrist_1_joint",
+    "wrist_2_joint",
+    "wrist_3_joint",
+)
+# The first line of every URScript program mjx-arm writes (commands.urscript_program).
+URSCRIPT_START = b"def mjx_arm_servo():"
+
+
+def ur_like(joint_names: tuple[str, ...]) -> bool:
+    """Whether an arm's joints are a Universal Robots arm's, the only arms URScript runs on:
+    six, named as UR names them (a prefix such as ``robot_`` allowed)."""
+    return len(joint_names) == len(UR_JOINTS) and all(
+        name.endswith(ur) for name, ur in zip(joint_names, UR_JOINTS, strict=True)
+    )
+
+
+def written_urscript(path: Path) -> bool:
+    """Whether the file ``path`` is a URScript program mjx-arm wrote (its first line)."""
+    if not path.is_file():
+        return False
+    with path.open("rb") as f:
+        return f.read(len(URSCRIPT_START)) == URSCRIPT_START
+
 
 def _stats(values: list[np.ndarray]) -> dict[str, float | None]:
     flat = np.concatenate([np.ravel(v) for v in values]) if values else np.zeros(0)
