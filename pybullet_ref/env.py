@@ -61,12 +61,12 @@ with native_output_silenced((STDOUT, STDERR)):  # "pybullet build time: ..."
 from mjx_arm.arm.config import ArmConfig
 from mjx_arm.arm.model_io import task_convert_config
 from mjx_arm.envs.base import DEFAULT_HEIGHT, DEFAULT_WIDTH, BaseRobotEnv, PhysicsReading
+from mjx_arm.envs.camera import task_camera
 from mjx_arm.paths import asset
 from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.grip import ObjectStart
 from mjx_arm.task.lift import cube_half
-from mjx_arm.urdf.scene import CAMERA_EYE, CAMERA_FOVY, CAMERA_TARGET
 from mjx_arm.urdf.scene_shapes import CUBE_HALF, CUBE_MASS
 from pybullet_ref.arm_model import (
     BASE,
@@ -154,7 +154,7 @@ class PybulletArmEnv(BaseRobotEnv):
             wrench_matrix=self.arm.tool.wrench_matrix,
         )
         self._target_of: tuple[np.ndarray, np.ndarray] | None = None  # body -> target point
-        self._camera = self._camera_matrices()
+        self._camera: tuple | None = None  # the view and projection, made at the first frame
         self._object = ObjectStart(np.array([1.0, 0.0, 0.0, 0.0]), CUBE_MASS, FRICTION)
         self.gripper = self.arm.gripper if self.task.spec.gripper else None
         # a complete world before the first reset (render, get_ee_pose): home pose, mid target
@@ -362,6 +362,7 @@ class PybulletArmEnv(BaseRobotEnv):
         return np.array([closure, *pos, w, x, y, z, *pads])
 
     def _render_frame(self) -> np.ndarray:
+        self._camera = self._camera or self._camera_matrices()
         view, projection = self._camera
         _, _, rgba, _, _ = self.client.getCameraImage(
             self.width,
@@ -399,8 +400,11 @@ class PybulletArmEnv(BaseRobotEnv):
         return self._target_of[1]
 
     def _camera_matrices(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
-        view = self.client.computeViewMatrix(CAMERA_EYE, CAMERA_TARGET, [0.0, 0.0, 1.0])
+        """The view and projection of the camera MuJoCo renders from too: it frames the arm
+        and the task area (:func:`~mjx_arm.envs.camera.task_camera`)."""
+        camera = task_camera(self.arm_task, self.width / self.height)
+        view = self.client.computeViewMatrix(camera.eye, camera.target, [0.0, 0.0, 1.0])
         projection = self.client.computeProjectionMatrixFOV(
-            CAMERA_FOVY, self.width / self.height, NEAR, FAR
+            camera.fovy, self.width / self.height, NEAR, FAR
         )
         return view, projection

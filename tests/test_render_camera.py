@@ -88,3 +88,38 @@ def test_mujoco_frames_the_whole_arm(arm, task) -> None:
          mask[:, -BORDER:].ravel()]
     )  # fmt: skip
     assert not edges.any()  # no part of it cut by the frame's edge
+
+
+@pytest.mark.pybullet
+@pytest.mark.parametrize(
+    ("arm", "task"),
+    [
+        pytest.param(PANDA, reach_config(), id="panda", marks=needs_robots),
+        pytest.param(UR10, touch_config(), id="ur10", marks=needs_robots),
+        pytest.param(None, touch_config(), id="ur5e"),
+    ],
+)
+def test_pybullet_frames_the_whole_arm_as_mujoco_does(arm, task) -> None:
+    import pybullet
+
+    from mjx_arm.envs.camera import task_camera
+    from pybullet_ref.env import PybulletArmEnv
+
+    env = PybulletArmEnv(task, arm, render_mode="rgb_array", width=320, height=240)
+    try:
+        env.reset(seed=0)
+        env.render()  # makes the camera
+        view, projection = env._camera
+        *_, seg = env.client.getCameraImage(
+            320, 240, viewMatrix=view, projectionMatrix=projection,
+            renderer=pybullet.ER_TINY_RENDERER,
+        )  # fmt: skip
+        camera = task_camera(env.arm_task, 320 / 240)
+        expected = env.client.computeViewMatrix(camera.eye, camera.target, [0.0, 0.0, 1.0])
+    finally:
+        env.close()
+    np.testing.assert_allclose(view, expected)  # the camera MuJoCo's env renders from
+    mask = np.asarray(seg).reshape(240, 320) == env.body
+    assert mask.mean() > 0.03
+    assert not (mask[:BORDER].any() or mask[-BORDER:].any())
+    assert not (mask[:, :BORDER].any() or mask[:, -BORDER:].any())
