@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -154,3 +155,39 @@ def frame_points(
     distance *= 1.0 + margin
     eye = target + distance * axes[2]
     return CameraView(tuple(eye.tolist()), tuple(target.tolist()), view.fovy)
+
+
+class FrameWindow:
+    """Frames shown in a window as they come (an env's ``render_mode="human"``), through
+    matplotlib, ``fps`` frames a second.
+
+    Raises:
+        RuntimeError: no display to show them on (on Linux, neither ``DISPLAY`` nor
+            ``WAYLAND_DISPLAY`` is set), where drawing would silently show nothing.
+    """
+
+    def __init__(self, fps: float, title: str = "mjx_arm") -> None:
+        missing = os.name == "posix" and sys.platform != "darwin"
+        if missing and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+            raise RuntimeError(
+                "render_mode='human' needs a display, and this machine has none (DISPLAY and "
+                "WAYLAND_DISPLAY are unset); use render_mode='rgb_array' and write the frames "
+                "to a video (mjx_arm.video.write_video)"
+            )
+        self.fps, self.title = fps, title
+        self._figure: Any = None
+        self._image: Any = None
+
+    def show(self, frame: np.ndarray) -> None:
+        """Draw one RGB frame ``(height, width, 3)`` and wait one frame's time."""
+        import matplotlib.pyplot as plt
+
+        if self._figure is None:
+            plt.ion()
+            self._figure = plt.figure(self.title)
+            self._image = plt.imshow(frame)
+            plt.axis("off")
+        else:
+            self._image.set_data(frame)
+        self._figure.canvas.draw_idle()
+        plt.pause(1.0 / self.fps)

@@ -123,3 +123,22 @@ def test_pybullet_frames_the_whole_arm_as_mujoco_does(arm, task) -> None:
     assert mask.mean() > 0.03
     assert not (mask[:BORDER].any() or mask[-BORDER:].any())
     assert not (mask[:, :BORDER].any() or mask[:, -BORDER:].any())
+
+
+@pytest.mark.parametrize("engine", ["mujoco", pytest.param("pybullet", marks=pytest.mark.pybullet)])
+def test_human_mode_without_a_display_is_an_error_and_dt_is_the_control_step(
+    engine: str, monkeypatch
+) -> None:
+    import gymnasium as gym
+
+    import mjx_arm  # noqa: F401  (registers the ids)
+
+    env = gym.make("mjx_arm/Reach-v0", engine=engine)
+    try:
+        assert env.unwrapped.dt == env.get_wrapper_attr("dt") == reach_config().ctrl_dt
+    finally:
+        env.close()
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    with pytest.raises(RuntimeError, match="render_mode='human' needs a display"):
+        gym.make("mjx_arm/Reach-v0", engine=engine, render_mode="human")

@@ -46,6 +46,7 @@ from mjx_arm.task import reward as reward_lib
 from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.grip import ObjectStart
+from mjx_arm.video import FrameWindow
 
 DEFAULT_WIDTH, DEFAULT_HEIGHT = 640, 480
 
@@ -117,6 +118,8 @@ class BaseRobotEnv(SingleThreadEnv, gym.Env):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}")
         self.render_mode, self.width, self.height = render_mode, width, height
+        if render_mode == "human":  # a machine without a display is an error, not silence
+            self._window = FrameWindow(self.metadata["render_fps"])
         n = self.arm.n_joints
         self.task_spec = self.task.spec
         self._extra = self.task_spec.extra_obs
@@ -146,6 +149,11 @@ class BaseRobotEnv(SingleThreadEnv, gym.Env):
         self._action_bounds = (np.full(na, -1.0, np.float32), np.full(na, 1.0, np.float32))
         self._distance = 0.0
         self._scores = self._scorers()
+
+    @property
+    def dt(self) -> float:
+        """Seconds one ``step()`` advances (the task's ``ctrl_dt``)."""
+        return self.task.ctrl_dt
 
     # ------------------------------------------------------------------ engine hooks
 
@@ -234,7 +242,7 @@ class BaseRobotEnv(SingleThreadEnv, gym.Env):
         self._ensure_open("render")
         frame = self._render_frame()
         if self.render_mode == "human":
-            self._show(frame)
+            self._window.show(frame)
             return None
         return frame
 
@@ -366,20 +374,6 @@ class BaseRobotEnv(SingleThreadEnv, gym.Env):
         comparison, NaN compares False; on six floats Python's comparisons cost a third of
         numpy's calls)."""
         return not all(map(operator.le, map(abs, qvel), self._speed_list))
-
-    def _show(self, frame: np.ndarray) -> None:
-        """Draw a frame in a window (needs a display and matplotlib)."""
-        import matplotlib.pyplot as plt
-
-        if getattr(self, "_figure", None) is None:
-            plt.ion()
-            self._figure = plt.figure("mjx_arm")
-            self._image = plt.imshow(frame)
-            plt.axis("off")
-        else:
-            self._image.set_data(frame)
-        self._figure.canvas.draw_idle()
-        plt.pause(1.0 / self.metadata["render_fps"])
 
 
 _FLOAT32 = np.dtype(np.float32)
