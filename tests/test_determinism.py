@@ -8,22 +8,14 @@ import os
 from pathlib import Path
 
 import pytest
+from tiny_run import EPOCHS, SETTINGS
 
 from mjx_arm.train.presets import load_config
 from mjx_arm.train.repeat import TIMING_COLUMNS, compare_runs
 
+# The tiny run of the resume tests, with the settings a deterministic run may change.
 TINY = {
-    "task": "reach",
-    "num_timesteps": "2000",
-    "num_envs": "32",
-    "batch_size": "32",
-    "num_minibatches": "4",
-    "unroll_length": "5",
-    "num_updates_per_batch": "2",
-    "num_evals": "3",
-    "num_eval_envs": "16",
-    "policy_hidden": "32,32",
-    "value_hidden": "32,32",
+    **SETTINGS,
     "schedule.kind": "adaptive",
     "normalizer.std_floor": "0.01",
     "normalizer.clip": "10",
@@ -91,7 +83,7 @@ def _repeat(tmp_path: Path, backend: str, extra: dict[str, str]) -> None:
     config = load_config("cpu", None, items)
     assert check_repeat(config, tmp_path / "run", quiet=True) == 0
     report = compare_runs(tmp_path / "run" / "repeat-a", tmp_path / "run" / "repeat-b")
-    assert report.identical and report.rows == 3 and report.checkpoints >= 2
+    assert report.identical and report.rows == EPOCHS + 1 and report.checkpoints == EPOCHS
 
 
 @pytest.mark.slow
@@ -104,7 +96,7 @@ def test_two_runs_are_identical_on_the_c_backend(tmp_path: Path) -> None:
 @pytest.mark.slow
 def test_two_runs_are_identical_on_mjx_jax_on_the_cpu(tmp_path: Path) -> None:
     """MJX's JAX physics under XLA's CPU backend (minutes: the MJX graph compiles on the CPU)."""
-    _repeat(tmp_path, "mjx", {"physics.impl": "jax", "num_timesteps": "1280"})
+    _repeat(tmp_path, "mjx", {"physics.impl": "jax"})
 
 
 def test_a_deterministic_run_steps_jax_physics_where_warp_would_run(monkeypatch) -> None:
