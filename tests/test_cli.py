@@ -221,3 +221,14 @@ def test_a_gpu_preset_on_a_cpu_says_how_long_first(tmp_path: Path, capsys):
     for preset in ("cpu", None):  # the cpu preset, a resumed run: no note
         _start_lines(tmp_path, config, preset)
         assert capsys.readouterr().err == ""
+
+
+@pytest.mark.parametrize("stem", ["a" * 246, "é" * 123])  # 251 bytes with ".json": valid on Linux
+def test_a_file_name_of_250_bytes_is_written(stem: str, tmp_path: Path) -> None:
+    from mjx_arm.inputs import check_output, write_atomic
+
+    target = tmp_path / f"{stem}.json"
+    assert len(target.name.encode()) == 251
+    write_atomic(b"{}", check_output(target, "-o"))
+    assert target.read_bytes() == b"{}"
+    assert [p.name for p in tmp_path.iterdir()] == [target.name]  # no temporary file left

@@ -237,3 +237,9 @@ def test_compile_clock_speaks_while_it_waits() -> None:
 def test_eval_on_another_task_names_what_it_kept_in_words(policy_path: Path) -> None:
     _, notes = eval_task(load(policy_path), "touch")
     assert notes and "{" not in notes[0] and "with ctrl_dt " in notes[0]
+
+
+def test_cli_eval_writes_a_250_byte_file_name(policy_path: Path, tmp_path: Path) -> None:
+    output = tmp_path / ("r" * 245 + ".json")
+    assert main(["eval", str(policy_path), "--episodes", "1", "-o", str(output)]) == EXIT_OK
+    assert json.loads(output.read_text())["episodes"] == 1
