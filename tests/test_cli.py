@@ -232,3 +232,39 @@ def test_a_file_name_of_250_bytes_is_written(stem: str, tmp_path: Path) -> None:
     write_atomic(b"{}", check_output(target, "-o"))
     assert target.read_bytes() == b"{}"
     assert [p.name for p in tmp_path.iterdir()] == [target.name]  # no temporary file left
+
+
+ROBOTS = Path(__import__("sysconfig").get_paths()["purelib"]) / (
+    "cmeel.prefix/share/example-robot-data/robots"
+)
+
+
+@pytest.mark.skipif(not ROBOTS.is_dir(), reason="example-robot-data is not installed")
+def test_convert_writes_mesh_paths_relative_to_the_mjcf(tmp_path: Path) -> None:
+    """The MJCF names its meshes from its own folder: the two move together."""
+    shutil.copytree(ROBOTS / "panda_description", tmp_path / "a/robots/panda_description")
+    urdf = tmp_path / "a/robots/panda_description/urdf/panda.urdf"
+    mjcf = tmp_path / "a/out/panda.xml"
+    mjcf.parent.mkdir()
+    argv = [
+        "convert",
+        str(urdf),
+        "-o",
+        str(mjcf),
+        "--package",
+        f"example-robot-data={tmp_path / 'a'}",
+    ]
+    assert _exit_code(argv) == EXIT_OK
+    files = [line.split('file="')[1].split('"')[0] for line in mjcf.read_text().splitlines()
+             if 'file="' in line]  # fmt: skip
+    assert files and all(f.startswith("../robots/panda_description/meshes/") for f in files)
+    (tmp_path / "a").rename(tmp_path / "moved")
+    model = mujoco.MjModel.from_xml_path(str(tmp_path / "moved/out/panda.xml"))
+    assert model.nmesh == len(files)
+
+
+def test_convert_names_a_missing_output_folder_instead_of_making_it(tmp_path: Path, capsys):
+    output = tmp_path / "no" / "such" / "arm.xml"
+    assert _exit_code(["convert", str(ARM_URDF), "-o", str(output)]) == 2
+    assert "does not exist; create it first" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from mjx_arm.engines import CONVERTER_ENGINE, engine_names
-from mjx_arm.inputs import InputError, check_output, require_file, write_atomic
+from mjx_arm.inputs import InputError, OutputPathError, check_output, require_file, write_atomic
 from mjx_arm.names import EXIT_INVALID, EXIT_OK
 from mjx_arm.urdf.repair_args import add_repair_arguments, repairs_of
 from mjx_arm.urdf.scene_shapes import SCENES
@@ -74,7 +74,12 @@ def cmd_convert(args: argparse.Namespace) -> int:
     from mjx_arm.urdf.mesh_convert import cache_dir_for
     from mjx_arm.urdf.validate import validate
 
-    check_output(args.output, "-o", (".xml",))
+    output = check_output(args.output, "-o", (".xml",))
+    if not output.parent.is_dir():  # a mistyped folder is named, not made (with its parents)
+        raise OutputPathError(
+            f"-o {str(output)!r}: the folder {str(output.parent)!r} does not exist; create it "
+            "first, or write into an existing folder"
+        )
     package_dirs = _package_dirs(args.package)
     repairs = repairs_of(args)
     config = ConvertConfig(
@@ -97,9 +102,34 @@ def cmd_convert(args: argparse.Namespace) -> int:
         print(report.format())
         return _invalid(args.urdf, report)
     xml = to_mjcf(args.urdf, config)  # a ConversionError is a named error (mjx_arm.cli.main)
-    write_atomic(xml.encode(), Path(args.output))
+    write_atomic(relative_files(xml, output.parent).encode(), output)
     print(_summary(args.output))
     return EXIT_OK
+
+
+def relative_files(xml: str, folder: Path) -> str:
+    """``xml`` (an MJCF) with each absolute ``file="..."`` (a mesh, a texture) written relative
+    to ``folder``, where the MJCF goes, so that the MJCF and its meshes move together (MuJoCo
+    reads such a path from the MJCF's folder). A path that shares no folder with ``folder``
+    but the root (or a drive) stays absolute."""
+    import os
+    import re
+    from xml.sax.saxutils import escape, unescape
+
+    base = os.path.realpath(folder)
+
+    def relative(match: re.Match) -> str:
+        path = os.path.realpath(unescape(match.group(1), {"&quot;": '"'}))
+        try:
+            shared = os.path.commonpath([path, base])
+        except ValueError:  # another drive (Windows): no relative path
+            return match.group(0)
+        if shared == os.path.dirname(shared):  # only the root in common
+            return match.group(0)
+        path = os.path.relpath(path, base)
+        return f'file="{escape(path, {chr(34): "&quot;"})}"'
+
+    return re.sub(r'\bfile="(/[^"]*|[A-Za-z]:[\\/][^"]*)"', relative, xml)
 
 
 def _summary(mjcf_path: str) -> str:
