@@ -10,7 +10,7 @@ and the value function's explained variance at the end, and the evaluation's tou
 overforce figures at the end.
 
     python -m benchmarks.training_diagnosis --campaign "as shipped=runs/tune_base" \\
-        --campaign "std floor + clip=runs/tune_clip" --out benchmarks/results/seeds/tuning
+        --campaign "std floor + clip=runs/tune_clip" --out benchmarks/results/diagnosis
 """
 
 from __future__ import annotations
@@ -118,7 +118,7 @@ def main() -> None:
     parser.add_argument("--campaign", action="append", required=True, help="LABEL=FOLDER")
     parser.add_argument("--threshold", type=float, default=0.95)
     parser.add_argument("--device", default="", help="the device the runs trained on (text)")
-    parser.add_argument("--name", default="diagnosis_touch_fast")
+    parser.add_argument("--name", default="touch_fast_seeds")
     parser.add_argument("--out", type=Path, default=Path("runs/diagnosis"))
     args = parser.parse_args()
     campaigns = []

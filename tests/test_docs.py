@@ -58,10 +58,10 @@ def test_changing_one_json_value_changes_the_page_and_the_readme(tmp_path):
     argv = ["--results", str(results), "--out", str(out), "--readme", str(readme), "--no-plots"]
     assert gen.main(argv) == 0
     page, block = (out / "seeds.md").read_text(), readme.read_text()
-    assert "10 of 10 seeds at 0.95; median 42.7 s warm" in block
+    assert "10 of 10 seeds at 0.95; median 9.5 s warm" in block  # Reach's row
     assert "| 10 of 10 |" in page
 
-    file = results / "seeds" / "seeds_touch_fast.json"
+    file = results / "seeds" / "seeds_reach_fast.json"
     data = json.loads(file.read_text())
     data["summary"]["solved"] = 7
     data["summary"]["time_to_threshold_warm"]["median"] = 51.25
@@ -150,7 +150,7 @@ def test_pages_read_as_results(tmp_path):
     for page in written:
         assert "| nan |" not in page.read_text() and " nan |" not in page.read_text()
     index = (tmp_path / "pages" / "index.md").read_text()
-    assert "source `seeds/seeds_touch_fast.json`" in index
+    assert "source `seeds/seeds_reach_fast.json`" in index
 
 
 def test_a_page_whose_files_are_gone_is_removed(tmp_path):
