@@ -247,16 +247,6 @@ def check_folder(path: str | Path, what: str) -> Path:
     return path
 
 
-# Bytes of the target's name that its temporary file's name keeps: with the dots, the random
-# part and ".tmp", the temporary name stays under the 255 bytes a file name may have.
-TEMP_NAME_BYTES = 200
-
-
-def _name_start(name: str) -> str:
-    """The start of a file name, at most :data:`TEMP_NAME_BYTES` bytes of UTF-8."""
-    return name.encode("utf-8", "surrogateescape")[:TEMP_NAME_BYTES].decode("utf-8", "ignore")
-
-
 def write_atomic(data: bytes, target: Path) -> None:
     """Write ``data`` to ``target`` through a temporary file in the same folder (created if
     missing), so a reader (or a second process writing the same file) never sees half a file,
@@ -269,9 +259,9 @@ def write_atomic(data: bytes, target: Path) -> None:
     temporary = None
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
-        handle, temporary = tempfile.mkstemp(
-            suffix=".tmp", prefix=f".{_name_start(target.name)}.", dir=target.parent
-        )
+        # named from the target's first 200 bytes: a name may have 255 (a long one is valid)
+        start = target.name.encode("utf-8", "surrogateescape")[:200].decode("utf-8", "ignore")
+        handle, temporary = tempfile.mkstemp(suffix=".tmp", prefix=f".{start}.", dir=target.parent)
         with os.fdopen(handle, "wb") as f:
             f.write(data)
             f.flush()

@@ -115,11 +115,7 @@ class BaseRobotEnv(SingleThreadEnv, gym.Env):
         self.arm: ArmInfo = self.arm_task.arm
         self.task = self.arm_task.task
         self.metadata = {**self.metadata, "render_fps": round(1.0 / self.task.ctrl_dt)}
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}")
-        self.render_mode, self.width, self.height = render_mode, width, height
-        if render_mode == "human":  # a machine without a display is an error, not silence
-            self._window = FrameWindow(self.metadata["render_fps"])
+        self._set_render(render_mode, width, height)
         n = self.arm.n_joints
         self.task_spec = self.task.spec
         self._extra = self.task_spec.extra_obs
@@ -149,6 +145,15 @@ class BaseRobotEnv(SingleThreadEnv, gym.Env):
         self._action_bounds = (np.full(na, -1.0, np.float32), np.full(na, 1.0, np.float32))
         self._distance = 0.0
         self._scores = self._scorers()
+
+    def _set_render(self, render_mode: str | None, width: int, height: int) -> None:
+        """Check ``render_mode`` and keep the frame size; "human" opens its window (on a
+        machine without a display: an error, not silence)."""
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}")
+        self.render_mode, self.width, self.height = render_mode, width, height
+        human = render_mode == "human"
+        self._window = FrameWindow(self.metadata["render_fps"]) if human else None
 
     @property
     def dt(self) -> float:

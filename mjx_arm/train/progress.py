@@ -132,8 +132,12 @@ class _Progress:
         self.task = task.task if isinstance(task, ArmTask) else task
         self.physics: dict[str, Any] = {}
         self.total = config.num_timesteps  # the run ends on the first evaluation at or past it
+        planned = planned_steps(config, step_offset)
+        if stop_after:  # a run stopped after its first epochs (warmup's one): the bar ends there
+            epoch = EpochSizes.of(config, config.num_timesteps).env_steps_per_epoch
+            planned = min(planned, step_offset + stop_after * epoch)
         self.bar = tqdm(
-            total=planned_steps(config, step_offset),
+            total=planned,
             initial=step_offset,
             unit="step",
             unit_scale=True,
