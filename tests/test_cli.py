@@ -268,3 +268,19 @@ def test_convert_names_a_missing_output_folder_instead_of_making_it(tmp_path: Pa
     assert _exit_code(["convert", str(ARM_URDF), "-o", str(output)]) == 2
     assert "does not exist; create it first" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.slow
+def test_a_training_says_its_compile_time_once(tmp_path: Path, capfd) -> None:
+    """One "compiled in" line: after the first epoch, or at the end with --quiet (no bar); the
+    end names the compile report where the line came before."""
+    argv = ["train", "--task", "reach", "--preset", "cpu", "--backend", "mujoco", "--set"]
+    argv += ["num_timesteps=20000", "num_evals=3", "num_envs=16", "batch_size=16"]
+    for extra in ([], ["--quiet"]):
+        run = tmp_path / f"run{len(extra)}"
+        assert _exit_code([*argv, "num_eval_envs=16", "--run-dir", str(run), *extra]) == EXIT_OK
+        lines = capfd.readouterr().out.splitlines()
+        assert sum(line.startswith("compiled in ") for line in lines) == 1, extra
+        if not extra:
+            assert lines[-1] == f"compile report: {run / 'compile.json'}"
+            assert (run / "compile.json").is_file()

@@ -82,9 +82,15 @@ def cmd_train(args: argparse.Namespace) -> int:
         _start_lines(run_dir, config, None if args.resume else args.preset or DEFAULT_PRESET)
     result = train(config, run_dir, resume=bool(args.resume), quiet=args.quiet or not group.leader)
     if group.leader:
-        print(done_line(result))
-        print(result.compile_summary)
+        _end_lines(result, run_dir, args.quiet)
     return EXIT_OK
+
+
+def _end_lines(result, run_dir: Path, quiet: bool) -> None:
+    """The lines a run ends with: the done line, then the compile line where ``quiet`` kept it
+    from coming after the first epoch, else where the compile report is (once is enough)."""
+    print(done_line(result))
+    print(result.compile_summary if quiet else f"compile report: {run_dir / 'compile.json'}")
 
 
 def _start_lines(run_dir: Path, config: TrainConfig, preset: str | None) -> None:
