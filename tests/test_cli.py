@@ -284,3 +284,17 @@ def test_a_training_says_its_compile_time_once(tmp_path: Path, capfd) -> None:
         if not extra:
             assert lines[-1] == f"compile report: {run / 'compile.json'}"
             assert (run / "compile.json").is_file()
+
+
+@pytest.mark.skipif(not ROBOTS.is_dir(), reason="example-robot-data is not installed")
+def test_validate_says_a_finding_shared_by_several_joints_once(capfd) -> None:
+    urdf = ROBOTS / "panda_description/urdf/panda.urdf"
+    assert _exit_code(["validate", str(urdf), "--engine", "all"]) == EXIT_OK
+    lines = capfd.readouterr().out.splitlines()
+    damping = [line for line in lines if "jitters with so little damping" in line]
+    assert damping == [
+        "  WARNING [2] joints 'panda_joint1', 'panda_joint2', 'panda_joint3' and 4 more (7): "
+        "has damping 0.003 < 0.01: PyBullet jitters with so little damping. Fix: raise "
+        "<dynamics damping> to at least 0.01"
+    ]
+    assert lines[-1] == "valid (18 warnings)"  # the count still counts each joint

@@ -8,6 +8,7 @@ length, and mesh paths, sizes and face counts.
 
 from __future__ import annotations
 
+import dataclasses
 import re
 import xml.etree.ElementTree as ET
 from collections.abc import Iterator, Mapping
@@ -160,6 +161,27 @@ class Finding:
         return head + _cut(problem, LINE_CHARS - len(head) - len(tail)) + tail
 
 
+def grouped_lines(findings: tuple[Finding, ...], shown: int = 3) -> list[str]:
+    """A line per finding (:meth:`Finding.line`), but one line for findings that differ only
+    in their element (the same problem and fix on seven joints): it names the first ``shown``
+    elements and the count, e.g. ``joints 'a', 'b', 'c' and 4 more (7)``."""
+    groups: dict[tuple, list[Finding]] = {}
+    for f in findings:
+        groups.setdefault((f.severity, f.layer, f.file, f.problem, f.fix), []).append(f)
+    lines = []
+    for group in groups.values():
+        if len(group) == 1:
+            lines.append(group[0].line())
+            continue
+        kinds = {f.element.partition(" ")[0] for f in group}
+        names = [f.element.partition(" ")[2] if len(kinds) == 1 else f.element for f in group]
+        more = f" and {len(names) - shown} more" if len(names) > shown else ""
+        kind = f"{kinds.pop()}s " if len(kinds) == 1 else ""
+        element = f"{kind}{', '.join(names[:shown])}{more} ({len(names)})"
+        lines.append(dataclasses.replace(group[0], element=element).line())
+    return lines
+
+
 @dataclass(frozen=True)
 class ValidationReport:
     """Everything :func:`mjx_arm.urdf.validate.validate` found in one URDF for one engine choice."""
@@ -187,7 +209,7 @@ class ValidationReport:
         """A header line with the path, the errors, the warnings (indented, without the
         path), and a verdict line."""
         lines = [f"Validating {self.path} (engine: {self.engine})"]
-        lines += ["  " + f.line() for f in (*self.errors, *self.warnings)]
+        lines += ["  " + line for line in grouped_lines((*self.errors, *self.warnings))]
         n_err, n_warn = len(self.errors), len(self.warnings)
         if n_err:
             lines.append(f"INVALID: {plural(n_err, 'error')}, {plural(n_warn, 'warning')}")
