@@ -19,7 +19,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     for output in args.output:  # every output checked before any is written
         check_output(output, "-o", SUFFIXES)
     for output in args.output:
-        path = export_run(args.run_dir, output, step=args.step)
+        path = export_run(args.source_run, output, step=args.step)
         print(f"wrote {path} ({path.stat().st_size / 1024:.0f} KiB)")
     return EXIT_OK
 
@@ -30,7 +30,9 @@ def _add_export(sub: argparse._SubParsersAction) -> None:
         help="export a run's policy to .npz (numpy) or .onnx",
         description=cmd_export.__doc__,
     )
-    p.add_argument("run_dir", help="training run directory")
+    # Not dest "run_dir": that names the folder a command writes into (an error report goes
+    # there, mjx_arm.cli.report_folders); export only reads the run.
+    p.add_argument("source_run", metavar="run_dir", help="training run directory")
     p.add_argument(
         "-o",
         "--output",
