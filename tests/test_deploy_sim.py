@@ -270,3 +270,22 @@ def test_deploy_sim_never_replaces_a_script_it_did_not_write(
     for _ in range(2):
         assert main(["deploy-sim", str(policy_path), "--episodes", "1"]) == EXIT_OK
         assert mine.read_text().startswith("def mjx_arm_servo():")
+
+
+def test_the_report_names_clips_in_words_not_as_a_dict() -> None:
+    from mjx_arm.sim2real.cli import format_report
+
+    run = {"success_rate": 1.0, "success_ci95": [0.7, 1.0], "mean_steps_to_success": 7.0,
+           "mean_return": -30.0}  # fmt: skip
+    report = {
+        "task": "reach", "engine": "mujoco", "episodes": 10, "seed": 0,
+        "settings": {"tau": 0.05, "limiter": {"acceleration": 10.0},
+                     "servo": {"position_gain": 40.0, "feedforward": True}},
+        "velocity_control": run, "position_control": run,
+        "tracking_error_rad": {"max": 0.2, "mean": 0.01},
+        "ee_deviation_m": {"max": 0.02, "mean": 0.007},
+        "limiter_clips": {"elbow_joint": {"acceleration": 3, "velocity": 1}},
+    }  # fmt: skip
+    text = format_report(report)
+    assert "  limiter clips: 4\n    elbow_joint: acceleration 3, velocity 1" in text
+    assert "{" not in text

@@ -133,7 +133,10 @@ def format_report(report: dict[str, Any]) -> str:
         f"  ee deviation (m): max {num(dev['max'], '.4f')}, mean {num(dev['mean'], '.4f')}"
         " (position run against velocity run, same episodes)",
         f"  limiter clips: {clips}"
-        + "".join(f"\n    {joint}: {kinds}" for joint, kinds in report["limiter_clips"].items()),
+        + "".join(
+            f"\n    {joint}: " + ", ".join(f"{kind} {count}" for kind, count in kinds.items())
+            for joint, kinds in report["limiter_clips"].items()
+        ),
     ]
     if report.get("script"):
         episode = report["script_episode"]
