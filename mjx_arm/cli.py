@@ -38,6 +38,14 @@ __all__ = [
     "report_folders",
 ]
 
+# Warnings of the libraries underneath that are not the user's to act on: the command line
+# hides them (a Python user of the package sees them as usual). (category, message start)
+LIBRARY_WARNINGS = (
+    (DeprecationWarning, "JAXopt is no longer maintained"),  # imported by Brax
+    (RuntimeWarning, r"os\.fork\(\) was called"),  # JAX, when ffmpeg or a worker starts
+    (UserWarning, "Explicitly requested dtype"),  # JAX without x64, on float64 constants
+    (UserWarning, "Tight layout not applied"),  # matplotlib, on a small plot
+)
 # Longest ``error:`` line the command prints; a longer one is shortened and its whole text
 # written to an error-report file that the line names.
 MAX_LINE_CHARS = 300
@@ -272,6 +280,10 @@ def main(argv: list[str] | None = None) -> int:
     a long report (its ``headline``), is shortened and the whole text goes to an error-report
     file that the line names (:func:`report_folders` says where).
     """
+    import warnings
+
+    for category, message in LIBRARY_WARNINGS:
+        warnings.filterwarnings("ignore", message, category)
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args) or 0)

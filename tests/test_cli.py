@@ -298,3 +298,18 @@ def test_validate_says_a_finding_shared_by_several_joints_once(capfd) -> None:
         "<dynamics damping> to at least 0.01"
     ]
     assert lines[-1] == "valid (18 warnings)"  # the count still counts each joint
+
+
+def test_known_library_warnings_stay_off_the_console() -> None:
+    import warnings
+
+    from mjx_arm.cli import LIBRARY_WARNINGS
+
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        assert _exit_code(["validate", str(ARM_URDF)]) == EXIT_OK  # the command sets the filters
+        warnings.warn("JAXopt is no longer maintained. See ...", DeprecationWarning, stacklevel=1)
+        warnings.warn("os.fork() was called. It is incompatible", RuntimeWarning, stacklevel=1)
+        warnings.warn("a warning of this project's own", UserWarning, stacklevel=1)
+    assert [str(w.message) for w in seen] == ["a warning of this project's own"]
+    assert len(LIBRARY_WARNINGS) >= 4
