@@ -132,11 +132,7 @@ def format_report(report: dict[str, Any]) -> str:
         " (joint angles against the limiter's commands)",
         f"  ee deviation (m): max {num(dev['max'], '.4f')}, mean {num(dev['mean'], '.4f')}"
         " (position run against velocity run, same episodes)",
-        f"  limiter clips: {clips}"
-        + "".join(
-            f"\n    {joint}: " + ", ".join(f"{kind} {count}" for kind, count in kinds.items())
-            for joint, kinds in report["limiter_clips"].items()
-        ),
+        f"  limiter clips: {clips}" + _clip_lines(report["limiter_clips"]),
     ]
     if report.get("script"):
         episode = report["script_episode"]
@@ -147,6 +143,14 @@ def format_report(report: dict[str, Any]) -> str:
     if report.get("trajectory"):
         lines.append(f"JointTrajectory: {report['trajectory']}")
     return "\n".join(lines)
+
+
+def _clip_lines(clips: dict[str, dict[str, int]]) -> str:
+    """A line per joint the limiter clipped: its clips by kind (``acceleration 3, ...``)."""
+    return "".join(
+        f"\n    {joint}: " + ", ".join(f"{kind} {count}" for kind, count in kinds.items())
+        for joint, kinds in clips.items()
+    )
 
 
 def register(sub: argparse._SubParsersAction) -> None:
