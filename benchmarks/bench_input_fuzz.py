@@ -43,9 +43,11 @@ STATUS_HEADERS = {
     "unnamed": "unnamed",
     "hang": "hangs > 30 s",
     "lost": "outputs lost",
+    "outside": "files changed outside the outputs",
     "long": "error lines > 300",
     "memory": "out of memory",
     "crash": "worker crashed",
+    "rss": "peak RSS > 1.5 GB",
 }
 MAX_EXAMPLES = 20
 
@@ -107,9 +109,16 @@ def file_kinds(outcome) -> list[str]:
 
 
 def hostile_kinds(outcome) -> list[str]:
-    """Rows of the per-mutation table: each hostile input's kind and mutation."""
+    """Rows of the per-mutation table: each hostile input's kind and mutation, and each
+    special input's kind and what is special (``special part=how``)."""
     parts = [label.split() for label in outcome.inputs]
-    return [" ".join([p[0], *p[2:]]) for p in parts if len(p) > 2 and p[1] == "hostile"]
+    rows = [" ".join([p[0], *p[2:]]) for p in parts if len(p) > 2 and p[1] == "hostile"]
+    return rows + [" ".join(p) for p in parts if len(p) > 2 and p[1] == "special"]
+
+
+def output_kinds(outcome) -> list[str]:
+    """Rows of the per-output table: how each output path of the case was named."""
+    return [f"output {name}" for name in outcome.outputs] or ["no output path"]
 
 
 def table(rows: dict, outcomes: list, key, first: str) -> str:
@@ -157,6 +166,13 @@ def failures(outcomes: list) -> list[dict]:
     return picked
 
 
+def slowest(outcomes: list, count: int = 10) -> list[dict]:
+    """The ``count`` slowest cases: seconds, status, argv and inputs."""
+    ranked = sorted(outcomes, key=lambda o: -o.seconds)[:count]
+    return [{"seconds": round(o.seconds, 2), "status": o.status, "argv": [a[-200:] for a in o.argv],
+             "inputs": o.inputs} for o in ranked]  # fmt: skip
+
+
 def passing_address_space(outcomes: list) -> float:
     """The largest peak address space (MB) of a worker after a passing case: what a normal
     case needs under the cap (a case the cap stopped reaches the cap itself)."""
@@ -189,7 +205,7 @@ def main() -> None:
     parser.add_argument("--results-dir", type=Path, default=RESULTS_DIR / "fuzz")
     args = parser.parse_args()
 
-    from input_fuzz.harness import tally
+    from input_fuzz.harness import RSS_LIMIT_MB, tally
 
     start = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="input_fuzz_") as folder:
@@ -197,11 +213,14 @@ def main() -> None:
     wall = time.perf_counter() - start
     by_command, by_kind = tally(outcomes), tally(outcomes, file_kinds)
     by_hostile = tally(outcomes, hostile_kinds)
+    by_output = tally(outcomes, output_kinds)
     summary = summary_text(by_command["all"], wall, figures, outcomes)
     text = "\n\n".join([
         "## Per command\n\n" + table(by_command, outcomes, lambda o: [o.command], "command"),
         "## Per input file (kind, how made)\n\n" + table(by_kind, outcomes, file_kinds, "input"),
-        "## Per hostile mutation\n\n" + table(by_hostile, outcomes, hostile_kinds, "mutation"),
+        "## Per hostile mutation and special file\n\n"
+        + table(by_hostile, outcomes, hostile_kinds, "mutation"),
+        "## Per output path (how named)\n\n" + table(by_output, outcomes, output_kinds, "output"),
         summary,
     ])  # fmt: skip
     print(text)
@@ -224,8 +243,11 @@ def main() -> None:
         "by_command": by_command,
         "by_input": by_kind,
         "by_hostile_mutation": by_hostile,
+        "by_output": by_output,
+        "rss_limit_mb": RSS_LIMIT_MB,
         "longest_error_line": longest_errors(outcomes),
         "failures": failures(outcomes),
+        "slowest": slowest(outcomes),
     }
     save_results(args.name, payload, text + "\n", args.results_dir)
 

@@ -18,9 +18,15 @@ from hypothesis import strategies as st
 from mjx_arm.names import EVAL_ENGINES, IMPLS, PARITY_ENGINES, PRESET_NAMES, TASKS
 
 # How an input slot is filled: the good file, a generic mutation of it, a structure-aware
-# hostile one (:mod:`input_fuzz.hostile`), no file, another kind's file.
-MODES = ("good", "mutated", "hostile", "hostile", "missing", "other")
+# hostile one (:mod:`input_fuzz.hostile`), no file, another kind's file, a special file (a FIFO,
+# a device, a socket, a folder, a link; or one of its parts so: :mod:`input_fuzz.special`).
+MODES = ("good", "mutated", "hostile", "hostile", "missing", "other", "special")
 FILE_KINDS = ("urdf", "arm_file", "arm_json", "config", "policy", "onnx", "trajectory", "run_dir")
+FILE_KINDS += ("mesh",)  # a URDF with a mesh and its side files (:mod:`input_fuzz.hostile_mesh`)
+# How an output path is named: beside the inputs; a 250-byte file name; deep under a folder
+# of / that does not exist; a folder of the user's holding their own files (folders only).
+OUT_NAMES = ("", "", "", "", "", "long", "deep")
+DIR_NAMES = ("", "", "", "user", "user", "long", "deep")
 
 
 @dataclass(frozen=True)
@@ -34,20 +40,23 @@ class In:
 
 @dataclass(frozen=True)
 class Out:
-    """An output path ending in ``suffix``; ``seeded``: a good file is there before the case."""
+    """An output path ending in ``suffix``; ``seeded``: a good file is there before the case;
+    ``name``: how it is named (:data:`OUT_NAMES`, :data:`DIR_NAMES`)."""
 
     suffix: str
     seeded: bool
+    name: str = ""
 
 
 @dataclass
 class Case:
     """One command line: ``argv`` of texts and slots; ``lock``: another process holds the run
-    directories of the case."""
+    directories of the case; ``real``: its work runs (not stopped by the harness)."""
 
     command: str
     argv: list[str | In | Out] = field(default_factory=list)
     lock: bool = False
+    real: bool = False
 
 
 # --------------------------------------------------------------------------- values
@@ -90,9 +99,16 @@ def infile(*kinds: str) -> st.SearchStrategy[In]:
 
 
 def outfile(*suffixes: str) -> st.SearchStrategy[Out]:
-    """An output slot, mostly with one of ``suffixes``, else a wrong one."""
+    """An output slot, mostly with one of ``suffixes``, else a wrong one; named as
+    :data:`OUT_NAMES`."""
     good = st.sampled_from(suffixes) if suffixes else st.just(".out")
-    return st.builds(Out, st.one_of(good, good, good, st.just(".txt")), st.booleans())
+    suffix = st.one_of(good, good, good, st.just(".txt"))
+    return st.builds(Out, suffix, st.booleans(), st.sampled_from(OUT_NAMES))
+
+
+def outdir() -> st.SearchStrategy[Out]:
+    """An output folder slot, named as :data:`DIR_NAMES` (a user's folder among them)."""
+    return st.builds(Out, st.just(""), st.booleans(), st.sampled_from(DIR_NAMES))
 
 
 def flags(options: dict[str, st.SearchStrategy], most: int = 4) -> st.SearchStrategy[list]:
@@ -120,7 +136,8 @@ def settings_items(keys: tuple[str, ...]) -> st.SearchStrategy[list[str]]:
 
 # --------------------------------------------------------------------------- commands
 
-ARMS = infile("urdf", "arm_file", "arm_json")
+ARMS = infile("urdf", "arm_file", "arm_json", "mesh")
+URDFS = infile("urdf", "mesh")
 POLICIES = infile("policy", "policy", "onnx", "run_dir")
 LINKS = st.sampled_from(["wrist_3_link", "tool0", "base_link", "no_link", ""])
 TRAIN_KEYS = (
@@ -207,7 +224,7 @@ def _train_case():
             argv += ["--resume", draw(infile("run_dir"))]
         else:
             argv += ["--preset", "cpu", "--backend", "mujoco"]
-            argv += ["--run-dir", draw(st.one_of(outfile(""), infile("run_dir")))]
+            argv += ["--run-dir", draw(st.one_of(outdir(), infile("run_dir")))]
             argv += draw(flags(_train(), 3))
             if draw(st.booleans()):
                 argv += draw(settings_items(TRAIN_KEYS))
@@ -217,14 +234,39 @@ def _train_case():
 
 
 def _bench(name: str, options: dict, positional: tuple = ()) -> st.SearchStrategy[Case]:
-    out = {"--out": st.one_of(outfile(""), infile("config"))}
+    out = {"--out": st.one_of(outdir(), infile("config"))}
     return _case(f"bench {name}", ["bench", name], list(positional), {**options, **out})
 
 
+# A quick parity run of the CPU engines, run whole, where --out is not given: it writes into
+# runs/ of the working folder, never into benchmarks/results (about 8 s).
+QUICK_PARITY = ["bench", "parity", "--quick", "--engines", "mujoco", "pybullet"]
+REAL_PARITY_EVERY = 25  # one bench parity case in this many
+
+
+def _parity() -> st.SearchStrategy[Case]:
+    fuzzed = _bench(
+        "parity",
+        {
+            "--quick": None,
+            "--engines": choice_text(PARITY_ENGINES),
+            "--fk-poses": integer_text(1, 8),
+            "--seconds": number_text(),
+            "--amplitude": number_text(),
+            "--press-boxes": integer_text(1, 8),
+            "--seed": integer_text(0, 5),
+            "--arm": ARMS,
+        },
+    )
+    real = st.just(Case("bench parity", list(QUICK_PARITY), real=True))
+    pick = st.integers(0, REAL_PARITY_EVERY - 1)
+    return pick.flatmap(lambda n: real if n == 0 else fuzzed)
+
+
 CASES: dict[str, Callable[[], st.SearchStrategy[Case]]] = {
-    "validate": lambda: _case("validate", ["validate"], [infile("urdf")], _validate()),
+    "validate": lambda: _case("validate", ["validate"], [URDFS], _validate()),
     "convert": lambda: _case(
-        "convert", ["convert"], [infile("urdf"), st.just("-o"), outfile(".xml")], _convert()
+        "convert", ["convert"], [URDFS, st.just("-o"), outfile(".xml")], _convert()
     ),
     "arm": lambda: _case(
         "arm",
@@ -276,22 +318,8 @@ CASES: dict[str, Callable[[], st.SearchStrategy[Case]]] = {
         ),
         st.one_of(st.just([]), settings_items(DEPLOY_KEYS)),
     ),
-    "demo": lambda: _case(
-        "demo", ["demo", "--quick"], [], {"--out": outfile(""), "--arm": ARMS}, 2
-    ),
-    "bench parity": lambda: _bench(
-        "parity",
-        {
-            "--quick": None,
-            "--engines": choice_text(PARITY_ENGINES),
-            "--fk-poses": integer_text(1, 8),
-            "--seconds": number_text(),
-            "--amplitude": number_text(),
-            "--press-boxes": integer_text(1, 8),
-            "--seed": integer_text(0, 5),
-            "--arm": ARMS,
-        },
-    ),
+    "demo": lambda: _case("demo", ["demo", "--quick"], [], {"--out": outdir(), "--arm": ARMS}, 2),
+    "bench parity": _parity,
     "bench grasp": lambda: _bench("grasp", {"--engines": choice_text(PARITY_ENGINES)}),
     "bench transfer": lambda: _bench(
         "transfer",

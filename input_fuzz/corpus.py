@@ -3,7 +3,8 @@
 :func:`build` writes into a folder: the shipped arm's URDF and an arm file for it, a training
 config file, a run directory with one checkpoint (params of small networks in Brax's layout,
 saved by the project's own checkpoint writer, and its transitions), the policy exported from it
-(``.npz``, and ``.onnx`` where onnx is installed) and a trajectory file. Each is what the real
+(``.npz``, and ``.onnx`` where onnx is installed), a trajectory file, and the arm's URDF with an
+OBJ mesh (its material library and texture beside it). Each is what the real
 pipeline writes, so a mutation of it is a realistic bad input, and the unmutated file must pass.
 """
 
@@ -46,6 +47,7 @@ class Corpus:
     policy: Path
     onnx: Path | None
     trajectory: Path
+    mesh: Path
 
     def files(self) -> dict[str, Path]:
         """Kind -> path of each good input file (the run directory not included)."""
@@ -56,12 +58,14 @@ class Corpus:
             "config": self.config,
             "policy": self.policy,
             "trajectory": self.trajectory,
+            "mesh": self.mesh,
         }
         return {**kinds, **({"onnx": self.onnx} if self.onnx else {})}
 
 
 def build(folder: Path) -> Corpus:
     """Write every good input into ``folder`` (created) and return their paths."""
+    from input_fuzz.hostile_mesh import write_urdf
     from mjx_arm.arm.report import arm_file_text
     from mjx_arm.paths import default_arm_urdf
     from mjx_arm.policy.export import export_run
@@ -80,7 +84,9 @@ def build(folder: Path) -> Corpus:
     policy = export_run(run_dir, folder / "policy.npz")
     onnx = export_run(run_dir, folder / "policy.onnx") if _have_onnx() else None
     trajectory = write_trajectory(folder / "trajectory.npz", arm)
-    return Corpus(folder, urdf, arm_file, arm_json, config, run_dir, policy, onnx, trajectory)
+    mesh = folder / "mesh_arm.urdf"
+    write_urdf(urdf, mesh, "obj")
+    return Corpus(folder, urdf, arm_file, arm_json, config, run_dir, policy, onnx, trajectory, mesh)
 
 
 def _arm():
@@ -118,6 +124,7 @@ def write_run(run_dir: Path, arm) -> Path:
     params = brax_params(obs, actions, np.random.default_rng(0))
     run.save_checkpoint(CHECKPOINT_STEP, params, {"task": "reach"}, trajectory_rows(arm))
     run.log_metrics(CHECKPOINT_STEP, {"eval/episode_success": 0.5})
+    run.close()  # TensorBoard's writer flushes from a thread of its own until it is closed
     return run_dir
 
 

@@ -14,10 +14,15 @@ stderr captured and the folder as the working directory, and checks:
 - ``hang``: the case took more than :data:`HANG_SECONDS`;
 - ``lost``: a good output (a seeded file, a run directory's checkpoint or config) was changed by
   a failing command, or replaced by a broken file;
+- ``outside``: a file the case must not touch was changed, removed or added: its inputs, a
+  user's file beside its outputs or in a user's folder, ``benchmarks/results/``
+  (:mod:`input_fuzz.sentinel`);
 - ``long``: an ``error:`` line longer than :data:`MAX_ERROR_CHARS` characters;
 - ``memory``: the case ran out of memory (a ``MemoryError`` or a native allocation failure
   under the worker's cap, :mod:`input_fuzz.pool`);
-- ``crash``: the worker process running the case died (a signal: a native crash).
+- ``crash``: the worker process running the case died (a signal: a native crash);
+- ``rss``: the case passed, but its worker's peak resident memory was over
+  :data:`RSS_LIMIT_MB` (set by :mod:`input_fuzz.pool`, which measures it).
 """
 
 from __future__ import annotations
@@ -27,7 +32,6 @@ import hashlib
 import io
 import json
 import os
-import shutil
 import signal
 import time
 import traceback
@@ -38,15 +42,18 @@ from unittest import mock
 
 import numpy as np
 
+from input_fuzz import sentinel
 from input_fuzz.cases import Case, In, Out
 from input_fuzz.corpus import Corpus
-from input_fuzz.mutate import mutate
+from input_fuzz.files import materialise, remove_deep_outputs
+from input_fuzz.hostile_run import USER_FILES
 
 HANG_SECONDS = 30.0
 ALARM_SECONDS = 120  # a case still running then is stopped (and counted as a hang)
 MAX_ERROR_CHARS = 300
-STATUSES = ("ok", "named", "work", "traceback", "unnamed", "hang", "lost")
-STATUSES += ("long", "memory", "crash")
+STATUSES = ("ok", "named", "work", "traceback", "unnamed", "hang", "lost", "outside")
+STATUSES += ("long", "memory", "crash", "rss")
+RSS_LIMIT_MB = 1.5e9 / 2**20  # 1.5 GB: a worker's peak resident memory, its imports included
 # Native allocation failures that onnxruntime and C++ code raise as other exception types.
 MEMORY_TEXTS = ("bad_alloc", "Failed to allocate memory", "Cannot allocate memory")
 GOOD = ("ok", "named", "work")  # the statuses of a passing case
@@ -66,7 +73,8 @@ class Outcome:
     ``inputs``: each input slot as ``kind mode[ mutation]``; ``error_line``: the longest
     ``error:`` line printed (its first 400 characters; ``error_chars``: its length);
     ``peak_rss_mb``: the worker's peak resident memory during the case, ``peak_vm_mb``: its
-    peak address space so far (both 0 in process)."""
+    peak address space so far (both 0 in process); ``outputs``: how each output path was
+    named (:data:`~input_fuzz.cases.OUT_NAMES`: ``plain``, ``long``, ``deep``, ``user``)."""
 
     command: str
     status: str
@@ -79,6 +87,7 @@ class Outcome:
     error_chars: int = 0
     peak_rss_mb: float = 0.0
     peak_vm_mb: float = 0.0
+    outputs: list[str] = field(default_factory=list)
 
 
 # --------------------------------------------------------------------------- stubs
@@ -123,89 +132,25 @@ WORK_STUBS = {
 }
 
 
+REAL_WORK = ("mjx_arm.bench.parity.run_parity",)  # what a case marked ``real`` runs
+
+
 @contextlib.contextmanager
-def stubs() -> Iterator[None]:
-    """The long work of every command stopped (:data:`WORK_STUBS`)."""
+def stubs(real: bool = False) -> Iterator[None]:
+    """The long work of every command stopped (:data:`WORK_STUBS`); with ``real``, but
+    :data:`REAL_WORK`."""
     import mjx_arm.evaluate.core as core
     import mjx_arm.train.ppo as ppo
 
     with contextlib.ExitStack() as stack:
         for target, stub in WORK_STUBS.items():
-            stack.enter_context(mock.patch(target, stub))
+            if not (real and target in REAL_WORK):
+                stack.enter_context(mock.patch(target, stub))
         stack.enter_context(
             mock.patch.object(core, "run_episodes", _short_episodes(core.run_episodes))
         )
         stack.enter_context(mock.patch.object(ppo, "make_envs", _cpu_envs_only(ppo.make_envs)))
         yield
-
-
-# --------------------------------------------------------------------------- files
-
-GOOD_OUTPUT = {".json": b'{"good": true}\n', ".txt": b"good\n", ".script": b"def good():\nend\n"}
-
-
-def _fill_in(slot: In, corpus: Corpus, folder: Path, index: int) -> tuple[Path, str]:
-    """The path of an input slot, made in ``folder``, and what it is (``kind mode[ how]``)."""
-    good = corpus.run_dir if slot.kind == "run_dir" else corpus.files().get(slot.kind)
-    label = f"{slot.kind} {slot.mode}"
-    if good is None:  # onnx without the onnx package: another kind's good file
-        good, label = corpus.policy, f"{slot.kind} other"
-    name = folder / f"in{index}_{slot.kind}{'' if slot.kind == 'run_dir' else good.suffix}"
-    rng = np.random.default_rng(slot.seed)
-    if slot.mode == "missing":
-        return name.with_name("missing_" + name.name), label
-    if slot.mode == "other":
-        files = list(corpus.files().values())
-        return files[int(rng.integers(len(files)))], label
-    if slot.mode in ("mutated", "hostile"):
-        what = mutate(slot.kind, good, name, rng, hostile=slot.mode == "hostile")
-        how, _, rest = what.partition(": ")
-        if how.startswith("hostile_"):  # a dispatcher: its own edit names the mutation
-            how = rest.partition(": ")[0]
-        return name, f"{label} {how}"
-    if slot.kind == "run_dir":
-        shutil.copytree(good, name)
-    else:
-        shutil.copy(good, name)
-    return name, label
-
-
-def _seed_output(slot: Out, corpus: Corpus, path: Path) -> None:
-    """A good file at ``path`` before the case (what a failing command must not spoil)."""
-    if not slot.seeded:
-        return
-    if slot.suffix == "":
-        path.mkdir(parents=True, exist_ok=True)
-        (path / "good.txt").write_bytes(b"good\n")
-        return
-    sources = {".npz": corpus.policy, ".onnx": corpus.onnx, ".toml": corpus.arm_file}
-    source = sources.get(slot.suffix)
-    if source is not None:
-        shutil.copy(source, path)
-    else:
-        path.write_bytes(GOOD_OUTPUT.get(slot.suffix, b"good output\n"))
-
-
-def materialise(
-    case: Case, corpus: Corpus, folder: Path, inputs: list[str] | None = None
-) -> tuple[list[str], dict[Path, Out]]:
-    """The argv of ``case`` with its files made in ``folder``; and its output paths. Each input
-    slot's ``kind mode[ how]`` is appended to ``inputs``."""
-    argv, outputs = [], {}
-    for i, token in enumerate(case.argv):
-        if isinstance(token, In):
-            path, label = _fill_in(token, corpus, folder, i)
-            argv.append(str(path))
-            if inputs is not None:
-                inputs.append(label)
-        elif isinstance(token, Out):
-            path = folder / f"out{i}{token.suffix}"
-            _seed_output(token, corpus, path)
-            outputs[path] = token
-            argv.append(str(path))
-        else:
-            argv.append(str(token))
-    return argv, outputs
 
 
 # --------------------------------------------------------------------------- good outputs
@@ -243,15 +188,27 @@ def _digest(path: Path) -> dict[str, str]:
     }
 
 
+def _newest_checkpoint(checkpoints: Path) -> Path | None:
+    """The newest usable checkpoint folder (``step_N`` or ``.old-step_N``), found without
+    moving anything (``latest_checkpoint`` moves an ``.old-`` one back: the case's to do)."""
+    from mjx_arm.train.checkpoints import checkpoint_step, usable
+
+    if not checkpoints.is_dir() or checkpoints.is_symlink():
+        return None
+    found = [p for p in checkpoints.iterdir() if checkpoint_step(p) is not None and usable(p)]
+    return max(found, key=lambda p: (checkpoint_step(p), p.name), default=None)
+
+
 def _run_dir_state(path: Path) -> dict[str, str]:
     """What a run directory must keep: config.json and its newest usable checkpoint."""
-    from mjx_arm.train.checkpoints import latest_checkpoint
+    from mjx_arm.train.checkpoints import checkpoint_step
 
-    latest = latest_checkpoint(path / "checkpoints") if path.is_dir() else None
+    latest = _newest_checkpoint(path / "checkpoints") if path.is_dir() else None
     if latest is None:
         return {}
     kept = {"config.json": _digest(path / "config.json").get("", "")}
-    kept.update({f"{latest.name}/{k}": v for k, v in _digest(latest).items()})
+    step = checkpoint_step(latest)
+    kept.update({f"{step}/{k}": v for k, v in _digest(latest).items()})
     return kept
 
 
@@ -341,11 +298,15 @@ def _locks(case: Case, argv: list[str]) -> Iterator[None]:
     with contextlib.ExitStack() as stack:
         for token in argv if case.lock else []:
             path = Path(token)
-            if path.is_absolute() and path.is_dir():
+            if not (path.is_absolute() and path.is_dir()):
+                continue
+            try:  # a .lock made special (a socket, a folder) is not held
                 f = stack.enter_context((path / ".lock").open("a+"))
                 fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
                 f.write("4242")
                 f.flush()
+            except OSError:
+                continue
         yield
 
 
@@ -390,20 +351,31 @@ def _call_main(argv: list[str], err: io.StringIO) -> tuple[str, int | None, str]
     return "traceback", code, f"exit code {code}: {err.getvalue()[-2000:]}"
 
 
-def run_case(case: Case, corpus: Corpus, folder: Path) -> Outcome:
-    """Make the case's files in ``folder`` (created), run it and judge it."""
-    folder.mkdir(parents=True, exist_ok=True)
-    inputs: list[str] = []
-    argv, outputs = materialise(case, corpus, folder, inputs)
-    before = snapshot(argv, outputs)
+def _sentinel_roots(
+    case: Case, corpus: Corpus, folder: Path, argv: list[str], outputs: dict[Path, Out]
+) -> tuple[list[Path], list[Path]]:
+    """(roots, skipped) of the files the case must not touch (:mod:`input_fuzz.sentinel`):
+    its folder, the corpus and the repository's results, less its named outputs, ``runs/``
+    (the benchmarks' default output) and the run directories ``train`` writes."""
+    skip = [*outputs, folder / "runs"]
+    if case.command == "train":
+        slots = zip(case.argv, argv, strict=True)
+        written = [Path(p) for t, p in slots if isinstance(t, In) and t.kind == "run_dir"]
+        skip += [p for p in written if p.parent == folder]
+    users = [path / name for path, slot in outputs.items() if slot.name == "user"
+             for name in USER_FILES]  # fmt: skip
+    return [folder, corpus.folder, sentinel.REPO_RESULTS, *users], skip
+
+
+def _run(case: Case, argv: list[str], folder: Path) -> tuple[str, int | None, str, str]:
+    """(status, exit code, detail, stderr) of ``argv`` run in ``folder``."""
     out, err = io.StringIO(), io.StringIO()
     cwd = os.getcwd()
-    start = time.perf_counter()
     try:
         os.chdir(folder)
         with (
             _locks(case, argv),
-            stubs(),
+            stubs(case.real),
             _quiet_fds(),
             contextlib.redirect_stdout(out),
             contextlib.redirect_stderr(err),
@@ -411,19 +383,59 @@ def run_case(case: Case, corpus: Corpus, folder: Path) -> Outcome:
             status, code, detail = _call_main(argv, err)
     finally:
         os.chdir(cwd)
-    seconds = time.perf_counter() - start
-    longest = max(error_lines(err.getvalue()), key=len, default="")
+    return status, code, detail, err.getvalue()
+
+
+def run_case(case: Case, corpus: Corpus, folder: Path, on_start=None) -> Outcome:
+    """Make the case's files in ``folder`` (created), run it and judge it; ``on_start()`` is
+    called once the files are made (the pool resets its peak-memory mark there)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    inputs: list[str] = []
+    argv, outputs = materialise(case, corpus, folder, inputs)
+    roots, skip = _sentinel_roots(case, corpus, folder, argv, outputs)
+    untouched = sentinel.record(roots, skip)
+    before = snapshot(argv, outputs)
+    if on_start is not None:
+        on_start()
+    start = time.perf_counter()
+    try:
+        status, code, detail, stderr = _run(case, argv, folder)
+        seconds = time.perf_counter() - start
+        touched = sentinel.changes(untouched, sentinel.record(roots, skip))
+    finally:
+        remove_deep_outputs()
+    longest = max(error_lines(stderr), key=len, default="")
     if seconds > HANG_SECONDS:
         status = "hang"
     elif status in GOOD:
         lost = lost_outputs(before, failed=code not in (0, None))
         if lost:
             status, detail = "lost", "; ".join(lost)
+        elif touched:
+            status, detail = "outside", "; ".join(touched)[:2000]
         elif len(longest) > MAX_ERROR_CHARS:
             status, detail = "long", f"{len(longest)} characters: {longest[:400]}"
     outcome = Outcome(case.command, status, code, seconds, argv, detail, inputs, longest[:400])
     outcome.error_chars = len(longest)
+    outcome.outputs = [slot.name or "plain" for slot in outputs.values()]
     return outcome
+
+
+# What a worker runs once before its first case: the first training, arm check and
+# evaluation of a process pay JAX's and the engines' start-up (8 s on an idle 2-core CPU,
+# 25 s under load), which is no input's doing and would read as a hang.
+WARM_UP = (
+    Case("train", ["train", "--quiet", "--preset", "cpu", "--backend", "mujoco", "--run-dir",
+                   Out("", False)]),
+    Case("arm", ["arm", In("urdf", "good", 0)]),
+    Case("eval", ["eval", "--episodes", "1", In("policy", "good", 0)]),
+)  # fmt: skip
+
+
+def warm_up(corpus: Corpus, folder: Path) -> None:
+    """Run :data:`WARM_UP` in ``folder`` (created); their outcomes are not kept."""
+    for i, case in enumerate(WARM_UP):
+        run_case(case, corpus, folder / f"warm{i}")
 
 
 def tally(outcomes: list[Outcome], key=lambda o: [o.command]) -> dict[str, dict[str, float]]:

@@ -304,11 +304,23 @@ MUTATIONS: dict[str, tuple[Mutation, ...]] = {
 MUTATIONS["arm_json"] = (*BYTE_MUTATIONS, mutate_json, mutate_json, mutate_json)
 
 
+def mutated_mesh(good: Path, out: Path, rng: np.random.Generator) -> str:
+    """A URDF with a mesh, one of whose files is damaged (:mod:`input_fuzz.hostile_mesh`)."""
+    from input_fuzz import hostile_mesh
+
+    return hostile_mesh.mutated_mesh(good, out, rng)
+
+
+MUTATIONS["mesh"] = (mutated_mesh,)
+
+
 def _hostile() -> dict[str, tuple[Mutation, ...]]:
     """The structure-aware mutations of each kind (:mod:`input_fuzz.hostile` and the modules
     it names); ONNX ones need the onnx package."""
     from input_fuzz import hostile
+    from input_fuzz.hostile_mesh import MESH_MUTATIONS
     from input_fuzz.hostile_npz import NPZ_MUTATIONS
+    from input_fuzz.hostile_run import hostile_run_files
 
     found = {
         "urdf": (hostile.hostile_urdf,),
@@ -317,7 +329,8 @@ def _hostile() -> dict[str, tuple[Mutation, ...]]:
         "config": (hostile.hostile_json,),
         "policy": NPZ_MUTATIONS,
         "trajectory": NPZ_MUTATIONS,
-        "run_dir": (hostile.hostile_run_dir,),
+        "run_dir": (hostile.hostile_run_dir, hostile_run_files, hostile_run_files),
+        "mesh": MESH_MUTATIONS,
     }
     try:
         from input_fuzz.hostile_onnx import ONNX_MUTATIONS

@@ -3,9 +3,16 @@ costs one worker, never the caller or the machine.
 
 Each worker (started by ``spawn``: no JAX state forked) sets ``resource.setrlimit`` on its
 address space (:data:`CAP_BYTES`, :data:`CAP_LIMIT`) before it imports anything, builds nothing
-(the caller's :class:`~input_fuzz.corpus.Corpus` is passed in), and runs cases with
-:func:`input_fuzz.harness.run_case`. Before each case it resets the kernel's peak-RSS mark
-(``/proc/self/clear_refs``), after it reads ``VmHWM``: the case's own peak resident memory.
+(the caller's :class:`~input_fuzz.corpus.Corpus` is passed in), runs the harness's warm-up
+cases (:data:`~input_fuzz.harness.WARM_UP`: the start-up of JAX and the engines, paid once),
+and runs cases with :func:`input_fuzz.harness.run_case`. Once a case's files are made it
+resets the kernel's peak-RSS mark (``/proc/self/clear_refs``), after the case it reads
+``VmHWM``: the case's own peak resident memory (the worker's imports included); a passing case
+over :data:`~input_fuzz.harness.RSS_LIMIT_MB` is ``rss``.
+
+A worker run by root gives up the capabilities that let root ignore file permissions
+(:func:`drop_permission_override`), so that a read-only folder is read-only to the commands it
+runs, as it is to a user.
 
 A worker that dies during a case (a signal, or an exit) makes that case ``crash`` (``memory``
 when the kernel killed it, SIGKILL) and is replaced, as is one whose case ran out of memory;
@@ -45,6 +52,33 @@ def set_cap(cap: int = CAP_BYTES, limit: str = CAP_LIMIT) -> None:
     resource.setrlimit(which, (cap, cap))
 
 
+_PERMISSION_CAPS = (1, 2)  # CAP_DAC_OVERRIDE, CAP_DAC_READ_SEARCH
+_CAP_VERSION_3 = 0x20080522
+
+
+def drop_permission_override() -> bool:
+    """Take the capabilities that let root ignore file permissions out of this thread's
+    effective set (threads started later inherit it); whether it was done (Linux only)."""
+    import ctypes
+
+    class Header(ctypes.Structure):
+        _fields_ = [("version", ctypes.c_uint32), ("pid", ctypes.c_int)]
+
+    class Data(ctypes.Structure):
+        _fields_ = [(name, ctypes.c_uint32) for name in ("effective", "permitted", "inherit")]
+
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        header, data = Header(_CAP_VERSION_3, 0), (Data * 2)()
+        if libc.capget(ctypes.byref(header), data) != 0:
+            return False
+        for bit in _PERMISSION_CAPS:
+            data[0].effective &= ~(1 << bit)
+        return libc.capset(ctypes.byref(header), data) == 0
+    except (OSError, AttributeError):
+        return False
+
+
 def reset_peak_rss() -> None:
     """Reset the kernel's peak-RSS mark of this process (``VmHWM``)."""
     with open("/proc/self/clear_refs", "w") as f:
@@ -64,36 +98,54 @@ def memory_mb(field: str = "VmHWM") -> float:
 def probe(case: Case, corpus: Corpus, folder: Path) -> Outcome:
     """A runner that checks the pool itself (tests/test_input_fuzz.py): ``case.command``
     "segfault" kills the worker by SIGSEGV, "allocate" asks for ``case.argv[0]`` bytes (a
-    MemoryError under the cap: ``memory``), anything else is ``ok``."""
+    MemoryError under the cap: ``memory``), "touch" fills that many bytes (resident: ``ok``,
+    which the pool judges by its peak RSS), "write" tries to make a file in the folder
+    ``case.argv[0]`` (the detail says "written" or "refused"), anything else is ``ok``."""
     start = time.perf_counter()
-    status = "ok"
+    status, detail = "ok", ""
     if case.command == "segfault":
         import ctypes
 
         ctypes.string_at(0)
-    elif case.command == "allocate":
+    elif case.command in ("allocate", "touch"):
         try:
-            bytearray(int(case.argv[0]))
+            block = bytearray(int(case.argv[0]))
+            if case.command == "touch":  # a byte in every page: all of it resident
+                block[::4096] = b"\x01" * len(range(0, len(block), 4096))
         except MemoryError:
             status = "memory"
-    return Outcome(case.command, status, 0, time.perf_counter() - start, [], "")
+    elif case.command == "write":
+        try:
+            (Path(case.argv[0]) / "probe.txt").write_text("x")
+            detail = "written"
+        except OSError:
+            detail = "refused"
+    return Outcome(case.command, status, 0, time.perf_counter() - start, [], detail)
 
 
 def _serve(conn, corpus: Corpus, cap: int, limit: str, runner) -> None:
     """A worker's loop: ``(case, folder)`` in, :class:`Outcome` out; None ends it. The
     error-report files the commands write go beside the corpus, not into the user's home."""
     set_cap(cap, limit)
+    drop_permission_override()
     os.environ["XDG_STATE_HOME"] = str(corpus.folder.parent / "state")
     import mjx_arm.cli  # noqa: F401  (imported once, before the first case is timed)
-    from input_fuzz.harness import run_case
+    from input_fuzz.harness import GOOD, RSS_LIMIT_MB, run_case, warm_up
 
-    runner = runner or run_case
+    if runner is None:
+        warm_up(corpus, corpus.folder.parent / f"warm_up_{os.getpid()}")
     conn.send("ready")
     while (job := conn.recv()) is not None:
         case, folder = job
         reset_peak_rss()
-        outcome = runner(case, corpus, folder)
+        if runner is None:
+            outcome = run_case(case, corpus, folder, on_start=reset_peak_rss)
+        else:
+            outcome = runner(case, corpus, folder)
         outcome.peak_rss_mb, outcome.peak_vm_mb = memory_mb("VmHWM"), memory_mb("VmPeak")
+        if outcome.status in GOOD and outcome.peak_rss_mb > RSS_LIMIT_MB:
+            outcome.detail = f"peak RSS {outcome.peak_rss_mb:.0f} MB; {outcome.detail}"
+            outcome.status = "rss"
         conn.send(outcome)
 
 

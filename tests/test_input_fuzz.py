@@ -1,11 +1,14 @@
 """The command line against generated inputs (:mod:`input_fuzz`): every subcommand's arguments
 and good, mutated and hostile policy files (``.npz``, ONNX), arm files, configs, run
-directories, trajectories and URDFs, run through ``mjx_arm.cli.main`` in capped worker
-processes (:mod:`input_fuzz.pool`).
+directories, trajectories, URDFs and URDFs with meshes, special files in their place (FIFOs,
+devices, sockets, folders, links), and output paths of 250-byte names, under absent folders or
+in a user's folder, run through ``mjx_arm.cli.main`` in capped worker processes
+(:mod:`input_fuzz.pool`).
 
 A case passes when it exits 0, or 2 with one ``error:`` line, or reaches the work its command
 would start (stopped there: no training, no MJX); a traceback, a crash of the worker, running
-out of memory under the cap, another exit code, a hang or a spoiled good output fails it.
+out of memory under the cap, another exit code, a hang, a spoiled good output, a file changed
+outside the named outputs or a peak RSS over 1.5 GB fails it.
 :data:`FUZZ_EXAMPLES` cases of each command take about 20 s on a 2-core CPU; the hostile
 mutations are checked to really be hostile (a header that declares 2^40 elements, a graph that
 allocates 2^36 floats, names of the exact lengths). benchmarks/bench_input_fuzz.py runs 6,000 cases.
@@ -14,23 +17,41 @@ allocates 2^36 floats, names of the exact lengths). benchmarks/bench_input_fuzz.
 from __future__ import annotations
 
 import itertools
+import json
+import os
+import re
+import shutil
+import stat
+import struct
 import subprocess
 import sys
 import zipfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, Phase, given, settings
 
-from input_fuzz import hostile, hostile_npz, hostile_onnx
-from input_fuzz.cases import CASES, Case, In, Out, cases
+from input_fuzz import (
+    hostile,
+    hostile_mesh,
+    hostile_npz,
+    hostile_onnx,
+    hostile_run,
+    sentinel,
+    special,
+)
+from input_fuzz import mutate as mutate_module
+from input_fuzz.cases import CASES, QUICK_PARITY, Case, In, Out, cases
 from input_fuzz.corpus import Corpus, build
-from input_fuzz.harness import MAX_ERROR_CHARS, Outcome, run_case, tally
+from input_fuzz.harness import MAX_ERROR_CHARS, RSS_LIMIT_MB, Outcome, run_case, tally
+from input_fuzz.hostile_npz import pick
 from input_fuzz.pool import CAP_BYTES, Pool, probe
+from mjx_arm.urdf import findings as hostile_mesh_limits
 
 FUZZ_EXAMPLES = 2  # of each command
-MUST_BE_ZERO = ("traceback", "crash", "memory", "lost", "unnamed", "hang")
+MUST_BE_ZERO = ("traceback", "crash", "memory", "lost", "outside", "unnamed", "hang", "rss")
 _COUNTER = itertools.count()
 
 
@@ -42,6 +63,13 @@ def corpus(tmp_path_factory) -> Corpus:
 @pytest.fixture(scope="module")
 def cases_dir(tmp_path_factory) -> Path:
     return tmp_path_factory.mktemp("input_cases")
+
+
+@pytest.fixture(scope="module")
+def pool(corpus: Corpus) -> Iterator[Pool]:
+    """Two workers, warmed up once for the module's pool tests."""
+    with Pool(corpus, workers=2) as workers:
+        yield workers
 
 
 def _run(case: Case, corpus: Corpus, folder: Path) -> Outcome:
@@ -71,12 +99,11 @@ def _draw(count: int, commands: tuple[str, ...] | None = None) -> list[Case]:
     return drawn
 
 
-def _fuzz(corpus: Corpus, folder: Path, count: int, per_command: bool = False) -> list[Outcome]:
-    """``count`` generated cases (``per_command``: that many of each command) run in a pool."""
+def _fuzz(pool: Pool, folder: Path, count: int, per_command: bool = False) -> list[Outcome]:
+    """``count`` generated cases (``per_command``: that many of each command) run in ``pool``."""
     drawn = [c for name in CASES for c in _draw(count, (name,))] if per_command else _draw(count)
     jobs = [(case, folder / f"gen{next(_COUNTER)}") for case in drawn]
-    with Pool(corpus, workers=2) as pool:
-        return list(pool.run(jobs))
+    return list(pool.run(jobs))
 
 
 def _assert_clean(outcomes: list[Outcome]) -> dict:
@@ -87,8 +114,8 @@ def _assert_clean(outcomes: list[Outcome]) -> dict:
     return counts
 
 
-def test_generated_command_lines_in_capped_workers(corpus: Corpus, cases_dir: Path) -> None:
-    outcomes = _fuzz(corpus, cases_dir, FUZZ_EXAMPLES, per_command=True)
+def test_generated_command_lines_in_capped_workers(pool: Pool, cases_dir: Path) -> None:
+    outcomes = _fuzz(pool, cases_dir, FUZZ_EXAMPLES, per_command=True)
     counts = _assert_clean(outcomes)
     assert counts["cases"] == FUZZ_EXAMPLES * len(CASES)
     assert {o.command for o in outcomes} == set(CASES), "every subcommand was tried"
@@ -98,8 +125,8 @@ def test_generated_command_lines_in_capped_workers(corpus: Corpus, cases_dir: Pa
 
 
 @pytest.mark.slow
-def test_a_thousand_generated_command_lines(corpus: Corpus, cases_dir: Path) -> None:
-    _assert_clean(_fuzz(corpus, cases_dir, 1000))
+def test_a_thousand_generated_command_lines(pool: Pool, cases_dir: Path) -> None:
+    _assert_clean(_fuzz(pool, cases_dir, 1000))
 
 
 GOOD_CASES = {
@@ -114,7 +141,19 @@ GOOD_CASES = {
     ),
     "resume": (["train", "--resume", In("run_dir", "good", 0)], "work"),
     "deploy-sim": (["deploy-sim", In("policy", "good", 0), "--episodes", "1"], "work"),
-}
+    # a 250-byte file name is a file name like any other
+    "eval_long_name": (
+        ["eval", In("policy", "good", 0), "--episodes", "1", "-o", Out(".json", True, "long")],
+        "ok",
+    ),
+    "export_long_name": (["export", In("run_dir", "good", 0), "-o", Out(".onnx", False, "long")],
+                         "ok"),
+    # a folder of the user's holding their config.json and metrics.csv is not a run's
+    "user_run_dir": (
+        ["train", "--preset", "cpu", "--backend", "mujoco", "--run-dir", Out("", True, "user")],
+        "named",
+    ),
+}  # fmt: skip
 
 
 @pytest.mark.parametrize("name", sorted(GOOD_CASES))
@@ -355,3 +394,300 @@ def test_run_directories_get_hostile_parts(corpus, tmp_path) -> None:
             sizes = [p.stat().st_size for p in (checkpoint / "params").rglob("*") if p.is_file()]
             assert max(sizes) == 3 * 2**30
     assert {"resume.npz", "env_state.npz", "orbax", "config.json", "meta.json"} <= seen
+
+
+# --------------------------------------------------------------------------- new kinds
+
+
+def _seed_where(predicate, limit: int = 2000) -> int:
+    """The first seed whose rng makes ``predicate(rng)`` true (the draws a generator makes)."""
+    return next(s for s in range(limit) if predicate(np.random.default_rng(s)))
+
+
+def _special_seed(how: str) -> int:
+    return _seed_where(lambda rng: pick(rng, special.SPECIALS) == how)
+
+
+def _hostile_seed(kind: str, mutation) -> int:
+    return _seed_where(lambda rng: pick(rng, mutate_module._hostile()[kind]) is mutation)
+
+
+def _run_file_seed(edit) -> int:
+    files = hostile_run.hostile_run_files
+    runs = mutate_module._hostile()["run_dir"]
+    return _seed_where(
+        lambda r: pick(r, runs) is files and pick(r, hostile_run.RUN_FILE_EDITS) is edit
+    )
+
+
+SPECIAL_COMMANDS = {
+    "urdf": lambda slot: ["validate", slot],
+    "mesh": lambda slot: ["convert", slot, "-o", Out(".xml", True)],
+    "arm_file": lambda slot: ["arm", slot, "--check"],
+    "arm_json": lambda slot: ["arm", slot],
+    "config": lambda slot: ["train", "--preset", "cpu", "--backend", "mujoco", "--run-dir",
+                            Out("", False), "--config", slot],
+    "policy": lambda slot: ["eval", "--episodes", "1", slot],
+    "onnx": lambda slot: ["eval", "--episodes", "1", slot, "-o", Out(".json", True)],
+    "trajectory": lambda slot: ["replay", slot, "-o", Out(".png", True)],
+    "run_dir": lambda slot: ["export", slot, "-o", Out(".npz", True)],
+}  # fmt: skip
+
+
+def _new_kind_cases() -> list[Case]:
+    """A few cases of each new kind: special files of every input kind (a FIFO among them),
+    hostile meshes, damaged run directories, ONNX work bombs, odd output paths."""
+    found = []
+    for i, (kind, make) in enumerate(SPECIAL_COMMANDS.items()):
+        how = ("fifo", "zero_link", "socket")[i % 3]
+        seed = _special_seed(how) if kind not in ("mesh", "run_dir") else i
+        found.append(Case(f"special {kind}", make(In(kind, "special", seed))))
+    for mutation in hostile_mesh.MESH_MUTATIONS[::2]:  # side files, zae, obj, long paths
+        slot = In("mesh", "hostile", _hostile_seed("mesh", mutation))
+        found.append(Case("mesh", ["convert", slot, "-o", Out(".xml", False)]))
+    for edit in (hostile_run.config_strings, hostile_run.metrics_long, hostile_run.read_only_old):
+        slot = In("run_dir", "hostile", _run_file_seed(edit))
+        found.append(Case("run files", ["export", slot, "-o", Out(".npz", True)]))
+        found.append(Case("run files", ["train", "--resume", slot]))
+    for bomb in hostile_onnx.WORK_BOMBS:
+        slot = In("onnx", "hostile", _hostile_seed("onnx", bomb))
+        found.append(Case("onnx", ["eval", "--episodes", "1", slot]))
+    found.append(
+        Case("out", ["export", In("run_dir", "good", 0), "-o", Out(".npz", False, "deep")])
+    )
+    return found
+
+
+def test_new_kinds_of_input_in_capped_workers(pool: Pool, cases_dir: Path) -> None:
+    drawn = _new_kind_cases()
+    outcomes = list(pool.run((case, cases_dir / f"new{next(_COUNTER)}") for case in drawn))
+    _assert_clean(outcomes)
+    labels = " ".join(label for o in outcomes for label in o.inputs)
+    for what in ("=fifo", "=socket", "zae_bomb", "side_special", "old_step", "identity_flood"):
+        assert what in labels, (what, labels)
+    assert all(o.seconds < 10 for o in outcomes), max(o.seconds for o in outcomes)
+
+
+@pytest.mark.slow
+def test_a_quick_parity_run_writes_into_runs_not_results(corpus: Corpus, cases_dir: Path) -> None:
+    case = Case("bench parity", list(QUICK_PARITY), real=True)
+    outcome = _run(case, corpus, cases_dir)
+    assert outcome.status == "ok", _explain(outcome)
+    folder = max(cases_dir.glob("case*"), key=lambda p: p.stat().st_mtime)
+    assert list((folder / "runs" / "bench").glob("parity-*/parity.json"))
+
+
+@pytest.mark.parametrize("fmt", hostile_mesh.FORMATS)
+def test_good_meshes_of_every_format_convert(fmt: str, corpus: Corpus, cases_dir: Path) -> None:
+    seed = _seed_where(lambda rng: pick(rng, hostile_mesh.FORMATS) == fmt)
+    case = Case("convert", ["convert", In("mesh", "good", seed), "-o", Out(".xml", False)])
+    outcome = _run(case, corpus, cases_dir)
+    assert outcome.status == "ok" and outcome.inputs == ["mesh good"], _explain(outcome)
+
+
+def test_special_files_are_what_they_say(corpus: Corpus, tmp_path: Path) -> None:
+    rng = np.random.default_rng(0)
+    checks = {
+        "fifo": lambda p: stat.S_ISFIFO(os.lstat(p).st_mode),
+        "zero_link": lambda p: os.readlink(p) == "/dev/zero",
+        "urandom_link": lambda p: os.readlink(p) == "/dev/urandom",
+        "device_path": lambda p: os.readlink(p) in special.DEVICES,
+        "socket": lambda p: stat.S_ISSOCK(os.lstat(p).st_mode),
+        "folder": lambda p: p.is_dir() and not p.is_symlink(),
+        "outside_link": lambda p: os.readlink(p) in (*special.OUTSIDE, str(corpus.policy)),
+        "dangling_link": lambda p: p.is_symlink() and not p.exists(),
+    }
+    for how in special.SPECIALS:
+        path = tmp_path / f"x_{how}.npz"
+        special.make_special(path, how, rng, outside=corpus.policy)
+        if how == "link_loop":
+            with pytest.raises(OSError, match="many levels of symbolic links"):
+                path.stat()
+        else:
+            assert checks[how](path), how
+    run = tmp_path / "run"
+    path, what = special.special_run_dir(corpus.run_dir, run, np.random.default_rng(3))
+    _, _, how = what.partition("=")
+    assert path == run and how in special.SPECIALS, what
+
+
+def test_zae_archives_are_made_hostile(corpus: Corpus, tmp_path: Path) -> None:
+    seen = set()
+    ops = hostile_mesh.ZAE_OPS
+    seeds = [_seed_where(lambda r, op=op: pick(r, ops) == op and (op != "many" or pick(
+        r, (255, 256, 257, 5000, 65_535)) == 257)) for op in ops]  # fmt: skip
+    for seed in seeds:
+        out = tmp_path / f"z{seed}.urdf"
+        what = hostile_mesh.zae_bomb(corpus.mesh, out, np.random.default_rng(seed))
+        op = what.split(":")[0].split()[1]
+        seen.add(op)
+        with zipfile.ZipFile(hostile_mesh.meshes_of(out) / "part.zae") as archive:
+            infos = archive.infolist()
+        dae = [i for i in infos if i.filename.endswith(".dae")]
+        if op == "bomb":
+            assert dae[0].file_size > hostile_npz.BOMB_BYTES and dae[0].compress_size < 4 * 2**20
+        elif op == "declares_big":
+            assert dae[0].file_size == 3 * 2**30 and dae[0].compress_size < 10_000
+        elif op == "declares_small":
+            assert dae[0].file_size < 10_000 and dae[0].compress_size > 10_000
+        elif op == "many":
+            assert len(infos) > hostile_mesh_limits.MAX_ZAE_MEMBERS - 2
+        else:
+            assert ".." in dae[0].filename or dae[0].filename.startswith("/"), dae[0].filename
+    assert seen == set(hostile_mesh.ZAE_OPS)
+
+
+def test_objs_textures_and_mesh_paths_are_made_hostile(corpus: Corpus, tmp_path: Path) -> None:
+    for op in ("cr", "index", "mtllib"):
+        seed = _seed_where(lambda r, op=op: pick(r, ("cr", "index", "index", "mtllib")) == op)
+        out = tmp_path / f"o{op}.urdf"
+        what = hostile_mesh.obj_damage(corpus.mesh, out, np.random.default_rng(seed))
+        data = (hostile_mesh.meshes_of(out) / "part.obj").read_bytes()
+        if op == "cr":
+            assert b"\n" not in data and data.count(b"\r") > 8, what
+        elif op == "index":
+            assert data.rstrip().endswith(what.split()[-1].encode()), what
+        else:
+            assert b"mtllib ../../../dev/zero" in data, what
+    for op in ("file", "package", "long", "long_dirs"):
+        seed = _seed_where(lambda r, op=op: pick(r, ("file", "package", "long", "long_dirs")) == op)
+        out = tmp_path / f"l{op}.urdf"
+        what = hostile_mesh.long_mesh_path(corpus.mesh, out, np.random.default_rng(seed))
+        (name,) = re.findall(r'<mesh filename="([^"]*)"', out.read_text())
+        assert len(name) >= 3990 or name.startswith(("file:", "package:")), what
+    hostile_mesh.texture_bomb(corpus.mesh, tmp_path / "t.urdf", np.random.default_rng(0))
+    png = (hostile_mesh.meshes_of(tmp_path / "t.urdf") / "tex.png").read_bytes()
+    width, height = struct.unpack(">II", png[16:24])
+    assert width * height > 4096 * 4096 and len(png) < 100_000
+
+
+def test_run_directory_files_are_damaged(corpus: Corpus, tmp_path: Path) -> None:
+    checks = {
+        hostile_run.config_strings: lambda run: any(
+            isinstance(table.get(k), str) for t, k in hostile_run.NUMBER_KEYS
+            for table in [json.loads((run / "config.json").read_text())[t]]),
+        hostile_run.config_bytes: lambda run: _not_utf8(run / "config.json"),
+        hostile_run.metrics_long: lambda run: len((run / "metrics.csv").read_text()) > 200_000,
+        hostile_run.metrics_bytes: lambda run: _not_utf8(run / "metrics.csv"),
+        hostile_run.metrics_no_step: lambda run: "step," not in (run / "metrics.csv").read_text(),
+        hostile_run.metrics_folder: lambda run: (run / "metrics.csv").is_dir(),
+        hostile_run.bad_step_names: lambda run: any(
+            p.name in hostile_run.BAD_STEPS for p in (run / "checkpoints").iterdir()),
+        hostile_run.read_only_old: lambda run: any(
+            p.name.startswith(".old-step_") for p in (run / "checkpoints").iterdir()),
+    }  # fmt: skip
+    for i, (edit, check) in enumerate(checks.items()):
+        run = tmp_path / f"run{i}"
+        shutil.copytree(corpus.run_dir, run)
+        what = edit(run, np.random.default_rng(i))
+        assert check(run), what
+    for folder in (tmp_path / "run7", tmp_path / "run7" / "checkpoints"):
+        os.chmod(folder, 0o755)  # read_only_old, for the clean-up
+
+
+def _not_utf8(path: Path) -> bool:
+    try:
+        path.read_bytes().decode("utf-8")
+    except UnicodeDecodeError:
+        return True
+    return False
+
+
+def test_onnx_work_bombs_are_what_they_say(corpus: Corpus, tmp_path: Path) -> None:
+    import onnx
+
+    out = tmp_path / "m.onnx"
+    what = hostile_onnx.matmul_flood(corpus.onnx, out, np.random.default_rng(3))
+    count, size = (int(w) for w in re.findall(r"(\d+) MatMul by a (\d+)", what)[0])
+    model = onnx.load(str(out))
+    assert sum(n.op_type == "MatMul" for n in model.graph.node) >= count + 1
+    assert any(list(t.dims) == [size, size] for t in model.graph.initializer)
+    seed = _seed_where(lambda rng: int(pick(rng, (4000, 5000, 100_000, 300_000))) == 100_000)
+    hostile_onnx.identity_flood(corpus.onnx, out, np.random.default_rng(seed))
+    assert out.read_bytes().count(b"Identity") == 100_000
+    hostile_onnx.sparse_bomb(corpus.onnx, out, np.random.default_rng(1))
+    (sparse,) = onnx.load(str(out)).graph.sparse_initializer
+    assert int(np.prod(list(sparse.dims), dtype=object)) > 2**24
+    hostile_onnx.local_functions(corpus.onnx, out, np.random.default_rng(0))
+    assert len(onnx.load(str(out)).functions) > 1
+    for seed in (0, 1):
+        hostile_onnx.duplicate_outputs(corpus.onnx, out, np.random.default_rng(seed))
+        graph = onnx.load(str(out)).graph
+        written = [o for n in graph.node for o in n.output] + [o.name for o in graph.output]
+        assert written.count("action") > 1
+    kinds = set()
+    for seed in range(12):
+        what = hostile_onnx.hostile_metadata(corpus.onnx, out, np.random.default_rng(seed))
+        kinds.add(what.split()[1])
+    assert kinds == {"task", "ctrl_dt", "obs_layout"}
+
+
+def test_the_judge_sees_files_changed_outside_the_outputs(
+    corpus: Corpus, cases_dir: Path, tmp_path: Path, monkeypatch
+) -> None:
+    """A command that writes beside its output (the user's file), into benchmarks/results or
+    into its input is ``outside``; the same command writing its named output is ``ok``."""
+    import mjx_arm.policy.export as export
+
+    case = Case("export", ["export", In("run_dir", "good", 0), "-o", Out(".npz", False)])
+    results = tmp_path / "results"
+    (results / "topic").mkdir(parents=True)
+    (results / "topic" / "kept.json").write_text("{}")
+    monkeypatch.setattr(sentinel, "REPO_RESULTS", results)
+    real = export.export_run
+    targets = {
+        "user": lambda out: out.parent / sentinel.USER_FILE,
+        "results": lambda out: results / "topic" / "new.json",
+        "input": lambda out: out.parent / "in1_run_dir" / "metrics.csv",
+    }
+    for name, target in targets.items():
+
+        def also_write(run_dir, output, step=None, target=target):
+            target(Path(output)).write_text("changed")
+            return real(run_dir, output, step)
+
+        monkeypatch.setattr(export, "export_run", also_write)
+        outcome = _run(case, corpus, cases_dir)
+        assert outcome.status == "outside", (name, _explain(outcome))
+    monkeypatch.setattr(export, "export_run", real)
+    assert _run(case, corpus, cases_dir).status == "ok"
+
+
+def test_sentinels_allow_a_moved_back_checkpoint_and_the_lock(tmp_path: Path) -> None:
+    run = tmp_path / "run" / "checkpoints" / ".old-step_1"
+    run.mkdir(parents=True)
+    (run / "meta.json").write_text("{}")
+    before = sentinel.record([tmp_path])
+    run.rename(run.with_name("step_1"))
+    (tmp_path / "run" / ".lock").write_text("123")
+    assert sentinel.changes(before, sentinel.record([tmp_path])) == []
+    (run.with_name("step_1") / "meta.json").write_text('{"x": 1}')
+    (tmp_path / "run" / "new").mkdir()
+    changed = sentinel.changes(before, sentinel.record([tmp_path]))
+    assert len(changed) == 2 and changed[0].startswith("changed") and "added" in changed[1]
+
+
+def test_the_pool_counts_a_peak_over_1_5_gb_and_drops_roots_permissions(
+    corpus: Corpus, tmp_path: Path
+) -> None:
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    os.chmod(locked, 0o555)
+    jobs = [
+        (Case("touch", [str(int(1.5e9))]), tmp_path),
+        (Case("write", [str(locked)]), tmp_path),
+    ]
+    with Pool(corpus, workers=1, runner=probe) as workers:
+        found = {o.command: o for o in workers.run(jobs)}
+    os.chmod(locked, 0o755)
+    assert found["touch"].status == "rss" and found["touch"].peak_rss_mb > RSS_LIMIT_MB
+    assert found["write"].status == "ok" and found["write"].detail == "refused"
+
+
+def test_export_keeps_its_error_reports_out_of_the_run_it_reads(corpus: Corpus) -> None:
+    """Found by the fuzz: export's run directory was taken for the folder it writes into, so a
+    long error line's report was written into the user's run."""
+    from mjx_arm.cli import build_parser, report_folders
+
+    args = build_parser().parse_args(["export", str(corpus.run_dir), "-o", "policy.npz"])
+    assert corpus.run_dir not in report_folders(args)
