@@ -328,7 +328,7 @@ def run_demo(
     claim_out(out, (arm_config or load_arm(None)).urdf_path.stem)
     log = _Log(echo)
     summary: dict[str, Any] = {"out": str(out), "quick": quick, "settings": vars(settings)}
-    summary["arm"] = arm_config.urdf if arm_config else "shipped"
+    summary["arm"] = (arm_config.urdf if arm_config else "") or "shipped"
     summary.update(_steps(out, settings, log, arm_config))
     summary["timings_s"] = log.timings
     summary["wall_seconds"] = round(time.monotonic() - log.start, 1)
