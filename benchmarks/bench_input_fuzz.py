@@ -1,23 +1,39 @@
 """Generated command lines against ``mjx-arm``, run in worker processes under a memory cap:
-every subcommand, its arguments, and every kind of input file good, mutated or hostile.
+every subcommand, its arguments, and every kind of input file good, mutated, hostile or special.
 
 Hypothesis generates the cases (:mod:`input_fuzz.cases`) from good inputs built without
 training (:mod:`input_fuzz.corpus`): each file argument is the good file, a generic mutation
 (:mod:`input_fuzz.mutate`: truncated, flipped bytes, deleted keys, values of the wrong type), a
 structure-aware hostile one (:mod:`input_fuzz.hostile`: ``.npz`` members declaring 2^40
 elements, zip bombs of 3 GiB, pickles, wrong dtypes, 3e38/NaN weights; ONNX graphs with a double
-input, the wrong rank, a 2^36-element allocation at run time or NaN outputs; damaged
-``resume.npz``/``env_state.npz``/orbax folders; configs and arm files with wrong types, huge
-numbers, deep nesting; URDFs with names of 255 to 100,000 characters, non-ASCII names, chains of
-500+ joints, huge mesh references), a missing path or another kind's file. Each case runs
-through ``mjx_arm.cli.main`` in a worker (:mod:`input_fuzz.pool`) whose address space is capped.
+input, the wrong rank, a 2^36-element allocation at run time, NaN outputs, thousands of MatMul
+nodes on a big weight, 300,000 Identity nodes, sparse initializers of 2^40 elements, model-local
+functions, duplicate outputs, metadata with an unknown task, a string ctrl_dt or unknown
+observation keys; damaged ``resume.npz``/``env_state.npz``/orbax folders, config.json with
+strings for numbers, metrics.csv with a 200,000-character field, bytes that are not UTF-8, no
+step column or a folder in its place, ``step_abc`` folders, a read-only run left with
+``.old-step_N`` (:mod:`input_fuzz.hostile_run`); configs and arm files with wrong types, huge
+numbers, deep nesting; URDFs with names of 255 to 100,000 characters, non-ASCII names, chains
+of 500+ joints, huge mesh references; URDFs with OBJ, STL, Collada, glTF or ``.zae`` meshes
+whose side files are special or lead out of the folder, ``.zae`` bombs, members and traversal
+names, CR-only OBJs, face indices of 99999999, 4,000-character and ``file://`` mesh paths,
+texture headers of 10^10 pixels (:mod:`input_fuzz.hostile_mesh`)), a special file in its place
+or in a run directory's (a FIFO, ``/dev/zero``, ``/dev/urandom``, a socket, a folder, a link out
+of the folder, dangling or in a loop: :mod:`input_fuzz.special`), a missing path or another
+kind's file. Output paths are named beside the inputs, by 250-byte names, deep under an absent
+folder of ``/``, or as a user's folder of their own config.json and metrics.csv. One ``bench
+parity`` case in 25 is a whole quick parity run without ``--out``. Each case runs through
+``mjx_arm.cli.main`` in a worker (:mod:`input_fuzz.pool`) whose address space is capped and
+that runs without root's permission override.
 
 A case passes when it exits 0, or 2 with an ``error:`` line of at most 300 characters, or
 reaches the command's long work (stopped there); it fails on a traceback, exit 2 without an
 error line, an error line over 300 characters (``long``), running out of memory under the cap
-(``memory``), the worker dying (``crash``), more than 30 s, or a good output spoiled.
+(``memory``), the worker dying (``crash``), more than 30 s, a good output spoiled, a file
+changed, removed or added outside its named outputs (its inputs, a user's file beside its
+outputs, ``benchmarks/results/``: ``outside``), or a peak RSS over 1.5 GB (``rss``).
 
-Run from the repository root: ``python benchmarks/bench_input_fuzz.py --cases 6000``.
+Run from the repository root: ``python benchmarks/bench_input_fuzz.py --cases 8000``.
 Results: ``benchmarks/results/fuzz/input_fuzz.{json,md}``.
 """
 
@@ -197,7 +213,7 @@ def summary_text(total: dict, wall: float, figures: dict, outcomes: list) -> str
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--cases", type=int, default=6000)
+    parser.add_argument("--cases", type=int, default=8000)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--budget", type=float, default=None, help="seconds; stop then")

@@ -87,10 +87,13 @@ def _cpu_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
 def _fuzz_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
     urdf, inputs = load("fuzz/urdf_fuzz.json"), load("fuzz/input_fuzz.json")
     crashes = sum(k.get("crash", 0) for k in urdf["by_kind"].values())
-    tracebacks = sum(c.get("traceback", 0) for c in inputs["by_command"].values())
+    total = inputs["by_command"]["all"]  # the sum of the commands' rows
+    tracebacks = total.get("traceback", 0)
+    outside = total.get("outside")
+    outside = "" if outside is None else f", {outside} files changed outside their outputs"
     value = (
         f"{fmt(urdf['mutations'])} mutated URDFs: {crashes} crashes; "
-        f"{fmt(inputs['cases'])} command lines: {tracebacks} tracebacks"
+        f"{fmt(inputs['cases'])} command lines: {tracebacks} tracebacks{outside}"
     )
     return "Hostile URDFs and bad inputs", value, ["fuzz/urdf_fuzz.json", "fuzz/input_fuzz.json"]
 

@@ -1,6 +1,7 @@
 """Hypothesis strategies of whole ``mjx-arm`` command lines: every subcommand, its flags with
-valid, out-of-range and malformed values, and its files good, mutated, missing or of another
-kind.
+valid, out-of-range and malformed values, its files good, mutated, hostile, missing, of another
+kind or special (a FIFO, a device, a socket, a folder, a link), and its output paths beside the
+inputs, of 250-byte names, under an absent folder of ``/`` or a user's folder.
 
 A :class:`Case` is an argv whose file arguments are slots (:class:`In`, :class:`Out`); the
 harness (:mod:`input_fuzz.harness`) makes the files and puts their paths in. The numbers lean

@@ -9,9 +9,11 @@ A case passes when it exits 0, or 2 with one ``error:`` line, or reaches the wor
 would start (stopped there: no training, no MJX); a traceback, a crash of the worker, running
 out of memory under the cap, another exit code, a hang, a spoiled good output, a file changed
 outside the named outputs or a peak RSS over 1.5 GB fails it.
-:data:`FUZZ_EXAMPLES` cases of each command take about 20 s on a 2-core CPU; the hostile
-mutations are checked to really be hostile (a header that declares 2^40 elements, a graph that
-allocates 2^36 floats, names of the exact lengths). benchmarks/bench_input_fuzz.py runs 6,000 cases.
+:data:`FUZZ_EXAMPLES` cases of each command and a few of each new kind run in one pool of two
+workers (its warm-up, 20-30 s, paid once); the file's fast tests take about 80 s on a 2-core
+CPU. The hostile mutations are checked to really be hostile (a header that declares 2^40
+elements, a graph that allocates 2^36 floats, names of the exact lengths, a FIFO, a .zae that
+unpacks to 3 GiB, a PNG header of 10^10 pixels). benchmarks/bench_input_fuzz.py runs 8,000 cases.
 """
 
 from __future__ import annotations
