@@ -4,7 +4,7 @@ which tasks it can do, or why not.
 Each URDF goes through the pipeline as a new user would, as published, then (where that is a
 named error) with the converter's repairs (``repair_inertia`` and default effort / velocity
 limits). An arm of 5 to 7 joints gets its setup derived for Reach, Touch and Lift
-(:func:`mjx_arm.arm.setup.task_verdict`); a URDF that is no such arm, or that stays invalid,
+(:func:`mjx_arm.arm.verdict.task_verdict`); a URDF that is no such arm, or that stays invalid,
 is a named error; anything else is a crash (a traceback). The goal: no crash, and every verdict
 states its reason.
 
@@ -38,7 +38,8 @@ def check_one(path: Path, **repairs) -> dict:
 
     from mjx_arm.arm.config import ArmConfig, ArmConfigError
     from mjx_arm.arm.info import validated_arm_info
-    from mjx_arm.arm.setup import arm_setup, task_verdict
+    from mjx_arm.arm.setup import arm_setup
+    from mjx_arm.arm.verdict import task_verdict
     from mjx_arm.inputs import InputError
     from mjx_arm.task.config import task_config
     from mjx_arm.urdf.errors import UrdfError

@@ -11,9 +11,12 @@ from mjx_arm.task.observation import decode_joints
 
 GAIN = 4.0  # 1/s: Cartesian speed per metre (and rad/s per rad) of error
 SPEED = 0.15  # m/s at most
-ALIGNED_SPEED = 0.05  # m/s at most with ``align`` (a small gripper: a straighter path down)
+ALIGNED_SPEED = 0.05  # m/s at most with ``align`` before the lift (a straighter path down)
 ALIGNED_TURN_WEIGHT = 0.1  # with ``align``: the orientation's weight against the position's
 LIMIT_ROOM = 0.02  # rad: with ``align``, a joint this near a limit is at it
+ALIGNED_CLOSE_TOL = 0.005  # m: with ``align``, near enough to close (the jaw leaves 1 cm a side)
+# with ``align``, the close phase lasts until both pads press this much (N), or this many steps
+ALIGNED_GRIP_FORCE, ALIGNED_CLOSE_STEPS = 5.0, 45
 
 
 class ScriptedLift:
@@ -23,8 +26,9 @@ class ScriptedLift:
     ``align``: first turn the tool about the vertical so that the pads close square to a face
     of the cube (a one-jaw gripper's pads, about 5 cm apart open, do not fit across a 2.7 cm
     cube's diagonal), and move at most :data:`ALIGNED_SPEED` (the servos' lag bends a faster
-    path by 5-8 mm, the room the jaws leave beside that cube); off, the tool keeps its home
-    orientation (a wide gripper fits either way).
+    path by 5-8 mm, the room the jaws leave beside that cube), and close until both pads press
+    (a jaw whose squeeze is capped closes in about a second); off, the tool keeps its home
+    orientation (a wide gripper fits either way) and closes for 0.5 s.
     """
 
     def __init__(self, env, align: bool = False, above: float = 0.06) -> None:
@@ -71,7 +75,7 @@ class ScriptedLift:
         mujoco.mj_jacSite(self.model, self.data, jacp, jacr, self.site)
         jac = np.vstack([jacp[:, self.dofs], jacr[:, self.dofs]])
         v = GAIN * (goal - ee)
-        speed = ALIGNED_SPEED if self.align else SPEED
+        speed = ALIGNED_SPEED if self.align and self.phase != "lift" else SPEED
         v *= min(1.0, speed / max(np.linalg.norm(v), 1e-9))
         error = np.zeros(3)  # rotation from the ee's orientation to tool-down (ee frame)
         mujoco.mju_subQuat(error, self.tool_down, np.asarray(quat, float))
@@ -104,12 +108,13 @@ class ScriptedLift:
             self.phase = "down"
         if self.phase == "down":
             goal = np.add(self.cube0, [0.0, 0.0, 0.005])
-            if np.linalg.norm(goal - ee) < 0.003:
+            if np.linalg.norm(goal - ee) < (ALIGNED_CLOSE_TOL if self.align else 0.003):
                 self.phase = "close"
         if self.phase == "close":
             goal, grip = np.add(self.cube0, [0.0, 0.0, 0.005]), 1.0
             self.count += 1
-            if self.count >= 15:
+            gripped = not self.align or (obs["pad_force"] >= ALIGNED_GRIP_FORCE).all()
+            if (self.count >= 15 and gripped) or self.count >= ALIGNED_CLOSE_STEPS:
                 self.phase = "lift"
         if self.phase == "lift":
             goal, grip = np.add(self.cube0, [0.0, 0.0, 0.17]), 1.0

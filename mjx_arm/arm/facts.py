@@ -88,6 +88,8 @@ class ArmInfo:
             fields.setdefault("rest_qpos", tuple(closed.items()))
         if gripper is not None and gripper.fitted.replaced:
             fields.setdefault("pads", gripper.fitted)
+        if gripper is not None and gripper.effort_cap:
+            fields.setdefault("effort_caps", ((gripper.joint, gripper.effort_cap),))
         return self.config.convert_config(self.ee_link, self.ft_joint, **fields)
 
     def joint_coding(self, task: TaskConfig) -> JointCoding:

@@ -7,7 +7,13 @@ import dataclasses
 from dataclasses import dataclass
 
 from mjx_arm.arm.config import ResolvedArm, is_shipped
-from mjx_arm.urdf.grippers import Follower, find_layout, grasp_centre, mimic_positions
+from mjx_arm.urdf.grippers import (
+    Follower,
+    find_layout,
+    grasp_centre,
+    jaw_lever,
+    mimic_positions,
+)
 from mjx_arm.urdf.pad_fit import FittedPads
 
 
@@ -36,6 +42,10 @@ class Gripper:
             every pad is made of primitives.
         rests_closed: the gripper is held closed in the tasks that do not grip (Reach, Touch):
             every arm's but the shipped gripper arm's, whose fingers stay at 0 (open).
+        effort_cap: the driven joint's effort (N m) where the models cap it below the URDF's;
+            0 keeps the URDF's. A jaw presses at most :data:`JAW_PRESS` at its grasp centre.
+        cube_half: half the edge (m) of the largest Lift cube it holds
+            (:attr:`mjx_arm.urdf.grippers.GripperLayout.held_half`).
     """
 
     joint: str
@@ -52,6 +62,8 @@ class Gripper:
     kind: str = "parallel"
     fitted: FittedPads = dataclasses.field(default_factory=FittedPads)
     rests_closed: bool = True
+    effort_cap: float = 0.0
+    cube_half: float = 0.0
 
     @property
     def rest_q(self) -> float:
@@ -107,4 +119,22 @@ def find_gripper(resolved: ResolvedArm) -> Gripper | None:
         kind=layout.kind,
         fitted=layout.fitted,
         rests_closed=not is_shipped(resolved.config),
+        effort_cap=_jaw_cap(resolved, layout),
+        cube_half=layout.held_half,
     )
+
+
+# N: the most a jaw presses at its grasp centre. The shipped parallel gripper presses 24 N; the
+# SO-101's URDF effort (10 N m at a 6 cm lever) pressed a 4 cm cube with about 150 N, into
+# which MuJoCo's soft contacts let the jaws sink 1 cm, and the cube turned out of the grip.
+JAW_PRESS = 30.0
+
+
+def _jaw_cap(resolved: ResolvedArm, layout) -> float:
+    """A jaw's effort cap (N m): :data:`JAW_PRESS` at its lever, where that is below the
+    URDF's effort; 0 for the other grippers (and a jaw the URDF already holds to it)."""
+    if layout.kind != "jaw":
+        return 0.0
+    effort = resolved.model.joints[layout.driven].limit.effort or resolved.config.default_effort
+    cap = JAW_PRESS * jaw_lever(resolved.model, layout)
+    return round(cap, 6) if 0.0 < cap < effort else 0.0

@@ -98,13 +98,15 @@ def grip_point(arm: ArmInfo) -> np.ndarray | None:
 
 def with_points(arm: ArmInfo) -> ArmInfo:
     """``arm`` (at the link's origin) with its derived tool point as its ee point, and its grip
-    point where it has a gripper. A gripper arm whose tool meets the box on its axis within
-    :data:`GRIP_PRESS` of the grip point keeps the grip point in every task (the Panda's TCP,
-    9.5 mm behind its closed fingertips)."""
+    point where it has a gripper. A gripper arm whose grip point lies on the tool axis, where
+    the tool meets the box within :data:`GRIP_PRESS` of it, keeps the grip point in every task
+    (the Panda's TCP, 9.5 mm behind its closed fingertips)."""
     tool, axis = derive_tool_point(arm)
     grip = grip_point(arm)
     if grip is not None and axis is None and np.linalg.norm(tool - grip) < GRIP_PRESS:
-        tool = grip
+        direction = tool_down_solver(arm).ik.tool
+        if np.linalg.norm(grip - direction * (grip @ direction)) < MIN_EE_OFFSET:
+            tool = grip
     arm = dataclasses.replace(arm, tool_axis=axis)
     return dataclasses.replace(
         _at(arm, tool),

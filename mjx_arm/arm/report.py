@@ -23,10 +23,17 @@ def describe(arm: ArmInfo) -> str:
     """Human-readable lines of an arm's facts (no task: fast)."""
     ft = arm.ft_joint or f"the last arm joint (tool link {arm.ft_link!r})"
     derived = "" if arm.config.ee_offset else " (derived: where the tool meets a pressed surface)"
+    if arm.tool_axis is not None and not arm.config.ee_offset:
+        derived = " (derived: the tool's deepest point, off its axis: it meets a surface first)"
     gain = "" if arm.config.kv_factor else " (derived: presses like the shipped arm)"
     lines = [
         f"urdf        {arm.urdf}",
         f"ee_link     {arm.ee_link}; ee point {_vector(arm.ee_offset)} m in its frame{derived}",
+    ]
+    grip = arm.grip_offset
+    if grip is not None and not np.allclose(grip, arm.ee_offset, atol=1e-9):
+        lines.append(f"            Lift's ee point {_vector(grip)} m: where the gripper holds")
+    lines += [
         f"joints      {arm.n_joints}: observation {16 + arm.n_joints}, action {arm.n_joints}",
     ]
     for name, lo, hi, v, turn in zip(

@@ -124,12 +124,13 @@ def arm_setup(arm: ArmInfo, task: TaskConfig) -> ArmSetup:
 
 def object_scale(arm: ArmInfo, task: TaskConfig) -> float:
     """``task``'s ``object_scale`` where it sets one, else the arm's: a gripper task's cube
-    shrinks so that the arm's gripper opens :data:`~mjx_arm.urdf.grippers.CUBE_CLEARANCE`
-    wider than it (:func:`~mjx_arm.urdf.grippers.held_cube_half`; 1.0 where the shipped cube
-    fits, and for the other tasks), never below :data:`MIN_OBJECT_SCALE`."""
+    shrinks to what the arm's gripper holds (:attr:`~mjx_arm.arm.gripper.Gripper.cube_half`:
+    it opens :data:`~mjx_arm.urdf.grippers.CUBE_CLEARANCE` wider, and a jaw holds it square;
+    1.0 where the shipped cube fits, and for the other tasks), never below
+    :data:`MIN_OBJECT_SCALE`."""
     if task.object_scale or not task.spec.gripper or arm.gripper is None:
         return task.object_scale or 1.0
-    half = held_cube_half(arm.gripper.opening)
+    half = arm.gripper.cube_half or held_cube_half(arm.gripper.opening)
     return float(np.clip(half / CUBE_HALF, MIN_OBJECT_SCALE, 1.0))
 
 
@@ -307,7 +308,8 @@ def _notes(arm, task, solver, q_home, scale) -> list[str]:
 
         notes.append(
             f"cube of {200 * cube_half(task):.1f} cm (x{task.object_scale:.2f}, mass "
-            f"x{task.object_scale**3:.2f}): the gripper opens {arm.gripper.opening * 100:.1f} cm"
+            f"x{task.object_scale:.2f}): what the gripper holds (it opens "
+            f"{arm.gripper.opening * 100:.1f} cm)"
         )
     return notes
 

@@ -90,16 +90,17 @@ def gripper_problem(arm: ArmInfo) -> str:
     shipped one)."""
     if arm.gripper is None:
         return (
-            "no gripper: no parallel gripper (two prismatic fingers, one driven and the other "
-            "its <mimic>), no linkage (one driven revolute joint, the knuckles and fingers its "
-            "<mimic>) and no jaw (one driven revolute joint turning a jaw against the hand)"
+            "no gripper: neither prismatic fingers (one driven, the others its <mimic>), nor a "
+            "linkage (one driven revolute joint, <mimic> knuckles), nor a jaw (one driven "
+            "revolute jaw against the hand)"
         )
-    opening = arm.gripper.opening
-    smallest = 2 * CUBE_HALF * MIN_OBJECT_SCALE
-    if opening < smallest + CUBE_CLEARANCE:
+    gripper = arm.gripper
+    smallest = CUBE_HALF * MIN_OBJECT_SCALE
+    if gripper.opening < 2 * smallest + CUBE_CLEARANCE or gripper.cube_half < smallest - 1e-9:
         return (
-            f"the gripper opens {opening * 100:.1f} cm, too little even for a "
-            f"{smallest * 100:.2f} cm cube"
+            f"the gripper opens {gripper.opening * 100:.1f} cm and holds at most a "
+            f"{max(gripper.cube_half, 0.0) * 200:.1f} cm cube, less than the smallest Lift "
+            f"cube ({smallest * 200:.2f} cm)"
         )
     return ""
 

@@ -122,10 +122,10 @@ class TaskConfig:
             z = 0.
         workspace_scale: the target box is scaled by this factor about the base; 0 takes the
             arm's reach over the shipped arm's (1.0 for the shipped arm). An env fills it in.
-        object_scale: a gripper task's object (Lift's cube) over its shipped size, edge and
-            mass alike (same density: the mass by its cube); 0 takes the arm's (1.0 but for a
-            gripper that opens too little for the shipped cube, :mod:`mjx_arm.arm.setup`). An
-            env fills it in.
+        object_scale: a gripper task's object (Lift's cube) over its shipped size, its edge
+            and its mass alike (:meth:`mjx_arm.task.lift.Lift.object_start`); 0 takes the arm's (1.0
+            but for a gripper that holds only a smaller cube, :mod:`mjx_arm.arm.setup`). An env
+            fills it in.
         success_distance: d (m) below which the ee point counts as at the target.
         force_band: (min, max) contact force norm (N) of a successful touch.
         success_hold_steps: consecutive control steps the success condition must hold (near the

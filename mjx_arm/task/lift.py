@@ -37,6 +37,10 @@ CUBE_EDGE_MARGIN = 0.08  # m: the cube keeps this far from the table's edges
 # some starts; from 0.8 it held every corner of the range in both CPU engines.
 CUBE_MASS_RANGE = (0.05, 0.2)
 FRICTION_RANGE = (0.8, 1.0)
+# A smaller cube (``object_scale`` below 1) is lighter by that factor, not by its volume: at
+# the volume's x0.125 the SO-101's 2.3 cm cube (6-25 g) sank 1 cm into its pads in C MuJoCo,
+# whose soft contacts give way in proportion to a light body's mass, and popped out of the grip
+# (at x0.5, 25-100 g, the scripted pick held it in both CPU engines).
 
 
 # Lift's reward. The distance charge and the near-field pull bring the ee to the cube;
@@ -176,14 +180,14 @@ class Lift(Task):
 
     def object_start(self, xp: Any, u, cfg: TaskConfig) -> grip_lib.ObjectStart:
         """A yaw in +-:data:`YAW_RANGE` from the target's third draw (the table fixes the
-        height); mass and friction uniform in :data:`CUBE_MASS_RANGE` (times the cube of the
-        config's ``object_scale``: a smaller cube of the same density) and
-        :data:`FRICTION_RANGE` from the next two."""
+        height); mass and friction uniform in :data:`CUBE_MASS_RANGE` (times the config's
+        ``object_scale``: a smaller cube is lighter by that factor) and :data:`FRICTION_RANGE`
+        from the next two."""
         (m0, m1), (f0, f1) = CUBE_MASS_RANGE, FRICTION_RANGE
-        volume = (cfg.object_scale or 1.0) ** 3
+        lighter = cfg.object_scale or 1.0
         return grip_lib.ObjectStart(
             quat=grip_lib.yaw_quat(xp, (2.0 * u[..., 2] - 1.0) * YAW_RANGE),
-            mass=(m0 + u[..., 3] * (m1 - m0)) * volume,
+            mass=(m0 + u[..., 3] * (m1 - m0)) * lighter,
             friction=f0 + u[..., 4] * (f1 - f0),
         )
 

@@ -65,6 +65,9 @@ class ConvertConfig:
         pads: a gripper's pads fitted to their meshes (:mod:`mjx_arm.urdf.pad_fit`): their
             links' collision meshes are replaced by the fitted boxes and the kept parts of cut
             meshes (:func:`mjx_arm.urdf.collision_fit.fit_pads`); None keeps the URDF's.
+        effort_caps: ``(joint, effort)`` pairs: those joints' actuators push at most that
+            (N m or N) where the URDF allows more (a jaw's squeeze,
+            :attr:`mjx_arm.arm.gripper.Gripper.effort_cap`).
         rest_qpos: joints the model starts at other than 0 (``qpos0``), ``(name, position)``
             pairs: a linkage gripper held closed (:func:`mjx_arm.urdf.convert.load_model`).
         solver_iterations: constraint solver iterations (few, for MJX speed). On an H200 the
@@ -103,6 +106,7 @@ class ConvertConfig:
     servo_dt: float = 0.0
     pad_links: tuple[str, ...] = ()
     pads: FittedPads | None = None
+    effort_caps: tuple[tuple[str, float], ...] = ()
     rest_qpos: tuple[tuple[str, float], ...] = ()
     solver_iterations: int = 2
     ls_iterations: int = 4

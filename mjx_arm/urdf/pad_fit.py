@@ -53,13 +53,20 @@ class PadAxes:
         closing: from this pad towards the other one, with the gripper closed.
         approach: from the hand towards the fingertips, across ``closing``.
         fixed_jaw: the link is a hand whose meshes carry a fixed jaw: the pad is cut from them
-            (module doc); otherwise all its collision meshes make the pad.
+            (module doc) and its box keeps ``closing`` and ``approach`` (its face along the
+            tool axis, where a cube standing on the table meets it); otherwise all its
+            collision meshes make the pad, and the box turns to the finger's face
+            (:func:`_box`).
+        tip: a moving jaw's pad is its last ``tip`` (m) towards its tip along ``approach``,
+            its box square to ``closing`` and ``approach`` (the rest of its meshes stays
+            hulls); 0: the whole finger.
     """
 
     link: str
     closing: tuple[float, float, float]
     approach: tuple[float, float, float]
     fixed_jaw: bool = False
+    tip: float = 0.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -170,12 +177,16 @@ def _fit_cached(path: str, mtime_ns: int, axes: tuple[PadAxes, ...], hand: str) 
         if not meshes:
             continue
         rotation = _rotation(pad)
-        if pad.fixed_jaw:
-            jaw, kept = _cut_jaw(model, pad, meshes, rotation)
+        if pad.fixed_jaw or pad.tip:
+            if pad.fixed_jaw:
+                jaw, kept = _cut_jaw(model, pad, meshes, rotation)
+            else:
+                tip = max(float((m @ rotation[:, 1]).max()) for m in meshes)
+                jaw, kept = _cut(meshes, rotation, tip - pad.tip)
             rests += [(pad.link, part) for part in kept]
+            boxes.append(_box(pad.link, jaw, rotation, turn=False))
         else:
-            jaw = np.concatenate(meshes)
-        boxes.append(_box(pad.link, jaw, rotation))
+            boxes.append(_box(pad.link, np.concatenate(meshes), rotation))
         replaced.add(pad.link)
     return FittedPads(tuple(boxes), tuple(rests), frozenset(replaced), hand)
 
@@ -190,16 +201,17 @@ def _rotation(pad: PadAxes) -> np.ndarray:
     return np.stack([closing, approach, np.cross(closing, approach)], axis=1)
 
 
-def _box(link: str, vertices: np.ndarray, rotation: np.ndarray) -> PadBox:
-    """The box around ``vertices (n, 3)`` (link frame), its faces along the pad's inner face:
-    ``rotation``'s axes turned about the across axis by the slant of that face (a line
-    through its outermost point in each :data:`JAW_SLAB` along the approach, within
-    :data:`MAX_TURN`). A finger that slants at the closed pose (the SO-101's moving jaw, 12
-    degrees) gets a box that presses with its face, not one as thick as its slant."""
+def _box(link: str, vertices: np.ndarray, rotation: np.ndarray, turn: bool = True) -> PadBox:
+    """The box around ``vertices (n, 3)`` (link frame), its faces along the pad's inner face
+    (``turn``): ``rotation``'s axes turned about the across axis by the slant of that face (a
+    line through its outermost point in each :data:`JAW_SLAB` along the approach, within
+    :data:`MAX_TURN`); without ``turn``, ``rotation``'s axes. A finger that slants at the
+    closed pose (the SO-101's moving jaw, 12 degrees) gets a box that presses with its face,
+    not one as thick as its slant."""
     face, along = vertices @ rotation[:, 0], vertices @ rotation[:, 1]
     slabs = np.floor((along - along.min()) / JAW_SLAB).astype(int)
     tops = [(along[slabs == k].mean(), face[slabs == k].max()) for k in np.unique(slabs)]
-    slope = np.polyfit(*np.array(tops).T, 1)[0] if len(tops) >= 2 else 0.0
+    slope = np.polyfit(*np.array(tops).T, 1)[0] if turn and len(tops) >= 2 else 0.0
     turn = np.clip(np.arctan(slope), -np.radians(MAX_TURN), np.radians(MAX_TURN))
     c, s = np.cos(turn), np.sin(turn)
     closing = c * rotation[:, 0] - s * rotation[:, 1]
@@ -229,9 +241,7 @@ def _cut_jaw(
         if slab.any() and face[slab].max() > tip_face + JAW_FACE_STEP:
             break
         cut -= JAW_SLAB
-    jaw = points[along > cut]
-    kept = [m[m @ rotation[:, 1] <= cut] for m in meshes]
-    kept = [k for k in kept if len(k) >= 4]
+    jaw, kept = _cut(meshes, rotation, cut)
     if len(jaw) < 4 or not kept:
         raise ConversionError(
             f"{model.path}: link {pad.link!r}: no fixed jaw can be cut from its collision "
@@ -239,3 +249,13 @@ def _cut_jaw(
             "collision box"
         )
     return jaw, kept
+
+
+def _cut(
+    meshes: list[np.ndarray], rotation: np.ndarray, cut: float
+) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The vertices beyond ``cut`` along the approach (``rotation``'s second axis), and each
+    mesh's vertices before it (those with at least 4 left)."""
+    points = np.concatenate(meshes)
+    kept = [m[m @ rotation[:, 1] <= cut] for m in meshes]
+    return points[points @ rotation[:, 1] > cut], [k for k in kept if len(k) >= 4]

@@ -81,8 +81,10 @@ def effort_velocity(urdf_joint, config: ConvertConfig) -> tuple[float, float]:
 
 def _add_actuators(spec: mujoco.MjSpec, joints, model: RobotModel, config: ConvertConfig) -> None:
     inertia = _min_joint_inertia(spec, [j.name for j in joints])
+    caps = dict(config.effort_caps)
     for joint in joints:
         effort, velocity = effort_velocity(model.joints[joint.name], config)
+        effort = min(effort, caps.get(joint.name, effort))
         act = spec.add_actuator()
         act.name = joint.name
         act.target = joint.name
@@ -205,21 +207,25 @@ def _add_pad_sensors(spec: mujoco.MjSpec, config: ConvertConfig, path: Path) -> 
     than the link's collision boxes (one box around them all, in the link's frame), so every
     contact on the pad counts (MuJoCo's touch sensor sums the normal forces of the body's
     contacts inside its site). A link with a fitted pad box (:mod:`mjx_arm.urdf.pad_fit`) gets
-    the site around that box alone: a one-jaw gripper's hand carries its palm beside it."""
+    that box, turned as it is, as its site: a one-jaw gripper's hand carries its palm beside
+    it."""
     for link in config.pad_links:
         body = spec.body(link)
         geoms = body.geoms if body is not None else []
         boxes = [g for g in geoms if g.type == mujoco.mjtGeom.mjGEOM_BOX and g.contype]
         fitted = [g for g in boxes if g.name == f"{link}{PAD_GEOM_SUFFIX}"]
-        boxes = fitted or boxes
         if not boxes:
             raise ConversionError(f"{path}: pad link {link!r} needs a collision box")
-        low, high = _boxes_extent(boxes)
         site = body.add_site()
         site.name = f"{link}_pad"
         site.type = mujoco.mjtGeom.mjGEOM_BOX
-        site.pos = list(0.5 * (low + high))
-        site.size = list(0.5 * (high - low) + PAD_MARGIN)
+        if fitted:  # the fitted box itself, turned as it is (PyBullet counts the same zone)
+            site.pos, site.quat = list(fitted[0].pos), list(fitted[0].quat)
+            site.size = list(np.asarray(fitted[0].size, float) + PAD_MARGIN)
+        else:
+            low, high = _boxes_extent(boxes)
+            site.pos = list(0.5 * (low + high))
+            site.size = list(0.5 * (high - low) + PAD_MARGIN)
         site.group = 4
         sensor = spec.add_sensor()
         sensor.name = pad_sensor(link)
