@@ -456,7 +456,11 @@ def test_every_report_line_of_hostile_meshes_in_deep_folders_is_under_300_charac
     folder.mkdir(parents=True)
     (folder / "cr.obj").write_bytes(TETRA.replace(b"\n", b"\r"))
     (folder / "zero.obj").write_bytes(b"mtllib " + b"../" * 30 + b"dev/zero\n" + TETRA)
+    png_header(folder / "skin.png", 4097, 4096)
+    (folder / "skin.mtl").write_bytes(b"newmtl a\nmap_Kd skin.png\n")
+    (folder / "skin.obj").write_bytes(b"mtllib skin.mtl\n" + TETRA)
     meshes = ["file:///etc/passwd", "x" * 1000 + ".dae", "cr.obj", "zero.obj", "a/" * 300 + "b.stl"]
+    meshes += ["package://" + "p" * 300 + "/meshes/part.stl", "skin.obj"]
     for i, mesh in enumerate(meshes):
         code = main(["validate", str(robot(folder, mesh, name=f"r{i}"))])
         out, err = capsys.readouterr()

@@ -30,8 +30,9 @@ def _package_dirs(items: list[str]) -> dict[str, str]:
     return out
 
 
-# Length of the error line after a failed validation (mjx_arm.cli.MAX_LINE_CHARS for others).
-LINE_CHARS = 300
+# Length of the error line after a failed validation: under 300 characters, as the report's
+# lines (mjx_arm.cli.MAX_LINE_CHARS for other commands).
+LINE_CHARS = 299
 
 
 def _invalid(urdf: str, report) -> int:
@@ -44,8 +45,9 @@ def _invalid(urdf: str, report) -> int:
     head = f"error: {shown}: "
     room = LINE_CHARS - len(head) - len(tail)
     line = f"{head}{report.summary(room)}{tail}"
-    if len(line) > LINE_CHARS:  # the count and "and N more" took their share: fit it exactly
-        line = f"{head}{report.summary(room - (len(line) - LINE_CHARS))}{tail}"
+    while len(line) > LINE_CHARS and room > 60:  # the count and "; " took their share
+        room -= len(line) - LINE_CHARS
+        line = f"{head}{report.summary(room)}{tail}"
     print(line, file=sys.stderr)
     return EXIT_INVALID
 

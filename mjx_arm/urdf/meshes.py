@@ -84,9 +84,11 @@ def resolve_asset(filename: str, urdf_path: Path, package_dirs: Mapping[str, str
         package, _, rest = filename[len(PACKAGE_PREFIX) :].partition("/")
         base = find_package_dir(package, urdf_path, package_dirs)
         if base is None:
+            name = package if len(package) <= 40 else package[:37] + "..."
             raise AssetPathError(
-                f"names package {package!r}, which was not found above {urdf_path.parent}",
-                f"pass package_dirs={{'{package}': '/path'}} (CLI: --package {package}=/path)",
+                f"names package {name!r}, which was not found above "
+                f"{short_path(urdf_path.parent, 50)}",
+                f"pass package_dirs={{'{name}': '/path'}} (CLI: --package {name}=/path)",
             )
         return _inside(base / rest, [base])
     local = filename[len(FILE_PREFIX) :] if filename.startswith(FILE_PREFIX) else filename
