@@ -245,7 +245,8 @@ def cmd_warmup(args: argparse.Namespace) -> int:
     preset = args.preset or DEFAULT_PRESET
     print(f"warming up {config.task} on {config.arm.urdf or 'the shipped arm'} ({preset})")
     result = warm_up(config, quiet=args.quiet)
-    print(result.compile_summary)
+    if args.quiet:  # else the compile line came after the epoch, with the bar
+        print(result.compile_summary)
     print("caches (share these folders between machines of the same GPU and versions):")
     for what, where in cache_locations().items():
         print(f"  {what}: {where}")
