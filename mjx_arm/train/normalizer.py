@@ -19,8 +19,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from brax.training.acme import running_statistics
-
 from mjx_arm.settings import check_range, check_types, config_fields
 
 # Brax's own floor: what a run without these settings used.
@@ -56,9 +54,13 @@ class NormalizerConfig:
 
 def normalize_fn(config: NormalizerConfig) -> Callable:
     """Brax's ``running_statistics.normalize`` with this config's clip (none when 0)."""
+    from brax.training.acme import running_statistics
+
     return functools.partial(running_statistics.normalize, max_abs_value=config.clip or None)
 
 
 def update(state: Any, observations: Any, config: NormalizerConfig) -> Any:
     """The normaliser's state after ``observations`` ``(..., obs_size)``, its std floored."""
+    from brax.training.acme import running_statistics
+
     return running_statistics.update(state, observations, std_min_value=config.std_floor)

@@ -14,13 +14,13 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import Any
-
-import jax.numpy as jnp
-import optax
+from typing import TYPE_CHECKING, Any
 
 from mjx_arm.inputs import ConfigError
 from mjx_arm.settings import check_range, check_types, config_fields
+
+if TYPE_CHECKING:
+    import optax
 
 SCHEDULES = ("constant", "adaptive")
 
@@ -80,6 +80,8 @@ def make_optimizer(
     A constant schedule builds the same optimiser (and state layout) as runs before schedules
     existed, so their checkpoints resume unchanged.
     """
+    import optax
+
     if not schedule.adaptive:
         return optax.chain(optax.clip_by_global_norm(max_grad_norm), optax.adam(learning_rate))
     adam = optax.inject_hyperparams(optax.adam)(learning_rate=learning_rate)
@@ -92,6 +94,8 @@ def current_rate(optimizer_state: Any, learning_rate: float) -> Any:
     Returns:
         A float32 scalar array.
     """
+    import jax.numpy as jnp
+
     inner = optimizer_state[1]
     if hasattr(inner, "hyperparams"):
         return jnp.asarray(inner.hyperparams["learning_rate"], jnp.float32)
@@ -108,6 +112,8 @@ def adapted_rate(rate: Any, kl: Any, schedule: ScheduleConfig) -> Any:
         kl: the minibatch's mean KL between the rollout's policy and the current one, a scalar.
         schedule: the rule's settings.
     """
+    import jax.numpy as jnp
+
     high, low = kl > 2.0 * schedule.desired_kl, (kl < 0.5 * schedule.desired_kl) & (kl > 0.0)
     rate = jnp.where(high, rate / schedule.factor, jnp.where(low, rate * schedule.factor, rate))
     return jnp.clip(rate, schedule.minimum, schedule.maximum).astype(jnp.float32)
@@ -115,6 +121,8 @@ def adapted_rate(rate: Any, kl: Any, schedule: ScheduleConfig) -> Any:
 
 def with_rate(optimizer_state: Any, rate: Any) -> Any:
     """``optimizer_state`` (an adaptive schedule's) with its learning rate set to ``rate``."""
+    import jax.numpy as jnp
+
     clip_state, inner = optimizer_state
     hyperparams = {**inner.hyperparams, "learning_rate": jnp.asarray(rate, jnp.float32)}
     return (clip_state, inner._replace(hyperparams=hyperparams))
