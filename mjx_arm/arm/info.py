@@ -41,8 +41,12 @@ def _info(resolved: ResolvedArm, reach: float, reference: float) -> ArmInfo:
         joint_names=resolved.joint_names,
         lower=np.array([_range(j)[0] for j in resolved.joints]),
         upper=np.array([_range(j)[1] for j in resolved.joints]),
-        v_max=np.array([lim.velocity or resolved.config.default_velocity for lim in limits]),
-        effort=np.array([lim.effort or resolved.config.default_effort for lim in limits]),
+        v_max=np.array(
+            [_limit(lim, "velocity") or resolved.config.default_velocity for lim in limits]
+        ),
+        effort=np.array(
+            [_limit(lim, "effort") or resolved.config.default_effort for lim in limits]
+        ),
         home_qpos=np.array(resolved.home_qpos),
         ee_link=resolved.ee_link,
         ft_joint=resolved.ft_joint,
@@ -55,11 +59,17 @@ def _info(resolved: ResolvedArm, reach: float, reference: float) -> ArmInfo:
     )
 
 
+def _limit(limit, name: str) -> float:
+    """A ``<limit>``'s ``velocity`` or ``effort``; 0 where the joint has no ``<limit>`` (a
+    continuous joint may leave it out: the config's default then applies)."""
+    return 0.0 if limit is None else getattr(limit, name)
+
+
 def _range(joint) -> tuple[float, float]:
     """A joint's position range (rad): its URDF limits, or +-2 pi for a continuous joint whose
     ``<limit>`` gives none (it turns freely in the physics either way)."""
     lim = joint.limit
-    if joint.type == "continuous" and not lim.lower < lim.upper:
+    if joint.type == "continuous" and (lim is None or not lim.lower < lim.upper):
         return -2 * math.pi, 2 * math.pi
     return lim.lower, lim.upper
 
@@ -181,8 +191,8 @@ def horizontal_reach(resolved: ResolvedArm) -> float:
     model = load_model(resolved.config.urdf_path, config)
     data = mujoco.MjData(model)
     adr = np.array([model.joint(n).qposadr[0] for n in resolved.joint_names])
-    low = np.maximum([j.limit.lower for j in resolved.joints], -np.pi)
-    high = np.minimum([j.limit.upper for j in resolved.joints], np.pi)
+    low = np.maximum([_range(j)[0] for j in resolved.joints], -np.pi)
+    high = np.minimum([_range(j)[1] for j in resolved.joints], np.pi)
     poses = np.random.default_rng(0).uniform(low, high, (REACH_SAMPLES, len(adr)))
     site = model.site(EE_SITE).id
     radii = np.empty(REACH_SAMPLES)
