@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 import operator
+import warnings
 from abc import abstractmethod
 from pathlib import Path
 from typing import Any, ClassVar, NamedTuple
@@ -148,12 +149,17 @@ class BaseRobotEnv(SingleThreadEnv, gym.Env):
 
     def _set_render(self, render_mode: str | None, width: int, height: int) -> None:
         """Check ``render_mode`` and keep the frame size; "human" opens its window (on a
-        machine without a display: an error, not silence)."""
+        machine without a display: a warning that says so and how to get frames, not
+        silence; the env still runs, as Gymnasium's checker expects of every listed mode)."""
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}")
         self.render_mode, self.width, self.height = render_mode, width, height
-        human = render_mode == "human"
-        self._window = FrameWindow(self.metadata["render_fps"]) if human else None
+        self._window = None
+        if render_mode == "human":
+            try:
+                self._window = FrameWindow(self.metadata["render_fps"])
+            except RuntimeError as err:
+                warnings.warn(f"{err}; nothing will be shown", stacklevel=3)
 
     @property
     def dt(self) -> float:
@@ -247,7 +253,8 @@ class BaseRobotEnv(SingleThreadEnv, gym.Env):
         self._ensure_open("render")
         frame = self._render_frame()
         if self.render_mode == "human":
-            self._window.show(frame)
+            if self._window is not None:  # None: no display, said when the env was made
+                self._window.show(frame)
             return None
         return frame
 
