@@ -299,8 +299,29 @@ def test_a_material_library_outside_the_mesh_folder_is_refused(tmp_path):
     depth = len(tmp_path.resolve().parts)
     (tmp_path / "tetra.obj").write_bytes(b"mtllib " + b"../" * depth + b"dev/zero\n" + TETRA)
     (error,) = validate(robot(tmp_path, "tetra.obj"), native=False).errors
-    assert "leads to /dev/zero, outside the mesh's folder" in error.problem
-    assert error.fix == "keep a mesh's material libraries, textures and buffers in its folder"
+    assert "which leads out of the mesh's folder" in error.problem
+    assert error.fix.startswith("keep a mesh's material libraries, textures and buffers in its")
+
+
+@pytest.mark.parametrize(
+    ("mtllib", "map_kd", "message"),
+    [
+        ("lib", "skin.png", "names material library 'lib', which is a folder, not a regular"),
+        ("tetra.mtl", "lib", "names texture 'lib', which is a folder, not a regular file"),
+        ("/home/me/tetra.mtl", "skin.png", "'/home/me/tetra.mtl', which is an absolute path"),
+        ("tetra.mtl", "../pipe", "names texture '../pipe', which leads out of the mesh's folder"),
+    ],
+)
+def test_side_file_names_pybullet_would_misread_are_refused(tmp_path, mtllib, map_kd, message):
+    """A folder where a material library or texture belongs aborts PyBullet (std::bad_alloc);
+    a texture it cannot find beside the mesh it looks for from its working directory (a
+    missing ``../pipe`` blocked it on a FIFO there), so a name leaving the folder is refused
+    whether or not anything is there."""
+    (tmp_path / "lib").mkdir()
+    (tmp_path / "tetra.mtl").write_bytes(f"newmtl a\nmap_Kd {map_kd}\n".encode())
+    (tmp_path / "tetra.obj").write_bytes(f"mtllib {mtllib}\n".encode() + TETRA)
+    problem = mesh_problem(tmp_path / "tetra.obj")
+    assert problem is not None and message in problem.problem
 
 
 def test_a_missing_material_library_is_no_error_and_a_plain_one_passes(tmp_path):

@@ -34,6 +34,9 @@ _KINDS = (
 _OPEN_FLAGS = os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_NOCTTY", 0) | getattr(os, "O_CLOEXEC", 0)
 _FIX_REGULAR = "point it at a regular file (a FIFO, device or socket is never read)"
 _FIX_SMALLER = "simplify the mesh or shrink the file (e.g. in MeshLab or Blender)"
+_FIX_SIDE = (
+    "keep a mesh's material libraries, textures and buffers in its folder, named relative to it"
+)
 
 
 class UnsafeFileError(ConversionError):
@@ -85,13 +88,18 @@ def read_regular(
         OSError: it cannot be opened or read (missing, no permission).
     """
     fd = os.open(path, _OPEN_FLAGS)
-    with os.fdopen(fd, "rb", buffering=0) as f:
+    try:  # checked on the open descriptor, before Python wraps it (it refuses a folder)
         info = os.fstat(fd)
         if not stat.S_ISREG(info.st_mode):
             kind = file_kind(info.st_mode)
             raise UnsafeFileError(path, f"is {kind}, not a regular file", _FIX_REGULAR)
         if info.st_size > limit:
             raise UnsafeFileError(path, too_large(info.st_size, limit, what), _FIX_SMALLER)
+        stream = os.fdopen(fd, "rb", buffering=0)
+    except BaseException:
+        os.close(fd)
+        raise
+    with stream as f:
         wanted = limit + 1 if head is None else min(head, limit + 1)
         chunks, got = [], 0
         while got < wanted:
@@ -112,26 +120,29 @@ def too_large(size: int, limit: int, what: str) -> str:
 
 def side_path(mesh: Path, name: str) -> Path | None:
     """The file a mesh's reader opens for the side file ``name`` the mesh names, resolved
-    (symbolic links followed), or None when nothing is there or only a folder (which every
-    reader fails to read, harmlessly).
+    (symbolic links followed), or None when nothing is there.
 
-    The readers join the name to the mesh's folder as text (PyBullet's OBJ reader: a name
-    starting with ``/`` is inside the folder too), so this does the same.
+    The name must stay in the mesh's folder as written: an absolute name, or one whose ``..``
+    leave the folder, is refused even when nothing is there, because PyBullet looks for a
+    texture it cannot find beside the mesh again from its working directory (a texture named
+    ``../pipe`` blocked it on a FIFO there). What is there must lie in the folder once links
+    are followed; a folder is returned (PyBullet aborts reading one: the caller's read refuses
+    it).
 
     Raises:
-        UnsafeFileError: something is there but outside the mesh's folder (or its subfolders).
+        UnsafeFileError: an absolute name, one leading out of the folder, or a link out of it.
     """
+    text = name.strip()
+    if text.startswith("/") or os.path.normpath(text).split(os.sep)[0] == "..":
+        how = "is an absolute path" if text.startswith("/") else "leads out of the mesh's folder"
+        raise UnsafeFileError(mesh, how, _FIX_SIDE)
     folder = mesh.parent.resolve()
     try:
-        resolved = (folder / name.strip().lstrip("/")).resolve()
-        if stat.S_ISDIR(resolved.stat().st_mode):
-            return None
+        resolved = (folder / text).resolve()
+        resolved.stat()
     except (OSError, RuntimeError, ValueError):  # missing, a link loop, a bad name
         return None
     if not resolved.is_relative_to(folder):
-        raise UnsafeFileError(
-            mesh,
-            f"leads to {short_path(resolved, 40)}, outside the mesh's folder",
-            "keep a mesh's material libraries, textures and buffers in its folder",
-        )
+        problem = f"leads to {short_path(resolved, 40)}, outside the mesh's folder"
+        raise UnsafeFileError(mesh, problem, _FIX_SIDE)
     return resolved

@@ -82,8 +82,8 @@ def _together(size: int, what: str) -> str:
 
 
 def _names(line: bytes) -> list[str]:
-    """The file names a statement's rest of line may mean: all of it, and each word (readers
-    differ: PyBullet takes the rest of the line, trimesh the words)."""
+    """The file names an ``mtllib`` statement's rest of line may mean: all of it, and each
+    word (PyBullet opens the words; a name with spaces is the whole line)."""
     text = line.decode("utf-8", "surrogateescape").strip()
     return list(dict.fromkeys([text, *text.split()])) if text else []
 
@@ -120,17 +120,16 @@ def _mtl_textures_problem(mesh: Path, text: bytes) -> MeshProblem | None:
         key = words[0].decode("utf-8", "replace").lower() if words else ""
         if len(words) < 2 or not (key.startswith("map_") or key in _TEXTURE_KEYS):
             continue
-        for name in _names(words[1]):
-            try:
-                texture = side_path(mesh, name)
-            except UnsafeFileError as exc:
-                return MeshProblem(
-                    f"names texture {short_path(name, 40)!r}, which {exc.problem}", exc.fix
-                )
+        name = words[1].decode("utf-8", "surrogateescape").strip()  # PyBullet: all of it
+        try:
+            texture = side_path(mesh, name) if name else None
+        except UnsafeFileError as exc:
+            problem = MeshProblem(exc.problem, exc.fix)
+        else:
             problem = None if texture is None else texture_problem(texture)
-            if problem is not None:
-                message = f"names texture {short_path(name, 40)!r}, which {problem.problem}"
-                return MeshProblem(message, problem.fix)
+        if problem is not None:
+            message = f"names texture {short_path(name, 40)!r}, which {problem.problem}"
+            return MeshProblem(message, problem.fix)
     return None
 
 
