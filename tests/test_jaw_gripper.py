@@ -176,29 +176,23 @@ def test_scripted_pick_lifts_the_cube(engine: str) -> None:
 
 @pytest.mark.slow
 def test_mjx_puts_the_pads_where_cpu_mujoco_does() -> None:
-    """MJX (JAX on the CPU) steps the arm's model (its fitted pads, no scene) with the jaw
-    closing from open onto its limit: the jaw's angle and the pad boxes' centres end where C
-    MuJoCo puts them (0.01 rad, 1 mm)."""
+    """MJX (JAX on the CPU) places the fitted pad boxes and their touch sites of the Lift
+    model where C MuJoCo does, at three jaw angles from open to past closed (1e-6 m)."""
     import jax
     from mujoco import mjx
 
-    from mjx_arm.urdf.convert import load_model
-
     arm = arm_info(ARM)
-    config = arm.convert_config(pad_links=arm.gripper.pad_links, self_collision=False)
-    model = load_model(arm.urdf, config)  # no contacts: MJX steps the joints and the pads
-    start = mujoco.MjData(model)
+    model = arm_model(arm, lift_config(object_scale=0.5))
+    mx, data = mjx.put_model(model), mujoco.MjData(model)
+    kinematics = jax.jit(mjx.kinematics)
     jaw = model.joint("gripper").qposadr[0]
-    start.qpos[jaw] = arm.gripper.open_q
-    start.ctrl[model.actuator("gripper").id] = arm.gripper.v_max * arm.gripper.closing_sign
-    cpu = mujoco.MjData(model)
-    cpu.qpos[:], cpu.ctrl[:] = start.qpos, start.ctrl
-    for _ in range(480):  # 2 s: the capped jaw closes in about 1 s
-        mujoco.mj_step(model, cpu)
-    assert abs(cpu.qpos[jaw] - arm.gripper.closed_q) < 0.02  # rad: on its limit
-    mx, dx = mjx.put_model(model), mjx.put_data(model, start)
-    dx = jax.jit(lambda d: jax.lax.fori_loop(0, 480, lambda _, d: mjx.step(mx, d), d))(dx)
-    assert abs(float(dx.qpos[jaw]) - cpu.qpos[jaw]) < 0.01  # rad
-    for link in (MOVING, HAND):
-        geom = model.geom(f"{link}{PAD_GEOM_SUFFIX}").id
-        np.testing.assert_allclose(np.asarray(dx.geom_xpos)[geom], cpu.geom_xpos[geom], atol=1e-3)
+    for q in (1.5, 0.6, -0.1):  # rad
+        data.qpos[:5] = [0.2, -0.3, 0.4, 1.2, 0.5]
+        data.qpos[jaw] = q
+        mujoco.mj_kinematics(model, data)
+        dx = kinematics(mx, mjx.put_data(model, data))
+        for link in (MOVING, HAND):
+            geom = model.geom(f"{link}{PAD_GEOM_SUFFIX}").id
+            site = model.site(f"{link}_pad").id
+            np.testing.assert_allclose(dx.geom_xpos[geom], data.geom_xpos[geom], atol=1e-6)
+            np.testing.assert_allclose(dx.site_xpos[site], data.site_xpos[site], atol=1e-6)
