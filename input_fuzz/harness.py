@@ -132,6 +132,16 @@ WORK_STUBS = {
 }
 
 
+# Where a case's native output (fds 1 and 2) goes: a file per worker, set by the pool
+# (native_log), that it reads when the worker dies; None: /dev/null.
+NATIVE_LOG: Path | None = None
+
+
+def native_log(pid: int, folder: Path) -> Path:
+    """The native-output file of the worker of process id ``pid`` (in ``folder``)."""
+    return folder / f"native-{pid}.txt"
+
+
 REAL_WORK = ("mjx_arm.bench.parity.run_parity",)  # what a case marked ``real`` runs
 
 
@@ -277,9 +287,10 @@ def lost_outputs(before: dict[Path, tuple[bool, dict]], failed: bool) -> list[st
 
 @contextlib.contextmanager
 def _quiet_fds() -> Iterator[None]:
-    """File descriptors 1 and 2 to /dev/null (the engines' C code prints there)."""
+    """File descriptors 1 and 2 to :data:`NATIVE_LOG` (emptied), or /dev/null: the engines' C
+    code prints there (what a native crash said, for the pool to report)."""
     saved = [os.dup(1), os.dup(2)]
-    with open(os.devnull, "wb") as null:
+    with open(NATIVE_LOG or os.devnull, "wb") as null:
         os.dup2(null.fileno(), 1)
         os.dup2(null.fileno(), 2)
     try:

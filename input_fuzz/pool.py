@@ -130,8 +130,10 @@ def _serve(conn, corpus: Corpus, cap: int, limit: str, runner) -> None:
     drop_permission_override()
     os.environ["XDG_STATE_HOME"] = str(corpus.folder.parent / "state")
     import mjx_arm.cli  # noqa: F401  (imported once, before the first case is timed)
+    from input_fuzz import harness
     from input_fuzz.harness import GOOD, RSS_LIMIT_MB, run_case, warm_up
 
+    harness.NATIVE_LOG = harness.native_log(os.getpid(), corpus.folder.parent)
     if runner is None:
         warm_up(corpus, corpus.folder.parent / f"warm_up_{os.getpid()}")
     conn.send("ready")
@@ -262,13 +264,21 @@ class Pool:
         except (EOFError, OSError):
             return None
 
-    @staticmethod
-    def _died(worker: _Worker, now: float) -> Outcome:
+    def _died(self, worker: _Worker, now: float) -> Outcome:
+        """The outcome of a worker that died: the signal or exit code, and the tail of what
+        its native code printed during the case."""
+        from input_fuzz.harness import native_log
+
         worker.process.join()
         code = worker.process.exitcode or 0
+        log = native_log(worker.process.pid, self.corpus.folder.parent)
+        said = log.read_bytes()[-800:].decode("utf-8", "replace") if log.is_file() else ""
+        said = f"; its native output ended: {said.strip()}" if said.strip() else ""
         if code < 0:
             name = signal.Signals(-code).name
             status = "memory" if -code == signal.SIGKILL else "crash"
-            return _lost(worker.job, now - worker.since, status, f"worker killed by {name}")
-        detail = f"worker exited with code {code}"
-        return _lost(worker.job, now - worker.since, "crash", detail)
+            detail = f"worker killed by {name}{said}"
+            return _lost(worker.job, now - worker.since, status, detail)
+        return _lost(
+            worker.job, now - worker.since, "crash", f"worker exited with code {code}{said}"
+        )
