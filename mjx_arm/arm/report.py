@@ -144,9 +144,19 @@ def arm_file_text(arm: ArmInfo, touch: ArmSetup | None = None) -> str:
         "kv_factor": round(float(arm.kv_factor), 6),
         "ee_offset": [round(float(v), 6) for v in arm.ee_offset],
     }
+    # one ee_offset serves every task: an arm with a grip point of its own leaves it derived
+    two_points = arm.grip_offset is not None and not arm.config.ee_offset
+    two_points = two_points and not np.allclose(arm.grip_offset, arm.ee_offset, atol=1e-9)
+    point = values.pop("ee_offset") if two_points else None
     repairs = UrdfRepairs.of(arm.config)  # written where set: the arm needs them to load
     values |= {key: value for key, value in dataclasses.asdict(repairs).items() if value}
     body = [f"{key} = {json.dumps(value)}" for key, value in values.items()]
+    if point is not None:
+        grip = [round(float(v), 6) for v in arm.grip_offset]
+        body.append(
+            f"# ee_offset = {json.dumps(point)}  # derived for Reach and Touch, {json.dumps(grip)} "
+            "for Lift; set, one point serves every task"
+        )
     if arm.config.home_qpos:
         body.append(f"home_qpos = {json.dumps([round(float(q), 6) for q in arm.home_qpos])}")
     elif touch is not None:
