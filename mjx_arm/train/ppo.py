@@ -84,8 +84,9 @@ def full_config(
         "task": task.to_dict(),
         "arm": arm_record(arm),
         "convert": {
-            **{k: v for k, v in vars(conversion).items() if k != "package_dirs"},
+            **{k: v for k, v in vars(conversion).items() if k not in ("package_dirs", "pads")},
             "scene": conversion.scene.name,
+            "pads": sorted(conversion.pads.replaced) if conversion.pads else [],  # fitted
         },
         "backend": resolve_backend(config.backend),
         "physics_resolved": physics or {},
