@@ -111,7 +111,9 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> Runs:
     procs = [
         _start(_train_args(pair, *hosts, "--host-rank", "0"), _env(), logs[0]),
         _start(_train_args(pair, *hosts, "--host-rank", "1"), _env(), logs[1]),
-        _start(_train_args(single, "--devices", "2"), two_devices, logs[2]),
+        # the preset's totals on two devices (not grown with them), as the pair trains
+        _start(_train_args(single, "--devices", "2", "--set", "scale_with_devices=false"),
+               two_devices, logs[2]),  # fmt: skip
     ]
     codes = _finish(procs)
     outputs = [log.read_text(errors="replace") for log in logs]
