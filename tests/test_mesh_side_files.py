@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import os
+import socket
 import struct
 import subprocess
 import sys
@@ -231,6 +232,11 @@ def test_read_regular_refuses_a_fifo_and_a_device_without_reading(tmp_path):
     assert not reader.is_alive() and "is a FIFO (named pipe), not a regular file" in str(outcome)
     with pytest.raises(UnsafeFileError, match="is a character device, not a regular file"):
         read_regular("/dev/zero", 100)
+    server = socket.socket(socket.AF_UNIX)
+    server.bind(str(tmp_path / "sock"))  # a socket cannot even be opened: still named
+    with pytest.raises(UnsafeFileError, match="is a socket, not a regular file"):
+        read_regular(tmp_path / "sock", 100)
+    server.close()
 
 
 def test_read_regular_reads_up_to_the_limit_and_no_further(tmp_path):

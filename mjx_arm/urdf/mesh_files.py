@@ -87,7 +87,7 @@ def read_regular(
             it is read).
         OSError: it cannot be opened or read (missing, no permission).
     """
-    fd = os.open(path, _OPEN_FLAGS)
+    fd = _open(path)
     try:  # checked on the open descriptor, before Python wraps it (it refuses a folder)
         info = os.fstat(fd)
         if not stat.S_ISREG(info.st_mode):
@@ -111,6 +111,26 @@ def read_regular(
     if got > limit:
         raise UnsafeFileError(path, f"grew above {limit / MIB:.0f} MiB while read", _FIX_SMALLER)
     return b"".join(chunks)
+
+
+def _open(path: str | Path) -> int:
+    """A descriptor of ``path`` opened without blocking (a FIFO opens at once).
+
+    Raises:
+        UnsafeFileError: it cannot be opened and is not a regular file (a socket).
+        OSError: it cannot be opened (missing, no permission).
+    """
+    try:
+        return os.open(path, _OPEN_FLAGS)
+    except OSError as exc:
+        try:
+            mode = os.stat(path).st_mode
+        except (OSError, ValueError):
+            raise exc from None
+        if stat.S_ISREG(mode):
+            raise
+        problem = f"is {file_kind(mode)}, not a regular file"
+        raise UnsafeFileError(path, problem, _FIX_REGULAR) from exc
 
 
 def too_large(size: int, limit: int, what: str) -> str:
