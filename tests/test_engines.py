@@ -200,7 +200,8 @@ NAMELESS = (
 # --backend), an engine's choice of a command, an env naming its own engine.
 TYPED = {
     "mjx_arm/evaluate/cli.py": {"mujoco": 1},  # --engine's default
-    "mjx_arm/evaluate/runners.py": {"mjx": 1},  # the batched runner's default backend
+    # the batched runner's default backend, and the backend whose CPU compile takes minutes
+    "mjx_arm/evaluate/runners.py": {"mjx": 2},
     "mjx_arm/bench/transfer.py": {"mjx": 1, "mujoco": 1},  # the backends of two rows
     "mjx_arm/bench/robustness.py": {"mjx": 1, "mujoco": 1},  # the backends of its engines
     "mjx_arm/bench/robustness_config.py": {"mjx": 1},  # a choice of --engine
