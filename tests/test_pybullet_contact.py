@@ -234,7 +234,7 @@ def test_lift_policy_sets_down_softly_in_pybullet() -> None:
 
 
 def test_eval_takes_the_contact_and_names_a_bad_one(capsys: pytest.CaptureFixture) -> None:
-    """``mjx-arm eval --pybullet-contact``: the summary names the contact it ran on; a bad text
+    """``mjx-arm eval --pybullet-contact``: the JSON summary names the contact it ran on; a bad text
     is exit 2 with the parser's message, before anything is loaded."""
     policy = str(LIFT_SEED0)
     assert (
@@ -248,6 +248,7 @@ def test_eval_takes_the_contact_and_names_a_bad_one(capsys: pytest.CaptureFixtur
                 "1",
                 "--pybullet-contact",
                 "rigid",
+                "--json",
             ]
         )
         == EXIT_OK
