@@ -88,6 +88,7 @@ class Outcome:
     peak_rss_mb: float = 0.0
     peak_vm_mb: float = 0.0
     outputs: list[str] = field(default_factory=list)
+    retire: bool = False  # the worker's address space is near its cap: the pool replaces it
 
 
 # --------------------------------------------------------------------------- stubs

@@ -15,8 +15,10 @@ A worker run by root gives up the capabilities that let root ignore file permiss
 runs, as it is to a user.
 
 A worker that dies during a case (a signal, or an exit) makes that case ``crash`` (``memory``
-when the kernel killed it, SIGKILL) and is replaced, as is one whose case ran out of memory;
-one that runs past :data:`KILL_SECONDS` is killed and its case is a ``hang``.
+when the kernel killed it, SIGKILL) and is replaced, as is one whose case ran out of memory or
+whose address space has grown past :data:`RETIRE_BYTES`; one that runs past
+:data:`KILL_SECONDS` is killed and its case is a ``hang``. What the case's native code printed
+last (:data:`~input_fuzz.harness.NATIVE_LOG`) is added to a crash's or a hang's detail.
 
 The cap was chosen by measurement (benchmarks/bench_input_fuzz.py reports it with each case's
 peak RSS): a worker that has imported ``mjx_arm.cli`` and run every command maps about 2.2 GB
@@ -43,6 +45,10 @@ from input_fuzz.harness import ALARM_SECONDS, Outcome
 
 CAP_BYTES = 4 * 2**30
 CAP_LIMIT = "RLIMIT_AS"
+# A worker whose address space has grown past this after a case is replaced: a case (and the
+# making of its files) starts with at least 0.8 GiB under the cap. Near the cap, a thread's
+# stack cannot be mapped, and XLA aborts or waits: the worker's state, not the case's doing.
+RETIRE_BYTES = CAP_BYTES - 0.8 * 2**30
 KILL_SECONDS = ALARM_SECONDS + 30  # the harness's own alarm comes first
 
 
@@ -145,6 +151,7 @@ def _serve(conn, corpus: Corpus, cap: int, limit: str, runner) -> None:
         else:
             outcome = runner(case, corpus, folder)
         outcome.peak_rss_mb, outcome.peak_vm_mb = memory_mb("VmHWM"), memory_mb("VmPeak")
+        outcome.retire = memory_mb("VmSize") * 2**20 > RETIRE_BYTES
         if outcome.status in GOOD and outcome.peak_rss_mb > RSS_LIMIT_MB:
             outcome.detail = f"peak RSS {outcome.peak_rss_mb:.0f} MB; {outcome.detail}"
             outcome.status = "rss"
@@ -245,10 +252,11 @@ class Pool:
                     continue
                 worker.process.kill()
                 worker.process.join()
-                outcome = _lost(worker.job, now - worker.since, "hang", "worker killed")
+                detail = "worker killed" + self._native_tail(worker)
+                outcome = _lost(worker.job, now - worker.since, "hang", detail)
             elif outcome is None:
                 outcome = self._died(worker, now)
-            if outcome.status == "memory":  # a fresh worker: its peak address space is its own
+            if outcome.status == "memory" or outcome.retire:  # a fresh worker: room under the cap
                 worker.stop()
             if not worker.process.is_alive():
                 self.workers[i] = self._start()
@@ -264,16 +272,21 @@ class Pool:
         except (EOFError, OSError):
             return None
 
+    def _native_tail(self, worker: _Worker) -> str:
+        """``; its native output ended: ...`` (the last 800 bytes the worker's case printed
+        from native code), or "" when it printed nothing."""
+        from input_fuzz.harness import native_log
+
+        log = native_log(worker.process.pid, self.corpus.folder.parent)
+        said = log.read_bytes()[-800:].decode("utf-8", "replace") if log.is_file() else ""
+        return f"; its native output ended: {said.strip()}" if said.strip() else ""
+
     def _died(self, worker: _Worker, now: float) -> Outcome:
         """The outcome of a worker that died: the signal or exit code, and the tail of what
         its native code printed during the case."""
-        from input_fuzz.harness import native_log
-
         worker.process.join()
         code = worker.process.exitcode or 0
-        log = native_log(worker.process.pid, self.corpus.folder.parent)
-        said = log.read_bytes()[-800:].decode("utf-8", "replace") if log.is_file() else ""
-        said = f"; its native output ended: {said.strip()}" if said.strip() else ""
+        said = self._native_tail(worker)
         if code < 0:
             name = signal.Signals(-code).name
             status = "memory" if -code == signal.SIGKILL else "crash"
