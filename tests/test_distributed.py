@@ -76,6 +76,10 @@ def _train_args(run_dir: Path, *flags: str) -> list[str]:
             "--run-dir", str(run_dir), *flags, "--set", *sets]  # fmt: skip
 
 
+# one process of two devices, on the preset's totals rather than grown with the devices
+SINGLE = ("--devices", "2", "--set", "scale_with_devices=false")
+
+
 def _finish(procs: list[subprocess.Popen]) -> list[int]:
     """Wait for every process (killing all at the timeout); their exit codes."""
     deadline = time.monotonic() + TIMEOUT_S
@@ -112,8 +116,7 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> Runs:
         _start(_train_args(pair, *hosts, "--host-rank", "0"), _env(), logs[0]),
         _start(_train_args(pair, *hosts, "--host-rank", "1"), _env(), logs[1]),
         # the preset's totals on two devices (not grown with them), as the pair trains
-        _start(_train_args(single, "--devices", "2", "--set", "scale_with_devices=false"),
-               two_devices, logs[2]),  # fmt: skip
+        _start(_train_args(single, *SINGLE), two_devices, logs[2]),
     ]
     codes = _finish(procs)
     outputs = [log.read_text(errors="replace") for log in logs]
