@@ -98,10 +98,15 @@ def gripper_problem(arm: ArmInfo) -> str:
     gripper = arm.gripper
     smallest = CUBE_HALF * MIN_OBJECT_SCALE
     if gripper.opening < 2 * smallest + CUBE_CLEARANCE or gripper.cube_half < smallest - 1e-9:
+        held = (
+            f"holds at most a {gripper.cube_half * 200:.1f} cm cube"
+            if gripper.cube_half > 0
+            else "holds no cube"
+        )
+        square = " square (its pads' faces within 10 degrees of parallel)" * (gripper.kind == "jaw")
         return (
-            f"the gripper opens {gripper.opening * 100:.1f} cm and holds at most a "
-            f"{max(gripper.cube_half, 0.0) * 200:.1f} cm cube, less than the smallest Lift "
-            f"cube ({smallest * 200:.2f} cm)"
+            f"the gripper opens {max(gripper.opening, 0.0) * 100:.1f} cm and {held}{square}, "
+            f"less than the smallest Lift cube ({smallest * 200:.2f} cm)"
         )
     return ""
 

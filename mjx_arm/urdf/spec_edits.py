@@ -204,7 +204,8 @@ def pad_sensor(link: str) -> str:
 
 def _add_pad_sensors(spec: mujoco.MjSpec, config: ConvertConfig, path: Path) -> None:
     """A touch sensor on each of ``config.pad_links``: a box site :data:`PAD_MARGIN` larger
-    than the link's collision boxes (one box around them all, in the link's frame), so every
+    than the link's collision primitives (one box around them all, in the link's frame: boxes,
+    and the boxes around spheres, capsules and cylinders), so every
     contact on the pad counts (MuJoCo's touch sensor sums the normal forces of the body's
     contacts inside its site). A link with a fitted pad box (:mod:`mjx_arm.urdf.pad_fit`) gets
     that box, turned as it is, as its site: a one-jaw gripper's hand carries its palm beside
@@ -212,10 +213,13 @@ def _add_pad_sensors(spec: mujoco.MjSpec, config: ConvertConfig, path: Path) -> 
     for link in config.pad_links:
         body = spec.body(link)
         geoms = body.geoms if body is not None else []
-        boxes = [g for g in geoms if g.type == mujoco.mjtGeom.mjGEOM_BOX and g.contype]
+        boxes = [g for g in geoms if int(g.type) in _PAD_SHAPES and g.contype]
         fitted = [g for g in boxes if g.name == f"{link}{PAD_GEOM_SUFFIX}"]
         if not boxes:
-            raise ConversionError(f"{path}: pad link {link!r} needs a collision box")
+            raise ConversionError(
+                f"{path}: pad link {link!r} needs a collision shape (a box, sphere, capsule or "
+                "cylinder, or a mesh the gripper's pads are fitted to)"
+            )
         site = body.add_site()
         site.name = f"{link}_pad"
         site.type = mujoco.mjtGeom.mjGEOM_BOX
@@ -233,15 +237,37 @@ def _add_pad_sensors(spec: mujoco.MjSpec, config: ConvertConfig, path: Path) -> 
         sensor.objtype, sensor.objname = mujoco.mjtObj.mjOBJ_SITE, site.name
 
 
+# The pad shapes a touch site can be put around (a cylinder pad is a capsule by then).
+_PAD_SHAPES = {
+    int(mujoco.mjtGeom.mjGEOM_BOX),
+    int(mujoco.mjtGeom.mjGEOM_SPHERE),
+    int(mujoco.mjtGeom.mjGEOM_CAPSULE),
+    int(mujoco.mjtGeom.mjGEOM_CYLINDER),
+}
+
+
+def _half_extent(geom) -> np.ndarray:
+    """Half sizes ``(3,)`` of the box around a spec geom in its own frame: a box's size, a
+    sphere's radius, a capsule's or cylinder's radius across and half length (and radius)
+    along its z."""
+    size = np.asarray(geom.size, float)
+    if int(geom.type) == int(mujoco.mjtGeom.mjGEOM_BOX):
+        return size
+    if int(geom.type) == int(mujoco.mjtGeom.mjGEOM_SPHERE):
+        return np.full(3, size[0])
+    cap = size[0] if int(geom.type) == int(mujoco.mjtGeom.mjGEOM_CAPSULE) else 0.0
+    return np.array([size[0], size[0], size[1] + cap])
+
+
 def _boxes_extent(boxes) -> tuple[np.ndarray, np.ndarray]:
     """Corners ``(3,)`` low and high of the axis-aligned box (in the body's frame) around
-    spec box geoms, each placed by its ``pos`` and ``quat``."""
+    spec geoms (:data:`_PAD_SHAPES`), each placed by its ``pos`` and ``quat``."""
     signs = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
     corners = []
     for box in boxes:
         rot = np.zeros(9)
         mujoco.mju_quat2Mat(rot, np.asarray(box.quat, float))
-        local = signs * np.asarray(box.size, float)
+        local = signs * _half_extent(box)
         corners.append(np.asarray(box.pos, float) + local @ rot.reshape(3, 3).T)
     points = np.concatenate(corners)
     return points.min(axis=0), points.max(axis=0)
