@@ -197,17 +197,25 @@ def passing_address_space(outcomes: list) -> float:
     return max((o.peak_vm_mb for o in outcomes if o.status in GOOD), default=0.0)
 
 
+def external_changes(outcomes: list) -> list[dict]:
+    """Cases during which another process changed benchmarks/results (not counted)."""
+    return [{"argv": o.argv, "changes": o.external} for o in outcomes if o.external]
+
+
 def summary_text(total: dict, wall: float, figures: dict, outcomes: list) -> str:
     rss = [o.peak_rss_mb for o in outcomes]
     vm = passing_address_space(outcomes)
     counts = ", ".join(f"{int(total[s])} {STATUS_HEADERS[s]}" for s in STATUS_HEADERS)
+    external = len(external_changes(outcomes))
     return (
         f"{int(total['cases'])} cases in {wall:.0f} s on {figures['workers']} workers "
         f"({figures['worker_restarts']} restarted): {counts}. Each worker's "
         f"{figures['cap_limit']} capped at {figures['cap_bytes'] / 2**30:.0f} GiB (the largest "
         f"address space a passing case left, imports included: {vm / 1024:.2f} GiB); peak RSS "
         f"per case (the worker's, imports included) median {statistics.median(rss):.0f} MB, max "
-        f"{max(rss):.0f} MB; longest error line {int(total['longest_error'])} characters."
+        f"{max(rss):.0f} MB; longest error line {int(total['longest_error'])} characters. "
+        f"{external} cases ran while another process wrote benchmarks/results (the case's "
+        "process wrote nothing there: not counted)."
     )
 
 
@@ -264,6 +272,7 @@ def main() -> None:
         "longest_error_line": longest_errors(outcomes),
         "failures": failures(outcomes),
         "slowest": slowest(outcomes),
+        "external_changes": external_changes(outcomes),
     }
     save_results(args.name, payload, text + "\n", args.results_dir)
 

@@ -275,7 +275,8 @@ def render_fuzz(data: Json) -> list[str]:
     cols = sorted({k for g in groups.values() for k in g})
     lines = []
     if isinstance(data.get("summary"), str):
-        lines += [data["summary"] + ".", ""]
+        summary = data["summary"]
+        lines += [summary if summary.endswith(".") else summary + ".", ""]
     total = data.get("mutations") or data.get("cases")
     lines += [f"{fmt(total)} cases, seed {data.get('seed')}, {secs(data.get('wall_seconds'))}.",
               ""]  # fmt: skip

@@ -15,8 +15,8 @@ stderr captured and the folder as the working directory, and checks:
 - ``lost``: a good output (a seeded file, a run directory's checkpoint or config) was changed by
   a failing command, or replaced by a broken file;
 - ``outside``: a file the case must not touch was changed, removed or added: its inputs, a
-  user's file beside its outputs or in a user's folder, ``benchmarks/results/``
-  (:mod:`input_fuzz.sentinel`);
+  user's file beside its outputs or in a user's folder, ``benchmarks/results/`` (there: written
+  by the case's own process, :mod:`input_fuzz.sentinel`);
 - ``long``: an ``error:`` line longer than :data:`MAX_ERROR_CHARS` characters;
 - ``memory``: the case ran out of memory (a ``MemoryError`` or a native allocation failure
   under the worker's cap, :mod:`input_fuzz.pool`);
@@ -89,6 +89,7 @@ class Outcome:
     peak_vm_mb: float = 0.0
     outputs: list[str] = field(default_factory=list)
     retire: bool = False  # the worker's address space is near its cap: the pool replaces it
+    external: str = ""  # benchmarks/results changed during the case, not by it (not counted)
 
 
 # --------------------------------------------------------------------------- stubs
@@ -410,10 +411,15 @@ def run_case(case: Case, corpus: Corpus, folder: Path, on_start=None) -> Outcome
     if on_start is not None:
         on_start()
     start = time.perf_counter()
+    sentinel.watch_writes()
     try:
         status, code, detail, stderr = _run(case, argv, folder)
         seconds = time.perf_counter() - start
-        touched = sentinel.changes(untouched, sentinel.record(roots, skip))
+        touched, shared = sentinel.split_shared(
+            sentinel.changes(untouched, sentinel.record(roots, skip))
+        )
+        written = sentinel.watched_writes()
+        touched += written
     finally:
         remove_deep_outputs()
     longest = max(error_lines(stderr), key=len, default="")
@@ -430,6 +436,8 @@ def run_case(case: Case, corpus: Corpus, folder: Path, on_start=None) -> Outcome
     outcome = Outcome(case.command, status, code, seconds, argv, detail, inputs, longest[:400])
     outcome.error_chars = len(longest)
     outcome.outputs = [slot.name or "plain" for slot in outputs.values()]
+    if shared and not written:  # another process wrote benchmarks/results meanwhile
+        outcome.external = "; ".join(shared)[:500]
     return outcome
 
 

@@ -11,6 +11,13 @@ and folder under these roots, but its named outputs:
 - the repository's ``benchmarks/results/`` tree (a benchmark writes there only where ``--out``
   names it).
 
+The repository's tree is shared with other processes (another benchmark may write its results
+while a case runs), so a change there counts only where this process wrote there during the
+case: :func:`watch_writes` records, by an audit hook (:func:`sys.addaudithook`), every write a
+process makes from Python under that tree (an ``open`` for writing, a rename, a removal, a new
+folder). A change there that no such write explains is another process's: the harness reports
+it apart and does not count it.
+
 Each entry is recorded by ``lstat`` (a link is not followed, a FIFO is not opened): a file's
 type, size and modification time in ns, a folder's type; an entry changed, removed or added is
 a change. Left out: the named outputs, a run directory ``train`` writes into, and two
@@ -23,6 +30,7 @@ from __future__ import annotations
 
 import os
 import stat
+import sys
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -81,3 +89,62 @@ def changes(before: State, after: State) -> list[str]:
     found += [f"removed {p}" for p in before if p not in after]
     found += [f"added {p}" for p in after if p not in before]
     return found
+
+
+# Audit events of writes (and what names the path), and open flags that write.
+_WRITE_EVENTS = {
+    "os.rename": 1,  # os.replace too: (src, dst, ...), the destination
+    "os.remove": 0,
+    "os.rmdir": 0,
+    "os.mkdir": 0,
+    "os.truncate": 0,
+    "os.symlink": 1,
+    "os.link": 1,
+    "shutil.copyfile": 1,
+    "shutil.rmtree": 0,
+}
+_WRITE_FLAGS = os.O_WRONLY | os.O_RDWR | os.O_CREAT | os.O_TRUNC | os.O_APPEND
+_writes: list[str] = []
+_hooked = False
+
+
+def _written_path(event: str, args: tuple) -> object:
+    """The path a write-ish audit event writes, or None for a read or another event."""
+    if event == "open":
+        path, mode, flags = args
+        writing = (isinstance(mode, str) and any(c in mode for c in "wax+")) or (
+            isinstance(flags, int) and flags & _WRITE_FLAGS
+        )
+        return path if writing else None
+    index = _WRITE_EVENTS.get(event)
+    return None if index is None or len(args) <= index else args[index]
+
+
+def _audit(event: str, args: tuple) -> None:
+    if event != "open" and event not in _WRITE_EVENTS:
+        return
+    path = _written_path(event, args)
+    if isinstance(path, str | bytes | os.PathLike):
+        text = os.path.abspath(os.fsdecode(path))
+        if text.startswith(str(REPO_RESULTS) + os.sep) or text == str(REPO_RESULTS):
+            _writes.append(f"{event} {text}")
+
+
+def watch_writes() -> None:
+    """Start (again) recording this process's writes under :data:`REPO_RESULTS`."""
+    global _hooked
+    if not _hooked:
+        sys.addaudithook(_audit)
+        _hooked = True
+    _writes.clear()
+
+
+def watched_writes() -> list[str]:
+    """The writes under :data:`REPO_RESULTS` since :func:`watch_writes` (``event path``)."""
+    return list(dict.fromkeys(_writes))
+
+
+def split_shared(found: list[str]) -> tuple[list[str], list[str]]:
+    """``found`` (:func:`changes`) as (those outside :data:`REPO_RESULTS`, those inside)."""
+    inside = [c for c in found if c.split(" ", 1)[1].startswith(str(REPO_RESULTS))]
+    return [c for c in found if c not in inside], inside

@@ -628,7 +628,8 @@ def test_the_judge_sees_files_changed_outside_the_outputs(
     corpus: Corpus, cases_dir: Path, tmp_path: Path, monkeypatch
 ) -> None:
     """A command that writes beside its output (the user's file), into benchmarks/results or
-    into its input is ``outside``; the same command writing its named output is ``ok``."""
+    into its input is ``outside``; the same command writing its named output is ``ok``, and so
+    is it while another process writes into benchmarks/results (reported apart)."""
     import mjx_arm.policy.export as export
 
     case = Case("export", ["export", In("run_dir", "good", 0), "-o", Out(".npz", False)])
@@ -653,6 +654,15 @@ def test_the_judge_sees_files_changed_outside_the_outputs(
         assert outcome.status == "outside", (name, _explain(outcome))
     monkeypatch.setattr(export, "export_run", real)
     assert _run(case, corpus, cases_dir).status == "ok"
+
+    def another_process_writes(run_dir, output, step=None):
+        code = f"open({str(results / 'topic' / 'theirs.json')!r}, 'w').write('{{}}')"
+        subprocess.run([sys.executable, "-c", code], check=True)
+        return real(run_dir, output, step)
+
+    monkeypatch.setattr(export, "export_run", another_process_writes)
+    outcome = _run(case, corpus, cases_dir)
+    assert outcome.status == "ok" and "theirs.json" in outcome.external, _explain(outcome)
 
 
 def test_sentinels_allow_a_moved_back_checkpoint_and_the_lock(tmp_path: Path) -> None:
