@@ -77,10 +77,10 @@ class ArmConfig:
             (:func:`mjx_arm.arm.info.press_kv_factor`; the shipped arms: 1). Configs recorded
             before this field existed read 1, what they trained with.
         ee_offset: the end-effector point in ``ee_link``'s frame (m, 3 values); () derives it:
-            where the tool's shapes meet a surface pressed against them along the tool axis
-            (:func:`mjx_arm.arm.info.derive_ee_offset`; the shipped arms and arms with a
-            parallel gripper: the link's origin). Configs recorded before this field existed
-            read (0, 0, 0).
+            where the tool, its gripper closed, meets a surface pressed against it along the
+            tool axis (:func:`mjx_arm.arm.points.derive_tool_point`; the shipped arms and arms
+            with a parallel gripper: the link's origin). Configs recorded before this field
+            existed read (0, 0, 0).
     """
 
     urdf: str = ""

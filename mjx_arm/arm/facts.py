@@ -40,7 +40,7 @@ class ArmInfo:
         kv_factor: the servos' velocity gain factor the arm's models are converted with
             (the config's, else :func:`press_kv_factor`).
         ee_offset: the ee point in the ee link's frame (m), ``(3,)`` (the config's, else
-            :func:`derive_ee_offset`).
+            :func:`mjx_arm.arm.points.derive_tool_point`).
         grip_offset: a gripper arm's ee point in the gripper tasks (Lift), where the pads
             hold the object, ``(3,)``; None: ``ee_offset`` (:func:`task_arm` picks the point of
             a task).
