@@ -21,8 +21,8 @@ texture headers of 10^10 pixels (:mod:`input_fuzz.hostile_mesh`)), a special fil
 or in a run directory's (a FIFO, ``/dev/zero``, ``/dev/urandom``, a socket, a folder, a link out
 of the folder, dangling or in a loop: :mod:`input_fuzz.special`), a missing path or another
 kind's file. Output paths are named beside the inputs, by 250-byte names, deep under an absent
-folder of ``/``, or as a user's folder of their own config.json and metrics.csv. One ``bench
-parity`` case in 25 is a whole quick parity run without ``--out``. Each case runs through
+folder of ``/``, or as a user's folder of their own config.json and metrics.csv. Some ``bench
+parity`` cases (25 of 8,000) are whole quick parity runs without ``--out``. Each case runs through
 ``mjx_arm.cli.main`` in a worker (:mod:`input_fuzz.pool`) whose address space is capped and
 that runs without root's permission override.
 
