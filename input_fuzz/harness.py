@@ -364,17 +364,25 @@ def _call_main(argv: list[str], err: io.StringIO) -> tuple[str, int | None, str]
     return "traceback", code, f"exit code {code}: {err.getvalue()[-2000:]}"
 
 
+# Flags whose value is written: an input slot there (a config file as --out) is an output.
+OUTPUT_FLAGS = ("-o", "--output", "--out", "--run-dir", "--video", "--trajectory", "--script",
+                "--picture")  # fmt: skip
+
+
 def _sentinel_roots(
     case: Case, corpus: Corpus, folder: Path, argv: list[str], outputs: dict[Path, Out]
 ) -> tuple[list[Path], list[Path]]:
     """(roots, skipped) of the files the case must not touch (:mod:`input_fuzz.sentinel`):
     its folder, the corpus and the repository's results, less its named outputs, ``runs/``
-    (the benchmarks' default output) and the run directories ``train`` writes."""
+    (the benchmarks' default output), the run directories ``train`` writes and an input given
+    as an output (after one of :data:`OUTPUT_FLAGS`)."""
     skip = [*outputs, folder / "runs"]
-    if case.command == "train":
-        slots = zip(case.argv, argv, strict=True)
-        written = [Path(p) for t, p in slots if isinstance(t, In) and t.kind == "run_dir"]
-        skip += [p for p in written if p.parent == folder]
+    slots = list(zip(case.argv, argv, strict=True))
+    for i, (token, path) in enumerate(slots):  # an input given where an output goes
+        flag = slots[i - 1][0] if i else ""
+        train_run = case.command == "train" and getattr(token, "kind", "") == "run_dir"
+        if isinstance(token, In) and (flag in OUTPUT_FLAGS or train_run):
+            skip += [Path(path)] if Path(path).parent == folder else []
     users = [path / name for path, slot in outputs.items() if slot.name == "user"
              for name in USER_FILES]  # fmt: skip
     return [folder, corpus.folder, sentinel.REPO_RESULTS, *users], skip
