@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from mjx_arm.paths import default_arm_urdf
+from mjx_arm.sim2real.deploy import UR_JOINTS
 from mjx_arm.urdf import load_model, parse_urdf
 from mjx_arm.urdf.convert import EE_SITE
 from mjx_arm.urdf.inertia import inertia_problem
@@ -26,14 +27,7 @@ DH_D = (0.1625, 0.0, 0.0, 0.1333, 0.0997, 0.0996)
 DH_A = (0.0, -0.425, -0.3922, 0.0, 0.0, 0.0)
 DH_ALPHA = (math.pi / 2, 0.0, 0.0, math.pi / 2, -math.pi / 2, 0.0)
 
-JOINTS = (
-    "shoulder_pan_joint",
-    "shoulder_lift_joint",
-    "elbow_joint",
-    "wrist_1_joint",
-    "wrist_2_joint",
-    "wrist_3_joint",
-)
+JOINTS = UR_JOINTS  # the shipped arm's joints, base to wrist
 LINK_MASSES = {  # UR5e link masses (kg)
     "shoulder_link": 3.761,
     "upper_arm_link": 8.058,

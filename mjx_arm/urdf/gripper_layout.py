@@ -88,6 +88,20 @@ def followers_of(model: RobotModel, driven: str) -> tuple[Follower, ...]:
     )
 
 
+def gripper_drives(model: RobotModel, arm_joints: set[str]) -> list:
+    """The joints that could drive a gripper: actuated revolute joints off the arm chain,
+    without ``<mimic>`` of their own, with a range to move through."""
+    return [
+        j
+        for j in model.actuated_joints
+        if j.name not in arm_joints
+        and j.mimic is None
+        and j.type == "revolute"
+        and j.limit is not None
+        and j.limit.upper > j.limit.lower
+    ]
+
+
 def unit_tuple(vector: np.ndarray) -> tuple[float, float, float]:
     """``vector (3,)`` made unit length, as a tuple (rounded to 1e-9: a cache key)."""
     unit = np.asarray(vector, float) / np.linalg.norm(vector)

@@ -36,6 +36,7 @@ from mjx_arm.urdf.gripper_layout import (
     GripperLayout,
     followers_of,
     frame_distance,
+    gripper_drives,
     layout_frames,
     unit_tuple,
 )
@@ -79,16 +80,7 @@ def _parallel(model: RobotModel, arm_joints: set[str]) -> GripperLayout | None:
 def _linkage(model: RobotModel, arm_joints: set[str]) -> GripperLayout | None:
     """One driven revolute joint off the arm chain with ``<mimic>`` followers; its pads are
     the two moved links with a collision shape whose frames close on each other the most."""
-    driven = [
-        j
-        for j in model.actuated_joints
-        if j.name not in arm_joints
-        and j.mimic is None
-        and j.type == "revolute"
-        and j.limit is not None
-        and j.limit.upper > j.limit.lower
-        and followers_of(model, j.name)
-    ]
+    driven = [j for j in gripper_drives(model, arm_joints) if followers_of(model, j.name)]
     if len(driven) != 1:
         return None
     followers = followers_of(model, driven[0].name)

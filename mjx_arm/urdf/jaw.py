@@ -16,6 +16,7 @@ from mjx_arm.urdf.gripper_layout import (
     CUBE_CLEARANCE,
     GripperLayout,
     followers_of,
+    gripper_drives,
     held_cube_half,
     layout_frames,
     unit_tuple,
@@ -31,13 +32,8 @@ def find_jaw(model: RobotModel, arm_joints: set[str]) -> GripperLayout | None:
     movable_parents = {j.parent for j in model.joints.values() if j.movable}
     jaws = [
         j
-        for j in model.actuated_joints
-        if j.name not in arm_joints
-        and j.mimic is None
-        and j.type == "revolute"
-        and j.limit is not None
-        and j.limit.upper > j.limit.lower
-        and not followers_of(model, j.name)
+        for j in gripper_drives(model, arm_joints)
+        if not followers_of(model, j.name)
         and not _moves_below(model, j.child, movable_parents)
         and model.links[j.child].collisions
         and model.links[j.parent].collisions
