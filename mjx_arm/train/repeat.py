@@ -73,8 +73,9 @@ def compare_runs(a: str | Path, b: str | Path) -> RepeatReport:
     rows_a, rows_b = RunDir(a).read_metrics(), RunDir(b).read_metrics()
     rows = min(len(rows_a), len(rows_b))
     row_diff = _first_row_difference(rows_a[:rows], rows_b[:rows])
-    steps = sorted(set(_checkpoints(a)) & set(_checkpoints(b)))
-    param_step = next((s for s in steps if not _same_params(a, b, s)), None)
+    ckpt_a, ckpt_b = _checkpoints(a), _checkpoints(b)
+    steps = sorted(set(ckpt_a) & set(ckpt_b))
+    param_step = next((s for s in steps if not _same_params(ckpt_a[s], ckpt_b[s])), None)
     report = RepeatReport(rows, len(steps))
     if row_diff is not None and (param_step is None or row_diff[0] <= param_step):
         return RepeatReport(rows, len(steps), *row_diff)
@@ -113,14 +114,13 @@ def _checkpoints(run: str | Path) -> dict[int, Path]:
     return found
 
 
-def _same_params(a: str | Path, b: str | Path, step: int) -> bool:
-    """Whether the two runs' checkpoints at ``step`` hold the same params, bit for bit."""
+def _same_params(a: Path, b: Path) -> bool:
+    """Whether checkpoint folders ``a`` and ``b`` hold the same params, bit for bit."""
     import jax
 
     from mjx_arm.train.rundir import RunDir
 
-    pa = RunDir.load_params(_checkpoints(a)[step])
-    pb = RunDir.load_params(_checkpoints(b)[step])
+    pa, pb = RunDir.load_params(a), RunDir.load_params(b)
     leaves_a, leaves_b = jax.tree.leaves(pa), jax.tree.leaves(pb)
     if len(leaves_a) != len(leaves_b):
         return False
