@@ -127,14 +127,19 @@ cold-arm)
     2>&1 | tee "$WORK/log_cold_arm.txt"
   ;;
 campaign)
-  # One `bench seeds` per GPU, all at once: JOBS holds one "GPU|NAME|TASK|SEEDS|SETS" per line
-  # (SETS: a --set list, "-" for the preset as shipped). Each stops after LIMIT seconds; the
-  # runs' metrics, configs and start-up reports, and every report, go into $OUT/NAME.tar.gz.
-  while IFS='|' read -r gpu name task seeds sets; do
+  # One `bench seeds` per JOBS line, all at once: "GPU|NAME|TASK|SEEDS|SETS[|ARGS]" (SETS: a
+  # --set list, "-" for the preset as shipped; ARGS: more `bench seeds` arguments, such as
+  # --arm A --threshold 0.9). Lines may share a GPU (MEM_FRACTION splits its memory). Each
+  # stops after LIMIT seconds; the runs' metrics, configs and start-up reports, and every
+  # report, go into $OUT/NAME.tar.gz; with EXPORT=1 each run's policy (its final checkpoint,
+  # the best evaluated one) also goes to $OUT/policies/NAME_RUN.npz.
+  [ -n "${MEM_FRACTION:-}" ] && export XLA_PYTHON_CLIENT_MEM_FRACTION="$MEM_FRACTION"
+  while IFS='|' read -r gpu name task seeds sets args; do
     [ -z "$gpu" ] && continue
     set_args=(); [ "$sets" != "-" ] && read -r -a set_args <<< "--set $sets"
+    read -r -a more <<< "${args:-}"
     CUDA_VISIBLE_DEVICES=$gpu timeout "${LIMIT:-500}" python3 -m mjx_arm.cli bench seeds \
-      --task "$task" --preset "${PRESET:-fast}" --seeds "$seeds" "${set_args[@]}" \
+      --task "$task" --preset "${PRESET:-fast}" --seeds "$seeds" "${set_args[@]}" "${more[@]}" \
       --name "$name" --runs "$WORK/$name" --out "$WORK/$name/report" ${EXTRA:-} \
       > "$WORK/$name.log" 2>&1 &
   done <<< "${JOBS:?one GPU|NAME|TASK|SEEDS|SETS per line}"
@@ -144,7 +149,16 @@ campaign)
     (cd "$WORK" && find "$name" "$name.log" \( -name metrics.csv -o -name config.json \
       -o -name compile.json -o -name '*.log' -o -path '*/report/*' \) -print0 2>/dev/null \
       | tar --null -czf "$OUT/$name.tar.gz" -T -)
+    if [ "${EXPORT:-0}" = 1 ]; then
+      mkdir -p "$OUT/policies"
+      for run in "$dir"*/; do
+        [ -d "$run/checkpoints" ] || continue
+        python3 -m mjx_arm.cli export "$run" -o "$OUT/policies/${name}_$(basename "$run").npz" \
+          > /dev/null 2>&1 || echo "export failed: $run" &
+      done
+    fi
   done
+  wait
   ;;
 sweep)
   # Candidate changes to the fast preset, each trained on SWEEP_SEEDS (exploration: the
