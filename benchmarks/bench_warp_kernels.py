@@ -83,8 +83,8 @@ def _steps_per_second(env, batch: int, steps: int) -> float:
 def _child(args: argparse.Namespace) -> dict:
     from mjx_arm.envs import warp_compile
     from mjx_arm.envs.backend import make_batched_env
-    from mjx_arm.envs.mjx_physics import warp_compatible
     from mjx_arm.envs.physics_config import PhysicsConfig
+    from mjx_arm.envs.warp_buffers import warp_compatible
     from mjx_arm.task import task_config
 
     task = task_config(args.task)

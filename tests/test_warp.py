@@ -136,7 +136,7 @@ def test_the_step_compiles_nothing_the_precompile_missed():
     On a GPU the env ran the precompile itself before the first step."""
     from mjx_arm.envs import warp_compile
     from mjx_arm.envs.backend import make_batched_env
-    from mjx_arm.envs.mjx_physics import warp_compatible
+    from mjx_arm.envs.warp_buffers import warp_compatible
     from mjx_arm.task import touch_config
 
     env = make_batched_env(touch_config(), "mjx", WARP, 2)
@@ -191,7 +191,7 @@ def test_box_pairs_take_the_box_box_collider():
 
     from mjx_arm.envs import warp_compile
     from mjx_arm.envs.backend import make_batched_env
-    from mjx_arm.envs.mjx_physics import warp_compatible
+    from mjx_arm.envs.warp_buffers import warp_compatible
     from mjx_arm.task import task_config
 
     no_compile = WARP.replace(compile_threads=0)

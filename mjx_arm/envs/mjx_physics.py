@@ -10,7 +10,8 @@ What differs under Warp, and how this layer handles it:
 - Contacts live in one pool that all envs of a batch share (``naconmax`` contacts in all);
   constraint rows are per env (``njmax``). Both are sized here from the model's own bound (every
   collision pair it allows, with its largest contact count, and all joint limits), times the
-  batch for the pool, unless the config sets them.
+  batch for the pool, unless the config sets them; so is the row count of the convex
+  collider's scratch arrays (``naccdmax``, :mod:`mjx_arm.envs.warp_buffers`).
 - Pool fields carry no batch axis, so batched states are merged field by field with Warp's own
   table of which fields are per env (:meth:`MjxPhysics.where`).
 - Warp counts an overflow per env in a bitmask. Dropped contacts or constraint rows raise
@@ -21,7 +22,6 @@ What differs under Warp, and how this layer handles it:
 
 from __future__ import annotations
 
-import copy
 import time
 from typing import Any
 
@@ -36,14 +36,15 @@ from mjx_arm.arm.info import ArmInfo
 from mjx_arm.arm.model_io import GripReader, SensorReader
 from mjx_arm.envs import warp_compile
 from mjx_arm.envs.physics_config import PhysicsConfig, resolve_impl
+from mjx_arm.envs.warp_buffers import (
+    DROPPED_BITS,
+    model_bounds,
+    overflow_message,
+    warp_compatible,
+)
 from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.urdf.scene import TARGET_BODY
-
-# Warp's overflow bits (mujoco_warp OverflowType) that mean contacts or constraint rows were
-# dropped: nefc > njmax (1), Jacobian non-zeros (2), broadphase (4), narrowphase (8), islands
-# (128). Iteration limits (512, 1024) are expected with a fixed 2-iteration solver.
-DROPPED_BITS = 1 | 2 | 4 | 8 | 128
 
 
 class PhysicsOverflowError(RuntimeError):
@@ -107,38 +108,6 @@ class Dynamics:
         return Dynamics(one, jnp.ones(n), jnp.ones(n), jnp.ones(n), jnp.zeros(n), zero, zero, one)
 
 
-def warp_compatible(mj_model: mujoco.MjModel) -> mujoco.MjModel:
-    """A copy of ``mj_model`` for MuJoCo Warp: without the options it rejects, and with box-box
-    contacts through the box-box collider that C MuJoCo uses.
-
-    - The converter disables MuJoCo's automatic reset of a diverged state (so that divergence
-      shows as a non-finite state); Warp has no automatic reset and refuses the flag, so it is
-      cleared.
-    - C MuJoCo always collides two boxes with its dedicated box-box function. MuJoCo Warp sends
-      box-box pairs through its general convex collider (GJK/EPA) unless native CCD is
-      disabled, a flag that in Warp changes nothing else. Disabling it gives the same collider
-      as the CPU engines that exported policies run in, and spares the convex kernel's compile
-      (about 52 s on an H200) where boxes are a model's only convex pairs (the gripper arm's
-      pads and cube).
-    """
-    model = copy.copy(mj_model)
-    model.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
-    model.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_NATIVECCD)
-    return model
-
-
-def model_bounds(mj_model: mujoco.MjModel) -> tuple[int, int]:
-    """(contacts, constraint rows) one env of ``mj_model`` can produce at most.
-
-    MJX's JAX implementation sizes its arrays statically for exactly this: every geom pair that
-    the contact filters allow, with the largest contact count of its collision function, and
-    every limited joint.
-    """
-    device = own_device()
-    data = mjx.make_data(mjx.put_model(mj_model, device, impl="jax"), device, impl="jax")
-    return int(data._impl.contact.dist.shape[0]), int(data._impl.efc_J.shape[0])
-
-
 def own_device() -> jax.Device:
     """This process's first device. MJX puts a model and data on ``jax.devices()[0]`` unless
     told: where several processes train (one per GPU), that is process 0's GPU, which the
@@ -193,23 +162,33 @@ class MjxPhysics:
         self._actuators = jnp.asarray(acts)  # the arm's, then the gripper's for a gripper task
 
     def _warp_model_and_data(self) -> tuple[Any, Any]:
-        contacts, rows = model_bounds(self.mj_model)
-        per_env = self.config.naconmax_per_env or contacts
-        njmax = self.config.njmax or rows
+        bounds = model_bounds(self.mj_model, own_device())
+        per_env = self.config.naconmax_per_env or bounds.contacts
+        ccd_per_env = min(self.config.naccdmax_per_env or max(bounds.convex_pairs, 1), per_env)
         self.buffers = {
             "naconmax_per_env": per_env,
             "naconmax": per_env * self.batch_size,
-            "njmax": njmax,
-            "model_contacts": contacts,
-            "model_rows": rows,
+            "njmax": self.config.njmax or bounds.rows,
+            "naccdmax_per_env": ccd_per_env,
+            "naccdmax": ccd_per_env * self.batch_size,
+            "model_contacts": bounds.contacts,
+            "model_rows": bounds.rows,
+            "model_convex_pairs": bounds.convex_pairs,
         }
         mj_model = warp_compatible(self.mj_model)
         model = mjx.put_model(mj_model, own_device(), impl="warp")
         # Warp prints a warning per env and substep on any overflow; this layer reads the bits.
         opt_impl = model.opt._impl.replace(warn_overflow=0)
         model = model.replace(opt=model.opt.replace(_impl=opt_impl))
-        naconmax = self.buffers["naconmax"]
-        data = mjx.make_data(mj_model, own_device(), impl="warp", naconmax=naconmax, njmax=njmax)
+        naconmax, njmax = self.buffers["naconmax"], self.buffers["njmax"]
+        data = mjx.make_data(
+            mj_model,
+            own_device(),
+            impl="warp",
+            naconmax=naconmax,
+            njmax=njmax,
+            naccdmax=self.buffers["naccdmax"],
+        )
         threads = self.config.compile_threads
         devices = warp_compile.cuda_devices() if threads else []
         if devices:
@@ -402,17 +381,6 @@ class MjxPhysics:
         flags = np.asarray(flags)
         if flags.any():
             raise PhysicsOverflowError(overflow_message(int(flags.sum()), self.describe()))
-
-
-def overflow_message(count: float, buffers: dict[str, Any]) -> str:
-    """The error text of a Warp buffer overflow in ``count`` envs (or env-steps)."""
-    return (
-        f"MuJoCo Warp dropped contacts or constraint rows in {count:g} env(s): its buffers "
-        f"(naconmax_per_env={buffers.get('naconmax_per_env')}, njmax={buffers.get('njmax')}) "
-        "are too small for this model and batch. Raise them with --set "
-        "physics.naconmax_per_env=N physics.njmax=N (0 = the model's bound), or use "
-        "physics.impl=jax."
-    )
 
 
 def _where_rows(done: jax.Array, new: jax.Array, old: jax.Array) -> jax.Array:

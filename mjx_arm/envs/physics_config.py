@@ -28,6 +28,11 @@ class PhysicsConfig:
             allows, each with its largest contact count), so the pool cannot overflow.
         njmax: Warp only. Constraint rows per env; 0 takes the model's bound (all contacts
             and joint limits active at once).
+        naccdmax_per_env: Warp only. Geom pairs per env, of one type pair, that Warp's convex
+            collider (GJK/EPA) takes at once; it sizes the collider's scratch arrays. 0 takes
+            the model's bound (its largest count of allowed pairs of one convex type pair, at
+            most ``naconmax_per_env``); Warp's own default, the whole contact pool, ran an H200
+            out of memory for a mesh-collision arm at 8,192 envs.
         compile_threads: Warp only. Threads that compile MuJoCo Warp's kernels before the first
             step (:mod:`mjx_arm.envs.warp_compile`); 0 leaves Warp to compile each module on
             first use, one at a time.
@@ -36,13 +41,20 @@ class PhysicsConfig:
     impl: str = "auto"
     naconmax_per_env: int = 0
     njmax: int = 0
+    naccdmax_per_env: int = 0
     compile_threads: int = 8
 
     def __post_init__(self) -> None:
         check_types(self, "physics.")
         if self.impl not in IMPLS:
             raise ConfigError(f"physics.impl must be one of {IMPLS}, got {self.impl!r}")
-        check_range(self, ("naconmax_per_env", "njmax"), low=0, high=2**16, prefix="physics.")
+        check_range(
+            self,
+            ("naconmax_per_env", "njmax", "naccdmax_per_env"),
+            low=0,
+            high=2**16,
+            prefix="physics.",
+        )
         check_range(self, "compile_threads", low=0, high=256, prefix="physics.")
 
     def replace(self, **changes: Any) -> PhysicsConfig:

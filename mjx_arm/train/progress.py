@@ -17,7 +17,8 @@ import jax
 import numpy as np
 
 from mjx_arm.arm.resolve import ArmTask
-from mjx_arm.envs.mjx_physics import PhysicsOverflowError, overflow_message
+from mjx_arm.envs.mjx_physics import PhysicsOverflowError
+from mjx_arm.envs.warp_buffers import overflow_message
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.train.compile_report import CompileReport, expected_compile, remember_compile
 from mjx_arm.train.config import TrainConfig
