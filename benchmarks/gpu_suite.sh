@@ -30,6 +30,7 @@ OUT="${OUT:-benchmarks/results/gpu}"
 WORK="${WORK:-runs/gpu_suite}"
 SITE="${SITE:-/tmp/site}"
 mkdir -p "$OUT" "$WORK"
+OUT=$(cd "$OUT" && pwd)  # absolute: some stages write it from inside $WORK
 export PYTHONPATH="$SITE:$PWD" PYTHONUNBUFFERED=1 MUJOCO_GL="${MUJOCO_GL:-}"
 [ -z "$MUJOCO_GL" ] && unset MUJOCO_GL
 one_gpu() { CUDA_VISIBLE_DEVICES=0 "$@"; }
@@ -129,16 +130,20 @@ cold-arm)
 campaign)
   # One `bench seeds` per JOBS line, all at once: "GPU|NAME|TASK|SEEDS|SETS[|ARGS]" (SETS: a
   # --set list, "-" for the preset as shipped; ARGS: more `bench seeds` arguments, such as
-  # --arm A --threshold 0.9). Lines may share a GPU (MEM_FRACTION splits its memory). Each
-  # stops after LIMIT seconds; the runs' metrics, configs and start-up reports, and every
-  # report, go into $OUT/NAME.tar.gz; with EXPORT=1 each run's policy (its final checkpoint,
-  # the best evaluated one) also goes to $OUT/policies/NAME_RUN.npz.
+  # --arm A --threshold 0.9). Give each line a GPU of its own: three lines on one H200 (its
+  # memory split by MEM_FRACTION, or preallocation off) ran out of memory. Each line keeps its
+  # own Warp kernel cache (processes that compiled one module into a shared cache at once
+  # failed to load it). Each stops after LIMIT seconds; the runs' metrics, configs and
+  # start-up reports, and every report, go into $OUT/NAME.tar.gz; with EXPORT=1 each run's
+  # policy (its final checkpoint, the best evaluated one) also goes to
+  # $OUT/policies/NAME_RUN.npz.
   [ -n "${MEM_FRACTION:-}" ] && export XLA_PYTHON_CLIENT_MEM_FRACTION="$MEM_FRACTION"
   while IFS='|' read -r gpu name task seeds sets args; do
     [ -z "$gpu" ] && continue
     set_args=(); [ "$sets" != "-" ] && read -r -a set_args <<< "--set $sets"
     read -r -a more <<< "${args:-}"
-    CUDA_VISIBLE_DEVICES=$gpu timeout "${LIMIT:-500}" python3 -m mjx_arm.cli bench seeds \
+    CUDA_VISIBLE_DEVICES=$gpu WARP_CACHE_PATH="$HOME/.cache/warp-$name" \
+      timeout "${LIMIT:-500}" python3 -m mjx_arm.cli bench seeds \
       --task "$task" --preset "${PRESET:-fast}" --seeds "$seeds" "${set_args[@]}" "${more[@]}" \
       --name "$name" --runs "$WORK/$name" --out "$WORK/$name/report" ${EXTRA:-} \
       > "$WORK/$name.log" 2>&1 &
