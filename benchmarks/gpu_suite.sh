@@ -130,11 +130,10 @@ cold-arm)
 campaign)
   # One `bench seeds` per JOBS line, all at once: "GPU|NAME|TASK|SEEDS|SETS[|ARGS]" (SETS: a
   # --set list, "-" for the preset as shipped; ARGS: more `bench seeds` arguments, such as
-  # --arm A --threshold 0.9). Give each line a GPU of its own: three lines on one H200 (its
-  # memory split by MEM_FRACTION, or preallocation off) ran out of memory. Each line keeps its
-  # own Warp kernel cache (processes that compiled one module into a shared cache at once
-  # failed to load it). Each stops after LIMIT seconds; the runs' metrics, configs and
-  # start-up reports, and every report, go into $OUT/NAME.tar.gz; with EXPORT=1 each run's
+  # --arm A --threshold 0.9). Lines may share a GPU (MEM_FRACTION splits its memory; three
+  # SO-101 lines on one H200 ran out of memory and then failed to load Warp's kernels). Each
+  # stops after LIMIT seconds; the runs' metrics, configs and start-up reports, and every
+  # report, go into $OUT/NAME.tar.gz; with EXPORT=1 each run's
   # policy (its final checkpoint, the best evaluated one) also goes to
   # $OUT/policies/NAME_RUN.npz.
   [ -n "${MEM_FRACTION:-}" ] && export XLA_PYTHON_CLIENT_MEM_FRACTION="$MEM_FRACTION"
@@ -142,8 +141,7 @@ campaign)
     [ -z "$gpu" ] && continue
     set_args=(); [ "$sets" != "-" ] && read -r -a set_args <<< "--set $sets"
     read -r -a more <<< "${args:-}"
-    CUDA_VISIBLE_DEVICES=$gpu WARP_CACHE_PATH="$HOME/.cache/warp-$name" \
-      timeout "${LIMIT:-500}" python3 -m mjx_arm.cli bench seeds \
+    CUDA_VISIBLE_DEVICES=$gpu timeout "${LIMIT:-500}" python3 -m mjx_arm.cli bench seeds \
       --task "$task" --preset "${PRESET:-fast}" --seeds "$seeds" "${set_args[@]}" "${more[@]}" \
       --name "$name" --runs "$WORK/$name" --out "$WORK/$name/report" ${EXTRA:-} \
       > "$WORK/$name.log" 2>&1 &
