@@ -29,6 +29,32 @@ from benchmarks.common import environment_metadata, save_results
 
 SEED_DIR = re.compile(r"seed(?P<seed>\d+)$")
 SPIKE_KL = 1.0  # a per-epoch mean KL above this: the update replaced the policy
+STRIKES = 0.2  # episodes ending on a strike, as a fraction: the striking trap
+TOUCHING = 5.0  # steps per episode with a reading in the band or over it: the tool presses
+HELD = 0.5  # steps per episode whose press had held 2+ steps: below it, in-band steps are taps
+TRAPS = ("striking", "tapping", "resting", "stalled", "other")
+
+
+def trap(last: dict[str, float]) -> str:
+    """The local optimum a failing Touch seed's evaluation ``last`` (a ``metrics.csv`` row:
+    per-episode sums) shows, one of :data:`TRAPS`:
+
+    - ``striking``: at least :data:`STRIKES` of the episodes end on a strike over the limit;
+    - ``tapping``: the tool meets the box on :data:`TOUCHING` steps or more, but its in-band
+      steps do not come two in a row (under :data:`HELD` streak steps per episode);
+    - ``resting``: it presses for several steps running, yet succeeds rarely (a reading over
+      the band earlier in the episode, or off the face centre);
+    - ``stalled``: it touches the box on less than one step per episode;
+    - ``other``: none of these.
+    """
+    if last.get("eval/episode_strike", 0.0) >= STRIKES:
+        return "striking"
+    touching = last.get("eval/episode_touching", 0.0)
+    if touching < 1.0:
+        return "stalled"
+    if touching >= TOUCHING:
+        return "tapping" if last.get("eval/episode_streak", 0.0) < HELD else "resting"
+    return "other"
 
 
 def _rows(run: Path) -> list[dict[str, float]]:
@@ -70,6 +96,9 @@ def seed_record(run: Path, threshold: float) -> dict[str, Any]:
         "explained_variance_last": last.get("training/explained_variance", math.nan),
         "touching_last": last.get("eval/episode_touching", math.nan),
         "overforce_last": last.get("eval/episode_overforce", math.nan),
+        "mean_distance_last": last.get("eval/episode_distance", math.nan)
+        / last.get("eval/avg_episode_length", math.nan),
+        "trap": None if hit is not None else trap(last),
         "settings": json.loads((run / "config.json").read_text())["train"]["schedule"]
         | json.loads((run / "config.json").read_text())["train"]["normalizer"],
     }
@@ -88,6 +117,7 @@ def campaign(label: str, folder: Path, threshold: float) -> dict[str, Any]:
         "count": len(seeds),
         "spiking_seeds_solved": sum(bool(s["kl_spikes"]) for s in solved),
         "spiking_seeds_failed": sum(bool(s["kl_spikes"]) for s in failed),
+        "traps": {t: sum(s["trap"] == t for s in failed) for t in TRAPS},
     }
 
 
@@ -98,8 +128,8 @@ def markdown(campaigns: list[dict[str, Any]], threshold: float) -> str:
         lines += [f"## {c['label']}: {c['solved']} of {c['count']} seeds at {threshold}", ""]
         lines += [
             "| seed | solved | best | last | KL max | KL median | epochs with KL > 1 | clip "
-            "fraction (median) | lr (last) | std (last) | explained variance (last) |",
-            "|---|---|---|---|---|---|---|---|---|---|---|",
+            "fraction (median) | lr (last) | std (last) | explained variance (last) | trap |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|",
         ]
         for s in c["seeds"]:
             lines.append(
@@ -107,7 +137,7 @@ def markdown(campaigns: list[dict[str, Any]], threshold: float) -> str:
                 f"{s['last_success']:.3f} | {s['kl_max']:.3g} | {s['kl_median']:.3g} | "
                 f"{len(s['kl_spikes'])} | {s['clip_fraction_median']:.3f} | "
                 f"{s['learning_rate_last']:.2g} | {s['policy_std_last']:.3f} | "
-                f"{s['explained_variance_last']:.3f} |"
+                f"{s['explained_variance_last']:.3f} | {s.get('trap') or '-'} |"
             )
         lines.append("")
     return "\n".join(lines)
