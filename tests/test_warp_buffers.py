@@ -82,5 +82,5 @@ def test_setting_overflow_bit_and_message():
     text = overflow_message(3, {"naconmax_per_env": 44, "njmax": 182, "naccdmax_per_env": 2})
     assert "naccdmax_per_env=2" in text and "physics.naccdmax_per_env=N" in text
     assert PhysicsConfig(naccdmax_per_env=8).naccdmax_per_env == 8
-    with pytest.raises(ConfigError, match="physics.naccdmax_per_env"):
+    with pytest.raises(ConfigError, match=r"physics\.naccdmax_per_env"):
         PhysicsConfig(naccdmax_per_env=-1)
