@@ -53,7 +53,9 @@ def compiling_text(elapsed: float, expected: float | None) -> str:
 
 class CompileClock:
     """Says on the progress bar that the run is compiling, once a second, until the first
-    program runs (the report's ``first reset run`` stage), then gives the bar its name back.
+    program runs (the report's ``first reset run`` stage) or :meth:`compiled`, then gives the
+    bar its name back and redraws it every ``HEARTBEAT_S`` seconds until :meth:`stop`: the bar
+    moves only at an evaluation, and an epoch on a CPU can run for minutes (its clock moves).
 
     Args:
         bar: the tqdm bar.
@@ -63,11 +65,12 @@ class CompileClock:
     """
 
     DONE = "first reset run"  # the stage that follows every compile stage
+    HEARTBEAT_S = 10.0  # after the compile: seconds between two redraws of the bar
 
     def __init__(self, bar: Any, desc: str, report: CompileReport, expected: float | None):
         self.bar, self.desc, self.report, self.expected = bar, desc, report, expected
         self.start = time.monotonic()
-        self._stop = threading.Event()
+        self._stop, self._compiled = threading.Event(), threading.Event()
         self._thread = threading.Thread(target=self._run, name="compile-clock", daemon=True)
 
     def text(self) -> str:
@@ -82,10 +85,16 @@ class CompileClock:
 
     def _run(self) -> None:
         while not self._stop.wait(1.0):
-            if self.DONE in self.report.stages:
+            if self.DONE in self.report.stages or self._compiled.is_set():
                 break
             self.bar.set_description_str(self.text())
         self.bar.set_description_str(self.desc)
+        while not self._stop.wait(self.HEARTBEAT_S):
+            self.bar.refresh()
+
+    def compiled(self) -> None:
+        """The first epoch has run: the bar gets its name back, and its redraws go on."""
+        self._compiled.set()
 
     def stop(self) -> None:
         """Stop updating (the bar's name is given back); waits for the clock's thread."""
@@ -223,7 +232,7 @@ class _Progress:
     def _start_up_done(self) -> None:
         """After the first epoch: the start-up line, and the compile time kept for next time."""
         if self.clock is not None:
-            self.clock.stop()
+            self.clock.compiled()
         if self.start_up_summary is not None:
             self.bar.write(self.start_up_summary())
         if self.report is not None and self.run is not None:
