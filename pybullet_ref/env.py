@@ -47,7 +47,9 @@ rest so the F/T sensor has a reading, and puts the joints back at the sampled an
 
 from __future__ import annotations
 
+import contextlib
 import operator
+import weakref
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -96,6 +98,15 @@ NEAR, FAR = 0.01, 10.0
 CUBE_RGBA = (0.2, 0.35, 0.85, 1.0)
 
 
+def disconnect(client: BulletClient) -> None:
+    """Disconnect ``client``'s physics server once, and mark it so that its own ``__del__``
+    does not try again (that retry catches ``pybullet.error``, which is gone at exit)."""
+    if client._client >= 0:
+        with contextlib.suppress(pybullet.error):
+            client.disconnect()
+        client._client = -1
+
+
 class PybulletArmEnv(BaseRobotEnv):
     """The arm task on PyBullet (one world, CPU), same contract as ``MujocoArmEnv``.
 
@@ -133,6 +144,9 @@ class PybulletArmEnv(BaseRobotEnv):
         self.self_collision = task_convert_config(self.task, self.arm).self_collision
         with native_output_silenced():  # "argv[0]="
             self.client = BulletClient(connection_mode=pybullet.DIRECT)
+        # disconnect when the env goes, or at exit while Python can still do it: an env left
+        # open until the interpreter tears pybullet down printed a TypeError from the client
+        self._disconnect = weakref.finalize(self, disconnect, self.client)
         self._calls = HotCalls.of(self.client)
         # without a render mode nothing is drawn: skip the visual shapes (halves the reset time)
         self._load_flags = 0 if render_mode else pybullet.URDF_IGNORE_VISUAL_SHAPES
@@ -377,9 +391,8 @@ class PybulletArmEnv(BaseRobotEnv):
 
     def close(self) -> None:
         """Disconnect this env's physics server."""
-        client = getattr(self, "client", None)
-        if client is not None:
-            client.disconnect()
+        if getattr(self, "client", None) is not None:
+            self._disconnect()
             self.client = None
         super().close()
 

@@ -249,6 +249,9 @@ def test_urscript_is_for_universal_robots_arms_only(tmp_path: Path, capsys, monk
     assert script_path(None, panda) is None
     err = capsys.readouterr().err
     assert "note: no URScript: panda.urdf (7 joints" in err and "--trajectory" in err
+    assert script_path(None, panda, "traj.json") is None  # asked for the trajectory already
+    err = capsys.readouterr().err
+    assert "JointTrajectory goes to traj.json" in err and "--trajectory" not in err
     with pytest.raises(ConfigError, match=r"Universal Robots' 6-joint arms only.*--trajectory"):
         script_path("panda.script", panda)
 

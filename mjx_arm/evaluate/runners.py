@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import functools
 import math
+import sys
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -129,6 +131,7 @@ def run_episodes(
     """
     writer, notes = _open_video(env, video)
     results, trajectories, filmed = [], [], 0
+    heartbeat = Heartbeat(episodes, "episodes")
     for i in range(episodes):
         capture = functools.partial(writer.capture, env) if writer and i < video_episodes else None
         try:
@@ -141,8 +144,35 @@ def run_episodes(
             stats, traj = run_episode(policy, env, seed + i)
         results.append(stats)
         trajectories.append(traj)
+        heartbeat(i + 1)
     frames = writer.close() if writer is not None else 0
     return EvalRun(results, trajectories, frames, notes, filmed if frames else 0)
+
+
+class Heartbeat:
+    """Says on stderr how far a long loop has come, at most every ``every`` seconds and never
+    in its first ``every`` seconds: an evaluation of 50 PyBullet episodes with a video ran 51 s
+    on 2 cores with nothing printed.
+
+    Args:
+        total: how many items the loop runs.
+        what: the items' name ("episodes").
+        every: seconds between two lines.
+        clock: the time source (tests pass their own).
+    """
+
+    def __init__(self, total: int, what: str, every: float = 15.0, clock=time.monotonic):
+        self.total, self.what, self.every, self.clock = total, what, every, clock
+        self.start = self.last = clock()
+
+    def __call__(self, done: int) -> None:
+        """Note that ``done`` items are finished; print a line if one is due."""
+        now = self.clock()
+        if now - self.last >= self.every and done < self.total:
+            elapsed = now - self.start
+            print(f"  {done} of {self.total} {self.what} ({elapsed:.0f} s)", file=sys.stderr)
+            sys.stderr.flush()
+            self.last = now
 
 
 class _RenderError(RuntimeError):

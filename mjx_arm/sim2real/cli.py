@@ -46,7 +46,7 @@ def cmd_deploy_sim(args: argparse.Namespace) -> int:
             check_output(path, flag, suffixes)
     config = apply_settings(DeployConfig(), args.set or [])
     policy, source = resolve_policy(args.policy)
-    script = script_path(args.script, arm_info(eval_arm(policy, args.arm)))
+    script = script_path(args.script, arm_info(eval_arm(policy, args.arm)), args.trajectory)
     report = deploy_sim(policy, args.engine, args.episodes, args.seed, config, arm=args.arm)
     write_commands(report, config, script, args.trajectory)
     commands = report.pop("commands")
@@ -65,11 +65,11 @@ def cmd_deploy_sim(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def script_path(given: str | None, arm: Any) -> Path | None:
+def script_path(given: str | None, arm: Any, trajectory: str | None = None) -> Path | None:
     """Where deploy-sim writes its URScript: ``--script``, else :data:`DEFAULT_SCRIPT` unless a
     file there is not one mjx-arm wrote; on an arm URScript does not run (not a Universal
     Robots arm: :func:`~mjx_arm.sim2real.deploy.ur_like`) nowhere, with a note saying what to
-    use instead.
+    use instead (or, where ``trajectory`` names the JointTrajectory file, where it goes).
 
     Raises:
         ConfigError: ``--script`` for an arm that is not a Universal Robots arm.
@@ -85,6 +85,8 @@ def script_path(given: str | None, arm: Any) -> Path | None:
                 f"--script writes URScript, which runs on Universal Robots' 6-joint arms "
                 f"only; {what} is not one: {instead}"
             )
+        if trajectory:
+            instead = f"its ROS 2 JointTrajectory goes to {trajectory}"
         print(
             f"note: no URScript: {what} is not a Universal Robots arm; {instead}", file=sys.stderr
         )

@@ -234,8 +234,9 @@ def plural(n: int, noun: str) -> str:
     return f"{n} {noun}" + ("" if n == 1 else "s")
 
 
-# An absolute path of three or more folders, shortened to its tail on a long report line.
-_PATH = re.compile(r"(?:/[^\s'\"/;:,()\[\]]+){3,}")
+# An absolute path of three or more folders, shortened to its tail on a long report line. It
+# starts a word: the tail of a path shortened before (``.../meshes/x.dae``) is not cut again.
+_PATH = re.compile(r"(?<![^\s'\"(\[=,])(?:/[^\s'\"/;:,()\[\]]+){3,}")
 
 
 def _tail(match: re.Match) -> str:
