@@ -53,9 +53,6 @@ class JointServo:
         damping: joint damping (N m s/rad), ``(n,)``.
         effort: torque cap of the actuator (N m), ``(n,)``.
         armature: reflected rotor inertia (kg m^2), ``(n,)``.
-        frictionloss: dry friction of each joint (N m), ``(n,)``: MuJoCo's ``frictionloss``,
-            which its URDF importer takes from ``<dynamics friction>`` (1 N m on each xArm6
-            joint).
         finger: the driven finger's servo, for an arm with a parallel gripper; else None.
     """
 
@@ -63,7 +60,6 @@ class JointServo:
     damping: tuple[float, ...]
     effort: tuple[float, ...]
     armature: tuple[float, ...]
-    frictionloss: tuple[float, ...]
     finger: FingerDrive | None = None
 
     def finger_force(self, speed: float) -> float:
@@ -98,7 +94,6 @@ def _servo_cached(config: ArmConfig, mtime: float, sim_dt: float) -> JointServo:
         damping=tuple(float(j.damping[0]) for j in joints),
         effort=tuple(float(a.forcerange[1]) for a in actuators),
         armature=tuple(float(j.armature[0]) for j in joints),
-        frictionloss=tuple(float(j.frictionloss[0]) for j in joints),
         finger=finger,
     )
 

@@ -85,26 +85,23 @@ class DriveGains:
         damping: joint damping (N m s/rad).
         effort: torque cap of the actuator (N m).
         armature: reflected rotor inertia (kg m^2).
-        frictionloss: dry friction (N m); all 0: none.
     """
 
     kv: np.ndarray
     damping: np.ndarray
     effort: np.ndarray
     armature: np.ndarray
-    frictionloss: np.ndarray
 
     @classmethod
-    def of(cls, kv, damping, effort, armature, frictionloss=None) -> DriveGains:
-        """From sequences of floats (``frictionloss`` None: no dry friction)."""
-        friction = np.zeros(len(kv)) if frictionloss is None else frictionloss
+    def of(cls, kv, damping, effort, armature) -> DriveGains:
+        """From sequences of floats."""
         arrays = (np.asarray(x, dtype=np.float64) for x in (kv, damping, effort, armature))
-        return cls(*arrays, np.asarray(friction, dtype=np.float64))
+        return cls(*arrays)
 
     @classmethod
     def of_servo(cls, servo) -> DriveGains:
         """From a :class:`~pybullet_ref.arm_model.JointServo`."""
-        return cls.of(servo.kv, servo.damping, servo.effort, servo.armature, servo.frictionloss)
+        return cls.of(servo.kv, servo.damping, servo.effort, servo.armature)
 
 
 def drive_torque(
@@ -136,30 +133,8 @@ def drive_torque(
         servo = np.minimum(np.maximum(servo, -effort), effort)
         stiffness = np.where(capped, damping, stiffness)
     lhs = mass + np.diag(gains.armature + dt * stiffness)
-    rhs = servo - damping * qdot + external
-    qddot = np.linalg.solve(lhs, rhs)
-    if gains.frictionloss.any():
-        qddot = np.linalg.solve(lhs, rhs + dry_friction(gains.frictionloss, lhs, qdot, qddot, dt))
+    qddot = np.linalg.solve(lhs, servo - damping * qdot + external)
     return mass @ qddot - external + np.array(gravity, dtype=np.float64)
-
-
-def dry_friction(
-    frictionloss: np.ndarray, lhs: np.ndarray, qdot: np.ndarray, qddot: np.ndarray, dt: float
-) -> np.ndarray:
-    """The joints' dry friction torques (N m), ``(n,)``, in an implicit step: each joint's the
-    torque that would stop it at the end of the step (on its own diagonal of ``lhs``), at most
-    its ``frictionloss`` either way, as MuJoCo's friction constraint bounds it. A joint the
-    friction can hold stays still; a faster one loses at most ``frictionloss`` of push.
-
-    Args:
-        frictionloss: dry friction (N m), ``(n,)``.
-        lhs: the step's ``M + A + dt K``, ``(n, n)``.
-        qdot: joint velocities now (rad/s), ``(n,)``; qddot: the step's acceleration without
-            the friction (rad/s^2), ``(n,)``.
-        dt: the physics step (s).
-    """
-    stop = -np.diag(lhs) * (qdot / dt + qddot)
-    return np.clip(stop, -frictionloss, frictionloss)
 
 
 @dataclass

@@ -18,9 +18,7 @@ implicit, the armature on the diagonal of the mass matrix (``calculateMassMatrix
 engines), with the contacts' share observed from the last substep and joint-limit reactions
 kept out of it. URDF joint damping is zeroed in PyBullet (Bullet applies it explicitly, which
 diverges on the light wrist links; it is part of the drive). ``kv``, ``d``, the effort and the
-armature are read from the converted MuJoCo model, and so is each joint's dry friction (MuJoCo's
-``frictionloss``, from the URDF's ``<dynamics friction>``), which the drive applies in its step
-as MuJoCo's friction constraint does. Friction is MuJoCo's 1.0 per contact.
+armature are read from the converted MuJoCo model. Friction is MuJoCo's 1.0 per contact.
 
 Self-collision as the task model has it (:func:`mjx_arm.arm.model_io.task_convert_config`):
 off, so the arm is loaded without ``URDF_USE_SELF_COLLISION`` (with it, a joint-limited UR10
