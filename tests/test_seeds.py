@@ -127,3 +127,23 @@ def test_seeds_in_processes_of_their_own(tmp_path: Path) -> None:
                          tmp_path, "p", sets, wall_s=12.5)  # fmt: skip
     summary = json.loads(paths[0].read_text())["summary"]
     assert summary["wall_s"] == 12.5 and summary["solved"] <= 2
+
+
+def test_a_failed_seed_reports_the_exception_its_log_ends_with():
+    """The error of a seed whose process died is the log's last exception line (a GPU out of
+    memory raised through JAX), not the traceback's last code lines; a log without one gives
+    its last three lines."""
+    from mjx_arm.bench.seeds import log_error
+
+    log = (
+        "Traceback (most recent call last):\n"
+        '  File "jax/_src/array.py", line 623, in _value\n'
+        "    npy_value, did_copy = self._single_device_array_to_np_array_did_copy()\n"
+        "                          ^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^\n"
+        "jax.errors.JaxRuntimeError: UNKNOWN: FFI callback error: RuntimeError: Failed to "
+        "allocate 1006632960 bytes on device 'cuda:0' [executable_name='jit_unroll']\n"
+    )
+    assert log_error(log).startswith("jax.errors.JaxRuntimeError: UNKNOWN: FFI callback error")
+    assert "Failed to allocate 1006632960 bytes" in log_error(log)
+    assert log_error("one\ntwo\nthree\nfour") == "two | three | four"
+    assert len(log_error("ValueError: " + "x" * 1000)) == 400

@@ -24,6 +24,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import re
 import subprocess
 import sys
 import time
@@ -156,6 +157,19 @@ def read_seed_run(
     )
 
 
+_RAISED = re.compile(r"^(?:[A-Za-z_][\w.]*\.)?\w*(?:Error|Exception|Interrupt)\b.*$", re.M)
+
+
+def log_error(log: str, chars: int = 400) -> str:
+    """What a failed seed's log says went wrong: its last line naming an exception
+    (``jax.errors.JaxRuntimeError: ...``, ``RuntimeError: ...``), else its last three lines,
+    at most ``chars`` characters. The last three lines alone were a traceback's code line for
+    a GPU out of memory."""
+    raised = _RAISED.findall(log)
+    text = raised[-1].strip() if raised else " | ".join(log.splitlines()[-3:])
+    return text if len(text) <= chars else text[: chars - 3] + "..."
+
+
 def failed_seed(seed: int, gpu: str, wall: float, error: str) -> SeedRun:
     """The result of a seed whose process failed: not solved, the error kept."""
     nan = math.nan
@@ -187,8 +201,8 @@ def _finished_seed(
 
     end = time.time()
     if proc.returncode != 0:
-        tail = (runs_dir / f"seed{seed}.log").read_text(errors="replace")
-        error = f"exit code {proc.returncode}: " + " | ".join(tail.splitlines()[-3:])
+        log = (runs_dir / f"seed{seed}.log").read_text(errors="replace")
+        error = f"exit code {proc.returncode}: {log_error(log)}"
         return failed_seed(seed, gpu, end - start, error), {}
     run_dir = seed_run_dir(config, seed, runs_dir)
     run = read_seed_run(config, seed, run_dir, start, end)
