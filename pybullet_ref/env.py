@@ -140,11 +140,7 @@ class PybulletArmEnv(BaseRobotEnv):
         self._ee_offset = self.arm.ee_offset.copy() if np.any(self.arm.ee_offset) else None
         self.servo = joint_servo(self.arm, self.task.spec.servo_dt or self.task.sim_dt)
         self.self_collision = task_convert_config(self.task, self.arm).self_collision
-        with native_output_silenced():  # "argv[0]="
-            self.client = BulletClient(connection_mode=pybullet.DIRECT)
-        # disconnect when the env goes, or at exit while Python can still do it: an env left
-        # open until the interpreter tears pybullet down printed a TypeError from the client
-        self._disconnect = weakref.finalize(self, disconnect, self.client)
+        self.client = self._connect()
         self._calls = HotCalls.of(self.client)
         # without a render mode nothing is drawn: skip the visual shapes (halves the reset time)
         self._load_flags = 0 if render_mode else pybullet.URDF_IGNORE_VISUAL_SHAPES
@@ -173,6 +169,15 @@ class PybulletArmEnv(BaseRobotEnv):
         self.gripper = self.arm.gripper if self.task.spec.gripper else None
         # a complete world before the first reset (render, get_ee_pose): home pose, mid target
         self._physics_reset(np.asarray(self.task.home_qpos), self._target_body)
+
+    def _connect(self) -> BulletClient:
+        """This env's own physics server (DIRECT), disconnected when the env goes or at exit,
+        while Python can still do it: an env left open until the interpreter tore pybullet
+        down printed a TypeError from the client's ``__del__``."""
+        with native_output_silenced():  # "argv[0]="
+            client = BulletClient(connection_mode=pybullet.DIRECT)
+        self._disconnect = weakref.finalize(self, disconnect, client)
+        return client
 
     # ------------------------------------------------------------------ world
 
