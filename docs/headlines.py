@@ -316,7 +316,7 @@ SMALL_GROUPS = (
     ("SO-101 touch", (f"{SMALL}seeds_touch_fast_so101_call1.json",),
      (f"{SMALL}transfer_touch_so101_seed0.json",)),
     ("SO-101 lift", (f"{SMALL}seeds_lift_fast_so101_call1.json",),
-     (f"{SMALL}transfer_lift_so101_seed1.json",)),
+     (f"{SMALL}transfer_lift_so101_seed1_cube_spring.json",)),
     ("xArm6 + gripper lift", tuple(f"{SMALL}seeds_lift_fast_xarm6_s{s}_call2.json" for s in (0, 1)),
      tuple(f"{SMALL}transfer_lift_xarm6_seed{s}.json" for s in (0, 1))),
     ("xArm6 + gripper touch",

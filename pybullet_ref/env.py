@@ -135,7 +135,7 @@ class PybulletArmEnv(BaseRobotEnv):
         contact: SceneContact | str = SOFT,
     ) -> None:
         super().__init__(task, arm, render_mode, width, height)
-        self.contact = arm_contact(contact, self.arm)
+        self.contact = arm_contact(contact, self.arm, self.task.object_scale)
         self._urdf = bullet_arm_urdf(self.arm)  # hulls eroded, repairs, pads fitted
         self._ee_offset = self.arm.ee_offset.copy() if np.any(self.arm.ee_offset) else None
         self.servo = joint_servo(self.arm, self.task.spec.servo_dt or self.task.sim_dt)

@@ -40,3 +40,16 @@ def test_a_lighter_arm_gets_a_softer_table_and_box():
     assert contact.fixed.stiffness == pytest.approx(SOFT.fixed.stiffness * ratio, rel=1e-9)
     assert contact.fixed.damping == pytest.approx(SOFT.fixed.damping * ratio, rel=1e-9)
     assert contact.cube == SOFT.cube
+
+
+def test_a_smaller_cube_gets_a_stiffer_spring():
+    """The SO-101 holds a cube of half the shipped edge: its spring is 4x the calibrated one
+    (the jaw sank 6-8 mm into it and knocked the cube away), its damper and the table's are
+    unchanged by the cube; the shipped size (0, or 1) keeps the calibration."""
+    shipped = arm_info()
+    assert arm_contact("soft", shipped, 0.0) == SOFT
+    assert arm_contact("soft", shipped, 1.0) == SOFT
+    half = arm_contact("soft", shipped, 0.5)
+    assert half.cube.stiffness == pytest.approx(4.0 * SOFT.cube.stiffness, rel=1e-12)
+    assert half.cube.damping == SOFT.cube.damping and half.fixed == SOFT.fixed
+    assert arm_contact("rigid", shipped, 0.5) == RIGID  # a named contact is kept as given
