@@ -80,6 +80,7 @@ def seed_record(run: Path, threshold: float) -> dict[str, Any]:
         (int(r["step"]) for r in rows if r.get("eval/episode_success", 0) >= threshold), None
     )
     last = rows[-1]
+    train = json.loads((run / "config.json").read_text())["train"]
     return {
         "seed": int(SEED_DIR.search(run.name)["seed"]),
         "solved": hit is not None,
@@ -99,8 +100,7 @@ def seed_record(run: Path, threshold: float) -> dict[str, Any]:
         "mean_distance_last": last.get("eval/episode_distance", math.nan)
         / last.get("eval/avg_episode_length", math.nan),
         "trap": None if hit is not None else trap(last),
-        "settings": json.loads((run / "config.json").read_text())["train"]["schedule"]
-        | json.loads((run / "config.json").read_text())["train"]["normalizer"],
+        "settings": train["schedule"] | train["normalizer"],
     }
 
 
