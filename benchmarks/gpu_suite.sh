@@ -128,24 +128,30 @@ cold-arm)
     2>&1 | tee "$WORK/log_cold_arm.txt"
   ;;
 campaign)
-  # One `bench seeds` per JOBS line, all at once: "GPU|NAME|TASK|SEEDS|SETS[|ARGS]" (SETS: a
-  # --set list, "-" for the preset as shipped; ARGS: more `bench seeds` arguments, such as
-  # --arm A --threshold 0.9). Lines may share a GPU (MEM_FRACTION splits its memory; three
-  # SO-101 lines on one H200 ran out of memory and then failed to load Warp's kernels). Each
-  # stops after LIMIT seconds; the runs' metrics, configs and start-up reports, and every
-  # report, go into $OUT/NAME.tar.gz; with EXPORT=1 each run's
-  # policy (its final checkpoint, the best evaluated one) also goes to
-  # $OUT/policies/NAME_RUN.npz.
-  [ -n "${MEM_FRACTION:-}" ] && export XLA_PYTHON_CLIENT_MEM_FRACTION="$MEM_FRACTION"
-  while IFS='|' read -r gpu name task seeds sets args; do
-    [ -z "$gpu" ] && continue
-    set_args=(); [ "$sets" != "-" ] && read -r -a set_args <<< "--set $sets"
-    read -r -a more <<< "${args:-}"
-    CUDA_VISIBLE_DEVICES=$gpu timeout "${LIMIT:-500}" python3 -m mjx_arm.cli bench seeds \
-      --task "$task" --preset "${PRESET:-fast}" --seeds "$seeds" "${set_args[@]}" "${more[@]}" \
-      --name "$name" --runs "$WORK/$name" --out "$WORK/$name/report" ${EXTRA:-} \
-      > "$WORK/$name.log" 2>&1 &
-  done <<< "${JOBS:?one GPU|NAME|TASK|SEEDS|SETS per line}"
+  # One `bench seeds` per JOBS line: "GPU|NAME|TASK|SEEDS|SETS[|ARGS]" (SETS: a --set list, "-"
+  # for the preset as shipped; ARGS: more `bench seeds` arguments, such as --arm A --threshold
+  # 0.9). The GPUs run at once; the lines of one GPU run one after another (several runs on one
+  # GPU at once make their times incomparable, and three SO-101 runs on one H200 ran out of
+  # memory). Every line stops DEADLINE seconds (default 540) after the campaign's start. The
+  # runs' metrics, configs and start-up reports, and every report, go into $OUT/NAME.tar.gz;
+  # with EXPORT=1 each run's policy (its final checkpoint, the best evaluated one) also goes to
+  # $OUT/policies/NAME_RUN.npz. Last, one line per seed run (benchmarks/campaign_brief.py).
+  start=$SECONDS
+  run_line() {  # GPU NAME TASK SEEDS SETS ARGS
+    local set_args=() more=() left=$(( ${DEADLINE:-540} - (SECONDS - start) ))
+    [ "$left" -le 10 ] && { echo "no time left for $2" > "$WORK/$2.log"; return; }
+    [ "$5" != "-" ] && read -r -a set_args <<< "--set $5"
+    read -r -a more <<< "${6:-}"
+    CUDA_VISIBLE_DEVICES=$1 timeout "$left" python3 -m mjx_arm.cli bench seeds \
+      --task "$3" --preset "${PRESET:-fast}" --seeds "$4" "${set_args[@]}" "${more[@]}" \
+      --name "$2" --runs "$WORK/$2" --out "$WORK/$2/report" ${EXTRA:-} > "$WORK/$2.log" 2>&1
+  }
+  jobs_text="${JOBS:?one GPU|NAME|TASK|SEEDS|SETS per line}"
+  for gpu in $(cut -d'|' -f1 <<< "$jobs_text" | grep -v '^$' | sort -u); do
+    (while IFS='|' read -r g name task seeds sets args; do
+      [ "$g" = "$gpu" ] && run_line "$g" "$name" "$task" "$seeds" "$sets" "$args"
+    done <<< "$jobs_text") &
+  done
   wait
   for dir in "$WORK"/*/; do
     name=$(basename "$dir")
@@ -162,6 +168,7 @@ campaign)
     fi
   done
   wait
+  python3 -m benchmarks.campaign_brief "$WORK" --threshold "${THRESHOLD:-0.95}"
   ;;
 sweep)
   # Candidate changes to the fast preset, each trained on SWEEP_SEEDS (exploration: the

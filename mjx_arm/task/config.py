@@ -44,7 +44,9 @@ class RewardConfig:
     ``proximity`` = exp(-d / proximity_length): 1 at the target, 0.37 one length away (a
     near-field pull that ``distance``'s longer length scale lacks),
     ``streak`` = how far a press inside the band has held on: 0 on a one-step tap, 1 once it
-    has held ``success_hold_steps`` steps running (:func:`mjx_arm.task.reward.streak`).
+    has held ``success_hold_steps`` steps running (:func:`mjx_arm.task.reward.streak`),
+    ``strike`` = 1 on the step whose reading ends the episode as a strike (a protective stop:
+    :meth:`mjx_arm.task.spec.Task.strikes`).
 
     A task with terms of its own (Lift's ``lift``, ``grasp``, ...) declares them in its file:
     a frozen subclass that adds one weight field per term and names them in
@@ -66,6 +68,7 @@ class RewardConfig:
     overforce: float = 0.0
     proximity: float = 0.0
     streak: float = 0.0
+    strike: float = 0.0
     distance_length: float = 0.1
     proximity_length: float = 0.01
     soft_limit: float = 0.95
@@ -96,6 +99,7 @@ REWARD_TERMS = (
     "overforce",
     "proximity",
     "streak",
+    "strike",
 )
 
 

@@ -285,10 +285,12 @@ def _own_terms(xp: Any, task: Any, distance, extra: dict | None) -> dict:
 
 def _state_terms(xp: Any, task: Any, distance, force_norm, cfg: TaskConfig) -> dict:
     """The terms of the distance d (m) and the tared force norm (N), each ``(...)``:
-    ``distance``, ``proximity``, and ``task``'s ``contact``, ``force_excess``, ``overforce``."""
+    ``distance``, ``proximity``, and ``task``'s ``contact``, ``force_excess``, ``overforce``
+    and ``strike``."""
     near = distance < cfg.success_distance
     contact, excess = task.contact_terms(xp, near, force_norm, cfg)
     return {
+        "strike": task.strikes(xp, force_norm, cfg) + 0.0 * distance,
         "distance": 1.0 - xp.exp(-distance / cfg.reward.distance_length),
         "contact": contact,
         "force_excess": excess,
