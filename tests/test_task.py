@@ -7,6 +7,7 @@ definition of the contract serves the JAX engine too.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -633,3 +634,32 @@ def test_streak_is_zero_where_one_step_succeeds() -> None:
     cfg = touch_config("seed")
     assert cfg.success_hold_steps == 1
     assert float(reward_lib.streak(np, np.asarray(5.0), cfg)) == 0.0
+
+
+def test_the_strike_term_marks_the_step_a_strike_ends() -> None:
+    """The ``strike`` term is 1 only on a reading over the strike limit of gentle Touch (the
+    step that ends the episode), in numpy and JAX, and its weight adds to the reward; Reach and
+    the seed variant of Touch (no protective stop) never set it. The shipped weight is 0: a
+    charge of -400 was measured and dropped (docs/training.md)."""
+    import jax.numpy as jnp
+
+    cfg = touch_config()
+    assert cfg.reward.strike == 0.0
+    limit = reward_lib.strike_limit(cfg)
+    for xp in (np, jnp):
+        forces = xp.asarray([0.0, 30.0, 60.0, limit, limit + 0.5])
+        terms = reward_lib.reward_terms(
+            xp, xp.full(5, 0.01), forces, xp.zeros((5, 6)), xp.zeros((5, 6)), UNIT_LIMITS,
+            xp.zeros(5, dtype=bool), xp.zeros(5, dtype=bool), cfg,
+        )  # fmt: skip
+        np.testing.assert_array_equal(np.asarray(terms["strike"]), [0, 0, 0, 0, 1])
+    charged = cfg.replace(reward=dataclasses.replace(cfg.reward, strike=-400.0))
+    struck = {name: np.asarray(v)[4] for name, v in terms.items()}
+    gap = reward_lib.total_reward(struck, charged) - reward_lib.total_reward(struck, cfg)
+    assert float(gap) == pytest.approx(-400.0)
+    for other in (reach_config(), touch_config("seed")):
+        terms = reward_lib.reward_terms(
+            np, np.asarray(0.01), np.asarray(500.0), np.zeros(6), np.zeros(6), UNIT_LIMITS,
+            False, False, other,
+        )  # fmt: skip
+        assert float(terms["strike"]) == 0.0
