@@ -88,3 +88,25 @@ def test_scripted_pick_lifts_the_cube(engine: str) -> None:
             assert info["height"] >= LIFT_HEIGHT and info["grasp"] == 1.0
     finally:
         env.close()
+
+
+def test_the_fingers_collide_with_the_table() -> None:
+    """The xArm6's URDF names its root link ``world`` (MuJoCo's world body, where the table and
+    the box live), and at all-zero angles its fingers reach below the table top. No link may
+    lose its contacts with the world body for that: at qpos0 MuJoCo makes pad-table contacts
+    (it made none when the at-rest overlap excluded the fingers from the world, and trained
+    policies pushed the fingers 15 mm through the table)."""
+    model = arm_model(arm_info(ARM), lift_config())
+    world_pairs = [s for s in model.exclude_signature if (s >> 16) == 0 or (s & 0xFFFF) == 0]
+    assert world_pairs == []
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    table = model.geom("table_0").id
+    pads = {model.geom(f"{pad}{PAD_GEOM_SUFFIX}").id for pad in PADS}
+    touching = {
+        g
+        for c in data.contact[: data.ncon]
+        for g in (c.geom1, c.geom2)
+        if table in (c.geom1, c.geom2) and g in pads
+    }
+    assert touching == pads

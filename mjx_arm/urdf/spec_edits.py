@@ -298,15 +298,20 @@ def _exclude_neighbours(spec: mujoco.MjSpec, model: RobotModel) -> None:
     """Exclude contacts between links joined by a joint and between links touching at rest.
 
     Neighbouring links overlap at their joint by construction, and so do links whose collision
-    shapes already touch in the reference configuration; neither is a real collision.
+    shapes already touch in the reference configuration; neither is a real collision. A pair
+    with MuJoCo's world body is never excluded, even where the URDF names its root link
+    ``world``: the scene (table, box) lives in that body, so such a pair would let a link pass
+    through the table (the xArm6's fingers, which reach below the table top at all-zero
+    angles, did). Links welded to the world never collide with it anyway.
     """
+    world = spec.worldbody.name
     pairs = {tuple(sorted((j.parent, j.child))) for j in model.joints.values()}
     root = model.root_link
     first = [j.child for j in model.joints.values() if j.parent == root]
     pairs |= {tuple(sorted((root, c))) for c in first}
     pairs |= _pairs_in_contact_at_rest(spec, set(model.links))
     for body1, body2 in sorted(pairs):
-        if body1 == body2:
+        if body1 == body2 or world in (body1, body2):
             continue
         exclude = spec.add_exclude()
         exclude.bodyname1 = body1
