@@ -319,11 +319,6 @@ SMALL_GROUPS = (
      (f"{SMALL}transfer_touch_so101_seed0.json",)),
     ("SO-101 lift", (f"{SMALL}seeds_lift_fast_so101_call1.json",),
      (f"{SMALL}transfer_lift_so101_seed1_cube_spring.json",)),
-    ("xArm6 + gripper lift", tuple(f"{SMALL}seeds_lift_fast_xarm6_s{s}_call2.json" for s in (0, 1)),
-     tuple(f"{SMALL}transfer_lift_xarm6_seed{s}.json" for s in (0, 1))),
-    ("xArm6 + gripper touch",
-     tuple(f"{SMALL}seeds_touch_fast_xarm6_s{s}_call2.json" for s in (0, 1)),
-     (f"{SMALL}transfer_touch_xarm6_seed1.json",)),
 )  # fmt: skip
 
 
@@ -351,7 +346,7 @@ HEADLINES: tuple[Headline, ...] = (
                     LINKAGE_GROUPS),
     _arm_groups_row("Touch on 7-joint arms, `--preset fast` as shipped", SEVEN_GROUPS,
                     _seven_compile),
-    _arm_groups_row("Small arm and published grippers, `--preset fast` as shipped, no arm file "
+    _arm_groups_row("Small arm with a one-jaw gripper, `--preset fast` as shipped, no arm file "
                     "beyond `repair_inertia` (a crashed seed counts as unsolved)", SMALL_GROUPS),
     _summary_row(LIFT_SUMMARIES, "Lift: `--preset fast` as shipped, seeds and transfer"),
     _summary_row(ROBUST_LIFT_SUMMARY, "Lift: `--preset robust` as shipped, seeds and transfer"),
