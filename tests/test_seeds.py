@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from mjx_arm.bench.seeds import first_at, run_seeds, write_report
+from mjx_arm.bench.seeds import first_at, write_report
 from mjx_arm.bench.seeds_config import SeedRun, SeedsConfig, parse_seeds
 from mjx_arm.bench.seeds_summary import quartiles, summarize
 
@@ -83,15 +83,28 @@ def test_report_files(tmp_path: Path) -> None:
     assert "not reached" in text and "1 of 2 seeds" in text and "with a=1" in text
     paths = write_report(config, runs, [{}, {}], meta, tmp_path, "s", ("a=1",), png=True)
     assert paths[2] == tmp_path / "s.png" and paths[2].stat().st_size > 1000  # a PNG drawn
+    # written while the benchmark runs: the seeds finished so far, and how many are to come
+    paths = write_report(config, runs[:1], [{}], meta, tmp_path, "s", pending=1)
+    assert json.loads(paths[0].read_text())["pending_seeds"] == 1
+    assert "1 seeds finished, 1 still to come" in paths[1].read_text()
 
 
 @pytest.mark.slow
 def test_two_tiny_seeds_on_the_c_backend(tmp_path: Path) -> None:
     """Two seeds of a few thousand steps: each trains, its curve starts at step 0, and the
-    report sees the saved config of each seed (its own seed)."""
+    report sees the saved config of each seed (its own seed); the command writes the report
+    of the first seed before the second trains (a benchmark stopped early keeps it)."""
+    from mjx_arm.bench.cli import _train_seeds
+
     config = SeedsConfig(task="reach", preset="cpu", seeds="0,1", backend="mujoco")
     sets = ("num_timesteps=2560", "num_evals=2", "num_eval_envs=8")
-    runs, configs = run_seeds(config, tmp_path, sets, log=lambda _: None)
+    reports = []
+
+    def report(runs, configs, **kwargs):
+        reports.append(([r.seed for r in runs], kwargs["pending"]))
+
+    runs, configs = _train_seeds(config, tmp_path, [], sets, 0.0, lambda _: None, report)
+    assert reports == [([0], 1)]  # the final report is the command's own
     assert [r.seed for r in runs] == [0, 1]
     assert [c["train"]["seed"] for c in configs] == [0, 1]
     for run in runs:

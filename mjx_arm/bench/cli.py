@@ -222,17 +222,12 @@ def cmd_seeds(args: argparse.Namespace) -> int:
     Overall: the fraction of seeds solved and the median and interquartile range of the time
     to the threshold, over all seeds and over the warm ones (all but the first, which pays
     for any empty compilation cache). Writes NAME.md and NAME.json into --out (and NAME.png,
-    the success curves, with --plot); the runs and their logs go to --runs.
+    the success curves, with --plot); the runs and their logs go to --runs. The report is
+    written again as each seed finishes, so a benchmark stopped early keeps its finished seeds.
     """
     start = time.time()
     from mjx_arm.bench.results import environment_metadata
-    from mjx_arm.bench.seeds import (
-        SeedsConfig,
-        check_seed_settings,
-        run_seeds,
-        run_seeds_on_gpus,
-        write_report,
-    )
+    from mjx_arm.bench.seeds import SeedsConfig, check_seed_settings, write_report
     from mjx_arm.train.launch import visible_gpus
 
     config = from_arguments(SeedsConfig(), args)
@@ -247,16 +242,32 @@ def cmd_seeds(args: argparse.Namespace) -> int:
     meta = environment_metadata(accelerator=True)
     overrides = tuple(args.set or ())
     log = functools.partial(print, flush=True)
-    if gpus:
-        runs, configs = run_seeds_on_gpus(config, runs_dir, gpus, overrides, log)
-    else:
-        runs, configs = run_seeds(config, runs_dir, overrides, start, log)
     name = args.name or f"seeds_{config.task}_{config.preset}"
+    report = functools.partial(write_report, config, meta=meta, out=args.out, name=name)
+    runs, configs = _train_seeds(config, runs_dir, gpus, overrides, start, log, report)
     wall = time.time() - start
-    paths = write_report(config, runs, configs, meta, args.out, name, overrides, wall, args.plot)
+    paths = report(runs, configs, overrides=overrides, wall_s=wall, png=args.plot)
     print(paths[1].read_text())
     _print_paths(paths)
     return EXIT_OK
+
+
+def _train_seeds(config, runs_dir: Path, gpus: list[str], overrides, start: float, log, report):
+    """Train the seeds (a process per seed on ``gpus``, else in turn here); after each seed
+    but the last, ``report`` writes the report of the seeds finished so far, so that a
+    benchmark stopped early keeps them. Returns the seed runs and their saved configs."""
+    from mjx_arm.bench.seeds import parse_seeds, run_seeds, run_seeds_on_gpus
+
+    total = len(parse_seeds(config.seeds))
+
+    def on_seed(runs: list, configs: list) -> None:
+        if len(runs) < total:
+            wall = time.time() - start
+            report(runs, configs, overrides=overrides, wall_s=wall, pending=total - len(runs))
+
+    if gpus:
+        return run_seeds_on_gpus(config, runs_dir, gpus, overrides, log, on_seed)
+    return run_seeds(config, runs_dir, overrides, start, log, on_seed)
 
 
 def _runs_folder(runs: Path | None, config: SeedsConfig) -> Path:

@@ -28,6 +28,7 @@ import re
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -38,6 +39,9 @@ from mjx_arm.bench.seeds_config import SeedRun, SeedsConfig, parse_seeds
 from mjx_arm.bench.seeds_summary import seed_line, seeds_table, start_up_line, summarize
 
 SUCCESS_KEY = "eval/episode_success"
+
+# Called with the seed runs finished so far and their saved configs (a partial report).
+SeedsDone = Callable[[list[SeedRun], list[dict[str, Any]]], None]
 
 
 def read_curve(run_dir: Path, start: float) -> list[tuple[float, int, float]]:
@@ -216,12 +220,14 @@ def run_seeds_on_gpus(
     gpus: list[str],
     overrides: tuple[str, ...] = (),
     log=print,
+    on_seed: SeedsDone | None = None,
 ) -> tuple[list[SeedRun], list[dict[str, Any]]]:
     """Train every seed in a process of its own, one per GPU of ``gpus`` at a time.
 
     Each seed's times count from its own process's start (imports, cache loads and any
     compilation included). A seed whose process fails is reported as not solved, with the
-    end of its log, and the others go on.
+    end of its log, and the others go on. ``on_seed`` is called with the seeds finished so
+    far (in seed order) each time one finishes.
     """
     queue, free = list(parse_seeds(config.seeds)), list(gpus)
     running: dict[int, tuple[subprocess.Popen, str, float]] = {}
@@ -241,6 +247,9 @@ def run_seeds_on_gpus(
             run = done[seed][0]
             failed = f"seed {seed}: its process failed ({run.error[:400]})"
             log(failed if run.error else seed_line(config, run))
+            if on_seed is not None:
+                finished = [done[s] for s in parse_seeds(config.seeds) if s in done]
+                on_seed([r for r, _ in finished], [c for _, c in finished])
         time.sleep(0.5)
     ordered = [done[s] for s in parse_seeds(config.seeds)]
     return [r for r, _ in ordered], [c for _, c in ordered]
@@ -302,11 +311,13 @@ def run_seeds(
     overrides: tuple[str, ...] = (),
     first_start: float | None = None,
     log=print,
+    on_seed: SeedsDone | None = None,
 ) -> tuple[list[SeedRun], list[dict[str, Any]]]:
     """Train every seed of ``config`` in turn; the results and each run's saved config.
 
     The first seed's times count from ``first_start`` (the command's start: imports and any
-    cold compilation included), the others' from their own start.
+    cold compilation included), the others' from their own start. ``on_seed`` is called with
+    the seeds finished so far each time one finishes.
     """
     seeds = parse_seeds(config.seeds)
     runs, configs = [], []
@@ -318,6 +329,8 @@ def run_seeds(
         configs.append(saved)
         log(seed_line(config, run))
         log(f"seed {seed} {start_up_line(run.compile_report)}")
+        if on_seed is not None:
+            on_seed(list(runs), list(configs))
     return runs, configs
 
 
@@ -331,10 +344,13 @@ def write_report(
     overrides: tuple[str, ...] = (),
     wall_s: float | None = None,
     png: bool = False,
+    pending: int = 0,
 ) -> list[Path]:
     """Write NAME.json and NAME.md (and with ``png``, NAME.png) into ``out``; return their paths.
 
-    ``wall_s``: the whole benchmark's wall time (recorded with the GPUs the seeds ran on)."""
+    ``wall_s``: the whole benchmark's wall time (recorded with the GPUs the seeds ran on).
+    ``pending``: seeds still training or queued (a report written while the benchmark runs,
+    so that one stopped early keeps its finished seeds); recorded as ``pending_seeds``."""
     summary = summarize(runs, config.threshold)
     if wall_s is not None:
         summary["wall_s"] = wall_s
@@ -342,10 +358,13 @@ def write_report(
     table = seeds_table(runs, summary)
     changed = f", with {' '.join(overrides)}" if overrides else " as shipped"
     title = f"{config.task}, preset {config.preset}{changed}, {meta['device']['kind']}"
+    if pending:
+        title += f" ({len(runs)} seeds finished, {pending} still to come)"
     payload = {
         "meta": meta,
         "settings": dataclasses.asdict(config),
         "overrides": list(overrides),
+        "pending_seeds": pending,
         "summary": summary,
         "seeds": [dataclasses.asdict(r) for r in runs],
         "configs": configs,
