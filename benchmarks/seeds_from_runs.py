@@ -1,7 +1,8 @@
 """The report of a ``bench seeds`` that was stopped before it wrote one, from its runs and log.
 
 ``gpu_suite.sh campaign`` stops every line at its deadline; a ``bench seeds`` stopped there
-leaves its seeds' run directories and its log, but no ``NAME.json``. This rebuilds that report
+before it wrote its report after each seed (``pending_seeds``) left its seeds' run directories
+and its log, but no ``NAME.json``. This rebuilds that report
 (the same summary: solve rate with its 95 % interval, times, steps, collapses) from them:
 
 - each seed's curve comes from its ``metrics.csv``;
