@@ -46,3 +46,47 @@ def test_a_campaign_counts_the_traps_of_its_failing_seeds(tmp_path):
     assert [s["trap"] for s in result["seeds"]] == [None, "tapping", "stalled"]
     assert result["traps"]["tapping"] == 1 and result["traps"]["stalled"] == 1
     assert abs(result["seeds"][1]["mean_distance_last"] - 0.04) < 1e-9
+
+
+def test_a_brief_line_per_seed_run(tmp_path):
+    """``campaign_brief``: a solved seed gives the steps of its first evaluation at the
+    threshold, a failing one its trap."""
+    from benchmarks.campaign_brief import brief
+
+    _run(tmp_path, 1, 0.99, 3.0, 2.0)
+    _run(tmp_path, 2, 0.0, 31.9, 0.1)
+    solved = brief(tmp_path / "touch-fast-seed1", 0.95)
+    assert solved.endswith("best 0.990 last 0.990 solved at 0.0M steps")
+    assert brief(tmp_path / "touch-fast-seed2", 0.95).endswith("(tapping)")
+
+
+def test_the_contact_reflex_of_a_tapping_episode():
+    """``touch_contact_reflex.reflex``: a press answered by a full-speed retract (3 of 6
+    joints at |a| >= 0.9 on the next step) counts as a retract; a held press does not."""
+    import numpy as np
+
+    from benchmarks.touch_contact_reflex import reflex
+
+    forces = np.array([0.0, 44.0, 0.0, 0.0, 42.0, 0.0, 20.0, 21.0, 0.0])
+    actions = np.zeros((9, 6))
+    actions[2, :4] = [-0.7, -1.0, 1.0, -1.0]  # the step after the first press
+    actions[5, :3] = [-1.0, 1.0, 0.95]  # and after the second
+    got = reflex(forces, actions, (1.0, 50.0))
+    assert got["contact_steps"] == 4 and got["in_band_steps"] == 4
+    assert got["in_band_pairs"] == 1 and got["retracts"] == 2
+    assert got["retract_forces"] == [44.0, 42.0] and got["contact_gap_median"] == 2.0
+
+
+def test_logged_times_of_a_stopped_seeds_benchmark():
+    """``seeds_from_runs``: the finished seeds of a bench log and their times to the
+    threshold; a seed still training has no line."""
+    from benchmarks.seeds_from_runs import logged_times
+
+    log = (
+        "seed 7100: training touch / fast on GPU 0\n"
+        "seed 7100: final 0.997, best 0.997, 0.95 at 96.0 s, wall 101.0 s, compile 9.6 s\n"
+        "seed 7101: training touch / fast on GPU 0\n"
+        "seed 7101: final 0.026, best 0.026, 0.95 at not reached, wall 103.0 s, compile 5.6 s\n"
+        "seed 7102: training touch / fast on GPU 0\n"
+    )
+    assert logged_times(log) == {7100: 96.0, 7101: None}
