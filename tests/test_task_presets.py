@@ -7,7 +7,7 @@ the training config, reward weights in one list for every task and task settings
 own file and the settings are a typed ``TaskConfig``: every number must be the same. The only
 keys allowed to go are reward weights of terms a task no longer carries, and only at weight 0;
 the only keys allowed to come are task fields added since, at their "from the arm" default
-(:data:`ADDED_FIELDS`).
+(:data:`ADDED_FIELDS`), and reward terms added since, at weight 0.
 """
 
 from __future__ import annotations
@@ -43,12 +43,14 @@ ADDED_FIELDS = {"object_scale": 0.0}
 
 def _drop_zero_terms(before: dict, after: dict) -> dict:
     """``before`` (a task config's dict) without the reward weights ``after`` lacks, each of
-    them 0, and with :data:`ADDED_FIELDS` at their defaults where ``after`` has them."""
+    them 0, with the reward terms added since at weight 0 (``strike``), and with
+    :data:`ADDED_FIELDS` at their defaults where ``after`` has them."""
     dropped = {k: v for k, v in before["reward"].items() if k not in after["reward"]}
     assert all(v == 0 for v in dropped.values()), dropped
     added = {k: v for k, v in ADDED_FIELDS.items() if k in after and k not in before}
     reward = {k: v for k, v in before["reward"].items() if k not in dropped}
-    return {**before, **added, "reward": reward}
+    new_terms = {k: 0.0 for k in after["reward"] if k not in before["reward"]}
+    return {**before, **added, "reward": {**reward, **new_terms}}
 
 
 def test_the_snapshot_covers_every_preset_and_shipped_task() -> None:
