@@ -11,6 +11,10 @@ reading is at least the band's lower end (1 N), looks at the action of the next 
 - per episode: success, strike (a reading over the strike limit ends it), contact steps,
   in-band steps, in-band pairs (two in a row: a press that held) and the gap between contacts.
 
+With ``--smoothing A [A ...]`` it runs each policy again with its actions low-passed at test
+time (``a'_t = A a'_{t-1} + (1 - A) a_t``) and reports success and strikes per ``A``: does a
+policy that retracts keep its presses when it cannot retract at once?
+
     python -m benchmarks.touch_contact_reflex runs/pol/*.npz --episodes 50 \\
         --name touch_contact_reflex --out benchmarks/results/diagnosis
 """
@@ -33,14 +37,17 @@ SATURATED_JOINTS = 3  # joints at full speed at once: a retract, not a correctio
 FIRST_EPISODE = 5000  # episode seeds start here (never used to train or choose anything)
 
 
-def episode(env: gym.Env, policy, seed: int) -> dict[str, Any]:
-    """One deterministic episode: per-step forces (N, ``(T,)``) and actions ``(T, n)``."""
+def episode(env: gym.Env, policy, seed: int, smoothing: float = 0.0) -> dict[str, Any]:
+    """One deterministic episode: per-step forces (N, ``(T,)``) and actions ``(T, n)``, the
+    actions low-passed by ``smoothing`` (0: as the policy gives them)."""
     obs, info = env.reset(seed=seed)
     forces, actions, success, strike = [], [], False, False
     for _ in range(10_000):
-        action = policy(obs)
+        action = np.asarray(policy(obs), dtype=np.float32)
+        if actions and smoothing:
+            action = smoothing * actions[-1] + (1.0 - smoothing) * action
         obs, _, terminated, truncated, info = env.step(action)
-        actions.append(np.asarray(action, dtype=float))
+        actions.append(action)
         forces.append(float(np.nan_to_num(info["contact_force_norm"], nan=0.0)))
         if terminated or truncated:
             success = bool(info["is_success"])
@@ -96,6 +103,21 @@ def measure(path: Path, episodes: int) -> dict[str, Any]:
     }
 
 
+def smoothed(path: Path, episodes: int, alphas: list[float]) -> list[dict[str, Any]]:
+    """Success and strike rate of the policy file ``path`` with its actions low-passed by
+    each of ``alphas``, over ``episodes`` episodes each."""
+    policy = policy_lib.load(path)
+    env = gym.make("mjx_arm/Touch-v0", engine="mujoco")
+    rows = []
+    for alpha in alphas:
+        eps = [episode(env, policy, FIRST_EPISODE + i, alpha) for i in range(episodes)]
+        rows.append({"policy": path.name, "smoothing": alpha, "episodes": episodes,
+                     "success": float(np.mean([e["success"] for e in eps])),
+                     "strike": float(np.mean([e["strike"] for e in eps]))})  # fmt: skip
+    env.close()
+    return rows
+
+
 def table(results: list[dict[str, Any]]) -> str:
     """One row per policy."""
     head = ["policy", "success", "strike", "contact steps", "in-band steps", "in-band pairs",
@@ -110,12 +132,25 @@ def table(results: list[dict[str, Any]]) -> str:
     return markdown_table(head, rows)
 
 
+def smoothing_table(rows: list[dict[str, Any]]) -> str:
+    """One row per policy and smoothing."""
+    head = ["policy", "smoothing", "success", "strike"]
+    cells = [
+        [r["policy"], f"{r['smoothing']:.1f}", f"{r['success']:.3f}", f"{r['strike']:.3f}"]
+        for r in rows
+    ]
+    return markdown_table(head, cells)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("policies", type=Path, nargs="+", help="exported Touch policies (.npz)")
     parser.add_argument("--episodes", type=int, default=50)
     parser.add_argument("--name", default="touch_contact_reflex")
     parser.add_argument("--out", type=Path, default=None, help="results folder")
+    parser.add_argument(
+        "--smoothing", type=float, nargs="*", default=[], help="low-pass factors to try too"
+    )
     args = parser.parse_args(argv)
     results = []
     for path in args.policies:
@@ -124,10 +159,15 @@ def main(argv: list[str] | None = None) -> int:
         share = result["retract_share"]
         print(f"{path.name}: success {result['success']:.3f}, retracts {share:.0%}")
     text = table(results)
+    smooth = []
+    if args.smoothing:
+        alphas = [0.0, *args.smoothing]
+        smooth = [row for path in args.policies for row in smoothed(path, args.episodes, alphas)]
+        text += "\n\nActions low-passed at test time:\n\n" + smoothing_table(smooth)
     print(text)
     payload = {"meta": environment_metadata(), "saturated": SATURATED,
                "saturated_joints": SATURATED_JOINTS, "first_episode": FIRST_EPISODE,
-               "results": results}  # fmt: skip
+               "results": results, "smoothing": smooth}  # fmt: skip
     save_results(args.name, payload, f"# Touch: the step after a contact\n\n{text}", args.out)
     return 0
 
