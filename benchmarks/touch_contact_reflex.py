@@ -9,7 +9,9 @@ reading is at least the band's lower end (1 N), looks at the action of the next 
   joints: the policy answers the reading by throwing the arm off the box at full speed;
 - the reading that triggers it (median force of the contact steps followed by a retract);
 - per episode: success, strike (a reading over the strike limit ends it), contact steps,
-  in-band steps, in-band pairs (two in a row: a press that held) and the gap between contacts.
+  in-band steps, in-band pairs (two in a row: a press that held) and the gap between contacts;
+- each impact (a contact step after a step without): how fast the ee point closed on the
+  target over the step before it (m/s), and the reading it made.
 
 With ``--smoothing A [A ...]`` it runs each policy again with its actions low-passed at test
 time (``a'_t = A a'_{t-1} + (1 - A) a_t``) and reports success and strikes per ``A``: does a
@@ -41,7 +43,7 @@ def episode(env: gym.Env, policy, seed: int, smoothing: float = 0.0) -> dict[str
     """One deterministic episode: per-step forces (N, ``(T,)``) and actions ``(T, n)``, the
     actions low-passed by ``smoothing`` (0: as the policy gives them)."""
     obs, info = env.reset(seed=seed)
-    forces, actions, success, strike = [], [], False, False
+    forces, actions, distances, success, strike = [], [], [], False, False
     for _ in range(10_000):
         action = np.asarray(policy(obs), dtype=np.float32)
         if actions and smoothing:
@@ -49,12 +51,22 @@ def episode(env: gym.Env, policy, seed: int, smoothing: float = 0.0) -> dict[str
         obs, _, terminated, truncated, info = env.step(action)
         actions.append(action)
         forces.append(float(np.nan_to_num(info["contact_force_norm"], nan=0.0)))
+        distances.append(float(info["distance"]))
         if terminated or truncated:
             success = bool(info["is_success"])
             strike = bool(terminated and not success)
             break
     return {"forces": np.asarray(forces), "actions": np.asarray(actions), "success": success,
-            "strike": strike}  # fmt: skip
+            "strike": strike, "distances": np.asarray(distances)}  # fmt: skip
+
+
+def impacts(forces: np.ndarray, distances: np.ndarray, low: float, ctrl_dt: float) -> list:
+    """``(closing speed (m/s), reading (N))`` of each impact of one episode: a step reading at
+    least ``low`` after one that did not, its speed that of the step before (how fast the
+    distance to the target shrank), from forces and distances ``(T,)``."""
+    touching = forces >= low
+    steps = [t for t in range(2, len(forces)) if touching[t] and not touching[t - 1]]
+    return [((distances[t - 2] - distances[t - 1]) / ctrl_dt, forces[t]) for t in steps]
 
 
 def reflex(forces: np.ndarray, actions: np.ndarray, band: tuple[float, float]) -> dict[str, Any]:
@@ -79,12 +91,13 @@ def measure(path: Path, episodes: int) -> dict[str, Any]:
     """The reflex figures of the policy file ``path`` over ``episodes`` episodes."""
     policy = policy_lib.load(path)
     env = gym.make("mjx_arm/Touch-v0", engine="mujoco")
-    band = tuple(env.unwrapped.task.force_band)
-    rows = []
+    band, ctrl_dt = tuple(env.unwrapped.task.force_band), env.unwrapped.task.ctrl_dt
+    rows, hits = [], []
     for i in range(episodes):
         ep = episode(env, policy, FIRST_EPISODE + i)
         rows.append({**reflex(ep["forces"], ep["actions"], band), "success": ep["success"],
                      "strike": ep["strike"], "length": len(ep["forces"])})  # fmt: skip
+        hits += impacts(ep["forces"], ep["distances"], band[0], ctrl_dt)
     env.close()
     contacts = sum(r["contact_steps"] for r in rows)
     retract_forces = [f for r in rows for f in r["retract_forces"]]
@@ -99,6 +112,9 @@ def measure(path: Path, episodes: int) -> dict[str, Any]:
         "retract_share": sum(r["retracts"] for r in rows) / contacts if contacts else 0.0,
         "retract_force_median": float(np.median(retract_forces)) if retract_forces else None,
         "contact_gap_median": float(np.nanmedian([r["contact_gap_median"] for r in rows])),
+        "impacts": len(hits),
+        "impact_speed_median": float(np.median([v for v, _ in hits])) if hits else None,
+        "impact_reading_median": float(np.median([f for _, f in hits])) if hits else None,
         "per_episode": [{k: v for k, v in r.items() if k != "retract_forces"} for r in rows],
     }
 
@@ -121,15 +137,21 @@ def smoothed(path: Path, episodes: int, alphas: list[float]) -> list[dict[str, A
 def table(results: list[dict[str, Any]]) -> str:
     """One row per policy."""
     head = ["policy", "success", "strike", "contact steps", "in-band steps", "in-band pairs",
-            "contacts then a retract", "retract at (N)", "steps between contacts"]  # fmt: skip
+            "contacts then a retract", "retract at (N)", "steps between contacts",
+            "closing speed before an impact (cm/s)", "impact reading (N)"]  # fmt: skip
     rows = [
         [r["policy"], f"{r['success']:.3f}", f"{r['strike']:.3f}", f"{r['contact_steps']:.1f}",
          f"{r['in_band_steps']:.1f}", f"{r['in_band_pairs']:.2f}", f"{r['retract_share']:.2f}",
          "-" if r["retract_force_median"] is None else f"{r['retract_force_median']:.1f}",
-         f"{r['contact_gap_median']:.1f}"]
+         f"{r['contact_gap_median']:.1f}", _fmt(r["impact_speed_median"], 100.0),
+         _fmt(r["impact_reading_median"])]
         for r in results
     ]  # fmt: skip
     return markdown_table(head, rows)
+
+
+def _fmt(value: float | None, scale: float = 1.0) -> str:
+    return "-" if value is None else f"{value * scale:.1f}"
 
 
 def smoothing_table(rows: list[dict[str, Any]]) -> str:

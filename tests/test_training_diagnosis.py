@@ -90,3 +90,16 @@ def test_logged_times_of_a_stopped_seeds_benchmark():
         "seed 7102: training touch / fast on GPU 0\n"
     )
     assert logged_times(log) == {7100: 96.0, 7101: None}
+
+
+def test_an_impact_is_a_first_contact_and_its_closing_speed():
+    """``touch_contact_reflex.impacts``: each contact after a step without one, with the
+    speed at which the distance shrank over the step before (m/s)."""
+    import numpy as np
+
+    from benchmarks.touch_contact_reflex import impacts
+
+    forces = np.array([0.0, 0.0, 0.0, 40.0, 30.0, 0.0, 0.0, 20.0])
+    distances = np.array([0.10, 0.08, 0.05, 0.04, 0.04, 0.05, 0.045, 0.04])
+    got = impacts(forces, distances, 1.0, 0.5)
+    assert [round(v, 6) for v, _ in got] == [0.06, 0.01] and [f for _, f in got] == [40.0, 20.0]
