@@ -18,19 +18,19 @@ from pathlib import Path
 from benchmarks.training_diagnosis import SEED_DIR, _col, _rows, trap
 
 
-def brief(run: Path, threshold: float) -> str:
+def brief(run: Path, threshold: float) -> tuple[str, bool]:
     """``campaign/run: best B last L``, then the steps at the threshold or the trap, of one
-    seed run."""
+    seed run; and whether it reached the threshold."""
     rows = _rows(run)
     if not rows:
-        return f"{run.parent.name}/{run.name}: no evaluation yet"
+        return f"{run.parent.name}/{run.name}: no evaluation yet", False
     success = _col(rows, "eval/episode_success")
     hit = next((r for r in rows if r.get("eval/episode_success", 0.0) >= threshold), None)
     best = float(success.max()) if success.size else math.nan
     text = f"{run.parent.name}/{run.name}: best {best:.3f} last {success[-1]:.3f}"
     if hit is not None:
-        return f"{text} solved at {hit['step'] / 1e6:.1f}M steps"
-    return f"{text} unsolved at {rows[-1]['step'] / 1e6:.1f}M steps ({trap(rows[-1])})"
+        return f"{text} solved at {hit['step'] / 1e6:.1f}M steps", True
+    return f"{text} unsolved at {rows[-1]['step'] / 1e6:.1f}M steps ({trap(rows[-1])})", False
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -42,10 +42,10 @@ def main(argv: list[str] | None = None) -> int:
     counts: dict[str, list[int]] = {}
     for run in runs:
         if SEED_DIR.search(run.name) and (run / "metrics.csv").is_file():
-            line = brief(run, args.threshold)
+            line, solved = brief(run, args.threshold)
             print(line)
             count = counts.setdefault(run.parent.name, [0, 0])
-            count[0] += " solved " in line
+            count[0] += solved
             count[1] += 1
     for name, (solved, total) in counts.items():
         print(f"{name}: {solved} of {total} at {args.threshold}")

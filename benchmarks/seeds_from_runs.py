@@ -33,11 +33,11 @@ import re
 import statistics
 from pathlib import Path
 
+from benchmarks.training_diagnosis import SEED_DIR
 from mjx_arm.bench.seeds import read_curve, read_seed_run, write_report
 from mjx_arm.bench.seeds_config import SeedsConfig
 
 LOGGED = re.compile(r"^seed (?P<seed>\d+): final .*?at (?:(?P<t>[\d.]+) s|not reached)", re.M)
-SEED_DIR = re.compile(r"seed(?P<seed>\d+)$")
 
 
 def logged_times(log: str) -> dict[int, float | None]:
@@ -50,28 +50,26 @@ def rebuild(folder: Path, log: str, config: SeedsConfig) -> tuple[list, list, di
     the deadline (seed -> best success and steps so far), seeds in order."""
     times = logged_times(log)
     runs = sorted(
-        (int(SEED_DIR.search(p.name)["seed"]), p)
+        (int(SEED_DIR.search(p.name)["seed"]), p, read_curve(p, 0.0))
         for p in folder.iterdir()
         if p.is_dir() and SEED_DIR.search(p.name) and (p / "metrics.csv").is_file()
     )
     starts, delays = {}, []
-    for seed, run in runs:
-        curve = read_curve(run, 0.0)
+    for seed, _, curve in runs:
         hit = next((t for t, _, s in curve if s >= config.threshold), None)
         if times.get(seed) is not None and hit is not None:
             starts[seed] = hit - times[seed]
             delays.append(curve[0][0] - starts[seed])
     delay = statistics.median(delays) if delays else 0.0
     seeds, configs, notes, stopped = [], [], {}, {}
-    for seed, run in runs:
-        curve = read_curve(run, 0.0)
+    for seed, run, curve in runs:
         if seed not in times:
             stopped[seed] = {"best_success": max(s for _, _, s in curve), "steps": curve[-1][1]}
             continue
         start = starts.get(seed, curve[0][0] - delay)
         record = read_seed_run(config, seed, run, start, curve[-1][0])
         saved = json.loads((run / "config.json").read_text())
-        if seed in times and saved["train"].get("keep_best", False):
+        if saved["train"].get("keep_best", False):
             record.final_success = record.best_success
         seeds.append(record)
         configs.append(saved)

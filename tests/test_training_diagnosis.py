@@ -55,9 +55,10 @@ def test_a_brief_line_per_seed_run(tmp_path):
 
     _run(tmp_path, 1, 0.99, 3.0, 2.0)
     _run(tmp_path, 2, 0.0, 31.9, 0.1)
-    solved = brief(tmp_path / "touch-fast-seed1", 0.95)
-    assert solved.endswith("best 0.990 last 0.990 solved at 0.0M steps")
-    assert brief(tmp_path / "touch-fast-seed2", 0.95).endswith("(tapping)")
+    line, solved = brief(tmp_path / "touch-fast-seed1", 0.95)
+    assert solved and line.endswith("best 0.990 last 0.990 solved at 0.0M steps")
+    line, solved = brief(tmp_path / "touch-fast-seed2", 0.95)
+    assert not solved and line.endswith("(tapping)")
 
 
 def test_the_contact_reflex_of_a_tapping_episode():

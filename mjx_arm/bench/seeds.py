@@ -229,7 +229,8 @@ def run_seeds_on_gpus(
     end of its log, and the others go on. ``on_seed`` is called with the seeds finished so
     far (in seed order) each time one finishes.
     """
-    queue, free = list(parse_seeds(config.seeds)), list(gpus)
+    seeds = parse_seeds(config.seeds)
+    queue, free = list(seeds), list(gpus)
     running: dict[int, tuple[subprocess.Popen, str, float]] = {}
     done: dict[int, tuple[SeedRun, dict[str, Any]]] = {}
     runs_dir.mkdir(parents=True, exist_ok=True)
@@ -248,10 +249,10 @@ def run_seeds_on_gpus(
             failed = f"seed {seed}: its process failed ({run.error[:400]})"
             log(failed if run.error else seed_line(config, run))
             if on_seed is not None:
-                finished = [done[s] for s in parse_seeds(config.seeds) if s in done]
+                finished = [done[s] for s in seeds if s in done]
                 on_seed([r for r, _ in finished], [c for _, c in finished])
         time.sleep(0.5)
-    ordered = [done[s] for s in parse_seeds(config.seeds)]
+    ordered = [done[s] for s in seeds]
     return [r for r, _ in ordered], [c for _, c in ordered]
 
 
