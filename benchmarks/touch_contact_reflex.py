@@ -150,6 +150,12 @@ def table(results: list[dict[str, Any]]) -> str:
     return markdown_table(head, rows)
 
 
+def _as_trained(result: dict[str, Any]) -> dict[str, Any]:
+    """The smoothing row (factor 0) of a policy's :func:`measure` result."""
+    return {"policy": result["policy"], "smoothing": 0.0, "episodes": result["episodes"],
+            "success": result["success"], "strike": result["strike"]}  # fmt: skip
+
+
 def _fmt(value: float | None, scale: float = 1.0) -> str:
     return "-" if value is None else f"{value * scale:.1f}"
 
@@ -182,9 +188,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{path.name}: success {result['success']:.3f}, retracts {share:.0%}")
     text = table(results)
     smooth = []
-    if args.smoothing:
-        alphas = [0.0, *args.smoothing]
-        smooth = [row for path in args.policies for row in smoothed(path, args.episodes, alphas)]
+    if args.smoothing:  # the unsmoothed rows are the measured ones above
+        smooth = [
+            row
+            for path, result in zip(args.policies, results, strict=True)
+            for row in [_as_trained(result), *smoothed(path, args.episodes, args.smoothing)]
+        ]
         text += "\n\nActions low-passed at test time:\n\n" + smoothing_table(smooth)
     print(text)
     payload = {"meta": environment_metadata(), "saturated": SATURATED,
