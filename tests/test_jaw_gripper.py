@@ -65,10 +65,10 @@ def test_the_arm_gets_the_jaw_a_smaller_cube_and_two_ee_points() -> None:
     assert gripper.kind == "jaw" and gripper.linkage and gripper.rests_closed
     assert arm.joint_names[-1] == "wrist_roll" and len(arm.joint_names) == 5
     # Reach and Touch press with the closed jaws' tips, 10.6 cm down the tool axis; Lift grips
-    # 2.1 cm in front of the fixed jaw (the cube's half and 1 cm), 6 mm behind the tips (there
+    # 1.65 cm in front of the fixed jaw (the cube's half and 5 mm), 6 mm behind the tips (there
     # they stay 5 mm above the table with the cube resting on it)
     np.testing.assert_allclose(arm.ee_offset, [0.0, 0.0, -0.106], atol=0.002)
-    np.testing.assert_allclose(arm.grip_offset, [0.0134, 0.0, -0.0981], atol=0.002)
+    np.testing.assert_allclose(arm.grip_offset, [0.0084, 0.0, -0.0981], atol=0.002)
     # the jaw's squeeze: 30 N at its 7.5 cm lever, not the URDF's 10 N m
     assert gripper.effort_cap == pytest.approx(2.25, abs=0.1)
     task = lift_config()
@@ -162,7 +162,9 @@ def test_check_says_yes_to_every_task_and_names_the_jaw(capsys) -> None:
 @pytest.mark.parametrize("engine", ["mujoco", "pybullet"])
 def test_scripted_pick_lifts_the_cube(engine: str) -> None:
     """Over the cube, the pads turned square to it, down, close, lift (tests/lift_script.py):
-    the cube ends LIFT_HEIGHT up, held by the moving pad against the fixed one (2 seeds)."""
+    the cube ends LIFT_HEIGHT up, held by the moving pad against the fixed one (2 seeds), and
+    Lift's reward reads that grasp as one: the cube's centre is between the pads (``cradle``
+    pays the closure) and no finger presses astray (``stray`` 0)."""
     env = gym.make("mjx_arm/Lift-v0", engine=engine, arm=ARM).unwrapped
     try:
         for seed in (0, 1):
@@ -170,6 +172,8 @@ def test_scripted_pick_lifts_the_cube(engine: str) -> None:
             info = result["info"]
             assert result["success"], (engine, seed, info)
             assert info["height"] >= LIFT_HEIGHT and info["grasp"] == 1.0
+            terms = info["reward_terms"]
+            assert terms["cradle"] > 0.5 and terms["stray"] == 0.0, (engine, seed, terms)
     finally:
         env.close()
 

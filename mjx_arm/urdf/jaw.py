@@ -175,19 +175,27 @@ def _jaw_gaps(model: RobotModel, layout: GripperLayout) -> list[tuple[float, flo
     return out
 
 
+# m: the room a jaw's grasp centre leaves between the fixed jaw and the cube it comes down
+# around. Closing pushes the cube against the fixed jaw, so a held cube's centre sits this much
+# (and the pads' give, about 2 mm in C MuJoCo) off the grasp centre, and Lift's ``cradle`` and
+# ``stray`` ask it to stay within the cube's half edge of it. At half of CUBE_CLEARANCE (1 cm)
+# the SO-101's held 2.3 cm cube sat 12 mm off, past that half edge (11.5 mm): lifting it turned
+# ``cradle`` off and ``stray`` on, and a Lift seed learned to hold it pressed to the table.
+FIXED_SIDE_ROOM = 0.25 * CUBE_CLEARANCE
+
+
 def jaw_grasp(model: RobotModel, layout: GripperLayout, link: str) -> np.ndarray:
     """A jaw's grasp centre in ``link``'s frame, ``(3,)``: in front of the fixed jaw's inner
-    face by half the cube it holds (:attr:`GripperLayout.held_half`) and half of
-    :data:`CUBE_CLEARANCE`, or half the opening where that is less (the cube has room on both
-    sides as the jaws come down around it; closing pushes it against the fixed jaw), as far
-    towards the tip as keeps the tip
-    :data:`TIP_CLEARANCE` above the table the cube rests on (the pad's middle, if that is
-    further out)."""
+    face by half the cube it holds (:attr:`GripperLayout.held_half`) and :data:`FIXED_SIDE_ROOM`,
+    or half the opening where that is less (the cube has room on both sides as the jaws come
+    down around it; closing pushes it against the fixed jaw), as far towards the tip as keeps
+    the tip :data:`TIP_CLEARANCE` above the table the cube rests on (the pad's middle, if that
+    is further out)."""
     fixed = layout.fitted.box(layout.pads[1])
     if fixed is None:
         return np.zeros(3)
     out = max(0.0, float(fixed.half[1]) - max(layout.held_half, 0.0) + TIP_CLEARANCE)
-    middle = min(0.5 * layout.opening, layout.held_half + 0.5 * CUBE_CLEARANCE)
+    middle = min(0.5 * layout.opening, layout.held_half + FIXED_SIDE_ROOM)
     point = fixed.inner_face + fixed.rotation[:, 0] * middle + fixed.rotation[:, 1] * out
     frames = layout_frames(model, layout, layout.open_q)
     world = frames[layout.pads[1]] @ np.append(point, 1.0)
