@@ -663,3 +663,27 @@ def test_the_strike_term_marks_the_step_a_strike_ends() -> None:
             False, False, other,
         )  # fmt: skip
         assert float(terms["strike"]) == 0.0
+
+
+def test_the_press_term_peaks_in_the_middle_of_the_band() -> None:
+    """``press`` is 1 at the middle of Touch's band (25.5 N of 1-50 N), falls linearly to 0 at
+    both ends, is 0 outside the band and away from the target (beyond ``success_distance``), in
+    numpy and JAX; it ships at weight 0."""
+    import jax.numpy as jnp
+
+    cfg = touch_config()
+    assert cfg.reward.press == 0.0
+    low, high = cfg.force_band
+    middle = 0.5 * (low + high)
+    forces = [0.0, low, 0.5 * (low + middle), middle, 0.5 * (middle + high), high, high + 5.0]
+    want = [0.0, 0.0, 0.5, 1.0, 0.5, 0.0, 0.0]
+    for xp in (np, jnp):
+        for distance, scale in ((0.01, 1.0), (cfg.success_distance + 0.01, 0.0)):
+            n = len(forces)
+            terms = reward_lib.reward_terms(
+                xp, xp.full(n, distance), xp.asarray(forces), xp.zeros((n, 6)),
+                xp.zeros((n, 6)), UNIT_LIMITS, xp.zeros(n, dtype=bool), xp.zeros(n, dtype=bool),
+                cfg,
+            )  # fmt: skip
+            np.testing.assert_allclose(np.asarray(terms["press"]), np.asarray(want) * scale,
+                                       atol=1e-6)  # fmt: skip

@@ -46,7 +46,10 @@ class RewardConfig:
     ``streak`` = how far a press inside the band has held on: 0 on a one-step tap, 1 once it
     has held ``success_hold_steps`` steps running (:func:`mjx_arm.task.reward.streak`),
     ``strike`` = 1 on the step whose reading ends the episode as a strike (a protective stop:
-    :meth:`mjx_arm.task.spec.Task.strikes`).
+    :meth:`mjx_arm.task.spec.Task.strikes`),
+    ``press`` = how near the middle of the force band a press within ``success_distance`` is:
+    1 at the middle, 0 at either end and outside (:func:`mjx_arm.task.reward.force_band_peak`;
+    ``contact`` pays the whole band alike).
 
     A task with terms of its own (Lift's ``lift``, ``grasp``, ...) declares them in its file:
     a frozen subclass that adds one weight field per term and names them in
@@ -69,6 +72,7 @@ class RewardConfig:
     proximity: float = 0.0
     streak: float = 0.0
     strike: float = 0.0
+    press: float = 0.0
     distance_length: float = 0.1
     proximity_length: float = 0.01
     soft_limit: float = 0.95
@@ -100,6 +104,7 @@ REWARD_TERMS = (
     "proximity",
     "streak",
     "strike",
+    "press",
 )
 
 

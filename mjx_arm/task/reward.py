@@ -95,6 +95,14 @@ def force_in_band(xp: Any, force_norm, cfg: TaskConfig):
     return ((force_norm >= low) & (force_norm <= high)) * 1.0
 
 
+def force_band_peak(xp: Any, force_norm, cfg: TaskConfig):
+    """How near the middle of ``cfg.force_band`` the contact force norm (N) is, ``(...)``: 1 at
+    the middle, falling linearly to 0 at either end of the band and outside it."""
+    low, high = cfg.force_band
+    middle, half = 0.5 * (low + high), 0.5 * (high - low)
+    return xp.clip(1.0 - xp.abs(force_norm - middle) / half, 0.0, 1.0)
+
+
 def force_excess(xp: Any, force_norm, cfg: TaskConfig):
     """The contact force above the band as a fraction of its top, else 0, shape ``(...)``."""
     high = cfg.force_band[1]
@@ -285,8 +293,8 @@ def _own_terms(xp: Any, task: Any, distance, extra: dict | None) -> dict:
 
 def _state_terms(xp: Any, task: Any, distance, force_norm, cfg: TaskConfig) -> dict:
     """The terms of the distance d (m) and the tared force norm (N), each ``(...)``:
-    ``distance``, ``proximity``, and ``task``'s ``contact``, ``force_excess``, ``overforce``
-    and ``strike``."""
+    ``distance``, ``proximity``, ``press`` (near the target, :func:`force_band_peak`), and
+    ``task``'s ``contact``, ``force_excess``, ``overforce`` and ``strike``."""
     near = distance < cfg.success_distance
     contact, excess = task.contact_terms(xp, near, force_norm, cfg)
     return {
@@ -296,6 +304,7 @@ def _state_terms(xp: Any, task: Any, distance, force_norm, cfg: TaskConfig) -> d
         "force_excess": excess,
         "overforce": (excess > 0) * 1.0,
         "proximity": xp.exp(-distance / cfg.reward.proximity_length),
+        "press": force_band_peak(xp, force_norm, cfg) * near,
     }
 
 
