@@ -133,13 +133,14 @@ def run_scripted_lift(
     **options,
 ) -> dict:
     """One scripted episode (the cube at yaw 0; ``align``, ``above``: :class:`ScriptedLift`'s;
-    ``options``: reset options such as ``object_mass``); returns success, steps and the last
-    info."""
+    ``options``: reset options such as ``object_mass``); returns success, steps, the last
+    info, and the episode's peak wrist reading (N)."""
     obs, _ = env.reset(seed=seed, options={"object_quat": np.asarray(quat), **options})
     script = ScriptedLift(env, align, above)
-    step = 0
+    step, peak = 0, 0.0
     for step in range(env.task.episode_steps):  # noqa: B007  (the count is returned)
         obs, _, done, _, info = env.step(script(obs))
+        peak = max(peak, float(info["contact_force_norm"]))
         if done:
             break
-    return {"success": info["is_success"], "steps": step + 1, "info": info}
+    return {"success": info["is_success"], "steps": step + 1, "info": info, "peak_force": peak}
