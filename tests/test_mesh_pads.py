@@ -23,7 +23,7 @@ from mjx_arm.arm.setup import arm_setup
 from mjx_arm.arm.verdict import task_verdict
 from mjx_arm.task.config import task_config
 from mjx_arm.task.lift import LIFT_HEIGHT, lift_config
-from mjx_arm.urdf.jaw import TIP_CLEARANCE
+from mjx_arm.urdf.gripper_layout import TIP_CLEARANCE
 from mjx_arm.urdf.pad_fit import PAD_GEOM_SUFFIX
 
 pybullet_data = pytest.importorskip("pybullet_data")

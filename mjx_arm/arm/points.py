@@ -34,7 +34,7 @@ from mjx_arm.arm.facts import ArmInfo
 from mjx_arm.arm.ik import ToolDownSolver
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.wrench import tool_inertia
-from mjx_arm.urdf.jaw import TIP_CLEARANCE
+from mjx_arm.urdf.gripper_layout import TIP_CLEARANCE
 from mjx_arm.urdf.scene_shapes import box_half_width, box_top_offset
 
 # The smallest offset (m) a derived point moves the ee point by: closer, the link's origin is
@@ -122,9 +122,9 @@ def with_points(arm: ArmInfo) -> ArmInfo:
 def _tips_clear(arm: ArmInfo, tool: np.ndarray, grip: np.ndarray) -> np.ndarray:
     """``grip (3,)`` moved along the tool axis towards the closed tips (the tool point ``tool
     (3,)``, on the axis) until they lie at most the held cube's half edge less
-    :data:`~mjx_arm.urdf.jaw.TIP_CLEARANCE` beyond it: with the grip point at the centre of
-    a cube resting on the table, the fingertips then stay that clearance above the table (a
-    jaw's grasp centre keeps the same rule). The xArm6 gripper's tips reach 3.9 cm past its
+    :data:`~mjx_arm.urdf.gripper_layout.TIP_CLEARANCE` beyond it: with the grip point at the
+    centre of a cube resting on the table, the fingertips then stay that clearance above the
+    table (a jaw's grasp centre keeps the same rule). The xArm6 gripper's tips reach 3.9 cm past its
     pads' centre: held there, a 4.5 cm cube put them 1.6 cm into the table."""
     direction = tool_down_solver(arm).ik.tool
     beyond = float((tool - grip) @ direction)

@@ -122,6 +122,10 @@ def frame_distance(frames: dict[str, np.ndarray], a: str, b: str) -> float:
 # m: a gripper opens at least this much wider than the cube it holds (1 cm a side: the SO-101's
 # open jaws, 4.7 cm apart, came down on a 3.7 cm cube's top at 7 mm off centre)
 CUBE_CLEARANCE = 0.02
+# m: a gripper's tips stay this far above the table while the grip point holds a cube resting
+# on it (a jaw's grasp centre, :func:`mjx_arm.urdf.jaw.jaw_grasp`; the grip point of the others,
+# :func:`mjx_arm.arm.points.with_points`)
+TIP_CLEARANCE = 0.005
 
 
 def held_cube_half(opening: float) -> float:

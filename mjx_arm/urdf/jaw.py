@@ -14,6 +14,7 @@ import numpy as np
 
 from mjx_arm.urdf.gripper_layout import (
     CUBE_CLEARANCE,
+    TIP_CLEARANCE,
     GripperLayout,
     followers_of,
     gripper_drives,
@@ -211,6 +212,3 @@ def jaw_lever(model: RobotModel, layout: GripperLayout) -> float:
     axis = to_hand[:3, :3] @ np.asarray(model.joints[layout.driven].axis, float)
     out = jaw_grasp(model, layout, hand) - to_hand[:3, 3]
     return float(np.linalg.norm(np.cross(out, axis / np.linalg.norm(axis))))
-
-
-TIP_CLEARANCE = 0.005  # m: a jaw's tip stays this far above the table while it grasps
