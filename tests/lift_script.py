@@ -124,6 +124,26 @@ class ScriptedLift:
         return np.clip(np.append(arm, grip), -1.0, 1.0).astype(np.float32)
 
 
+class OpenHandPress(ScriptedLift):
+    """Over the cube, then down past its centre with the gripper held open: the open hand
+    comes to rest around the cube on whatever it meets first (the table, for a hand whose
+    open fingers straddle the cube)."""
+
+    def __call__(self, obs: dict) -> np.ndarray:
+        ee = obs["ee_pose"][:3].astype(float)
+        if self.cube0 is None:
+            self.cube0 = obs["target_rel"].astype(float).copy()
+        goal = np.add(self.cube0, [0.0, 0.0, self.above])
+        if self.phase == "above" and np.linalg.norm(goal - ee) < 0.005:
+            self.phase = "down"
+        if self.phase == "down":
+            goal = np.add(self.cube0, [0.0, 0.0, -0.03])
+        q = decode_joints(obs["joint_angles"].astype(float), self.coding)
+        qdot = self._qdot(q, ee, goal, obs["ee_pose"][3:])
+        arm = qdot / self.task.joint_speeds(self.arm.v_max)
+        return np.clip(np.append(arm, -1.0), -1.0, 1.0).astype(np.float32)
+
+
 def run_scripted_lift(
     env,
     seed: int = 0,

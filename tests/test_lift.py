@@ -159,6 +159,43 @@ def test_grasp_needs_the_cube_between_the_pads():
     assert measures["grasp"].tolist() == [1.0, 0.0]
 
 
+def test_grasp_needs_the_gripper_closed_as_far_as_its_gate():
+    """With ``grasp_closure`` set, both pads pressing around the cube count as a grasp only
+    from that closure on (pads pressing with the gripper more open press something else, as
+    the table under an open hand); 0 (a config with no arm) asks for nothing."""
+    task = lift_lib.LIFT
+    ee, quat = np.zeros((3, 3)), np.tile([1.0, 0.0, 0.0, 0.0], (3, 1))
+    grip = np.zeros((3, 10))
+    grip[:, 0] = [0.0, 0.34, 0.36]  # closure: open, just under the gate, just over it
+    grip[:, 4] = 1.0  # cube quaternion w
+    grip[:, 1:4] = [0.0, 0.0, 0.01]  # the cube between the pads
+    grip[:, 8:] = 5.0  # both pads press
+    gated = task.measures(np, ee, quat, grip, lift_config(grasp_closure=0.35))["grasp"]
+    assert gated.tolist() == [0.0, 0.0, 1.0]
+    assert task.measures(np, ee, quat, grip, lift_config())["grasp"].tolist() == [1.0] * 3
+
+
+def test_the_gate_stands_the_pads_a_centimetre_wider_than_the_cube():
+    """Each gripper class's derived ``grasp_closure``: the closure at which its pads stand
+    GRASP_SLACK wider apart than its Lift cube (the shipped prismatic fingers: 1 - 5.5/8.5,
+    linear; a linkage and a jaw from their kinematics), and a real grasp closes past it (the
+    shipped arm's Lift policy holds the cube up at 0.46-0.50)."""
+    from mjx_arm.arm.info import arm_info
+    from mjx_arm.arm.resolve import task_for_arm
+
+    arm = arm_info(asset("ur5e_gripper.urdf"))
+    task = task_for_arm(lift_config(), arm)
+    assert task.grasp_closure == pytest.approx(1.0 - 0.055 / 0.085, abs=1e-3)
+    for name in ("ur5e_2f85.urdf", "ur5e_xarm_gripper.urdf"):
+        arm = arm_info(asset(name))
+        task = task_for_arm(lift_config(), arm)
+        closures, gaps = zip(*arm.gripper.closure_gaps, strict=True)
+        gap = np.interp(task.grasp_closure, closures, gaps)
+        assert gap == pytest.approx(2 * CUBE_HALF + lift_lib.GRASP_SLACK, abs=1e-4), name
+        assert 0.3 < task.grasp_closure < 0.45, name
+    assert task_for_arm(lift_config(grasp_closure=0.2), arm).grasp_closure == 0.2  # as set
+
+
 def test_cradle_pays_the_closure_only_with_the_cube_between_the_pads():
     """``cradle`` is the closure while the cube's centre is within a half edge of the ee point:
     fingers closing around the cube are paid, fingers closed on its top face (the ee point

@@ -13,7 +13,7 @@ import gymnasium as gym
 import mujoco
 import numpy as np
 import pytest
-from lift_script import run_scripted_lift
+from lift_script import OpenHandPress, run_scripted_lift
 
 import mjx_arm  # noqa: F401  (registers the ids)
 from mjx_arm.arm.config import ArmConfig
@@ -22,7 +22,7 @@ from mjx_arm.arm.model_io import arm_model
 from mjx_arm.arm.setup import arm_setup
 from mjx_arm.arm.verdict import task_verdict
 from mjx_arm.task.config import task_config
-from mjx_arm.task.lift import LIFT_HEIGHT, lift_config
+from mjx_arm.task.lift import GRASP_FORCE, LIFT_HEIGHT, lift_config
 from mjx_arm.urdf.gripper_layout import TIP_CLEARANCE
 from mjx_arm.urdf.pad_fit import PAD_GEOM_SUFFIX
 
@@ -93,6 +93,25 @@ def test_scripted_pick_lifts_the_cube(engine: str) -> None:
             assert result["success"], (engine, seed, info)
             assert info["height"] >= LIFT_HEIGHT and info["grasp"] == 1.0
             assert result["peak_force"] < env.task.force_band[1], (engine, seed, result)
+    finally:
+        env.close()
+
+
+def test_an_open_hand_on_the_table_around_the_cube_is_no_grasp() -> None:
+    """Pushed down around the cube with the gripper open, the hand rests with both pad boxes
+    on the table, each pad reading a press, the cube's centre between them: without
+    ``grasp_closure`` that read as a grasp (a Lift policy rested there and was paid 4 a step);
+    the gripper is not closed far enough to hold the cube, so it is none."""
+    env = gym.make("mjx_arm/Lift-v0", engine="mujoco", arm=ARM).unwrapped
+    try:
+        obs, _ = env.reset(seed=0, options={"object_quat": np.array([1.0, 0.0, 0.0, 0.0])})
+        script = OpenHandPress(env, above=0.06)
+        for _ in range(120):
+            obs, _, done, _, info = env.step(script(obs))
+            assert not done
+        assert (obs["pad_force"] >= GRASP_FORCE).all(), obs["pad_force"]
+        assert env.task.grasp_closure > 0.3 and obs["gripper"][0] < 0.05
+        assert info["reward_terms"]["grasp"] == 0.0
     finally:
         env.close()
 

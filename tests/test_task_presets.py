@@ -38,7 +38,7 @@ def _portable(value):
 
 
 # Task config fields added after the snapshot, with the value every preset leaves them at.
-ADDED_FIELDS = {"object_scale": 0.0}
+ADDED_FIELDS = {"object_scale": 0.0, "grasp_closure": 0.0}
 
 
 def _drop_zero_terms(before: dict, after: dict) -> dict:

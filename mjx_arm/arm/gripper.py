@@ -9,6 +9,7 @@ from dataclasses import dataclass
 from mjx_arm.arm.config import ResolvedArm, is_shipped
 from mjx_arm.urdf.grippers import (
     Follower,
+    closure_gaps,
     find_layout,
     grasp_centre,
     jaw_lever,
@@ -46,6 +47,8 @@ class Gripper:
             0 keeps the URDF's. A jaw presses at most :data:`JAW_PRESS` at its grasp centre.
         cube_half: half the edge (m) of the largest Lift cube it holds
             (:attr:`mjx_arm.urdf.grippers.GripperLayout.held_half`).
+        closure_gaps: the pads' gap (m) against the closure (0 open, 1 closed),
+            ``((closure, gap), ...)`` (:func:`mjx_arm.urdf.grippers.closure_gaps`).
     """
 
     joint: str
@@ -64,6 +67,7 @@ class Gripper:
     rests_closed: bool = True
     effort_cap: float = 0.0
     cube_half: float = 0.0
+    closure_gaps: tuple[tuple[float, float], ...] = ()
 
     @property
     def rest_q(self) -> float:
@@ -121,6 +125,7 @@ def find_gripper(resolved: ResolvedArm) -> Gripper | None:
         rests_closed=not is_shipped(resolved.config),
         effort_cap=_jaw_cap(resolved, layout),
         cube_half=layout.held_half,
+        closure_gaps=closure_gaps(resolved.model, layout),
     )
 
 

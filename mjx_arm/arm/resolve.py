@@ -125,7 +125,11 @@ def task_for_arm(task: TaskConfig, arm: ArmInfo, check: bool = True) -> TaskConf
             )
     setup = arm_setup(arm, task)
     return task.for_arm(
-        setup.home_qpos, setup.workspace_scale, setup.episode_steps, setup.object_scale
+        setup.home_qpos,
+        setup.workspace_scale,
+        setup.episode_steps,
+        setup.object_scale,
+        setup.grasp_closure,
     )
 
 

@@ -42,6 +42,7 @@ from mjx_arm.arm.info import HOME_HEIGHT, ArmInfo, tool_down_solver
 from mjx_arm.arm.points import task_arm
 from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
+from mjx_arm.task.lift import GRASP_SLACK
 from mjx_arm.urdf.grippers import held_cube_half
 from mjx_arm.urdf.scene_shapes import CUBE_HALF, box_half_width
 
@@ -79,6 +80,8 @@ class ArmSetup:
         contact_spread: how much that changes as the box turns about the tool axis (m):
             shapes beside the axis that straddle the box at one turn and land on it at another.
         object_scale: a gripper task's cube over the shipped one (:func:`object_scale`).
+        grasp_closure: how closed a gripper task's gripper must be to hold its cube
+            (:func:`grasp_closure`; 0: no gripper task).
         notes: what the derivation had to do or could not do, one line each.
     """
 
@@ -96,6 +99,7 @@ class ArmSetup:
     contact_offset: float | None = 0.0
     contact_spread: float = 0.0
     object_scale: float = 1.0
+    grasp_closure: float = 0.0
     notes: tuple[str, ...] = field(default=())
 
     @property
@@ -119,7 +123,8 @@ def arm_setup(arm: ArmInfo, task: TaskConfig) -> ArmSetup:
     (:func:`~mjx_arm.arm.points.task_arm`) and cube (:func:`object_scale`), cached per arm and
     task config; see the module."""
     arm = task_arm(arm, task)
-    return _setup_cached(arm, task.replace(object_scale=object_scale(arm, task)))
+    task = task.replace(object_scale=object_scale(arm, task))
+    return _setup_cached(arm, task.replace(grasp_closure=grasp_closure(arm, task)))
 
 
 def object_scale(arm: ArmInfo, task: TaskConfig) -> float:
@@ -132,6 +137,21 @@ def object_scale(arm: ArmInfo, task: TaskConfig) -> float:
         return task.object_scale or 1.0
     half = arm.gripper.cube_half or held_cube_half(arm.gripper.opening)
     return float(np.clip(half / CUBE_HALF, MIN_OBJECT_SCALE, 1.0))
+
+
+def grasp_closure(arm: ArmInfo, task: TaskConfig) -> float:
+    """``task``'s ``grasp_closure`` where it sets one, else the closure (0 open, 1 closed) at
+    which ``arm``'s pads stand :data:`~mjx_arm.task.lift.GRASP_SLACK` wider apart than the
+    task's cube (:attr:`~mjx_arm.arm.gripper.Gripper.closure_gaps`, at ``task``'s
+    ``object_scale``); 0 for the other tasks and where the table says nothing."""
+    if task.grasp_closure or not task.spec.gripper or arm.gripper is None:
+        return task.grasp_closure
+    table = arm.gripper.closure_gaps
+    if not table:
+        return 0.0
+    closures, gaps = (np.asarray(column) for column in zip(*table, strict=True))
+    wide = 2.0 * CUBE_HALF * (task.object_scale or 1.0) + GRASP_SLACK
+    return round(float(np.interp(wide, gaps[::-1], closures[::-1])), 4)
 
 
 @functools.cache
@@ -282,6 +302,7 @@ def _finish(arm, task, solver, q_home, source, scale, reached, targets, poses) -
         tool_reach=solver.tool_reach(q_home),
         **_contact(solver, q_home),
         object_scale=task.object_scale,
+        grasp_closure=task.grasp_closure,
         notes=tuple(notes),
     )
 

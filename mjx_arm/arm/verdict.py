@@ -126,7 +126,11 @@ def _build_cached(arm: ArmInfo, task: TaskConfig) -> str:
 
     setup = arm_setup(arm, task)
     filled = task.for_arm(
-        setup.home_qpos, setup.workspace_scale, setup.episode_steps, setup.object_scale
+        setup.home_qpos,
+        setup.workspace_scale,
+        setup.episode_steps,
+        setup.object_scale,
+        setup.grasp_closure,
     )
     try:
         model = arm_model(arm, filled)

@@ -135,6 +135,10 @@ class TaskConfig:
             and its mass alike (:meth:`mjx_arm.task.lift.Lift.object_start`); 0 takes the arm's (1.0
             but for a gripper that holds only a smaller cube, :mod:`mjx_arm.arm.setup`). An env
             fills it in.
+        grasp_closure: how closed (0 open, 1 closed) a gripper task's gripper must be for its
+            pads' press to count as a grasp (:meth:`mjx_arm.task.lift.Lift.measures`): where
+            they stand :data:`~mjx_arm.task.lift.GRASP_SLACK` wider than the cube; 0 takes the
+            arm's (:func:`mjx_arm.arm.setup.grasp_closure`). An env fills it in.
         success_distance: d (m) below which the ee point counts as at the target.
         force_band: (min, max) contact force norm (N) of a successful touch.
         success_hold_steps: consecutive control steps the success condition must hold (near the
@@ -177,6 +181,7 @@ class TaskConfig:
     target_high: tuple[float, float, float] = (0.65, 0.25, 0.45)
     workspace_scale: float = 0.0
     object_scale: float = 0.0
+    grasp_closure: float = 0.0
     success_distance: float = 0.05
     force_band: tuple[float, float] = (1.0, 50.0)
     success_hold_steps: int = 1
@@ -218,6 +223,8 @@ class TaskConfig:
             raise ConfigError("workspace_scale must be >= 0 (0: from the arm)")
         if not 0 <= self.object_scale <= 1:
             raise ConfigError("object_scale must be in [0, 1] (0: from the arm)")
+        if not 0 <= self.grasp_closure < 1:
+            raise ConfigError("grasp_closure must be in [0, 1) (0: from the arm)")
         if self.success_hold_steps < 1:
             raise ConfigError("success_hold_steps must be >= 1")
         if not self.divergence_speed_factor > 1:
@@ -250,9 +257,11 @@ class TaskConfig:
         reach_scale: float,
         episode_steps: int = 0,
         object_scale: float = 1.0,
+        grasp_closure: float = 0.0,
     ) -> TaskConfig:
-        """This config with the arm's home pose, workspace scale and object scale where it
-        leaves them empty, and an episode of at least ``episode_steps`` (0: as it is).
+        """This config with the arm's home pose, workspace scale, object scale and grasp
+        closure where it leaves them empty, and an episode of at least ``episode_steps`` (0: as
+        it is).
 
         Raises:
             ValueError: a ``home_qpos`` given here that does not fit the arm's joint count.
@@ -266,6 +275,7 @@ class TaskConfig:
             home_qpos=home,
             workspace_scale=self.workspace_scale or reach_scale,
             object_scale=self.object_scale or object_scale,
+            grasp_closure=self.grasp_closure or grasp_closure,
             episode_steps=max(self.episode_steps, episode_steps),
         )
 

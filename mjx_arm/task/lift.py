@@ -26,6 +26,12 @@ from mjx_arm.urdf.scene_shapes import CUBE_HALF, LIFT_SCENE, table_top_extent
 LIFT_HEIGHT = 0.10  # m above the resting height
 GRASP_FORCE = 0.5  # N on each pad: the pad presses the cube
 GRASP_RADIUS = 0.03  # m: the cube's centre within this of the ee point (between the pads)
+# m: a grasp needs the gripper closed at least so far that its pads stand this much wider apart
+# than the cube (``TaskConfig.grasp_closure``, from the arm). Pads that read a press with the
+# gripper more open press something else: the xArm6's open hand, set down on the table around
+# the cube, read 11-13 N on each pad and was paid as a grasp. The shipped gripper arm's Lift
+# policy holds the cube up at closure 0.46-0.50 (gate 0.35).
+GRASP_SLACK = 0.01
 # ``cradle`` pays for closing the fingers while the cube's centre is within its half edge of
 # the ee point (:func:`cube_half`): between the pads (off centre by at most half the spare
 # opening), not under fingers closed on its top face (the ee point then sits at least a half
@@ -206,7 +212,8 @@ class Lift(Task):
     def measures(self, xp: Any, ee_pos, ee_quat, grip, cfg: TaskConfig) -> dict[str, Any]:
         """``height``: the cube's centre above its resting height (m); ``grasp``: 1 where both
         pads press the cube (each at least :data:`GRASP_FORCE`, its centre within
-        :data:`GRASP_RADIUS` of the ee point), else 0; ``cradle``: the fingers' closure where
+        :data:`GRASP_RADIUS` of the ee point, the gripper closed at least ``grasp_closure``),
+        else 0; ``cradle``: the fingers' closure where
         the cube's centre is within its half edge of the ee point (between the pads),
         else 0; ``stray``: 1 where a finger presses something (at least :data:`GRASP_FORCE`)
         while the cube's centre is not that near (a fingertip on the cube's top, a finger on
@@ -217,9 +224,10 @@ class Lift(Task):
         touching = parts["pad_force"] >= GRASP_FORCE
         height = parts["object_pos"][..., 2] - cube_half(cfg)
         between = gap < cube_half(cfg)
+        closed = parts["closure"][..., 0] >= cfg.grasp_closure
         return {
             "height": height,
-            "grasp": ((gap < GRASP_RADIUS) & touching.all(axis=-1)) * 1.0,
+            "grasp": ((gap < GRASP_RADIUS) & touching.all(axis=-1) & closed) * 1.0,
             "cradle": between * parts["closure"][..., 0],
             "stray": (touching.any(axis=-1) & ~between) * 1.0,
         }

@@ -42,7 +42,7 @@ from mjx_arm.urdf.gripper_layout import (
 )
 from mjx_arm.urdf.gripper_layout import held_cube_half as held_cube_half
 from mjx_arm.urdf.gripper_layout import mimic_positions as mimic_positions
-from mjx_arm.urdf.jaw import find_jaw, jaw_grasp
+from mjx_arm.urdf.jaw import find_jaw, jaw_gaps, jaw_grasp
 from mjx_arm.urdf.jaw import jaw_lever as jaw_lever
 from mjx_arm.urdf.jaw import jaw_opening as jaw_opening
 from mjx_arm.urdf.model import Joint, RobotModel
@@ -151,6 +151,29 @@ def pad_gap(model: RobotModel, layout: GripperLayout, q: float) -> float:
     a, b = layout.pads[:2]
     now = frame_distance(layout_frames(model, layout, q), a, b)
     return now - frame_distance(layout_frames(model, layout, layout.closed_q), a, b)
+
+
+GAP_SAMPLES = 25  # driven-joint positions the pads' gap is tabled at, open to closed
+
+
+def closure_gaps(model: RobotModel, layout: GripperLayout) -> tuple[tuple[float, float], ...]:
+    """The pads' gap (m) against the gripper's closure (0 open, 1 closed), ``((closure, gap),
+    ...)`` by closure, the gap never growing as the gripper closes: :func:`pad_gap` at
+    :data:`GAP_SAMPLES` positions, a jaw's where its pads can hold a cube
+    (:func:`~mjx_arm.urdf.jaw.jaw_gaps`)."""
+    span = layout.closed_q - layout.open_q
+    if layout.kind == "jaw":
+        rows = [((q - layout.open_q) / span, gap) for q, gap, _ in jaw_gaps(model, layout)]
+    else:
+        closures = np.linspace(0.0, 1.0, GAP_SAMPLES)
+        rows = [(c, pad_gap(model, layout, layout.open_q + c * span)) for c in closures]
+    if not rows:
+        return ()
+    rows.sort()
+    gaps = np.minimum.accumulate([gap for _, gap in rows])
+    return tuple(
+        (round(float(c), 6), round(float(g), 6)) for (c, _), g in zip(rows, gaps, strict=True)
+    )
 
 
 def grasp_centre(model: RobotModel, layout: GripperLayout, link: str) -> np.ndarray:

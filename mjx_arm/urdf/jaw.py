@@ -64,13 +64,13 @@ def find_jaw(model: RobotModel, arm_joints: set[str]) -> GripperLayout | None:
 def _jaw_fit(model: RobotModel, layout: GripperLayout, closing, approach) -> GripperLayout:
     """``layout`` with its pads fitted (the moving jaw's box along its face at the closed
     pose, :func:`_jaw_axes`), its opening (the widest gap where the pads can hold a cube,
-    :func:`_jaw_gaps`) and the cube it holds: the widest gap at which the pads' faces are
+    :func:`jaw_gaps`) and the cube it holds: the widest gap at which the pads' faces are
     within :data:`JAW_WEDGE` of parallel, if that is less than :func:`held_cube_half` of the
     opening (a revolute jaw's face turns as it closes: the SO-101's met a 3.8 cm cube 14
     degrees askew, with its top edge only, and the cube slid out of the grip)."""
     axes = _jaw_axes(model, layout, closing, approach, layout.closed_q)
     layout = replace(layout, axes=axes, fitted=fit_pads(model, axes, layout.pads[1]))
-    gaps = _jaw_gaps(model, layout)
+    gaps = jaw_gaps(model, layout)
     opening = max((gap for _, gap, _ in gaps), default=0.0)
     square = [gap for _, gap, wedge in gaps if wedge <= math.radians(JAW_WEDGE)]
     half = min(held_cube_half(opening), 0.5 * max(square, default=0.0))
@@ -141,11 +141,11 @@ JAW_SAMPLES = 24  # jaw angles the opening is looked for at, from closed to open
 
 def jaw_opening(model: RobotModel, layout: GripperLayout) -> float:
     """The widest gap (m) between a jaw's fitted pads where they can hold a cube between them
-    (:func:`_jaw_gaps`); 0 where the pads are not fitted boxes."""
-    return max((gap for _, gap, _ in _jaw_gaps(model, layout)), default=0.0)
+    (:func:`jaw_gaps`); 0 where the pads are not fitted boxes."""
+    return max((gap for _, gap, _ in jaw_gaps(model, layout)), default=0.0)
 
 
-def _jaw_gaps(model: RobotModel, layout: GripperLayout) -> list[tuple[float, float, float]]:
+def jaw_gaps(model: RobotModel, layout: GripperLayout) -> list[tuple[float, float, float]]:
     """``(q, gap, wedge)`` from closed to open (:data:`JAW_SAMPLES` angles) where a jaw's
     pads can hold a cube: the wedge (rad) between their faces, and the gap (m) along the
     closing direction from the fixed pad's inner face to
