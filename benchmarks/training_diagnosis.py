@@ -6,8 +6,10 @@ Reads the seed run directories of one or more campaigns (each a folder of ``benc
 evaluation, and what its training logged: the largest and the median per-epoch KL between the
 rollout's policy and the updated one, the epochs whose KL passed 1 (an update that replaced the
 policy rather than nudged it), the median clip fraction, the learning rate, the policy's std
-and the value function's explained variance at the end, and the evaluation's touch and
-overforce figures at the end.
+and the value function's explained variance at the end, the evaluation's touch and overforce
+figures at the end, and how far the policy's Gaussian (before the tanh) had drifted by
+:data:`EARLY_STEPS`: its smallest and largest std and its largest mean over the batch and the
+action entries (a mean of 3 already gives tanh 0.995: beyond, the action no longer changes).
 
     python -m benchmarks.training_diagnosis --campaign "as shipped=runs/tune_base" \\
         --campaign "std floor + clip=runs/tune_clip" --out benchmarks/results/diagnosis
@@ -33,6 +35,7 @@ STRIKES = 0.2  # episodes ending on a strike, as a fraction: the striking trap
 TOUCHING = 5.0  # steps per episode with a reading in the band or over it: the tool presses
 HELD = 0.5  # steps per episode whose press had held 2+ steps: below it, in-band steps are taps
 TRAPS = ("striking", "tapping", "resting", "stalled", "other")
+EARLY_STEPS = 6e6  # env steps: the policy's drift is read over the first ones (a fifth of Touch's)
 
 
 def trap(last: dict[str, float]) -> str:
@@ -100,7 +103,24 @@ def seed_record(run: Path, threshold: float) -> dict[str, Any]:
         "mean_distance_last": last.get("eval/episode_distance", math.nan)
         / last.get("eval/avg_episode_length", math.nan),
         "trap": None if hit is not None else trap(last),
+        **early_drift(trained),
         "settings": train["schedule"] | train["normalizer"],
+    }
+
+
+def early_drift(trained: list[dict[str, float]]) -> dict[str, float]:
+    """The policy Gaussian's smallest and largest std and largest mean (before the tanh) over
+    the training epochs up to :data:`EARLY_STEPS` (rows of ``metrics.csv``)."""
+    early = [r for r in trained if r["step"] <= EARLY_STEPS]
+
+    def pick(name: str, reduce) -> float:
+        values = _col(early, name)
+        return float(reduce(values)) if values.size else math.nan
+
+    return {
+        "early_std_min": pick("training/policy_dist_min_std", np.min),
+        "early_std_max": pick("training/policy_dist_max_std", np.max),
+        "early_mean_max": pick("training/policy_dist_max_loc", np.max),
     }
 
 
@@ -128,8 +148,10 @@ def markdown(campaigns: list[dict[str, Any]], threshold: float) -> str:
         lines += [f"## {c['label']}: {c['solved']} of {c['count']} seeds at {threshold}", ""]
         lines += [
             "| seed | solved | best | last | KL max | KL median | epochs with KL > 1 | clip "
-            "fraction (median) | lr (last) | std (last) | explained variance (last) | trap |",
-            "|---|---|---|---|---|---|---|---|---|---|---|---|",
+            "fraction (median) | lr (last) | std (last) | explained variance (last) | std "
+            f"range, first {EARLY_STEPS / 1e6:.0f}M | largest mean, first "
+            f"{EARLY_STEPS / 1e6:.0f}M | trap |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
         ]
         for s in c["seeds"]:
             lines.append(
@@ -137,7 +159,8 @@ def markdown(campaigns: list[dict[str, Any]], threshold: float) -> str:
                 f"{s['last_success']:.3f} | {s['kl_max']:.3g} | {s['kl_median']:.3g} | "
                 f"{len(s['kl_spikes'])} | {s['clip_fraction_median']:.3f} | "
                 f"{s['learning_rate_last']:.2g} | {s['policy_std_last']:.3f} | "
-                f"{s['explained_variance_last']:.3f} | {s.get('trap') or '-'} |"
+                f"{s['explained_variance_last']:.3f} | {s['early_std_min']:.3g}-"
+                f"{s['early_std_max']:.3g} | {s['early_mean_max']:.3g} | {s.get('trap') or '-'} |"
             )
         lines.append("")
     return "\n".join(lines)
