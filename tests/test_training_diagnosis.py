@@ -5,7 +5,7 @@ from __future__ import annotations
 import csv
 import json
 
-from benchmarks.training_diagnosis import campaign, trap
+from benchmarks.training_diagnosis import EARLY_STEPS, campaign, early_drift, trap
 
 
 def _eval(strike=0.0, touching=0.0, streak=0.0):
@@ -104,3 +104,18 @@ def test_an_impact_is_a_first_contact_and_its_closing_speed():
     distances = np.array([0.10, 0.08, 0.05, 0.04, 0.04, 0.05, 0.045, 0.04])
     got = impacts(forces, distances, 1.0, 0.5)
     assert [round(v, 6) for v, _ in got] == [0.06, 0.01] and [f for _, f in got] == [40.0, 20.0]
+
+
+def test_the_early_drift_reads_only_the_first_steps():
+    """``early_drift``: the smallest and largest std and the largest mean of the epochs up to
+    EARLY_STEPS; later epochs (a mean of 500 at twice that) do not count."""
+    row = {"training/policy_dist_min_std": 0.5, "training/policy_dist_max_std": 2.0,
+           "training/policy_dist_max_loc": 1.0}  # fmt: skip
+    rows = [
+        {"step": 1e6, **row},
+        {"step": EARLY_STEPS, **row, "training/policy_dist_min_std": 0.002,
+         "training/policy_dist_max_loc": 40.0},
+        {"step": 2 * EARLY_STEPS, **row, "training/policy_dist_max_loc": 500.0},
+    ]  # fmt: skip
+    assert early_drift(rows) == {"early_std_min": 0.002, "early_std_max": 2.0,
+                                 "early_mean_max": 40.0}  # fmt: skip
