@@ -224,3 +224,54 @@ def test_a_full_disk_is_named_before_the_lock_file_is_made(tmp_path: Path, monke
     with pytest.raises(RunDirError, match="0 MiB free"):
         train(config, tmp_path / "run", quiet=True)
     assert not (tmp_path / "run" / ".lock").exists()
+
+
+def test_the_normal_policy_bounds_its_mean_and_shares_its_std() -> None:
+    """``policy_distribution=normal``: the policy's mean stays inside (-1, 1) whatever its last
+    layer gives (a soft sign: a raw mean of 40, where the tanh-normal policy's action would sit
+    saturated at 1, is 0.976), its std is one learned value per action entry, the same for
+    every state, starting at NORMAL_INIT_STD, and the PPO loss and its metrics take it."""
+    import jax
+    import jax.numpy as jnp
+
+    from mjx_arm.task.observation import OBS_SIZE
+    from mjx_arm.train.learner import Learner, local_devices, make_mesh
+    from mjx_arm.train.networks import NORMAL_INIT_STD
+
+    config = load_config("cpu", None, _tiny(4000, policy_distribution="normal"))
+    learner = Learner(config, OBS_SIZE, 6, make_mesh(local_devices(1)))
+    state = learner.init(jax.random.PRNGKey(0), jax.random.PRNGKey(1))
+    normalizer, policy, _ = learner.params(state)
+    network = learner.network.policy_network
+    obs = jax.random.normal(jax.random.PRNGKey(2), (64, OBS_SIZE)) * 100.0
+    mean, std = network.apply(normalizer, policy, obs)
+    assert mean.shape == std.shape == (64, 6)
+    assert float(jnp.max(jnp.abs(mean))) < 1.0
+    np.testing.assert_allclose(np.asarray(std), NORMAL_INIT_STD, rtol=1e-6)
+    dist = learner.network.parametric_action_distribution
+    assert float(jnp.max(jnp.abs(dist.mode((mean, std))))) < 1.0
+    head = policy["params"]["Dense_0"]  # the mean's layer: give every state a raw mean of 40
+    pushed = {
+        "params": {
+            **policy["params"],
+            "Dense_0": {
+                "kernel": jnp.zeros_like(head["kernel"]),
+                "bias": jnp.full_like(head["bias"], 40.0),
+            },
+        }
+    }
+    mean, _ = network.apply(normalizer, pushed, obs)
+    np.testing.assert_allclose(np.asarray(mean), 40.0 / 41.0, rtol=1e-6)
+
+
+def test_a_normal_policy_run_names_why_it_does_not_export(tmp_path: Path) -> None:
+    """Policy files hold tanh-normal policies; a run of the other distribution is refused
+    before any checkpoint is read, with the reason."""
+    from mjx_arm.policy import export_policy
+
+    run = tmp_path / "run"
+    (run / "checkpoints" / "000000000640").mkdir(parents=True)
+    config = load_config("cpu", None, _tiny(4000, policy_distribution="normal"))
+    (run / "config.json").write_text(json.dumps({"train": config.to_dict()}))
+    with pytest.raises(ConfigError, match="'normal' policy"):
+        export_policy(run, tmp_path / "policy.npz")

@@ -179,6 +179,22 @@ def _table(config: Mapping[str, Any], key: str, run_dir: Path) -> dict[str, Any]
     return value
 
 
+def _check_distribution(run_dir: Path) -> None:
+    """Refuse a run whose policy is not tanh-normal, the one distribution policy files hold.
+
+    Raises:
+        ConfigError: the run's config names another ``policy_distribution``.
+    """
+    config = read_json_object(run_dir / "config.json", "run config", within=run_dir)
+    distribution = _table(config, "train", run_dir).get("policy_distribution", "tanh_normal")
+    if distribution != "tanh_normal":
+        raise ConfigError(
+            f"{run_dir}: the run trained a {distribution!r} policy; policy files hold "
+            "'tanh_normal' policies only (the training default), so this run does not export. "
+            "Its metrics and checkpoints are its own (mjx-arm bench seeds reads them)"
+        )
+
+
 def load_run(run_dir: str | Path, step: int | None = None):
     """(arrays, metadata, raw params) of a run's checkpoint (newest, or at ``step``), checked
     as a policy file's are (:func:`~mjx_arm.policy.numpy_policy.check_arrays`).
@@ -189,6 +205,8 @@ def load_run(run_dir: str | Path, step: int | None = None):
     from mjx_arm.train.rundir import CheckpointError, RunDir
 
     run_dir = Path(run_dir)
+    if (run_dir / "config.json").is_file():
+        _check_distribution(run_dir)
     checkpoint = find_checkpoint(run_dir, step)
     config = read_json_object(run_dir / "config.json", "run config", within=run_dir)
     with warnings.catch_warnings():  # orbax: "Sharding info not provided when restoring"

@@ -42,6 +42,10 @@ SECTIONS = {
 MAX_LEARNING_RATE = 1.0
 
 
+# The policy's action distributions (TrainConfig.policy_distribution).
+POLICY_DISTRIBUTIONS = ("tanh_normal", "normal")
+
+
 @dataclass(frozen=True)
 class TrainConfig:
     """Everything a training run needs besides the task. Saved as JSON in the run directory.
@@ -68,6 +72,11 @@ class TrainConfig:
         normalize_observations: running mean/std normalisation of observations.
         normalizer: its std floor and clip.
         policy_hidden, value_hidden: MLP layer sizes.
+        policy_distribution: the policy's action distribution. "tanh_normal" (Brax's default):
+            a Gaussian whose mean and std the MLP gives per state, its samples squashed by a
+            tanh. "normal": a Gaussian whose mean the MLP gives, bounded to (-1, 1) (a soft
+            sign), with one learned std per action entry for every state, its samples clipped
+            to [-1, 1] by the env. Only "tanh_normal" policies export (:mod:`mjx_arm.policy`).
         num_evals: evaluations over the run (metrics are written at each).
         num_eval_envs: envs per evaluation (one episode each).
         checkpoint_every: save a checkpoint every this many evaluations (and at the end).
@@ -120,6 +129,7 @@ class TrainConfig:
     normalizer: NormalizerConfig = field(default_factory=NormalizerConfig)
     policy_hidden: tuple[int, ...] = (128, 128, 128)
     value_hidden: tuple[int, ...] = (256, 256, 256)
+    policy_distribution: str = "tanh_normal"
     num_evals: int = 10
     num_eval_envs: int = 128
     checkpoint_every: int = 1
@@ -145,6 +155,11 @@ class TrainConfig:
         check_range(self, ("reward_scaling", "discounting"), above=0)
         check_range(self, ("discounting", "gae_lambda", "stop_at_success"), low=0, high=1)
         check_range(self, ("vf_loss_coefficient", "entropy_cost"), low=0)
+        if self.policy_distribution not in POLICY_DISTRIBUTIONS:
+            raise ConfigError(
+                f"policy_distribution must be one of {list(POLICY_DISTRIBUTIONS)}, got "
+                f"{self.policy_distribution!r}"
+            )
         if self.learning_rate > MAX_LEARNING_RATE:
             raise ConfigError(
                 f"learning_rate must be <= {MAX_LEARNING_RATE:g}, got {self.learning_rate:g}: "
