@@ -213,11 +213,11 @@ class Lift(Task):
         """``height``: the cube's centre above its resting height (m); ``grasp``: 1 where both
         pads press the cube (each at least :data:`GRASP_FORCE`, its centre within
         :data:`GRASP_RADIUS` of the ee point, the gripper closed at least ``grasp_closure``),
-        else 0; ``cradle``: the fingers' closure where
-        the cube's centre is within its half edge of the ee point (between the pads),
-        else 0; ``stray``: 1 where a finger presses something (at least :data:`GRASP_FORCE`)
-        while the cube's centre is not that near (a fingertip on the cube's top, a finger on
-        the table or on a cube held off centre), else 0."""
+        else 0; ``cradle``: the fingers' closure where the cube's centre is within its half
+        edge of the ee point (between the pads), else 0; ``stray``: 1 where a finger presses
+        something (at least :data:`GRASP_FORCE`) while the cube's centre is not that near (a
+        fingertip on the cube's top, a finger on the table or on a cube held off centre),
+        else 0."""
         parts = grip_lib.split_grip(grip)
         offset = parts["object_pos"] - ee_pos
         gap = xp.sqrt(xp.vecdot(offset, offset))
