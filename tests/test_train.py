@@ -69,9 +69,10 @@ def test_reach_learns_on_the_c_backend(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
-def test_resume_continues_from_the_saved_step(tmp_path: Path) -> None:
+@pytest.mark.parametrize("distribution", ["tanh_normal", "normal"])
+def test_resume_continues_from_the_saved_step(tmp_path: Path, distribution: str) -> None:
     run_dir = tmp_path / "run"
-    config = load_config("cpu", None, _tiny(4000))
+    config = load_config("cpu", None, _tiny(4000, policy_distribution=distribution))
     first = train(config, run_dir, quiet=True)
     run = RunDir(run_dir)
     checkpoints = sorted(p.name for p in run.checkpoints.iterdir())
