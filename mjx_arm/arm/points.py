@@ -105,13 +105,14 @@ def with_points(arm: ArmInfo) -> ArmInfo:
     (the Panda's TCP, 9.5 mm behind its closed fingertips)."""
     tool, axis = derive_tool_point(arm)
     grip = grip_point(arm)
-    if grip is not None and axis is None and np.linalg.norm(tool - grip) < GRIP_PRESS:
+    if grip is not None and axis is None:
         direction = tool_down_solver(arm).ik.tool
-        if np.linalg.norm(grip - direction * (grip @ direction)) < MIN_EE_OFFSET:
+        on_axis = np.linalg.norm(grip - direction * (grip @ direction)) < MIN_EE_OFFSET
+        if np.linalg.norm(tool - grip) < GRIP_PRESS and on_axis:
             tool = grip
+        if arm.gripper.kind != "jaw":
+            grip = _tips_clear(arm, tool, grip, direction)
     arm = dataclasses.replace(arm, tool_axis=axis)
-    if grip is not None and axis is None and arm.gripper.kind != "jaw":
-        grip = _tips_clear(arm, tool, grip)
     return dataclasses.replace(
         _at(arm, tool),
         tool_offset=tuple(float(v) for v in tool),
@@ -119,14 +120,15 @@ def with_points(arm: ArmInfo) -> ArmInfo:
     )
 
 
-def _tips_clear(arm: ArmInfo, tool: np.ndarray, grip: np.ndarray) -> np.ndarray:
-    """``grip (3,)`` moved along the tool axis towards the closed tips (the tool point ``tool
-    (3,)``, on the axis) until they lie at most the held cube's half edge less
-    :data:`~mjx_arm.urdf.gripper_layout.TIP_CLEARANCE` beyond it: with the grip point at the
-    centre of a cube resting on the table, the fingertips then stay that clearance above the
-    table (a jaw's grasp centre keeps the same rule). The xArm6 gripper's tips reach 3.9 cm past its
-    pads' centre: held there, a 4.5 cm cube put them 1.6 cm into the table."""
-    direction = tool_down_solver(arm).ik.tool
+def _tips_clear(
+    arm: ArmInfo, tool: np.ndarray, grip: np.ndarray, direction: np.ndarray
+) -> np.ndarray:
+    """``grip (3,)`` moved along the tool axis (the unit ``direction (3,)``) towards the closed
+    tips (the tool point ``tool (3,)``, on the axis) until they lie at most the held cube's half
+    edge less :data:`~mjx_arm.urdf.gripper_layout.TIP_CLEARANCE` beyond it: with the grip
+    point at the centre of a cube resting on the table, the fingertips then stay that clearance
+    above the table (a jaw's grasp centre keeps the same rule). The xArm6 gripper's tips reach
+    3.9 cm past its pads' centre: held there, a 4.5 cm cube put them 1.6 cm into the table."""
     beyond = float((tool - grip) @ direction)
     room = arm.gripper.cube_half - TIP_CLEARANCE
     if beyond <= room:

@@ -123,14 +123,7 @@ def task_for_arm(task: TaskConfig, arm: ArmInfo, check: bool = True) -> TaskConf
             raise TaskFitError(
                 f"{arm.urdf.name} cannot do {task.task}: {why} (mjx-arm arm URDF --check)"
             )
-    setup = arm_setup(arm, task)
-    return task.for_arm(
-        setup.home_qpos,
-        setup.workspace_scale,
-        setup.episode_steps,
-        setup.object_scale,
-        setup.grasp_closure,
-    )
+    return arm_setup(arm, task).fill(task)
 
 
 def default_arm(task: TaskConfig, arm: Any = None) -> Any:

@@ -102,6 +102,17 @@ class ArmSetup:
     grasp_closure: float = 0.0
     notes: tuple[str, ...] = field(default=())
 
+    def fill(self, task: TaskConfig) -> TaskConfig:
+        """``task`` with what this setup derived where it leaves it empty
+        (:meth:`~mjx_arm.task.config.TaskConfig.for_arm`)."""
+        return task.for_arm(
+            self.home_qpos,
+            self.workspace_scale,
+            self.episode_steps,
+            self.object_scale,
+            self.grasp_closure,
+        )
+
     @property
     def covers_area(self) -> bool:
         """Every grid target is reachable with the tool down."""

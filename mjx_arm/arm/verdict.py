@@ -124,14 +124,7 @@ def _build_cached(arm: ArmInfo, task: TaskConfig) -> str:
     from mjx_arm.arm.model_io import GripReader, SensorReader, arm_model
     from mjx_arm.urdf.errors import UrdfError
 
-    setup = arm_setup(arm, task)
-    filled = task.for_arm(
-        setup.home_qpos,
-        setup.workspace_scale,
-        setup.episode_steps,
-        setup.object_scale,
-        setup.grasp_closure,
-    )
+    filled = arm_setup(arm, task).fill(task)
     try:
         model = arm_model(arm, filled)
         reader = SensorReader(model, arm)
