@@ -179,13 +179,13 @@ def _table(config: Mapping[str, Any], key: str, run_dir: Path) -> dict[str, Any]
     return value
 
 
-def _check_distribution(run_dir: Path) -> None:
-    """Refuse a run whose policy is not tanh-normal, the one distribution policy files hold.
+def _check_distribution(config: Mapping[str, Any], run_dir: Path) -> None:
+    """Refuse a run (its ``config.json`` read as ``config``) whose policy is not tanh-normal,
+    the one distribution policy files hold.
 
     Raises:
         ConfigError: the run's config names another ``policy_distribution``.
     """
-    config = read_json_object(run_dir / "config.json", "run config", within=run_dir)
     distribution = _table(config, "train", run_dir).get("policy_distribution", "tanh_normal")
     if distribution != "tanh_normal":
         raise ConfigError(
@@ -205,10 +205,13 @@ def load_run(run_dir: str | Path, step: int | None = None):
     from mjx_arm.train.rundir import CheckpointError, RunDir
 
     run_dir = Path(run_dir)
-    if (run_dir / "config.json").is_file():
-        _check_distribution(run_dir)
+    config = None
+    if (run_dir / "config.json").is_file():  # refused before any checkpoint is looked for
+        config = read_json_object(run_dir / "config.json", "run config", within=run_dir)
+        _check_distribution(config, run_dir)
     checkpoint = find_checkpoint(run_dir, step)
-    config = read_json_object(run_dir / "config.json", "run config", within=run_dir)
+    if config is None:  # its error, after the checkpoint's
+        config = read_json_object(run_dir / "config.json", "run config", within=run_dir)
     with warnings.catch_warnings():  # orbax: "Sharding info not provided when restoring"
         warnings.filterwarnings("ignore", message="Sharding info not provided")
         params = RunDir.load_params(checkpoint)
