@@ -132,17 +132,20 @@ campaign)
   # for the preset as shipped; ARGS: more `bench seeds` arguments, such as --arm A --threshold
   # 0.9). The GPUs run at once; the lines of one GPU run one after another (several runs on one
   # GPU at once make their times incomparable, and three SO-101 runs on one H200 ran out of
-  # memory). Every line stops DEADLINE seconds (default 540) after the campaign's start. The
-  # runs' metrics, configs and start-up reports, and every report, go into $OUT/NAME.tar.gz;
-  # with EXPORT=1 each run's policy (its final checkpoint, the best evaluated one) also goes to
-  # $OUT/policies/NAME_RUN.npz. Last, one line per seed run (benchmarks/campaign_brief.py).
+  # memory). GPU may name a lane, "0:b": each lane of a GPU runs at once beside the others
+  # (success over seeds, not times; give each process a share of memory with
+  # XLA_PYTHON_CLIENT_MEM_FRACTION). Every line stops DEADLINE seconds (default 540) after the
+  # campaign's start. The runs' metrics, configs and start-up reports, and every report, go
+  # into $OUT/NAME.tar.gz; with EXPORT=1 each run's policy (its final checkpoint, the best
+  # evaluated one) also goes to $OUT/policies/NAME_RUN.npz. Last, one line per seed run
+  # (benchmarks/campaign_brief.py).
   start=$SECONDS
   run_line() {  # GPU NAME TASK SEEDS SETS ARGS
     local set_args=() more=() left=$(( ${DEADLINE:-540} - (SECONDS - start) ))
     [ "$left" -le 10 ] && { echo "no time left for $2" > "$WORK/$2.log"; return; }
     [ "$5" != "-" ] && read -r -a set_args <<< "--set $5"
     read -r -a more <<< "${6:-}"
-    CUDA_VISIBLE_DEVICES=$1 timeout "$left" python3 -m mjx_arm.cli bench seeds \
+    CUDA_VISIBLE_DEVICES=${1%%:*} timeout "$left" python3 -m mjx_arm.cli bench seeds \
       --task "$3" --preset "${PRESET:-fast}" --seeds "$4" "${set_args[@]}" "${more[@]}" \
       --name "$2" --runs "$WORK/$2" --out "$WORK/$2/report" ${EXTRA:-} > "$WORK/$2.log" 2>&1
   }

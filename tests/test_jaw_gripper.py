@@ -18,14 +18,16 @@ from lift_script import run_scripted_lift
 
 import mjx_arm  # noqa: F401  (registers the ids)
 from mjx_arm.arm.config import ArmConfig, resolve_arm
-from mjx_arm.arm.info import arm_info
+from mjx_arm.arm.info import arm_info, tool_down_solver
 from mjx_arm.arm.model_io import arm_model
+from mjx_arm.arm.points import task_arm
 from mjx_arm.arm.setup import arm_setup
 from mjx_arm.arm.verdict import task_verdict
 from mjx_arm.task.config import task_config
 from mjx_arm.task.lift import LIFT_HEIGHT, cube_half, lift_config
 from mjx_arm.urdf.grippers import find_layout
 from mjx_arm.urdf.pad_fit import PAD_GEOM_SUFFIX
+from mjx_arm.urdf.scene_shapes import box_top_offset
 
 DATA = Path(__file__).parent / "data" / "example-robot-data" / "robots"
 SO101 = DATA / "so_arm_description" / "urdf" / "so101.urdf"
@@ -80,6 +82,20 @@ def test_the_arm_gets_the_jaw_a_smaller_cube_and_two_ee_points() -> None:
         2 * gripper.cube_half
     )
     assert setup.object_scale == pytest.approx(0.5, abs=0.01)
+
+
+def test_touch_home_leaves_room_above_the_box() -> None:
+    """The SO-101 holds its tool down no higher than about 7 cm over Touch's area; of the
+    heights tried (0.2, 0.15, 0.10 m, then those times its 0.38 reach scale) the highest with a
+    home is 5.7 cm, its tip 7 mm over the 5 cm box. The home is raised to the highest
+    tool-down height instead: at least 1.5 cm of room above the box (PRESS_CLEARANCE)."""
+    arm = arm_info(ARM)
+    setup = arm_setup(arm, task_config("touch"))
+    assert setup.home_source == "derived" and setup.covers_area
+    tip = tool_down_solver(task_arm(arm, task_config("touch"))).ik.pose(
+        np.asarray(setup.home_qpos)
+    )[0][2]
+    assert tip - box_top_offset() >= 0.015
 
 
 def test_mujoco_gets_the_fitted_pads_with_touch_sensors_around_them_alone() -> None:

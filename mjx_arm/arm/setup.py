@@ -18,7 +18,10 @@ of it is derived here, for a task config and an arm:
   turn are taken nearest the middle of the range. Where the slowest home-to-target motion from
   that height would lengthen the episode, the lower heights are tried too, and the highest home
   whose motions fit the task's episode wins (a small or slow arm's home at 0.2 m can sit a
-  wrist swing of 1.5 rad from the box; nearer the table, its moves are shorter).
+  wrist swing of 1.5 rad from the box; nearer the table, its moves are shorter). Touch's
+  home that would sit less than :data:`PRESS_CLEARANCE` above the box top (a small arm's) is
+  raised to the highest tool-down height below the next height tried: the tool needs that room
+  to slow down before it presses (the SO-101's tip 7 mm above the box struck it at 54-72 N).
 - **episode**: the time the home-to-target motions take at the task's commanded joint speeds
   (:meth:`TaskConfig.joint_speeds`); an episode shorter than :data:`EPISODE_TIME_FACTOR` times
   the slowest motion is lengthened.
@@ -44,7 +47,7 @@ from mjx_arm.task import sampling
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.task.lift import GRASP_SLACK
 from mjx_arm.urdf.grippers import held_cube_half
-from mjx_arm.urdf.scene_shapes import CUBE_HALF, box_half_width
+from mjx_arm.urdf.scene_shapes import CUBE_HALF, box_half_width, box_top_offset
 
 # Fractions of the reach scale tried, nearest 1 first: smaller areas for arms that cannot hold
 # the tool down far out, larger ones for arms that cannot reach down near their base (or, as
@@ -54,6 +57,9 @@ SCALE_STEPS = (1.0, 0.9, 1.1, 0.8, 1.2, 0.7, 1.3, 0.6, 1.4, 0.5)
 # times its reach scale, where that is lower (the SO-101, reach scale 0.38, holds its tool down
 # only up to about 8 cm)
 HOME_HEIGHTS = (HOME_HEIGHT, 0.15, 0.10)
+# m: room above Touch's box top that a home leaves for slowing down before the press; a home
+# nearer the box is raised as far as a tool-down pose allows, to RAISE_TOLERANCE
+PRESS_CLEARANCE, RAISE_TOLERANCE = 0.03, 0.002
 MIN_OBJECT_SCALE = 0.5  # a gripper that holds only a cube smaller than this fraction cannot Lift
 EPISODE_TIME_FACTOR = 2.0  # an episode lasts at least this many times the slowest motion
 
@@ -228,7 +234,8 @@ def _try_scale(arm: ArmInfo, solver: ToolDownSolver, task: TaskConfig, home: np.
     points = grid_targets(task)
     low, high = points[:, :2].min(axis=0), points[:, :2].max(axis=0)
     centre = 0.5 * (low + high)
-    groups = [[home]] if home is not None else _home_groups(solver, centre, arm.reach_scale)
+    floor = box_top_offset() + PRESS_CLEARANCE if task.spec.scene.box else 0.0
+    groups = [[home]] if home is not None else _home_groups(solver, centre, arm.reach_scale, floor)
     best, best_rank = None, None
     for homes in groups:
         trial = _best_home(solver, task, points, homes)
@@ -253,15 +260,39 @@ def _best_home(solver: ToolDownSolver, task: TaskConfig, points: np.ndarray, hom
 
 
 def _home_groups(
-    solver: ToolDownSolver, centre: np.ndarray, reach_scale: float
+    solver: ToolDownSolver, centre: np.ndarray, reach_scale: float, floor: float = 0.0
 ) -> Iterator[list[np.ndarray]]:
     """Tool-down homes over ``centre (2,)`` (x, y) at each of :func:`home_heights` that has
     any, highest first (a small arm, or a long tool, may not hold the tool down higher up);
-    each height is solved only when asked for."""
+    each height is solved only when asked for. A height below ``floor`` (m) whose next height
+    up has no home is first raised as high as a tool-down home allows (:func:`_raised`)."""
+    above = None  # the last height tried, which had no home
     for height in home_heights(reach_scale):
         homes = solver.homes(np.array([*centre, height]))
+        if homes and above is not None and height < floor:
+            raised = _raised(solver, centre, height, min(above, floor))
+            if raised:
+                yield raised
         if homes:
             yield homes
+        above = None if homes else height
+
+
+def _raised(
+    solver: ToolDownSolver, centre: np.ndarray, low: float, high: float
+) -> list[np.ndarray]:
+    """Tool-down homes over ``centre (2,)`` at the highest height found between ``low`` (m,
+    which has homes) and ``high`` (bisection to :data:`RAISE_TOLERANCE`); [] where none is
+    above ``low`` by that much."""
+    best: list[np.ndarray] = []
+    while high - low > RAISE_TOLERANCE:
+        middle = 0.5 * (low + high)
+        homes = solver.homes(np.array([*centre, middle]))
+        if homes:
+            low, best = middle, homes
+        else:
+            high = middle
+    return best
 
 
 def home_heights(reach_scale: float) -> tuple[float, ...]:
