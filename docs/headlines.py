@@ -321,14 +321,17 @@ SMALL = "arms/small_and_grippers/"
 SMALL_GROUPS = (
     ("SO-101 reach", (f"{SMALL}seeds_reach_fast_so101_call1.json",),
      tuple(f"{SMALL}transfer_reach_so101_seed{s}.json" for s in (0, 1))),
-    ("SO-101 touch", (f"{SMALL}seeds_touch_fast_so101_call1.json",),
-     (f"{SMALL}transfer_touch_so101_seed0.json",)),
+    ("SO-101 touch", (f"{SMALL}seeds_touch_fast_so101_raised_home_shared_gpu.json",),
+     tuple(f"{SMALL}transfer_touch_so101_raised_seed{s}.json" for s in (0, 1))),
     ("SO-101 lift", (f"{SMALL}seeds_lift_fast_so101_grip5mm.json",),
      tuple(f"{SMALL}transfer_lift_so101_seed{s}.json" for s in (0, 1))),
 )  # fmt: skip
 MESH_PAD_GROUPS = (
     ("xArm6 touch", (f"{SMALL}seeds_touch_fast_xarm6_table_collides.json",),
      tuple(f"{SMALL}transfer_touch_xarm6_seed{s}.json" for s in (0, 1))),
+    ("xArm6 lift", (f"{SMALL}seeds_lift_fast_xarm6_gate_s0_shared_gpu.json",
+                    f"{SMALL}seeds_lift_fast_xarm6_gate_s1.json"),
+     tuple(f"{SMALL}transfer_lift_xarm6_gate_seed{s}.json" for s in (0, 1))),
 )  # fmt: skip
 
 
@@ -344,7 +347,12 @@ HEADLINES: tuple[Headline, ...] = (
         "`--preset fast` as shipped, 19 fresh seeds (7100-7125), one per GPU, time to threshold",
         warm=False,
     ),
-    _seeds_row("Reach", "seeds/seeds_reach_fast.json", "`--preset fast`, time to threshold"),
+    _seeds_row(
+        "Reach",
+        "seeds/fresh/seeds_reach_fast_fresh_7300.json",
+        "`--preset fast` as shipped, 11 fresh seeds (7300-7310), one GPU, one process per seed, "
+        "time from the command's start",
+    ),
     _seeds_row("Touch", "seeds/seeds_touch_cpu_c_backend.json",
                "`--preset cpu --backend mujoco`, time to threshold", warm=False),
     _seeds_row("Reach", "seeds/seeds_reach_cpu_c_backend.json",
