@@ -133,8 +133,9 @@ campaign)
   # 0.9). The GPUs run at once; the lines of one GPU run one after another (several runs on one
   # GPU at once make their times incomparable, and three SO-101 runs on one H200 ran out of
   # memory). GPU may name a lane, "0:b": each lane of a GPU runs at once beside the others
-  # (success over seeds, not times; give each process a share of memory with
-  # XLA_PYTHON_CLIENT_MEM_FRACTION). Every line stops DEADLINE seconds (default 540) after the
+  # (success over seeds, not times). Where lanes share a GPU, each process takes 0.6 / lanes of
+  # its memory unless XLA_PYTHON_CLIENT_MEM_FRACTION says otherwise (three Lift runs at 0.3 each
+  # left Warp out of memory). Every line stops DEADLINE seconds (default 540) after the
   # campaign's start. The runs' metrics, configs and start-up reports, and every report, go
   # into $OUT/NAME.tar.gz; with EXPORT=1 each run's policy (its final checkpoint, the best
   # evaluated one) also goes to $OUT/policies/NAME_RUN.npz. Last, one line per seed run
@@ -150,6 +151,10 @@ campaign)
       --name "$2" --runs "$WORK/$2" --out "$WORK/$2/report" ${EXTRA:-} > "$WORK/$2.log" 2>&1
   }
   jobs_text="${JOBS:?one GPU|NAME|TASK|SEEDS|SETS per line}"
+  lanes=$(cut -d'|' -f1 <<< "$jobs_text" | grep -v '^$' | sort -u | cut -d: -f1 | uniq -c \
+    | sort -rn | head -1 | awk '{print $1}')
+  share="${XLA_PYTHON_CLIENT_MEM_FRACTION:-0.$(printf %02d $((60 / ${lanes:-1})))}"
+  [ "${lanes:-1}" -gt 1 ] && export XLA_PYTHON_CLIENT_MEM_FRACTION="$share"
   for gpu in $(cut -d'|' -f1 <<< "$jobs_text" | grep -v '^$' | sort -u); do
     (while IFS='|' read -r g name task seeds sets args; do
       [ "$g" = "$gpu" ] && run_line "$g" "$name" "$task" "$seeds" "$sets" "$args"
