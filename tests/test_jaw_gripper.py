@@ -96,6 +96,7 @@ def test_touch_home_leaves_room_above_the_box() -> None:
         np.asarray(setup.home_qpos)
     )[0][2]
     assert tip - box_top_offset() >= 0.015
+    assert any("cm above the box, less than the 3 cm wanted" in note for note in setup.notes)
 
 
 def test_mujoco_gets_the_fitted_pads_with_touch_sensors_around_them_alone() -> None:

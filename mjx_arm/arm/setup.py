@@ -366,6 +366,13 @@ def _notes(arm, task, solver, q_home, scale) -> list[str]:
         )
     elif height < HOME_HEIGHT - 0.01:
         notes.append(f"home {height:.2f} m above the table: none holds the tool down higher")
+    room = height - box_top_offset()
+    if task.spec.scene.box and room < PRESS_CLEARANCE - 0.001:
+        notes.append(
+            f"home {room * 100:.1f} cm above the box, less than the "
+            f"{PRESS_CLEARANCE * 100:.0f} cm wanted to slow down before the press (a derived "
+            "home is raised as far as a tool-down pose allows)"
+        )
     if task.spec.gripper and task.object_scale < 1.0:
         from mjx_arm.task.lift import cube_half
 
