@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import time
 from pathlib import Path
 
 import pytest
@@ -103,8 +104,14 @@ def test_two_tiny_seeds_on_the_c_backend(tmp_path: Path) -> None:
     def report(runs, configs, **kwargs):
         reports.append(([r.seed for r in runs], kwargs["pending"]))
 
-    runs, configs = _train_seeds(config, tmp_path, [], sets, 0.0, lambda _: None, report)
+    command_start = time.time() - 5.0  # the command started 5 s ago (its imports)
+    runs, configs = _train_seeds(config, tmp_path, [], sets, command_start, lambda _: None, report)
     assert reports == [([0], 1)]  # the final report is the command's own
+    # the first seed's time before training counts from the command's start, the next's from
+    # its own: a few hundredths of a second in this process
+    before = [run.compile_report["stages"]["before training"] for run in runs]
+    assert before[0] >= 5.0 and 0.0 <= before[1] < 1.0
+    assert next(iter(runs[0].compile_report["stages"])) == "before training"
     assert [r.seed for r in runs] == [0, 1]
     assert [c["train"]["seed"] for c in configs] == [0, 1]
     for run in runs:
@@ -127,6 +134,9 @@ def test_seeds_in_processes_of_their_own(tmp_path: Path) -> None:
     for run in runs:
         assert run.curve[0][1] == 0 and run.total_steps >= 2560 and run.compile_report
         assert "stages" in run.compile_report and 0.0 <= run.final_success <= 1.0
+        # a process of its own imports JAX, MuJoCo and Brax before its trainer starts
+        before = run.compile_report["stages"]["before training"]
+        assert 0.5 < before < run.wall_s
     failed, _ = run_seeds_on_gpus(
         SeedsConfig(task="reach", preset="cpu", seeds="2", backend="mujoco"),
         tmp_path,

@@ -111,9 +111,20 @@ def train_seed(
         compile_s=result.compile_seconds,
         training_steps_per_s=result.steps_per_second,
         curve=curve,
-        compile_report=result.compile_report,
+        compile_report=with_time_before_training(result.compile_report, start),
     )
     return run, RunDir(run_dir).load_config()
+
+
+def with_time_before_training(report: dict[str, Any], start: float) -> dict[str, Any]:
+    """A seed's compile report with a first stage, ``before training``: the seconds from
+    ``start`` (``time.time()`` the seed's times count from) to the trainer's start (its
+    report's ``opened_at``): a process's imports and CUDA's start, for a seed trained in a
+    process of its own. A report without ``opened_at`` is returned as it is."""
+    if "opened_at" not in report:
+        return report
+    before = {"before training": round(report["opened_at"] - start, 3)}
+    return {**report, "stages": {**before, **report.get("stages", {})}}
 
 
 def seed_run_dir(config: SeedsConfig, seed: int, out: Path) -> Path:
@@ -143,7 +154,7 @@ def read_seed_run(
     curve = read_curve(run_dir, start) if (run_dir / "metrics.csv").is_file() else []
     hit = first_at(curve, config.threshold)
     starts = RunDir(run_dir).compile_reports()
-    report = starts[-1] if starts else {}
+    report = with_time_before_training(starts[-1] if starts else {}, start)
     speeds = [r.get("training/sps", math.nan) for r in RunDir(run_dir).read_metrics()]
     speeds = [v for v in speeds if math.isfinite(v)]
     return SeedRun(

@@ -85,6 +85,7 @@ class CompileReport:
         self.seconds: dict[str, float] = defaultdict(float)  # trace / lower / backend totals
         self.counts: dict[str, int] = defaultdict(int)
         self.start = time.monotonic()
+        self.opened_at = time.time()  # wall clock (s since the epoch), for other processes
 
     def open(self) -> CompileReport:
         """Start listening to JAX's compile events; returns self."""
@@ -135,10 +136,12 @@ class CompileReport:
         return {name: round(s, 3) for name, s in ranked[:count]}
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready: the compile time (s), stages (s), JAX totals (s, summed over programs
-        compiled at the same time), counts and the slowest programs."""
+        """JSON-ready: the compile time (s), when the report opened (``time.time()``, at the
+        trainer's start), stages (s), JAX totals (s, summed over programs compiled at the same
+        time), counts and the slowest programs."""
         return {
             "compile_s": round(self.compile_seconds, 3),
+            "opened_at": round(self.opened_at, 3),
             "compile_stages": [name for name in COMPILE_STAGES if name in self.stages],
             "stages": {k: round(v, 3) for k, v in self.stages.items()},
             "jax_seconds": {k: round(v, 3) for k, v in self.seconds.items()},
