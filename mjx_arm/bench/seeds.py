@@ -257,8 +257,11 @@ def run_seeds_on_gpus(
             free.append(gpu)
             done[seed] = _finished_seed(config, seed, runs_dir, proc, gpu, start)
             run = done[seed][0]
-            failed = f"seed {seed}: its process failed ({run.error[:400]})"
-            log(failed if run.error else seed_line(config, run))
+            if run.error:
+                log(f"seed {seed}: its process failed ({run.error[:400]})")
+            else:
+                log(seed_line(config, run))
+                log(f"seed {seed} {start_up_line(run.compile_report)}")
             if on_seed is not None:
                 finished = [done[s] for s in seeds if s in done]
                 on_seed([r for r, _ in finished], [c for _, c in finished])
