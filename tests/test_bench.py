@@ -264,3 +264,16 @@ def test_transfer_writes_the_matrix(tmp_path_factory, tmp_path: Path):
     table = (tmp_path / "transfer_reach.md").read_text()
     assert "| CPU MuJoCo (Gymnasium) | 4 |" in table and "success >= 0.95" in table
     assert (tmp_path / "transfer_reach.png").stat().st_size > 0
+
+
+def test_a_given_commit_is_what_results_record(monkeypatch) -> None:
+    """A tree copied onto another machine over older git metadata records the commit it is
+    told (MJX_ARM_GIT_COMMIT); without it, this checkout's own."""
+    from mjx_arm.bench.results import environment_metadata, git_commit
+
+    monkeypatch.delenv("MJX_ARM_GIT_COMMIT", raising=False)
+    own = git_commit()
+    assert own is None or len(own.removesuffix("-dirty")) == 40
+    monkeypatch.setenv("MJX_ARM_GIT_COMMIT", "0123abc")
+    assert git_commit() == "0123abc"
+    assert environment_metadata(packages=())["git_commit"] == "0123abc"

@@ -65,7 +65,14 @@ def package_versions(packages: Iterable[str] = DEFAULT_PACKAGES) -> dict[str, st
 
 
 def git_commit() -> str | None:
-    """The checkout's commit (with ``-dirty`` when files changed), or None outside git."""
+    """The checkout's commit (with ``-dirty`` when files changed), or None outside git.
+
+    ``MJX_ARM_GIT_COMMIT``, where set, is taken as it is: for a copy of a checkout whose git
+    metadata is not the tree's (a tree copied onto another machine over an older ``.git``).
+    """
+    given = os.environ.get("MJX_ARM_GIT_COMMIT", "").strip()
+    if given:
+        return given
     root = Path(__file__).resolve().parents[2]
     try:
         commit = subprocess.run(
