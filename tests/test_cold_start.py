@@ -107,6 +107,10 @@ def test_after_warmup_a_new_process_loads_the_update_and_init(tmp_path: Path) ->
     report = json.loads((run / "compile.json").read_text())[-1]
     counts = report["jax_counts"]
     assert counts["cache_hits"] >= 3, counts  # init, update, policy at least
+    # the first checkpoint (with its recorded CPU MuJoCo episode) is a start-up stage of its
+    # own, and the report says when the trainer started
+    assert 0.0 < report["stages"]["first checkpoint"] < 60.0, report["stages"]
+    assert report["opened_at"] > 1.7e9
     # loaded, not compiled: well under the rollout, which holds host callbacks and always
     # compiles (measured loaded 1.2 s against the rollout's 14.8 s on a loaded 2-core CPU)
     programs = report["slowest_programs"]

@@ -223,7 +223,10 @@ class _Progress:
                     f"(evaluation success {best_success:.3f}, last {success:.3f})"
                 )
             if self.run is not None:
+                saving = time.monotonic()
                 self._save(step, make_policy, params, meta, resume)
+                if self.evals == 1 and self.report is not None:  # a start-up stage
+                    self.report.add("first checkpoint", time.monotonic() - saving)
         if solved:
             raise Solved(step)
         if self.stop_after and self.evals >= self.stop_after:
