@@ -210,27 +210,32 @@ class _Progress:
         self._remember_best(step, success)
         due = self.evals % self.config.checkpoint_every == 0
         if (due or solved or step >= self.total) and self.latest is not None:
-            with_envs = self.evals % self.config.env_state_every == 0
-            take = self.take_snapshot
-            resume = take(with_envs) if take is not None else None
-            make_policy, params = self.latest
-            meta: dict[str, Any] = {}
-            if step >= self.total and not solved and self._best_is_better(success):
-                best_success, best_step, params = self.best
-                meta = {"params_step": best_step, "params_success": best_success}
-                self.bar.write(
-                    f"the final checkpoint keeps the params of step {best_step} "
-                    f"(evaluation success {best_success:.3f}, last {success:.3f})"
-                )
-            if self.run is not None:
-                saving = time.monotonic()
-                self._save(step, make_policy, params, meta, resume)
-                if self.evals == 1 and self.report is not None:  # a start-up stage
-                    self.report.add("first checkpoint", time.monotonic() - saving)
+            self._checkpoint(step, success, solved)
         if solved:
             raise Solved(step)
         if self.stop_after and self.evals >= self.stop_after:
             raise Stopped(step)
+
+    def _checkpoint(self, step: int, success: float, solved: bool) -> None:
+        """Save the checkpoint of ``step`` (the envs' state every ``env_state_every``; at the
+        budget's end, the best evaluated params where they beat the last); the first one's
+        seconds are a start-up stage."""
+        take = self.take_snapshot
+        resume = take(self.evals % self.config.env_state_every == 0) if take else None
+        make_policy, params = self.latest
+        meta: dict[str, Any] = {}
+        if step >= self.total and not solved and self._best_is_better(success):
+            best_success, best_step, params = self.best
+            meta = {"params_step": best_step, "params_success": best_success}
+            self.bar.write(
+                f"the final checkpoint keeps the params of step {best_step} "
+                f"(evaluation success {best_success:.3f}, last {success:.3f})"
+            )
+        if self.run is not None:
+            saving = time.monotonic()
+            self._save(step, make_policy, params, meta, resume)
+            if self.evals == 1 and self.report is not None:
+                self.report.add("first checkpoint", time.monotonic() - saving)
 
     def _start_up_done(self) -> None:
         """After the first epoch: the start-up line, and the compile time kept for next time."""
