@@ -234,7 +234,7 @@ def _try_scale(arm: ArmInfo, solver: ToolDownSolver, task: TaskConfig, home: np.
     points = grid_targets(task)
     low, high = points[:, :2].min(axis=0), points[:, :2].max(axis=0)
     centre = 0.5 * (low + high)
-    floor = box_top_offset() + PRESS_CLEARANCE if task.spec.scene.box else 0.0
+    floor = _press_floor(task)
     groups = [[home]] if home is not None else _home_groups(solver, centre, arm.reach_scale, floor)
     best, best_rank = None, None
     for homes in groups:
@@ -257,6 +257,12 @@ def _best_home(solver: ToolDownSolver, task: TaskConfig, points: np.ndarray, hom
         if best is None or reached > best[0]:
             best = (reached, len(points), q_home, poses, task.workspace_scale)
     return best
+
+
+def _press_floor(task: TaskConfig) -> float:
+    """The lowest home height (m) that leaves :data:`PRESS_CLEARANCE` above the task's box
+    top; 0.0 for a task without the box."""
+    return box_top_offset() + PRESS_CLEARANCE if task.spec.scene.box else 0.0
 
 
 def _home_groups(
@@ -366,8 +372,9 @@ def _notes(arm, task, solver, q_home, scale) -> list[str]:
         )
     elif height < HOME_HEIGHT - 0.01:
         notes.append(f"home {height:.2f} m above the table: none holds the tool down higher")
-    room = height - box_top_offset()
-    if task.spec.scene.box and room < PRESS_CLEARANCE - 0.001:
+    floor = _press_floor(task)
+    if height < floor - 0.001:
+        room = height - box_top_offset()
         notes.append(
             f"home {room * 100:.1f} cm above the box, less than the "
             f"{PRESS_CLEARANCE * 100:.0f} cm wanted to slow down before the press (a derived "
