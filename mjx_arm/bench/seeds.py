@@ -260,8 +260,7 @@ def run_seeds_on_gpus(
             if run.error:
                 log(f"seed {seed}: its process failed ({run.error[:400]})")
             else:
-                log(seed_line(config, run))
-                log(f"seed {seed} {start_up_line(run.compile_report)}")
+                _log_run(log, config, run)
             if on_seed is not None:
                 finished = [done[s] for s in seeds if s in done]
                 on_seed([r for r, _ in finished], [c for _, c in finished])
@@ -342,11 +341,16 @@ def run_seeds(
         run, saved = train_seed(config, seed, runs_dir, overrides, start)
         runs.append(run)
         configs.append(saved)
-        log(seed_line(config, run))
-        log(f"seed {seed} {start_up_line(run.compile_report)}")
+        _log_run(log, config, run)
         if on_seed is not None:
             on_seed(list(runs), list(configs))
     return runs, configs
+
+
+def _log_run(log, config: SeedsConfig, run: SeedRun) -> None:
+    """A finished seed's result line, then its start-up line."""
+    log(seed_line(config, run))
+    log(f"seed {run.seed} {start_up_line(run.compile_report)}")
 
 
 def write_report(
