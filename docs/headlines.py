@@ -349,8 +349,8 @@ HEADLINES: tuple[Headline, ...] = (
     ),
     _seeds_row(
         "Reach",
-        "seeds/fresh/seeds_reach_fast_fresh_7300.json",
-        "`--preset fast` as shipped, 11 fresh seeds (7300-7310), one GPU, one process per seed, "
+        "seeds/fresh/seeds_reach_fast_fresh.json",
+        "`--preset fast` as shipped, 20 fresh seeds (7300-7319), one GPU, one process per seed, "
         "time from the command's start",
     ),
     _seeds_row("Touch", "seeds/seeds_touch_cpu_c_backend.json",

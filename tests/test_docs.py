@@ -58,17 +58,17 @@ def test_changing_one_json_value_changes_the_page_and_the_readme(tmp_path):
     argv = ["--results", str(results), "--out", str(out), "--readme", str(readme), "--no-plots"]
     assert gen.main(argv) == 0
     page, block = (out / "seeds.md").read_text(), readme.read_text()
-    assert "11 of 11 seeds at 0.95 (95% interval 0.74-1.00); median 26.1 s warm" in block  # Reach
-    assert "| 11 of 11 |" in page
+    assert "20 of 20 seeds at 0.95 (95% interval 0.84-1.00); median 26.0 s warm" in block  # Reach
+    assert "| 20 of 20 |" in page
 
-    file = results / "seeds" / "fresh" / "seeds_reach_fast_fresh_7300.json"
+    file = results / "seeds" / "fresh" / "seeds_reach_fast_fresh.json"
     data = json.loads(file.read_text())
     data["summary"]["solved"] = 7
     data["summary"]["time_to_threshold_warm"]["median"] = 51.25
     file.write_text(json.dumps(data))
     assert gen.main(argv) == 0
-    assert "7 of 11 seeds at 0.95 (95% interval 0.74-1.00); median 51.2 s" in readme.read_text()
-    assert "| 7 of 11 | 51.2 s (" in (out / "seeds.md").read_text()
+    assert "7 of 20 seeds at 0.95 (95% interval 0.84-1.00); median 51.2 s" in readme.read_text()
+    assert "| 7 of 20 | 51.2 s (" in (out / "seeds.md").read_text()
     assert readme.read_text().startswith("intro\n") and readme.read_text().endswith("rest\n")
     assert gen.main(["--results", str(results), "--readme", str(readme), "--check"]) == 0
 
@@ -150,7 +150,7 @@ def test_pages_read_as_results(tmp_path):
     for page in written:
         assert "| nan |" not in page.read_text() and " nan |" not in page.read_text()
     index = (tmp_path / "pages" / "index.md").read_text()
-    assert "source `seeds/fresh/seeds_reach_fast_fresh_7300.json`" in index
+    assert "source `seeds/fresh/seeds_reach_fast_fresh.json`" in index
 
 
 def test_a_page_whose_files_are_gone_is_removed(tmp_path):

@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
+
+import pytest
 
 from benchmarks.training_diagnosis import EARLY_STEPS, campaign, early_drift, trap
 
@@ -119,3 +122,47 @@ def test_the_early_drift_reads_only_the_first_steps():
     ]  # fmt: skip
     assert early_drift(rows) == {"early_std_min": 0.002, "early_std_max": 2.0,
                                  "early_mean_max": 40.0}  # fmt: skip
+
+
+def _seeds_report(seeds: list[int], solved_at: float | None, date: str) -> dict:
+    """A seeds report as ``bench seeds`` writes it, one record per seed (its summary unread)."""
+    from mjx_arm.bench.seeds_config import SeedRun
+
+    runs = [
+        SeedRun(seed, 1.0, 1.0, 100 if solved_at else None, solved_at, 200, 30.0, 4.0, 1e5,
+                [(10.0, 0, 0.0), (solved_at or 20.0, 100, 1.0 if solved_at else 0.0)])
+        for seed in seeds
+    ]  # fmt: skip
+    settings = {"task": "reach", "preset": "fast", "seeds": "", "backend": "auto",
+                "threshold": 0.95, "devices": 0, "arm": "", "deterministic": False}  # fmt: skip
+    return {
+        "meta": {"date": date, "git_commit": date[-2:], "device": {"kind": "gpu"}},
+        "settings": settings,
+        "overrides": [],
+        "seeds": [dataclasses.asdict(r) for r in runs],
+        "configs": [{"seed": s} for s in seeds],
+    }
+
+
+def test_seeds_reports_of_two_calls_merge_into_one(tmp_path):
+    """``merge_seeds_reports``: the seeds of both reports in seed order with their configs,
+    one summary over all of them, the newest machine record and each input named; a seed in
+    both reports, or another threshold, is refused."""
+    from benchmarks.merge_seeds_reports import merge
+    from mjx_arm.bench.seeds import write_report
+
+    first = _seeds_report([7301, 7300], 20.0, "2026-11-29T01")
+    second = _seeds_report([7302], None, "2026-11-29T05")
+    config, runs, configs, meta = merge([first, second], ["a.json", "b.json"])
+    assert [r.seed for r in runs] == [7300, 7301, 7302] and config.seeds == "7300,7301,7302"
+    assert [c["seed"] for c in configs] == [7300, 7301, 7302]
+    assert meta["git_commit"] == "05"
+    assert [m["seeds"] for m in meta["merged_from"]] == [[7301, 7300], [7302]]
+    write_report(config, runs, configs, meta, tmp_path, "merged")
+    summary = json.loads((tmp_path / "merged.json").read_text())["summary"]
+    assert (summary["solved"], summary["seeds"]) == (2, 3)
+    with pytest.raises(ValueError, match="seed 7301 is in two reports"):
+        merge([first, first], ["a.json", "c.json"])
+    other = {**second, "settings": {**second["settings"], "threshold": 0.9}}
+    with pytest.raises(ValueError, match="threshold"):
+        merge([first, other], ["a.json", "d.json"])

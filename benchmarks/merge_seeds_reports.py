@@ -1,0 +1,87 @@
+"""One seeds report from several reports of the same benchmark run in different calls.
+
+A GPU call is bounded in time, so a range of fresh seeds is often trained over two or more
+calls (the first stopped at its deadline; the next trains the seeds it did not reach). This
+writes the report of the whole range: every finished seed of the inputs, the summary computed
+again over all of them (solve rate with its 95 % interval, times, steps, collapses). The
+inputs must agree on task, preset, threshold, arm and ``--set`` items; a seed in two of them
+is an error. The machine's record is the newest input's; ``meta.merged_from`` names each
+input with its commit, date and seeds.
+
+    python -m benchmarks.merge_seeds_reports A.json B.json --name seeds_reach_fast_fresh \\
+        --out benchmarks/results/seeds/fresh
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from mjx_arm.bench.seeds import write_report
+from mjx_arm.bench.seeds_config import SeedRun, SeedsConfig
+
+# settings every input must share (the seeds differ)
+SHARED = ("task", "preset", "backend", "threshold", "devices", "arm", "deterministic")
+
+
+def merge(reports: list[dict[str, Any]], names: list[str]) -> tuple[SeedsConfig, list, list, dict]:
+    """(config, seed runs in seed order, their configs, meta) of ``reports`` merged.
+
+    Raises:
+        ValueError: the reports differ in a shared setting or ``--set`` items, or share a seed.
+    """
+    first = reports[0]
+    for report, name in zip(reports[1:], names[1:], strict=True):
+        for key in SHARED:
+            if report["settings"][key] != first["settings"][key]:
+                raise ValueError(
+                    f"{name}: {key} {report['settings'][key]!r}, not "
+                    f"{first['settings'][key]!r} as in {names[0]}"
+                )
+        if report["overrides"] != first["overrides"]:
+            raise ValueError(f"{name}: --set {report['overrides']}, not {first['overrides']}")
+    pairs: dict[int, tuple[dict, dict]] = {}
+    for report, name in zip(reports, names, strict=True):
+        for record, config in zip(report["seeds"], report["configs"], strict=True):
+            if record["seed"] in pairs:
+                raise ValueError(f"seed {record['seed']} is in two reports (again in {name})")
+            pairs[record["seed"]] = (record, config)
+    order = sorted(pairs)
+    runs = [SeedRun(**pairs[s][0]) for s in order]
+    settings = {k: first["settings"][k] for k in SHARED}
+    config = SeedsConfig(**settings, seeds=",".join(str(s) for s in order))
+    newest = max(reports, key=lambda r: r["meta"]["date"])
+    merged_from = [
+        {
+            "file": name,
+            "git_commit": r["meta"].get("git_commit"),
+            "date": r["meta"]["date"],
+            "seeds": [s["seed"] for s in r["seeds"]],
+        }
+        for r, name in zip(reports, names, strict=True)
+    ]
+    meta = {**newest["meta"], "merged_from": merged_from}
+    return config, runs, [pairs[s][1] for s in order], meta
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("reports", type=Path, nargs="+", help="seeds reports (NAME.json)")
+    parser.add_argument("--name", required=True)
+    parser.add_argument("--out", type=Path, required=True)
+    args = parser.parse_args(argv)
+    reports = [json.loads(p.read_text()) for p in args.reports]
+    try:
+        config, runs, configs, meta = merge(reports, [p.name for p in args.reports])
+    except ValueError as err:
+        parser.error(str(err))
+    overrides = tuple(reports[0]["overrides"])
+    for path in write_report(config, runs, configs, meta, args.out, args.name, overrides):
+        print(path)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
