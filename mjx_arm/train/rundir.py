@@ -39,6 +39,7 @@ import numpy as np
 from mjx_arm.inputs import InputError, MiB, read_json_object, read_text, write_atomic
 from mjx_arm.train import checkpoints as ckpt
 from mjx_arm.train.checkpoints import CHECKPOINT_PREFIX, CheckpointError
+from mjx_arm.train.tb_events import ScalarWriter, event_file_name
 
 __all__ = [
     "CHECKPOINT_PREFIX",
@@ -229,17 +230,18 @@ class RunDir:
             writer.writerow(row)
 
     def _write_tb(self, step: int, row: dict[str, float]) -> None:
-        writer = self._tensorboard()
-        for key, value in row.items():
-            if key not in ("step", "time") and math.isfinite(value):
-                writer.add_scalar(key, value, step)
-        writer.flush()
+        scalars = {k: v for k, v in row.items() if k not in ("step", "time") and math.isfinite(v)}
+        self._tensorboard().add_scalars(step, scalars)
 
-    def _tensorboard(self):
+    def _tensorboard(self) -> ScalarWriter:
+        """The event file of this start of the run (a new one per start; TensorBoard reads
+        every file in ``tb/``)."""
         if self._tb is None:
-            from tensorboardX import SummaryWriter
-
-            self._tb = SummaryWriter(str(self.path / "tb"))
+            folder = self.path / "tb"
+            folder.mkdir(exist_ok=True)
+            path = folder / event_file_name()
+            fd = open_no_follow(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, "TensorBoard file")
+            self._tb = ScalarWriter(os.fdopen(fd, "ab"))
         return self._tb
 
     def _metrics(self) -> tuple[list[str], list[dict[str, Any]]]:
