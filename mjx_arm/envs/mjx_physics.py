@@ -162,7 +162,7 @@ class MjxPhysics:
         self._actuators = jnp.asarray(acts)  # the arm's, then the gripper's for a gripper task
 
     def _warp_model_and_data(self) -> tuple[Any, Any]:
-        bounds = model_bounds(self.mj_model, own_device())
+        bounds = model_bounds(self.mj_model)
         per_env = self.config.naconmax_per_env or bounds.contacts
         ccd_per_env = min(self.config.naccdmax_per_env or max(bounds.convex_pairs, 1), per_env)
         self.buffers = {

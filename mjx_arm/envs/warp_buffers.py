@@ -68,14 +68,14 @@ class ModelBounds(NamedTuple):
     convex_pairs: int
 
 
-def model_bounds(mj_model: mujoco.MjModel, device: Any = None) -> ModelBounds:
+def model_bounds(mj_model: mujoco.MjModel) -> ModelBounds:
     """The :class:`ModelBounds` of ``mj_model``: contacts and rows read from MJX's JAX sizing of
-    its arrays on ``device`` (None: JAX's default device), convex pairs from the geom pairs that
-    MJX's contact filters allow."""
+    its arrays (their shapes only: nothing is built on a device, which took about a second on
+    a GPU), convex pairs from the geom pairs that MJX's contact filters allow."""
+    import jax
     from mujoco import mjx
 
-    model = mjx.put_model(mj_model, device, impl="jax")
-    data = mjx.make_data(model, device, impl="jax")
+    data = jax.eval_shape(lambda: mjx.make_data(mjx.put_model(mj_model, impl="jax"), impl="jax"))
     return ModelBounds(
         int(data._impl.contact.dist.shape[0]),
         int(data._impl.efc_J.shape[0]),
