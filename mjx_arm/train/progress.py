@@ -22,11 +22,11 @@ from mjx_arm.envs.warp_buffers import overflow_message
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.train.compile_report import CompileReport, expected_compile, remember_compile
 from mjx_arm.train.config import TrainConfig
+from mjx_arm.train.episode import CheckpointEpisode
 from mjx_arm.train.learner import EpochSizes
 from mjx_arm.train.resume import ENV_STATE_FILE, ResumeState, resume_arrays
 from mjx_arm.train.rundir import RunDir
 
-TRANSITIONS_KEPT = 100
 LOGGED_PREFIXES = ("eval/", "training/")
 
 
@@ -167,6 +167,7 @@ class _Progress:
         self.take_snapshot: Any = None
         self.report: CompileReport | None = None
         self.clock: CompileClock | None = None
+        self.episode: CheckpointEpisode | None = None  # records each checkpoint's episode
 
     def watch_compile(self, report: CompileReport) -> None:
         """Show on the bar that the run compiles (seconds so far, the last run's compile time);
@@ -273,12 +274,12 @@ class _Progress:
         resume: ResumeState | None = None,
     ) -> None:
         params = jax.tree.map(np.asarray, params)
-        if self.setup is not None:
-            transitions = rollout_transitions(make_policy, params, self.setup, seed=step)
-        else:
-            transitions = rollout_transitions(
-                make_policy, params, self.task, seed=step, arm=self.config.arm
-            )
+        if self.episode is None:  # the policy's network is the run's: built once
+            if self.setup is not None:
+                self.episode = CheckpointEpisode(make_policy, self.setup)
+            else:
+                self.episode = CheckpointEpisode(make_policy, self.task, self.config.arm)
+        transitions = self.episode.record(params, seed=step)
         meta = {"task": self.config.task, **(meta or {})}
         arrays = resume_arrays(resume) if resume is not None else None
         # the envs' state is kept in the newest checkpoint that has it, only
@@ -291,6 +292,8 @@ class _Progress:
     def close(self) -> None:
         if self.clock is not None:
             self.clock.stop()
+        if self.episode is not None:
+            self.episode.close()
         self.bar.close()
 
 
@@ -301,44 +304,3 @@ def host_params(params: Any) -> tuple:
     from flax import serialization
 
     return tuple(jax.tree.map(np.asarray, serialization.to_state_dict(p)) for p in params)
-
-
-def rollout_transitions(
-    make_policy, params, task: TaskConfig | ArmTask, seed: int, arm: Any = None
-) -> dict[str, np.ndarray]:
-    """One evaluation episode in the CPU MuJoCo env of ``task`` on its arm (an
-    :class:`~mjx_arm.arm.resolve.ArmTask`), or of a task config on ``arm`` (default: the
-    shipped arm); the last 100 transitions as arrays.
-
-    Returns:
-        obs ``(T, 16 + n)``, action ``(T, n)``, reward ``(T,)``, done ``(T,)``, ee_pos ``(T, 3)``,
-        contact_force ``(T,)`` with T <= 100.
-    """
-    from mjx_arm.envs.mujoco_env import MujocoArmEnv
-    from mjx_arm.task.observation import flatten_obs
-
-    # params as an argument, not a constant: one program for every checkpoint (and cached)
-    act = jax.jit(lambda p, obs, key: make_policy(p, deterministic=True)(obs, key))
-    env = MujocoArmEnv(task, arm)
-    obs, _ = env.reset(seed=int(seed) % (2**31))
-    key = jax.random.PRNGKey(0)
-    rows: dict[str, list] = {
-        k: [] for k in ("obs", "action", "reward", "done", "ee_pos", "contact_force")
-    }
-    for _ in range(env.task.episode_steps):
-        flat = flatten_obs(np, obs)
-        action = np.asarray(act(params, flat, key)[0], dtype=np.float32)
-        obs, reward, terminated, _, info = env.step(action)
-        for name, value in (
-            ("obs", flat),
-            ("action", action),
-            ("reward", reward),
-            ("done", terminated),
-            ("ee_pos", obs["ee_pose"][:3]),
-            ("contact_force", info["contact_force_norm"]),
-        ):
-            rows[name].append(value)
-        if terminated:
-            break
-    env.close()
-    return {k: np.asarray(v[-TRANSITIONS_KEPT:]) for k, v in rows.items()}
