@@ -160,8 +160,8 @@ def test_final_checkpoint_keeps_the_best_evaluation(tmp_path: Path, keep_best: b
     config = config.replace(keep_best=keep_best)
     progress = _Progress(RunDir(tmp_path / "run"), config, task_config("reach"), 0, quiet=True)
     saved = []
-    progress._save = lambda step, make_policy, params, meta=None, resume=None: saved.append(
-        (step, params, meta or {})
+    progress._save_job = lambda step, make_policy, params, meta, resume=None: (
+        lambda: saved.append((step, params, meta))
     )
     for step, success in ((10, 0.5), (20, 0.9), (30, 0.4)):
         progress.policy_params(step, None, {"w": np.full(2, float(step))})

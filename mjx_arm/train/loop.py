@@ -25,7 +25,7 @@ from mjx_arm.envs.wrappers import wrap_for_training
 from mjx_arm.train.compile_report import CompileReport
 from mjx_arm.train.config import TrainConfig
 from mjx_arm.train.distributed import gather, is_leader, share
-from mjx_arm.train.divergence import check_epoch, rollout_guard
+from mjx_arm.train.divergence import check_epoch
 from mjx_arm.train.evaluation import Evaluator
 from mjx_arm.train.learner import (
     ENV_AXIS,
@@ -330,8 +330,7 @@ def _epoch_done(
     params = run.learner.params(state)
     callbacks.policy_params(step, run.learner.make_policy, params)
     callbacks.snapshot(step, functools.partial(run.snapshot, *taken))
-    with rollout_guard(config, step):  # the checkpoint's rollout acts with the policy
-        callbacks.progress(step, _evaluate(run.evaluate, params, training))
+    callbacks.progress(step, _evaluate(run.evaluate, params, training))
 
 
 def _evaluate(evaluate: Evaluator, params: Params, training: dict[str, Any]) -> dict[str, Any]:

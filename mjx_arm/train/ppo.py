@@ -12,6 +12,7 @@ run directory; the others read a checkpoint to resume from and write nothing.
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import time
 import warnings
@@ -256,11 +257,12 @@ def _train(
         progress.times.append((start, step_offset))
         callbacks = Callbacks(progress.progress, progress.policy_params, progress.snapshot)
         try:
-            run_ppo(
-                config, env, eval_env, task.episode_steps, callbacks, restore, step_offset, report
-            )
-        except (Solved, Stopped):
-            pass
+            with contextlib.suppress(Solved, Stopped):  # a run solved or stopped early
+                run_ppo(
+                    config, env, eval_env, task.episode_steps, callbacks, restore, step_offset,
+                    report,
+                )  # fmt: skip
+            progress.finish()  # the last checkpoint on disk (a failed save raises here)
         finally:
             progress.close()
     finally:

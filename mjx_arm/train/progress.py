@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
 import jax
@@ -22,10 +23,12 @@ from mjx_arm.envs.warp_buffers import overflow_message
 from mjx_arm.task.config import TaskConfig
 from mjx_arm.train.compile_report import CompileReport, expected_compile, remember_compile
 from mjx_arm.train.config import TrainConfig
+from mjx_arm.train.divergence import rollout_guard
 from mjx_arm.train.episode import CheckpointEpisode
 from mjx_arm.train.learner import EpochSizes
 from mjx_arm.train.resume import ENV_STATE_FILE, ResumeState, resume_arrays
 from mjx_arm.train.rundir import RunDir
+from mjx_arm.train.saver import CheckpointSaver, host_copy
 
 LOGGED_PREFIXES = ("eval/", "training/")
 
@@ -168,6 +171,7 @@ class _Progress:
         self.report: CompileReport | None = None
         self.clock: CompileClock | None = None
         self.episode: CheckpointEpisode | None = None  # records each checkpoint's episode
+        self.saver = CheckpointSaver()  # writes checkpoints while the next epoch trains
 
     def watch_compile(self, report: CompileReport) -> None:
         """Show on the bar that the run compiles (seconds so far, the last run's compile time);
@@ -234,7 +238,9 @@ class _Progress:
             )
         if self.run is not None:
             saving = time.monotonic()
-            self._save(step, make_policy, params, meta, resume)
+            self.saver.submit(self._save_job(step, make_policy, params, meta, resume))
+            if solved or step >= self.total:
+                self.saver.wait()  # the run's last checkpoint is on disk before it ends
             if self.evals == 1 and self.report is not None:
                 self.report.add("first checkpoint", time.monotonic() - saving)
 
@@ -265,31 +271,50 @@ class _Progress:
         )
         self.bar.refresh()
 
-    def _save(
+    def _save_job(
         self,
         step: int,
         make_policy,
         params,
-        meta: dict[str, Any] | None = None,
+        meta: dict[str, Any],
         resume: ResumeState | None = None,
-    ) -> None:
-        params = jax.tree.map(np.asarray, params)
-        if self.episode is None:  # the policy's network is the run's: built once
+    ) -> Callable[[], None]:
+        """The save of the checkpoint of ``step``, for :attr:`saver`. The host copies of the
+        params and state are made here, in the training thread (the next epoch reuses their
+        GPU buffers); the job records the episode and writes the files."""
+        params = host_copy(params)
+        arrays = host_copy(resume_arrays(resume)) if resume is not None else None
+        # the envs' state is kept in the newest checkpoint that has it, only
+        envs = resume is not None and resume.env_leaves is not None
+        newest_only = (ENV_STATE_FILE,) if envs else ()
+        meta = {"task": self.config.task, **meta}
+        episode = self._episode(make_policy)
+        run, config = self.run, self.config
+
+        def job() -> None:
+            with rollout_guard(config, step):  # the recorded episode acts with the policy
+                transitions = episode.record(params, seed=step)
+            run.save_checkpoint(
+                step, host_params(params), meta, transitions, arrays, newest_only=newest_only
+            )
+
+        return job
+
+    def _episode(self, make_policy) -> CheckpointEpisode:
+        """The recorder of every checkpoint's episode (the policy's network is the run's)."""
+        if self.episode is None:
             if self.setup is not None:
                 self.episode = CheckpointEpisode(make_policy, self.setup)
             else:
                 self.episode = CheckpointEpisode(make_policy, self.task, self.config.arm)
-        transitions = self.episode.record(params, seed=step)
-        meta = {"task": self.config.task, **(meta or {})}
-        arrays = resume_arrays(resume) if resume is not None else None
-        # the envs' state is kept in the newest checkpoint that has it, only
-        envs = resume is not None and resume.env_leaves is not None
-        newest_only = (ENV_STATE_FILE,) if envs else ()
-        self.run.save_checkpoint(
-            step, host_params(params), meta, transitions, arrays, newest_only=newest_only
-        )
+        return self.episode
+
+    def finish(self) -> None:
+        """Wait for the pending checkpoint; raise its error, if its save failed."""
+        self.saver.wait()
 
     def close(self) -> None:
+        self.saver.close()
         if self.clock is not None:
             self.clock.stop()
         if self.episode is not None:
