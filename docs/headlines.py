@@ -348,6 +348,12 @@ HEADLINES: tuple[Headline, ...] = (
         warm=False,
     ),
     _seeds_row(
+        "Touch",
+        "seeds/fresh/seeds_touch_fast_fresh_7400.json",
+        "`--preset fast` as shipped, 5 fresh seeds (7400-7404) after the start-up changes, one "
+        "GPU, one process per seed, time from the command's start",
+    ),
+    _seeds_row(
         "Reach",
         "seeds/fresh/seeds_reach_fast_fresh.json",
         "`--preset fast` as shipped, 20 fresh seeds (7300-7319), one GPU, one process per seed, "
