@@ -218,6 +218,9 @@ ROBUSTNESS_GROUPS = (
     ("Touch fast", ["robustness/robustness_touch_fast_seed0.json"]),
 )
 TOUCH_TRANSFER = [f"contact/transfer/touch_fast_seed{i}.json" for i in range(3)]
+TOUCH_FRESH_TRANSFER = [
+    f"contact/transfer/touch_fast_fresh_seed{i}.json" for i in (7402, 7403, 7404)
+]
 GPU_SEEDS = ("scaling/seeds_touch_fast_2gpu_of_2.json", "scaling/seeds_touch_fast_1gpu_of_2.json")
 
 
@@ -364,6 +367,8 @@ HEADLINES: tuple[Headline, ...] = (
     _seeds_row("Reach", "seeds/seeds_reach_cpu_c_backend.json",
                "`--preset cpu --backend mujoco`, time to threshold", warm=False),
     _transfer_row("Touch", TOUCH_TRANSFER, ("mujoco", "pybullet")),
+    _transfer_row("Touch, the solved fresh seeds 7402-7404", TOUCH_FRESH_TRANSFER,
+                  ("mujoco", "pybullet")),
     Headline(_any_arm_row),
     Headline(_pick_row),
     _arm_groups_row("Lift on the UR5e with a linkage gripper, `--preset fast` as shipped",
