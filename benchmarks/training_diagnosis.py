@@ -104,6 +104,7 @@ def seed_record(run: Path, threshold: float) -> dict[str, Any]:
         / last.get("eval/avg_episode_length", math.nan),
         "trap": None if hit is not None else trap(last),
         **early_drift(trained),
+        **normaliser_share(trained),
         "settings": train["schedule"] | train["normalizer"],
     }
 
@@ -121,6 +122,19 @@ def early_drift(trained: list[dict[str, float]]) -> dict[str, float]:
         "early_std_min": pick("training/policy_dist_min_std", np.min),
         "early_std_max": pick("training/policy_dist_max_std", np.max),
         "early_mean_max": pick("training/policy_dist_max_loc", np.max),
+    }
+
+
+def normaliser_share(trained: list[dict[str, float]]) -> dict[str, float]:
+    """The KL and clip fraction of each update's first minibatch, before its first gradient
+    step (the observation normaliser's move alone), over the epochs: largest and median KL,
+    median clip fraction (NaN for runs that did not log them)."""
+    kl = _col(trained, "training/kl_before_update")
+    clip = _col(trained, "training/clip_fraction_before_update")
+    return {
+        "kl_before_update_max": float(kl.max()) if kl.size else math.nan,
+        "kl_before_update_median": float(np.median(kl)) if kl.size else math.nan,
+        "clip_fraction_before_update_median": float(np.median(clip)) if clip.size else math.nan,
     }
 
 
@@ -163,7 +177,29 @@ def markdown(campaigns: list[dict[str, Any]], threshold: float) -> str:
                 f"{s['early_std_max']:.3g} | {s['early_mean_max']:.3g} | {s.get('trap') or '-'} |"
             )
         lines.append("")
+        lines += _normaliser_table(c["seeds"])
     return "\n".join(lines)
+
+
+def _normaliser_table(seeds: list[dict[str, Any]]) -> list[str]:
+    """The normaliser's share of each seed's KL (runs that logged it), as markdown lines."""
+    logged = [s for s in seeds if math.isfinite(s.get("kl_before_update_max", math.nan))]
+    if not logged:
+        return []
+    lines = [
+        "Before each update's first gradient step (the normaliser's move alone):",
+        "",
+        "| seed | KL max | KL median | clip fraction (median) | whole update: KL max, median |",
+        "|---|---|---|---|---|",
+    ]
+    for s in logged:
+        lines.append(
+            f"| {s['seed']} | {s['kl_before_update_max']:.3g} | "
+            f"{s['kl_before_update_median']:.3g} | "
+            f"{s['clip_fraction_before_update_median']:.3f} | "
+            f"{s['kl_max']:.3g}, {s['kl_median']:.3g} |"
+        )
+    return [*lines, ""]
 
 
 def main() -> None:

@@ -276,3 +276,31 @@ def test_a_normal_policy_run_names_why_it_does_not_export(tmp_path: Path) -> Non
     (run / "config.json").write_text(json.dumps({"train": config.to_dict()}))
     with pytest.raises(ConfigError, match="'normal' policy"):
         export_policy(run, tmp_path / "policy.npz")
+
+
+def test_the_kl_before_an_update_is_the_normalisers_alone(tmp_path: Path, monkeypatch) -> None:
+    """``training/kl_before_update`` is read before the update's first gradient step: with the
+    observation normaliser held still the policy is the rollout's (a KL under 1e-3, from the
+    two programs' float rounding, and no transition outside the clip), while the KL of the
+    whole update is not 0; with the normaliser moving, the first update's starts far from the
+    rollout's policy (its statistics start empty: a KL of about 1 and most transitions
+    clipped). With ``normalizer.after_update`` the normaliser moves after the update, whose
+    first step then starts from the rollout's policy."""
+    import mjx_arm.train.learner as learner
+
+    config = load_config("cpu", None, _tiny(600))
+    row = RunDir(train(config, tmp_path / "moving", quiet=True).run_dir).read_metrics()[-1]
+    assert float(row["training/kl_before_update"]) > 0.1
+    assert float(row["training/clip_fraction_before_update"]) > 0.5
+    monkeypatch.setattr(learner, "normalizer_update", lambda params, obs, config: params)
+    row = RunDir(train(config, tmp_path / "still", quiet=True).run_dir).read_metrics()[-1]
+    assert 0 <= float(row["training/kl_before_update"]) < 1e-3
+    assert float(row["training/clip_fraction_before_update"]) == 0.0
+    assert float(row["training/kl_mean"]) > 1e-3
+    monkeypatch.undo()  # the normaliser moves, after the update (normalizer.after_update)
+    after = load_config("cpu", None, _tiny(600, **{"normalizer.after_update": "true"}))
+    run = RunDir(train(after, tmp_path / "after", quiet=True).run_dir)
+    row = run.read_metrics()[-1]
+    assert 0 <= float(row["training/kl_before_update"]) < 1e-3
+    assert float(row["training/clip_fraction_before_update"]) == 0.0
+    assert json.loads((run.path / "config.json").read_text())["train"]["normalizer"]["after_update"]

@@ -166,3 +166,24 @@ def test_seeds_reports_of_two_calls_merge_into_one(tmp_path):
     other = {**second, "settings": {**second["settings"], "threshold": 0.9}}
     with pytest.raises(ValueError, match="threshold"):
         merge([first, other], ["a.json", "d.json"])
+
+
+def test_the_normalisers_share_of_the_kl_is_read_where_logged():
+    """``normaliser_share``: largest and median KL before each update's first gradient step and
+    the median clip fraction there; NaN for runs from before the columns existed."""
+    import math
+
+    from benchmarks.training_diagnosis import normaliser_share
+
+    kl, clip = "training/kl_before_update", "training/clip_fraction_before_update"
+    rows = [
+        {"step": 1e6, kl: 0.02, clip: 0.1},
+        {"step": 2e6, kl: 2.4e5, clip: 0.4},
+        {"step": 3e6, kl: 6.8, clip: 0.2},
+    ]
+    assert normaliser_share(rows) == {
+        "kl_before_update_max": 2.4e5,
+        "kl_before_update_median": 6.8,
+        "clip_fraction_before_update_median": 0.2,
+    }
+    assert all(math.isnan(v) for v in normaliser_share([{"step": 1e6}]).values())

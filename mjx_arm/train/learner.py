@@ -238,8 +238,10 @@ class Learner:
         normalizer = normalizer_update(
             state.normalizer_params, data.observation, self.config.normalizer
         )
+        # the statistics the losses read: the rollout's, or (Brax's order) the moved ones
+        read = state.normalizer_params if self.config.normalizer.after_update else normalizer
         (optimizer_state, params, _), metrics = jax.lax.scan(
-            functools.partial(self._sgd_epoch, data=data, normalizer=normalizer),
+            functools.partial(self._sgd_epoch, data=data, normalizer=read),
             (state.optimizer_state, state.params, key_sgd),
             (),
             length=self.config.num_updates_per_batch,
@@ -250,7 +252,7 @@ class Learner:
             normalizer_params=normalizer,
             env_steps=state.env_steps + env_steps,
         )
-        return state, jax.tree.map(jnp.mean, metrics)
+        return state, {**jax.tree.map(jnp.mean, metrics), **_before_update(metrics)}
 
     def _rollout(self, env: Any, env_state: Any, policy: Any, key: jax.Array, unrolls: int):
         """``unrolls`` unrolls of every env; transitions as ``(num_envs * unrolls, T, ...)``."""
@@ -308,6 +310,16 @@ class Learner:
         updates, optimizer_state = self.optimizer.update(grads, optimizer_state)
         params = optax.apply_updates(params, updates)
         return (optimizer_state, params, key), metrics
+
+
+def _before_update(metrics: dict[str, jax.Array]) -> dict[str, jax.Array]:
+    """The first minibatch's KL and clip fraction, ``(passes, minibatches)`` metrics at
+    ``[0, 0]``: measured before the update's first gradient step, so the policy differs from the
+    rollout's only by the observation normaliser, which the update moved first."""
+    return {
+        "kl_before_update": metrics["kl_mean"][0, 0],
+        "clip_fraction_before_update": metrics["clip_fraction"][0, 0],
+    }
 
 
 def _update_view(data: Any) -> Any:
