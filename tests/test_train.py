@@ -284,8 +284,8 @@ def test_the_kl_before_an_update_is_the_normalisers_alone(tmp_path: Path, monkey
     two programs' float rounding, and no transition outside the clip), while the KL of the
     whole update is not 0; with the normaliser moving, the first update's starts far from the
     rollout's policy (its statistics start empty: a KL of about 1 and most transitions
-    clipped). With ``normalizer.after_update`` the normaliser moves after the update, whose
-    first step then starts from the rollout's policy."""
+    clipped). With ``normalizer.after_update`` the normaliser moves after each update but the
+    first, whose first step then starts from the rollout's policy."""
     import mjx_arm.train.learner as learner
 
     config = load_config("cpu", None, _tiny(600))
@@ -298,9 +298,11 @@ def test_the_kl_before_an_update_is_the_normalisers_alone(tmp_path: Path, monkey
     assert float(row["training/clip_fraction_before_update"]) == 0.0
     assert float(row["training/kl_mean"]) > 1e-3
     monkeypatch.undo()  # the normaliser moves, after the update (normalizer.after_update)
-    after = load_config("cpu", None, _tiny(600, **{"normalizer.after_update": "true"}))
-    run = RunDir(train(after, tmp_path / "after", quiet=True).run_dir)
-    row = run.read_metrics()[-1]
-    assert 0 <= float(row["training/kl_before_update"]) < 1e-3
-    assert float(row["training/clip_fraction_before_update"]) == 0.0
+    sets = _tiny(1900, num_evals="4", **{"normalizer.after_update": "true"})
+    run = RunDir(train(load_config("cpu", None, sets), tmp_path / "after", quiet=True).run_dir)
+    first, *later = run.read_metrics()[1:]  # the first update takes its rollout in first
+    assert float(first["training/kl_before_update"]) > 0.1 and len(later) == 2
+    for row in later:
+        assert 0 <= float(row["training/kl_before_update"]) < 1e-3
+        assert float(row["training/clip_fraction_before_update"]) == 0.0
     assert json.loads((run.path / "config.json").read_text())["train"]["normalizer"]["after_update"]

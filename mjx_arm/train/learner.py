@@ -238,8 +238,9 @@ class Learner:
         normalizer = normalizer_update(
             state.normalizer_params, data.observation, self.config.normalizer
         )
-        # the statistics the losses read: the rollout's, or (Brax's order) the moved ones
-        read = state.normalizer_params if self.config.normalizer.after_update else normalizer
+        read = normalizer  # the statistics the losses read (Brax's order: the moved ones)
+        if self.config.normalizer.after_update:
+            read = _rollouts_statistics(state.normalizer_params, normalizer)
         (optimizer_state, params, _), metrics = jax.lax.scan(
             functools.partial(self._sgd_epoch, data=data, normalizer=read),
             (state.optimizer_state, state.params, key_sgd),
@@ -310,6 +311,15 @@ class Learner:
         updates, optimizer_state = self.optimizer.update(grads, optimizer_state)
         params = optax.apply_updates(params, updates)
         return (optimizer_state, params, key), metrics
+
+
+def _rollouts_statistics(rollout: Any, moved: Any) -> Any:
+    """The normaliser statistics the rollout acted with, except before the first update, when
+    they are still empty (no observation taken in): then the moved ones, so that the first
+    update does not fit the policy to raw observations."""
+    count = rollout.count  # Brax's UInt64 (two uint32 halves), or an integer array
+    empty = (count.hi == 0) & (count.lo == 0) if hasattr(count, "hi") else count == 0
+    return jax.tree.map(lambda old, new: jnp.where(empty, new, old), rollout, moved)
 
 
 def _before_update(metrics: dict[str, jax.Array]) -> dict[str, jax.Array]:

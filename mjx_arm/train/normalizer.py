@@ -33,9 +33,10 @@ class NormalizerConfig:
         std_floor: the smallest std a dimension is divided by (Brax: 1e-6).
         clip: normalised values are clipped to ``[-clip, clip]``; 0 leaves them unbounded.
         after_update: the update's losses read the statistics the rollout acted with, and the
-            statistics take in the rollout's observations after the update's gradient steps.
-            False (Brax's order): they take them in first, so the update starts from a policy
-            that already differs from the rollout's (``training/kl_before_update``).
+            statistics take in the rollout's observations after the update's gradient steps
+            (except the first update's: the statistics are empty until then). False (Brax's
+            order): they take them in first, so the update starts from a policy that already
+            differs from the rollout's (``training/kl_before_update``).
     """
 
     std_floor: float = BRAX_STD_FLOOR
