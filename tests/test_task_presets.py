@@ -8,7 +8,8 @@ own file and the settings are a typed ``TaskConfig``: every number must be the s
 keys allowed to go are reward weights of terms a task no longer carries, and only at weight 0;
 the only keys allowed to come are task fields added since, at their "from the arm" default
 (:data:`ADDED_FIELDS`), training fields added since, at their default
-(:data:`ADDED_TRAIN_FIELDS`), and reward terms added since, at weight 0.
+(:data:`ADDED_TRAIN_FIELDS`, :data:`ADDED_NORMALIZER_FIELDS`), and reward terms added since, at
+weight 0.
 """
 
 from __future__ import annotations
@@ -42,6 +43,8 @@ def _portable(value):
 ADDED_FIELDS = {"object_scale": 0.0, "grasp_closure": 0.0}
 # Training config fields added after the snapshot, with the value every preset leaves them at.
 ADDED_TRAIN_FIELDS = {"policy_distribution": "tanh_normal"}
+# ... and inside its ``normalizer`` section.
+ADDED_NORMALIZER_FIELDS = {"after_update": False}
 
 
 def _drop_zero_terms(before: dict, after: dict) -> dict:
@@ -72,7 +75,8 @@ def test_preset_resolves_to_the_shipped_numbers(case: str) -> None:
     after = _portable(preset_config(preset, task).to_dict())
     settings = after.pop("task_settings")
     before = {k: v for k, v in before_train.items() if k != "task_overrides"}
-    assert after == {**before, **ADDED_TRAIN_FIELDS}
+    normalizer = {**before["normalizer"], **ADDED_NORMALIZER_FIELDS}
+    assert after == {**before, **ADDED_TRAIN_FIELDS, "normalizer": normalizer}
     assert settings == _drop_zero_terms(before_task, settings)
 
 
