@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from input_fuzz.hostile_npz import pick
+from mjx_arm.protobuf_wire import length_delimited
 
 BOMB_ELEMENTS = 2**36
 INPUT, PARAMS = "state", "distribution_params"
@@ -181,20 +182,6 @@ def matmul_flood(good: Path, out: Path, rng: np.random.Generator) -> str:
     return f"matmul_flood: {count} MatMul by a {size} x {size} weight"
 
 
-def _varint(value: int) -> bytes:
-    out = bytearray()
-    while True:
-        byte, value = value & 0x7F, value >> 7
-        out.append(byte | (0x80 if value else 0))
-        if not value:
-            return bytes(out)
-
-
-def _field(number: int, data: bytes) -> bytes:
-    """A length-delimited protobuf field."""
-    return _varint(number << 3 | 2) + _varint(len(data)) + data
-
-
 def identity_flood(good: Path, out: Path, rng: np.random.Generator) -> str:
     """A chain of Identity nodes from the input, its end summed into the output; the nodes are
     written as protobuf bytes before the graph's own (order kept: they only need the input)."""
@@ -210,7 +197,7 @@ def identity_flood(good: Path, out: Path, rng: np.random.Generator) -> str:
     )  # fmt: skip
     graph = nodes + model.graph.SerializeToString()
     model.ClearField("graph")
-    out.write_bytes(model.SerializeToString() + _field(7, graph))
+    out.write_bytes(model.SerializeToString() + length_delimited(7, graph))
     return f"identity_flood: {count} Identity nodes"
 
 

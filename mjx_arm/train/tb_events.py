@@ -19,6 +19,8 @@ import struct
 import time
 from typing import BinaryIO
 
+from mjx_arm.protobuf_wire import length_delimited, varint
+
 FILE_VERSION = "brain.Event:2"
 _CRC32C_POLY = 0x82F63B78  # Castagnoli, bit-reversed
 _MASK_DELTA = 0xA282EAD8
@@ -60,35 +62,20 @@ def record(data: bytes) -> bytes:
     )  # fmt: skip
 
 
-def _varint(value: int) -> bytes:
-    out = bytearray()
-    value &= (1 << 64) - 1  # int64 as protobuf encodes it (a negative step: ten bytes)
-    while True:
-        low, value = value & 0x7F, value >> 7
-        out.append(low | (0x80 if value else 0))
-        if not value:
-            return bytes(out)
-
-
-def _field_bytes(number: int, payload: bytes) -> bytes:
-    """A length-delimited field (a string or an embedded message)."""
-    return _varint(number << 3 | 2) + _varint(len(payload)) + payload
-
-
 def event(wall_time: float, step: int = 0, *, version: str = "", scalars=None) -> bytes:
     """An ``Event`` message: the file's version record, or ``scalars`` ({tag: value}) at
     ``step``."""
-    out = _varint(1 << 3 | 1) + struct.pack("<d", wall_time)
+    out = varint(1 << 3 | 1) + struct.pack("<d", wall_time)
     if step:
-        out += _varint(2 << 3) + _varint(int(step))
+        out += varint(2 << 3) + varint(int(step))
     if version:
-        out += _field_bytes(3, version.encode())
+        out += length_delimited(3, version.encode())
     if scalars:
         values = b"".join(
-            _field_bytes(1, _field_bytes(1, tag.encode()) + b"\x15" + struct.pack("<f", v))
+            length_delimited(1, length_delimited(1, tag.encode()) + b"\x15" + struct.pack("<f", v))
             for tag, v in scalars.items()
         )
-        out += _field_bytes(5, values)
+        out += length_delimited(5, values)
     return out
 
 
