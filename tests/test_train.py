@@ -306,3 +306,27 @@ def test_the_kl_before_an_update_is_the_normalisers_alone(tmp_path: Path, monkey
         assert 0 <= float(row["training/kl_before_update"]) < 1e-3
         assert float(row["training/clip_fraction_before_update"]) == 0.0
     assert json.loads((run.path / "config.json").read_text())["train"]["normalizer"]["after_update"]
+
+
+def test_kl_stop_skips_the_rest_of_an_update(tmp_path: Path) -> None:
+    """``kl_stop``: a bound no minibatch reaches leaves the run exactly as without it (no
+    minibatch skipped); a bound of 1e-12 stops each update after its first gradient step (the
+    normaliser held still through it, every later minibatch of 8 sees a KL over the bound), so
+    at least 7 of 8 minibatches are skipped and the logged KL is smaller than the unstopped
+    run's."""
+    base = _tiny(1900, num_evals="4", **{"normalizer.after_update": "true"})
+
+    def rows(name: str, *sets: str) -> list[dict]:
+        config = load_config("cpu", None, [*base, *sets])
+        return RunDir(train(config, tmp_path / name, quiet=True).run_dir).read_metrics()[1:]
+
+    free, loose, tight = rows("free"), rows("loose", "kl_stop=1e30"), rows("tight", "kl_stop=1e-12")
+    for a, b in zip(free, loose, strict=True):
+        assert float(b["training/skipped_fraction"]) == 0.0
+        assert a["eval/episode_reward"] == b["eval/episode_reward"]
+        assert a["training/kl_mean"] == b["training/kl_mean"]
+    for row in tight[1:]:  # the first update takes its rollout in first (KL over 0 at once)
+        assert float(row["training/skipped_fraction"]) >= 7 / 8
+    assert sum(float(r["training/kl_mean"]) for r in tight[1:]) < sum(
+        float(r["training/kl_mean"]) for r in free[1:]
+    )

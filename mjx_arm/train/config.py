@@ -69,6 +69,11 @@ class TrainConfig:
         learning_rate, discounting, gae_lambda, clipping_epsilon, vf_loss_coefficient,
             max_grad_norm, entropy_cost, reward_scaling: PPO settings.
         schedule: how the learning rate moves (constant, or adapted to a KL target).
+        kl_stop: an update takes no more gradient steps once a minibatch's KL between the
+            rollout's policy and the current one, measured before its step, exceeds this (the
+            rest of its minibatches are skipped, as Stable-Baselines3's ``target_kl`` does);
+            0 never stops. Meant with ``normalizer.after_update``, without which the first
+            step's KL already holds the normaliser's move.
         normalize_observations: running mean/std normalisation of observations.
         normalizer: its std floor and clip.
         policy_hidden, value_hidden: MLP layer sizes.
@@ -125,6 +130,7 @@ class TrainConfig:
     entropy_cost: float = 1e-3
     reward_scaling: float = 0.1
     schedule: ScheduleConfig = field(default_factory=ScheduleConfig)
+    kl_stop: float = 0.0
     normalize_observations: bool = True
     normalizer: NormalizerConfig = field(default_factory=NormalizerConfig)
     policy_hidden: tuple[int, ...] = (128, 128, 128)
@@ -154,7 +160,7 @@ class TrainConfig:
         check_range(self, ("learning_rate", "clipping_epsilon", "max_grad_norm"), above=0)
         check_range(self, ("reward_scaling", "discounting"), above=0)
         check_range(self, ("discounting", "gae_lambda", "stop_at_success"), low=0, high=1)
-        check_range(self, ("vf_loss_coefficient", "entropy_cost"), low=0)
+        check_range(self, ("vf_loss_coefficient", "entropy_cost", "kl_stop"), low=0)
         if self.policy_distribution not in POLICY_DISTRIBUTIONS:
             raise ConfigError(
                 f"policy_distribution must be one of {list(POLICY_DISTRIBUTIONS)}, got "

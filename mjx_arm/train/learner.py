@@ -241,9 +241,9 @@ class Learner:
         read = normalizer  # the statistics the losses read (Brax's order: the moved ones)
         if self.config.normalizer.after_update:
             read = _rollouts_statistics(state.normalizer_params, normalizer)
-        (optimizer_state, params, _), metrics = jax.lax.scan(
+        (optimizer_state, params, _, _), metrics = jax.lax.scan(
             functools.partial(self._sgd_epoch, data=data, normalizer=read),
-            (state.optimizer_state, state.params, key_sgd),
+            (state.optimizer_state, state.params, key_sgd, jnp.bool_(False)),
             (),
             length=self.config.num_updates_per_batch,
         )
@@ -275,8 +275,10 @@ class Learner:
         return env_state, data
 
     def _sgd_epoch(self, carry: tuple, _: Any, data: Any, normalizer: Any):
-        """One pass over the rollout in ``num_minibatches`` shuffled minibatches."""
-        optimizer_state, params, key = carry
+        """One pass over the rollout in ``num_minibatches`` shuffled minibatches; ``carry`` is
+        ``(optimizer_state, params, key, stopped)``, ``stopped`` set once the update's KL passed
+        ``kl_stop``."""
+        optimizer_state, params, key, stopped = carry
         key, key_perm, key_grad = jax.random.split(key, 3)
         count = self.config.num_minibatches
         split = NamedSharding(self.mesh, P(None, ENV_AXIS))
@@ -286,31 +288,39 @@ class Learner:
             x = x.reshape((count, -1, *x.shape[1:]))
             return jax.lax.with_sharding_constraint(x, split)
 
-        (optimizer_state, params, _), metrics = jax.lax.scan(
+        (optimizer_state, params, _, stopped), metrics = jax.lax.scan(
             functools.partial(self._minibatch_step, normalizer=normalizer),
-            (optimizer_state, params, key_grad),
+            (optimizer_state, params, key_grad, stopped),
             jax.tree.map(minibatches, data),
             length=count,
         )
-        return (optimizer_state, params, key), metrics
+        return (optimizer_state, params, key, stopped), metrics
 
     def _minibatch_step(self, carry: tuple, batch: Any, normalizer: Any):
         """One gradient step on one minibatch ``(batch_size, T, ...)``; with an adaptive
-        schedule the rate is first moved by the minibatch's KL (:mod:`mjx_arm.train.schedule`)."""
-        optimizer_state, params, key = carry
+        schedule the rate is first moved by the minibatch's KL (:mod:`mjx_arm.train.schedule`).
+        Once a minibatch's KL passes ``kl_stop`` (when set), it and every later minibatch of the
+        update leave params and optimiser state as they are (``skipped_fraction`` is 1)."""
+        optimizer_state, params, key, stopped = carry
         key, key_loss = jax.random.split(key)
         (_, metrics), grads = self._loss_and_grad(params, normalizer, batch, key_loss)
-        schedule = self.config.schedule
+        schedule, before = self.config.schedule, (optimizer_state, params)
         if schedule.adaptive:
             rate = current_rate(optimizer_state, self.config.learning_rate)
             optimizer_state = with_rate(
                 optimizer_state, adapted_rate(rate, metrics["kl_mean"], schedule)
             )
-        metrics["learning_rate"] = current_rate(optimizer_state, self.config.learning_rate)
         metrics["grad_norm"] = optax.tree_utils.tree_norm(grads)
         updates, optimizer_state = self.optimizer.update(grads, optimizer_state)
         params = optax.apply_updates(params, updates)
-        return (optimizer_state, params, key), metrics
+        if self.config.kl_stop > 0:
+            stopped = stopped | (metrics["kl_mean"] > self.config.kl_stop)
+            optimizer_state, params = jax.tree.map(
+                lambda old, new: jnp.where(stopped, old, new), before, (optimizer_state, params)
+            )
+        metrics["learning_rate"] = current_rate(optimizer_state, self.config.learning_rate)
+        metrics["skipped_fraction"] = stopped.astype(jnp.float32)
+        return (optimizer_state, params, key, stopped), metrics
 
 
 def _rollouts_statistics(rollout: Any, moved: Any) -> Any:
