@@ -3,8 +3,9 @@
 Reads every campaign folder under WORK (``NAME/*-seedN/metrics.csv``) and prints, per run, its
 best and last evaluated success, the env steps of its first evaluation at the threshold, and,
 for a Touch seed that has not reached it, the trap its last evaluation shows
-(:func:`benchmarks.training_diagnosis.trap`). Runs still training show what they have logged
-so far. Printed at the end of a campaign, so that the next call can be chosen at once.
+(:func:`benchmarks.training_diagnosis.trap`). A run that ended before its budget without
+reaching the threshold (the call's deadline stopped it) says so and is left out of its
+campaign's count. Printed at the end of a campaign, so that the next call can be chosen at once.
 
     python -m benchmarks.campaign_brief runs/gpu_suite --threshold 0.95
 """
@@ -15,22 +16,27 @@ import argparse
 import math
 from pathlib import Path
 
-from benchmarks.training_diagnosis import SEED_DIR, _col, _rows, trap
+from benchmarks.training_diagnosis import SEED_DIR, _col, _rows, stopped_early, trap
+
+STATES = ("solved", "unsolved", "stopped")
 
 
-def brief(run: Path, threshold: float) -> tuple[str, bool]:
+def brief(run: Path, threshold: float) -> tuple[str, str]:
     """``campaign/run: best B last L``, then the steps at the threshold or the trap, of one
-    seed run; and whether it reached the threshold."""
+    seed run; and where it stands: "solved", "unsolved" (its budget spent) or "stopped"."""
     rows = _rows(run)
     if not rows:
-        return f"{run.parent.name}/{run.name}: no evaluation yet", False
+        return f"{run.parent.name}/{run.name}: no evaluation yet", "stopped"
     success = _col(rows, "eval/episode_success")
     hit = next((r for r in rows if r.get("eval/episode_success", 0.0) >= threshold), None)
     best = float(success.max()) if success.size else math.nan
     text = f"{run.parent.name}/{run.name}: best {best:.3f} last {success[-1]:.3f}"
+    steps = f"{rows[-1]['step'] / 1e6:.1f}M steps"
     if hit is not None:
-        return f"{text} solved at {hit['step'] / 1e6:.1f}M steps", True
-    return f"{text} unsolved at {rows[-1]['step'] / 1e6:.1f}M steps ({trap(rows[-1])})", False
+        return f"{text} solved at {hit['step'] / 1e6:.1f}M steps", "solved"
+    if stopped_early(run, rows, threshold):
+        return f"{text} stopped at {steps}, before its budget (so far {trap(rows[-1])})", "stopped"
+    return f"{text} unsolved at {steps} ({trap(rows[-1])})", "unsolved"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -39,16 +45,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--threshold", type=float, default=0.95)
     args = parser.parse_args(argv)
     runs = sorted(args.work.glob("*/*"), key=lambda p: (p.parent.name, p.name))
-    counts: dict[str, list[int]] = {}
+    counts: dict[str, dict[str, int]] = {}
     for run in runs:
         if SEED_DIR.search(run.name) and (run / "metrics.csv").is_file():
-            line, solved = brief(run, args.threshold)
+            line, state = brief(run, args.threshold)
             print(line)
-            count = counts.setdefault(run.parent.name, [0, 0])
-            count[0] += solved
-            count[1] += 1
-    for name, (solved, total) in counts.items():
-        print(f"{name}: {solved} of {total} at {args.threshold}")
+            count = counts.setdefault(run.parent.name, dict.fromkeys(STATES, 0))
+            count[state] += 1
+    for name, count in counts.items():
+        finished = count["solved"] + count["unsolved"]
+        stopped = f" ({count['stopped']} stopped, left out)" if count["stopped"] else ""
+        print(f"{name}: {count['solved']} of {finished} at {args.threshold}{stopped}")
     return 0
 
 

@@ -138,15 +138,31 @@ def normaliser_share(trained: list[dict[str, float]]) -> dict[str, float]:
     }
 
 
+def stopped_early(run: Path, rows: list[dict[str, float]], threshold: float) -> bool:
+    """Whether a seed's run ended before its budget (``num_timesteps`` in its config.json)
+    without reaching the threshold: a call's deadline or a kill stopped it, so it neither
+    solved nor failed."""
+    config = run / "config.json"
+    if not rows or not config.is_file():
+        return False
+    budget = json.loads(config.read_text()).get("train", {}).get("num_timesteps")
+    reached = any(r.get("eval/episode_success", 0.0) >= threshold for r in rows)
+    return budget is not None and not reached and rows[-1]["step"] < budget
+
+
 def campaign(label: str, folder: Path, threshold: float) -> dict[str, Any]:
-    """Every seed run under ``folder``, with the campaign's counts."""
+    """Every seed run under ``folder``, with the campaign's counts; runs stopped before their
+    budget (:func:`stopped_early`) are listed as ``stopped`` and left out of the counts."""
     runs = sorted(p for p in folder.iterdir() if p.is_dir() and SEED_DIR.search(p.name))
-    seeds = [seed_record(r, threshold) for r in runs if (r / "metrics.csv").is_file()]
+    runs = [r for r in runs if (r / "metrics.csv").is_file()]
+    stopped = [r for r in runs if stopped_early(r, _rows(r), threshold)]
+    seeds = [seed_record(r, threshold) for r in runs if r not in stopped]
     solved = [s for s in seeds if s["solved"]]
     failed = [s for s in seeds if not s["solved"]]
     return {
         "label": label,
         "seeds": seeds,
+        "stopped": [int(SEED_DIR.search(r.name)["seed"]) for r in stopped],
         "solved": len(solved),
         "count": len(seeds),
         "spiking_seeds_solved": sum(bool(s["kl_spikes"]) for s in solved),
@@ -159,7 +175,12 @@ def markdown(campaigns: list[dict[str, Any]], threshold: float) -> str:
     """One table per campaign."""
     lines = []
     for c in campaigns:
-        lines += [f"## {c['label']}: {c['solved']} of {c['count']} seeds at {threshold}", ""]
+        left_out = ", ".join(str(seed) for seed in c.get("stopped", []))
+        left_out = f" ({left_out} stopped before their budget, left out)" if left_out else ""
+        lines += [
+            f"## {c['label']}: {c['solved']} of {c['count']} seeds at {threshold}{left_out}",
+            "",
+        ]
         lines += [
             "| seed | solved | best | last | KL max | KL median | epochs with KL > 1 | clip "
             "fraction (median) | lr (last) | std (last) | explained variance (last) | std "

@@ -25,7 +25,7 @@ def test_each_trap_from_its_figures():
     assert trap(_eval(touching=3.0, streak=0.0)) == "other"
 
 
-def _run(folder, seed, success, touching, streak):
+def _run(folder, seed, success, touching, streak, budget=None):
     run = folder / f"touch-fast-seed{seed}"
     run.mkdir(parents=True)
     cols = ["step", "eval/episode_success", "eval/episode_touching", "eval/episode_streak",
@@ -37,6 +37,8 @@ def _run(folder, seed, success, touching, streak):
         writer.writerow([0, 0.0, 0.0, 0.0, 0.0, 56.0, 150, "", ""])
         writer.writerow([1000, success, touching, streak, 0.0, 6.0, 150, 0.1, 0.3])
     train = {"schedule": {"kind": "constant"}, "normalizer": {"clip": 0.0}}
+    if budget is not None:
+        train["num_timesteps"] = budget
     (run / "config.json").write_text(json.dumps({"train": train}))
 
 
@@ -53,15 +55,23 @@ def test_a_campaign_counts_the_traps_of_its_failing_seeds(tmp_path):
 
 def test_a_brief_line_per_seed_run(tmp_path):
     """``campaign_brief``: a solved seed gives the steps of its first evaluation at the
-    threshold, a failing one its trap."""
+    threshold, a failing one its trap; a run that ended before its budget unsolved is
+    "stopped", and a campaign leaves it out of its counts."""
     from benchmarks.campaign_brief import brief
 
     _run(tmp_path, 1, 0.99, 3.0, 2.0)
     _run(tmp_path, 2, 0.0, 31.9, 0.1)
-    line, solved = brief(tmp_path / "touch-fast-seed1", 0.95)
-    assert solved and line.endswith("best 0.990 last 0.990 solved at 0.0M steps")
-    line, solved = brief(tmp_path / "touch-fast-seed2", 0.95)
-    assert not solved and line.endswith("(tapping)")
+    _run(tmp_path, 3, 0.0, 31.9, 0.1, budget=1000)  # its budget spent: unsolved
+    _run(tmp_path, 4, 0.5, 31.9, 0.1, budget=30_000_000)  # a deadline stopped it at 1000 steps
+    line, state = brief(tmp_path / "touch-fast-seed1", 0.95)
+    assert state == "solved" and line.endswith("best 0.990 last 0.990 solved at 0.0M steps")
+    line, state = brief(tmp_path / "touch-fast-seed2", 0.95)
+    assert state == "unsolved" and line.endswith("(tapping)")
+    assert brief(tmp_path / "touch-fast-seed3", 0.95)[1] == "unsolved"
+    line, state = brief(tmp_path / "touch-fast-seed4", 0.95)
+    assert state == "stopped" and line.endswith("before its budget (so far tapping)")
+    result = campaign("test", tmp_path, 0.95)
+    assert (result["solved"], result["count"], result["stopped"]) == (1, 3, [4])
 
 
 def test_the_contact_reflex_of_a_tapping_episode():
