@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import itertools
 import json
 import math
 import re
@@ -36,6 +37,8 @@ TOUCHING = 5.0  # steps per episode with a reading in the band or over it: the t
 HELD = 0.5  # steps per episode whose press had held 2+ steps: below it, in-band steps are taps
 TRAPS = ("striking", "tapping", "resting", "stalled", "other")
 EARLY_STEPS = 6e6  # env steps: the policy's drift is read over the first ones (a fifth of Touch's)
+FIRST = 0.05  # evaluation success at which a seed counts as having started to touch
+FALL = 0.3  # a drop in evaluation success between two evaluations that counts as a fall
 
 
 def trap(last: dict[str, float]) -> str:
@@ -105,6 +108,7 @@ def seed_record(run: Path, threshold: float) -> dict[str, Any]:
         "trap": None if hit is not None else trap(last),
         **early_drift(trained),
         **normaliser_share(trained),
+        **success_course(rows),
         "settings": train["schedule"] | train["normalizer"],
     }
 
@@ -122,6 +126,21 @@ def early_drift(trained: list[dict[str, float]]) -> dict[str, float]:
         "early_std_min": pick("training/policy_dist_min_std", np.min),
         "early_std_max": pick("training/policy_dist_max_std", np.max),
         "early_mean_max": pick("training/policy_dist_max_loc", np.max),
+    }
+
+
+def success_course(rows: list[dict[str, float]]) -> dict[str, Any]:
+    """The evaluations' success over the run: every value (``success_curve``, with its
+    ``curve_steps``), the step of the first at :data:`FIRST` or more (None: never), and the
+    falls, evaluations at least :data:`FALL` under the one before."""
+    evaluated = [r for r in rows if math.isfinite(r.get("eval/episode_success", math.nan))]
+    curve = [float(r["eval/episode_success"]) for r in evaluated]
+    first = next((int(r["step"]) for r in evaluated if r["eval/episode_success"] >= FIRST), None)
+    return {
+        "success_curve": curve,
+        "curve_steps": [int(r["step"]) for r in evaluated],
+        "first_success_step": first,
+        "falls": sum(before - after >= FALL for before, after in itertools.pairwise(curve)),
     }
 
 
@@ -168,6 +187,9 @@ def campaign(label: str, folder: Path, threshold: float) -> dict[str, Any]:
         "spiking_seeds_solved": sum(bool(s["kl_spikes"]) for s in solved),
         "spiking_seeds_failed": sum(bool(s["kl_spikes"]) for s in failed),
         "traps": {t: sum(s["trap"] == t for s in failed) for t in TRAPS},
+        "seeds_with_falls_solved": sum(s["falls"] > 0 for s in solved),
+        "seeds_with_falls_failed": sum(s["falls"] > 0 for s in failed),
+        "failed_never_started": sum(s["first_success_step"] is None for s in failed),
     }
 
 
@@ -199,6 +221,7 @@ def markdown(campaigns: list[dict[str, Any]], threshold: float) -> str:
             )
         lines.append("")
         lines += _normaliser_table(c["seeds"])
+        lines += _course_table(c["seeds"])
     return "\n".join(lines)
 
 
@@ -219,6 +242,25 @@ def _normaliser_table(seeds: list[dict[str, Any]]) -> list[str]:
             f"{s['kl_before_update_median']:.3g} | "
             f"{s['clip_fraction_before_update_median']:.3f} | "
             f"{s['kl_max']:.3g}, {s['kl_median']:.3g} |"
+        )
+    return [*lines, ""]
+
+
+def _course_table(seeds: list[dict[str, Any]]) -> list[str]:
+    """Each seed's success over its evaluations: when it started and how often it fell."""
+    lines = [
+        f"Success over the run (started: the first evaluation at {FIRST} or more; falls: "
+        f"evaluations {FALL} or more under the one before):",
+        "",
+        "| seed | solved | started at (M steps) | falls | success at each evaluation |",
+        "|---|---|---|---|---|",
+    ]
+    for s in seeds:
+        start = s["first_success_step"]
+        start = f"{start / 1e6:.1f}" if start is not None else "never"
+        curve = " ".join(f"{v:.2f}" for v in s["success_curve"])
+        lines.append(
+            f"| {s['seed']} | {'yes' if s['solved'] else 'no'} | {start} | {s['falls']} | {curve} |"
         )
     return [*lines, ""]
 

@@ -197,3 +197,18 @@ def test_the_normalisers_share_of_the_kl_is_read_where_logged():
         "clip_fraction_before_update_median": 0.2,
     }
     assert all(math.isnan(v) for v in normaliser_share([{"step": 1e6}]).values())
+
+
+def test_the_course_of_success_over_a_run():
+    """``success_course``: the first evaluation at 0.05 or more is where a seed started, and a
+    drop of 0.3 or more from one evaluation to the next is a fall (0.94 -> 0.53 is one; 0.53 ->
+    0.81 and 0.06 -> 0.0 are not)."""
+    from benchmarks.training_diagnosis import success_course
+
+    values = [0.0, 0.02, 0.06, 0.0, 0.94, 0.53, 0.81, 0.2, 0.95]
+    rows = [{"step": 1000.0 * i, "eval/episode_success": v} for i, v in enumerate(values)]
+    rows.insert(3, {"step": 2500.0})  # a training row without an evaluation
+    got = success_course(rows)
+    assert got["first_success_step"] == 2000 and got["falls"] == 2
+    assert got["success_curve"] == values and got["curve_steps"][-1] == 8000
+    assert success_course(rows[:2])["first_success_step"] is None
