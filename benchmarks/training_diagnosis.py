@@ -9,7 +9,9 @@ policy rather than nudged it), the median clip fraction, the learning rate, the 
 and the value function's explained variance at the end, the evaluation's touch and overforce
 figures at the end, and how far the policy's Gaussian (before the tanh) had drifted by
 :data:`EARLY_STEPS`: its smallest and largest std and its largest mean over the batch and the
-action entries (a mean of 3 already gives tanh 0.995: beyond, the action no longer changes).
+action entries (a mean of 3 already gives tanh 0.995: beyond, the action no longer changes),
+and the course of its success: every evaluation's value, the first at :data:`FIRST` or more,
+and its falls. A run a deadline stopped before its budget, unsolved, is listed and left out.
 
     python -m benchmarks.training_diagnosis --campaign "as shipped=runs/tune_base" \\
         --campaign "std floor + clip=runs/tune_clip" --out benchmarks/results/diagnosis
