@@ -13,10 +13,11 @@ campaign's count. Printed at the end of a campaign, so that the next call can be
 from __future__ import annotations
 
 import argparse
+import json
 import math
 from pathlib import Path
 
-from benchmarks.training_diagnosis import SEED_DIR, _col, _rows, stopped_early, trap
+from benchmarks.training_diagnosis import SEED_DIR, _col, _rows, short_of_budget, trap
 
 STATES = ("solved", "unsolved", "stopped")
 
@@ -34,7 +35,9 @@ def brief(run: Path, threshold: float) -> tuple[str, str]:
     steps = f"{rows[-1]['step'] / 1e6:.1f}M steps"
     if hit is not None:
         return f"{text} solved at {hit['step'] / 1e6:.1f}M steps", "solved"
-    if stopped_early(run, rows, threshold):
+    config = run / "config.json"
+    train = json.loads(config.read_text()).get("train", {}) if config.is_file() else {}
+    if short_of_budget(train, rows[-1]["step"]):
         return f"{text} stopped at {steps}, before its budget (so far {trap(rows[-1])})", "stopped"
     return f"{text} unsolved at {steps} ({trap(rows[-1])})", "unsolved"
 

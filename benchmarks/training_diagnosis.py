@@ -11,7 +11,7 @@ figures at the end, and how far the policy's Gaussian (before the tanh) had drif
 :data:`EARLY_STEPS`: its smallest and largest std and its largest mean over the batch and the
 action entries (a mean of 3 already gives tanh 0.995: beyond, the action no longer changes),
 and the course of its success: every evaluation's value, the first at :data:`FIRST` or more,
-and its falls. A run a deadline stopped before its budget, unsolved, is listed and left out.
+and its falls. An unsolved run a deadline stopped short of its budget is listed and left out.
 
     python -m benchmarks.training_diagnosis --campaign "as shipped=runs/tune_base" \\
         --campaign "std floor + clip=runs/tune_clip" --out benchmarks/results/diagnosis
@@ -96,6 +96,7 @@ def seed_record(run: Path, threshold: float) -> dict[str, Any]:
         "best_success": float(success.max()) if success.size else math.nan,
         "last_success": float(success[-1]) if success.size else math.nan,
         "last_step": int(last["step"]),
+        "stopped": hit is None and short_of_budget(train, last["step"]),
         "kl_max": float(kl.max()) if kl.size else math.nan,
         "kl_median": float(np.median(kl)) if kl.size else math.nan,
         "kl_spikes": [int(r["step"]) for r in trained if r["training/kl_mean"] > SPIKE_KL],
@@ -159,31 +160,27 @@ def normaliser_share(trained: list[dict[str, float]]) -> dict[str, float]:
     }
 
 
-def stopped_early(run: Path, rows: list[dict[str, float]], threshold: float) -> bool:
-    """Whether a seed's run ended before its budget (``num_timesteps`` in its config.json)
-    without reaching the threshold: a call's deadline or a kill stopped it, so it neither
-    solved nor failed."""
-    config = run / "config.json"
-    if not rows or not config.is_file():
-        return False
-    budget = json.loads(config.read_text()).get("train", {}).get("num_timesteps")
-    reached = any(r.get("eval/episode_success", 0.0) >= threshold for r in rows)
-    return budget is not None and not reached and rows[-1]["step"] < budget
+def short_of_budget(train: dict[str, Any], last_step: float) -> bool:
+    """Whether a run's last logged step falls short of its budget (``num_timesteps`` of its
+    config's ``train``): unsolved, such a run was stopped by a call's deadline or a kill, so it
+    neither solved nor failed."""
+    budget = train.get("num_timesteps")
+    return budget is not None and last_step < budget
 
 
 def campaign(label: str, folder: Path, threshold: float) -> dict[str, Any]:
-    """Every seed run under ``folder``, with the campaign's counts; runs stopped before their
-    budget (:func:`stopped_early`) are listed as ``stopped`` and left out of the counts."""
+    """Every seed run under ``folder``, with the campaign's counts; unsolved runs stopped short
+    of their budget (:func:`short_of_budget`) are listed as ``stopped`` and left out of them."""
     runs = sorted(p for p in folder.iterdir() if p.is_dir() and SEED_DIR.search(p.name))
-    runs = [r for r in runs if (r / "metrics.csv").is_file()]
-    stopped = [r for r in runs if stopped_early(r, _rows(r), threshold)]
-    seeds = [seed_record(r, threshold) for r in runs if r not in stopped]
+    records = [seed_record(r, threshold) for r in runs if (r / "metrics.csv").is_file()]
+    stopped = [s["seed"] for s in records if s["stopped"]]
+    seeds = [s for s in records if not s["stopped"]]
     solved = [s for s in seeds if s["solved"]]
     failed = [s for s in seeds if not s["solved"]]
     return {
         "label": label,
         "seeds": seeds,
-        "stopped": [int(SEED_DIR.search(r.name)["seed"]) for r in stopped],
+        "stopped": stopped,
         "solved": len(solved),
         "count": len(seeds),
         "spiking_seeds_solved": sum(bool(s["kl_spikes"]) for s in solved),
