@@ -72,6 +72,8 @@ def test_bad_schedule_and_normalizer_settings_are_named() -> None:
         load_config("cpu", None, ["schedule.factor=1"])
     with pytest.raises(ConfigError, match=r"normalizer\.clip"):
         load_config("cpu", None, ["normalizer.clip=-1"])
+    with pytest.raises(ConfigError, match=r"normalizer\.force_scale"):
+        load_config("cpu", None, ["normalizer.force_scale=-50"])
 
 
 def test_the_std_floor_and_clip_bound_a_dimension_that_was_constant() -> None:
@@ -89,6 +91,24 @@ def test_the_std_floor_and_clip_bound_a_dimension_that_was_constant() -> None:
     bounded = NormalizerConfig(std_floor=0.01, clip=10.0)
     state = update(running_statistics.init_state(spec), first, bounded)
     assert float(normalize_fn(bounded)(touch, state)[0, 0]) == pytest.approx(10.0)
+
+
+def test_a_fixed_force_scale_holds_through_updates() -> None:
+    """``force_scale``: the entries named stay at mean 0 and the scale whatever they read (a
+    25 N reading is 0.5 at a scale of 50 from the first touch on); the others move."""
+    from brax.training.acme import running_statistics, specs
+
+    spec = specs.Array((3,), jnp.dtype("float32"))
+    first = jnp.array([[2.0, 0.0, 0.0], [4.0, 0.0, 0.0]] * 8)
+    touch = jnp.array([[3.0, 25.0, -75.0]])
+    fixed = NormalizerConfig(force_scale=50.0)
+    state = update(running_statistics.init_state(spec), first, fixed, slice(1, 3))
+    state = update(state, touch, fixed, slice(1, 3))
+    assert jnp.allclose(state.mean[1:], 0.0) and jnp.allclose(state.std[1:], 50.0)
+    assert 2.0 < float(state.mean[0]) < 4.0 and 0.5 < float(state.std[0]) < 1.5
+    assert normalize_fn(fixed)(touch, state)[0, 1:].tolist() == [0.5, -1.5]
+    plain = update(running_statistics.init_state(spec), first, fixed, None)
+    assert float(plain.std[1]) == pytest.approx(1e-6)  # no dims named: Brax's statistics
 
 
 def test_devices_scale_the_envs_minibatch_and_budget() -> None:

@@ -44,7 +44,7 @@ ADDED_FIELDS = {"object_scale": 0.0, "grasp_closure": 0.0}
 # Training config fields added after the snapshot, with the value every preset leaves them at.
 ADDED_TRAIN_FIELDS = {"policy_distribution": "tanh_normal", "kl_stop": 0.0}
 # ... and inside its ``normalizer`` section.
-ADDED_NORMALIZER_FIELDS = {"after_update": False}
+ADDED_NORMALIZER_FIELDS = {"after_update": False, "force_scale": 0.0}
 
 
 def _drop_zero_terms(before: dict, after: dict) -> dict:

@@ -292,7 +292,7 @@ def test_the_kl_before_an_update_is_the_normalisers_alone(tmp_path: Path, monkey
     row = RunDir(train(config, tmp_path / "moving", quiet=True).run_dir).read_metrics()[-1]
     assert float(row["training/kl_before_update"]) > 0.1
     assert float(row["training/clip_fraction_before_update"]) > 0.5
-    monkeypatch.setattr(learner, "normalizer_update", lambda params, obs, config: params)
+    monkeypatch.setattr(learner, "normalizer_update", lambda params, *_: params)
     row = RunDir(train(config, tmp_path / "still", quiet=True).run_dir).read_metrics()[-1]
     assert 0 <= float(row["training/kl_before_update"]) < 1e-3
     assert float(row["training/clip_fraction_before_update"]) == 0.0
@@ -306,6 +306,21 @@ def test_the_kl_before_an_update_is_the_normalisers_alone(tmp_path: Path, monkey
         assert 0 <= float(row["training/kl_before_update"]) < 1e-3
         assert float(row["training/clip_fraction_before_update"]) == 0.0
     assert json.loads((run.path / "config.json").read_text())["train"]["normalizer"]["after_update"]
+
+
+def test_a_fixed_force_scale_reaches_the_policy_file(tmp_path: Path) -> None:
+    """``normalizer.force_scale``: the six ``contact_force`` entries of the saved policy are
+    normalised by mean 0 and the fixed scale, every other entry by its running statistics."""
+    from mjx_arm.policy.export import load_run
+    from mjx_arm.task.observation import obs_slices
+
+    sets = _tiny(600, task="touch", **{"normalizer.force_scale": "50"})
+    result = train(load_config("cpu", None, sets), tmp_path / "fixed", quiet=True)
+    arrays, _, _ = load_run(result.run_dir)
+    force = obs_slices()["contact_force"]
+    assert np.all(arrays["obs_std"][force] == 50.0) and np.all(arrays["obs_mean"][force] == 0.0)
+    rest = np.delete(arrays["obs_std"], np.arange(force.start, force.stop))
+    assert np.all(rest != 50.0) and np.all(rest != 1.0)  # running statistics, moved
 
 
 def test_kl_stop_skips_the_rest_of_an_update(tmp_path: Path) -> None:

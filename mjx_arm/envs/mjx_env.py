@@ -159,6 +159,11 @@ class MjxArmEnv(Env):
         return obs_lib.obs_size(self.arm.n_joints, self.task_spec.extra_obs)
 
     @property
+    def contact_force_dims(self) -> slice:
+        """Where ``contact_force`` (6 entries) sits in the flat observation."""
+        return obs_lib.obs_slices(self.arm.n_joints, self.task_spec.extra_obs)["contact_force"]
+
+    @property
     def action_size(self) -> int:
         """One joint velocity command in [-1, 1] per arm joint (and one for the gripper)."""
         return action_size(self.arm, self.task)

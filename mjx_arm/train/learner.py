@@ -41,6 +41,7 @@ from mjx_arm.inputs import ConfigError
 from mjx_arm.train.config import TrainConfig
 from mjx_arm.train.losses import init_params, loss_and_grad
 from mjx_arm.train.networks import make_networks
+from mjx_arm.train.normalizer import fix_force_scale
 from mjx_arm.train.normalizer import update as normalizer_update
 from mjx_arm.train.schedule import adapted_rate, current_rate, make_optimizer, with_rate
 
@@ -137,12 +138,19 @@ class Learner:
         observation_size: size of the flat observation (22).
         action_size: size of the action (6).
         mesh: the devices; the env batch is split over its ``envs`` axis.
+        force_dims: where ``contact_force`` sits in the flat observation (the normaliser's
+            ``force_scale`` acts there); None: nowhere.
     """
 
     def __init__(
-        self, config: TrainConfig, observation_size: int, action_size: int, mesh: Mesh
+        self,
+        config: TrainConfig,
+        observation_size: int,
+        action_size: int,
+        mesh: Mesh,
+        force_dims: slice | None = None,
     ) -> None:
-        self.config, self.mesh = config, mesh
+        self.config, self.mesh, self.force_dims = config, mesh, force_dims
         self.observation_size = observation_size
         self.network = make_networks(config, observation_size, action_size)
         self.make_policy = ppo_networks.make_inference_fn(self.network)
@@ -167,7 +175,9 @@ class Learner:
         return TrainingState(
             optimizer_state=self.optimizer.init(params),
             params=params,
-            normalizer_params=running_statistics.init_state(obs_spec),
+            normalizer_params=fix_force_scale(
+                running_statistics.init_state(obs_spec), self.config.normalizer, self.force_dims
+            ),
             env_steps=brax_types.UInt64(hi=zero, lo=zero),
         )
 
@@ -236,7 +246,7 @@ class Learner:
     def _update_step(self, env_steps: int, state: TrainingState, data: Any, key_sgd: jax.Array):
         """The PPO update of one training step on ``data``: ``(state, mean metrics)``."""
         normalizer = normalizer_update(
-            state.normalizer_params, data.observation, self.config.normalizer
+            state.normalizer_params, data.observation, self.config.normalizer, self.force_dims
         )
         read = normalizer  # the statistics the losses read (Brax's order: the moved ones)
         if self.config.normalizer.after_update:

@@ -232,7 +232,7 @@ def _learner(
     config: TrainConfig, env: Any, mesh: Any, keys: tuple[jax.Array, jax.Array], restore: Any
 ) -> tuple[Learner, Any]:
     """The learner and its first state: fresh from ``keys`` (policy, value), or restored."""
-    learner = Learner(config, env.observation_size, env.action_size, mesh)
+    learner = Learner(config, env.observation_size, env.action_size, mesh, env.contact_force_dims)
     state = learner.init(*keys)
     if restore is None:
         return learner, state

@@ -326,7 +326,7 @@ def _restore_state(folder: Path, config: TrainConfig, env: Any):
     from mjx_arm.train.resume import env_leaf_paths, load_resume_state, select_leaves
 
     mesh = make_mesh(train_devices(config.devices))
-    learner = Learner(config, env.observation_size, env.action_size, mesh)
+    learner = Learner(config, env.observation_size, env.action_size, mesh, env.contact_force_dims)
     key = jax.random.PRNGKey(0)
     template = jax.eval_shape(learner._fresh_state, key, key)
     wrapped = wrap_for_training(env, config.task_config().episode_steps)
