@@ -7,6 +7,7 @@ The task pages include these (``docs/generated/``), so the numbers they show are
 from __future__ import annotations
 
 import dataclasses
+import functools
 from pathlib import Path
 from typing import Any
 
@@ -23,7 +24,7 @@ TASK_FIELDS = (
 TRAIN_FIELDS = (
     "num_timesteps", "num_envs", "unroll_length", "batch_size", "num_minibatches",
     "num_updates_per_batch", "learning_rate", "discounting", "entropy_cost", "num_evals",
-    "num_eval_envs", "stop_at_success",
+    "num_eval_envs", "stop_at_success", "normalizer.force_scale",
 )  # fmt: skip
 
 
@@ -61,6 +62,11 @@ def obs_table(name: str, n_joints: int = 6) -> str:
                       f"| total | {start} | |", ""])  # fmt: skip
 
 
+def _setting(config: Any, name: str) -> Any:
+    """A config's field by its ``--set`` name (``normalizer.force_scale``: a section's field)."""
+    return functools.reduce(getattr, name.split("."), config)
+
+
 def preset_table(task: str) -> str:
     """Each training preset's settings for ``task``, as markdown."""
     configs = {}
@@ -71,7 +77,7 @@ def preset_table(task: str) -> str:
             continue
     head = "| setting | " + " | ".join(f"`{n}`" for n in configs) + " |"
     rows = [
-        f"| `{f}` | " + " | ".join(_cell(getattr(c, f)) for c in configs.values()) + " |"
+        f"| `{f}` | " + " | ".join(_cell(_setting(c, f)) for c in configs.values()) + " |"
         for f in TRAIN_FIELDS
     ]
     variants = [_cell(c.task_config().variant) for c in configs.values()]

@@ -45,6 +45,9 @@ ADDED_FIELDS = {"object_scale": 0.0, "grasp_closure": 0.0}
 ADDED_TRAIN_FIELDS = {"policy_distribution": "tanh_normal", "kl_stop": 0.0}
 # ... and inside its ``normalizer`` section.
 ADDED_NORMALIZER_FIELDS = {"after_update": False, "force_scale": 0.0}
+# Presets changed on purpose since the snapshot, case -> normaliser fields: Touch's ``fast``
+# divides the wrist wrench by 50 N (measured on fresh seeds 7700-7726, docs/training.md).
+CHANGED_NORMALIZER_FIELDS = {"fast/touch": {"force_scale": 50.0}}
 
 
 def _drop_zero_terms(before: dict, after: dict) -> dict:
@@ -75,7 +78,8 @@ def test_preset_resolves_to_the_shipped_numbers(case: str) -> None:
     after = _portable(preset_config(preset, task).to_dict())
     settings = after.pop("task_settings")
     before = {k: v for k, v in before_train.items() if k != "task_overrides"}
-    normalizer = {**before["normalizer"], **ADDED_NORMALIZER_FIELDS}
+    changed = CHANGED_NORMALIZER_FIELDS.get(case, {})
+    normalizer = {**before["normalizer"], **ADDED_NORMALIZER_FIELDS, **changed}
     assert after == {**before, **ADDED_TRAIN_FIELDS, "normalizer": normalizer}
     assert settings == _drop_zero_terms(before_task, settings)
 

@@ -31,6 +31,8 @@ class Budget:
     Attributes:
         num_timesteps, num_evals, num_envs, batch_size, stop_at_success: as in the preset.
         randomization: the training draw by name (``mjx_arm.train.config.RANDOMIZATIONS``).
+        force_scale: the observation normaliser's fixed scale of the wrist wrench, N
+            (``normalizer.force_scale``).
     """
 
     num_timesteps: int | None = None
@@ -39,6 +41,7 @@ class Budget:
     batch_size: int | None = None
     stop_at_success: float | None = None
     randomization: str | None = None
+    force_scale: float | None = None
 
     def changes(self) -> dict[str, Any]:
         """The fields this budget sets, name -> value."""

@@ -7,6 +7,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Any
 
@@ -94,6 +95,9 @@ def preset_config(name: str, task: str | None = None, variant: str | None = None
     changes = budget.changes() if budget else {}
     if "randomization" in changes:
         changes["randomization"] = _randomization(changes["randomization"])
+    if "force_scale" in changes:
+        scale = changes.pop("force_scale")
+        changes["normalizer"] = dataclasses.replace(config.normalizer, force_scale=scale)
     if spec.default_arm:
         changes["arm"] = ArmConfig(urdf=str(asset(spec.default_arm)))
     settings = task_changes(task, None, {"variant": variant or PRESET_VARIANTS.get(name)})
