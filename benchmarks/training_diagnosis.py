@@ -10,8 +10,9 @@ and the value function's explained variance at the end, the evaluation's touch a
 figures at the end, and how far the policy's Gaussian (before the tanh) had drifted by
 :data:`EARLY_STEPS`: its smallest and largest std and its largest mean over the batch and the
 action entries (a mean of 3 already gives tanh 0.995: beyond, the action no longer changes),
-and the course of its success: every evaluation's value, the first at :data:`FIRST` or more,
-and its falls. An unsolved run a deadline stopped short of its budget is listed and left out.
+the course of its success: every evaluation's value, the first at :data:`FIRST` or more,
+and its falls; and the evaluation of the highest return beside the most successful one. An
+unsolved run a deadline stopped short of its budget is listed and left out.
 
     python -m benchmarks.training_diagnosis --campaign "as shipped=runs/tune_base" \\
         --campaign "std floor + clip=runs/tune_clip" --out benchmarks/results/diagnosis
@@ -112,6 +113,7 @@ def seed_record(run: Path, threshold: float) -> dict[str, Any]:
         **early_drift(trained),
         **normaliser_share(trained),
         **success_course(rows),
+        **richest_evaluation(rows),
         "settings": train["schedule"] | train["normalizer"],
     }
 
@@ -145,6 +147,26 @@ def success_course(rows: list[dict[str, float]]) -> dict[str, Any]:
         "first_success_step": first,
         "falls": sum(before - after >= FALL for before, after in itertools.pairwise(curve)),
     }
+
+
+def richest_evaluation(rows: list[dict[str, float]]) -> dict[str, Any]:
+    """The evaluation of the highest episode return and the one of the best success, each as
+    step, success, return, overforce readings, steps touching and held-press steps per
+    episode: where a policy earns more without succeeding, the reward ranks something above
+    success (``richest`` and ``most_successful``)."""
+    evaluated = [r for r in rows if math.isfinite(r.get("eval/episode_reward", math.nan))]
+    if not evaluated:
+        return {"richest": None, "most_successful": None}
+    keys = {"success": "eval/episode_success", "episode_return": "eval/episode_reward",
+            "overforce": "eval/episode_overforce", "touching": "eval/episode_touching",
+            "streak": "eval/episode_streak"}  # fmt: skip
+
+    def view(r: dict[str, float]) -> dict[str, float]:
+        return {"step": int(r["step"]), **{k: r.get(v, math.nan) for k, v in keys.items()}}
+
+    richest = max(evaluated, key=lambda r: r["eval/episode_reward"])
+    best = max(evaluated, key=lambda r: r.get("eval/episode_success", -1.0))
+    return {"richest": view(richest), "most_successful": view(best)}
 
 
 def normaliser_share(trained: list[dict[str, float]]) -> dict[str, float]:
@@ -221,6 +243,7 @@ def markdown(campaigns: list[dict[str, Any]], threshold: float) -> str:
         lines.append("")
         lines += _normaliser_table(c["seeds"])
         lines += _course_table(c["seeds"])
+        lines += _richest_table(c["seeds"])
     return "\n".join(lines)
 
 
@@ -261,6 +284,28 @@ def _course_table(seeds: list[dict[str, Any]]) -> list[str]:
         lines.append(
             f"| {s['seed']} | {'yes' if s['solved'] else 'no'} | {start} | {s['falls']} | {curve} |"
         )
+    return [*lines, ""]
+
+
+def _richest_table(seeds: list[dict[str, Any]]) -> list[str]:
+    """Each seed's evaluation of the highest return beside its most successful one."""
+    lines = [
+        "The evaluation of the highest return beside the most successful one (per episode: "
+        "return, readings over the band, steps touching, held-press steps):",
+        "",
+        "| seed | highest return: step (M), success, return, over, touching, held | best "
+        "success: step (M), success, return, over, touching, held |",
+        "|---|---|---|",
+    ]
+
+    def cell(e: dict[str, float] | None) -> str:
+        if e is None:
+            return "-"
+        return (f"{e['step'] / 1e6:.1f}, {e['success']:.2f}, {e['episode_return']:.0f}, "
+                f"{e['overforce']:.2f}, {e['touching']:.1f}, {e['streak']:.1f}")  # fmt: skip
+
+    for s in seeds:
+        lines.append(f"| {s['seed']} | {cell(s['richest'])} | {cell(s['most_successful'])} |")
     return [*lines, ""]
 
 

@@ -18,8 +18,8 @@ from mjx_arm.train.presets import PRESETS, preset_config
 
 TASK_FIELDS = (
     "ctrl_dt", "sim_dt", "action_scale", "episode_steps", "success_distance", "force_band",
-    "success_hold_steps", "fail_on_overforce", "terminate_on_overforce", "strike_force",
-    "target_low", "target_high", "init_noise", "variant",
+    "success_hold_steps", "fail_on_overforce", "pay_after_overforce", "terminate_on_overforce",
+    "strike_force", "target_low", "target_high", "init_noise", "variant",
 )  # fmt: skip
 TRAIN_FIELDS = (
     "num_timesteps", "num_envs", "unroll_length", "batch_size", "num_minibatches",

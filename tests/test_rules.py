@@ -67,7 +67,14 @@ def _jax_batch(cfg, x):
     return run(batch)
 
 
-@pytest.mark.parametrize("make_cfg", [reach_config, touch_config, lambda: touch_config("seed")])
+def _forfeiting() -> object:
+    """Touch whose press pay ends once a reading over the band has ruled success out."""
+    return touch_config(pay_after_overforce=False)
+
+
+@pytest.mark.parametrize(
+    "make_cfg", [reach_config, touch_config, lambda: touch_config("seed"), _forfeiting]
+)
 def test_numpy_and_jax_score_the_same_steps(make_cfg) -> None:
     """Flags agree exactly; terms and rewards within float32 rounding of the JAX batch
     (rtol 1e-5 on the reward, whose terms reach 1000)."""
@@ -84,6 +91,29 @@ def test_numpy_and_jax_score_the_same_steps(make_cfg) -> None:
         np.testing.assert_allclose(values, batch.terms[term], rtol=1e-5, atol=1e-5, err_msg=term)
     np.testing.assert_allclose([float(s.reward) for s in ones], batch.reward, rtol=1e-5, atol=1e-4)
     assert any(bool(s.success) for s in ones) or cfg.task == "touch"  # the batch covers success
+
+
+@pytest.mark.parametrize("pays_on", [True, False])
+def test_a_reading_over_the_band_can_forfeit_the_press_pay(pays_on: bool) -> None:
+    """A press held in the band at the box (25 N, 4 mm, its second step): before any reading
+    over the band it pays ``contact`` and ``streak``; after one (success ruled out) it pays them
+    on only with ``pay_after_overforce`` (the default), else nothing, and the reward is lower by
+    exactly their weighted sum (the other terms are the same)."""
+    cfg = touch_config(pay_after_overforce=pays_on)
+    band = reward_lib.joint_band(LIMITS, cfg)
+
+    def press(over: bool):
+        progress = reward_lib.Progress(np.asarray(1.0), np.asarray(over))
+        return score_step(np, cfg, progress, 0.005, 0.0, 0.004, 25.0, np.zeros(6), np.zeros(6),
+                          band, False)  # fmt: skip
+
+    clean, after = press(False), press(True)
+    assert float(clean.terms["contact"]) == 1.0 and float(clean.terms["streak"]) == 0.5
+    assert not clean.success and not after.success  # two steps of three: not yet
+    paid = {k: float(after.terms[k]) for k in ("contact", "streak")}
+    assert paid == ({"contact": 1.0, "streak": 0.5} if pays_on else {"contact": 0.0, "streak": 0.0})
+    lost = 0.0 if pays_on else cfg.reward.contact + 0.5 * cfg.reward.streak
+    assert float(clean.reward) - float(after.reward) == pytest.approx(lost)
 
 
 def test_a_diverged_step_scores_only_its_penalty() -> None:
@@ -140,7 +170,7 @@ def _one_by_one(xp, cfg, x, extra=None) -> list:
 
 
 @pytest.mark.parametrize(
-    "make_cfg", [reach_config, touch_config, lambda: touch_config("seed"), lift_config]
+    "make_cfg", [reach_config, touch_config, lambda: touch_config("seed"), lift_config, _forfeiting]
 )
 def test_python_scalars_score_the_steps_numpy_scores(make_cfg) -> None:
     """``SCALAR_XP`` gives numpy's flags and hold counts exactly and its terms and rewards to

@@ -212,3 +212,23 @@ def test_the_course_of_success_over_a_run():
     assert got["first_success_step"] == 2000 and got["falls"] == 2
     assert got["success_curve"] == values and got["curve_steps"][-1] == 8000
     assert success_course(rows[:2])["first_success_step"] is None
+
+
+def test_the_richest_evaluation_beside_the_most_successful():
+    """``richest_evaluation``: the evaluation of the highest return and the one of the best
+    success, with their readings over the band and touching steps; training rows without an
+    evaluation are skipped, and a run without one gives None."""
+    from benchmarks.training_diagnosis import richest_evaluation
+
+    def row(step, success, ret, over, touching):
+        return {"step": step, "eval/episode_success": success, "eval/episode_reward": ret,
+                "eval/episode_overforce": over, "eval/episode_touching": touching,
+                "eval/episode_streak": touching - 1.0}  # fmt: skip
+
+    rows = [row(0.0, 0.0, -1400.0, 0.0, 0.0), row(1e6, 0.92, 840.0, 0.0, 3.0),
+            {"step": 1.5e6}, row(2e6, 0.13, 5150.0, 1.6, 81.0)]  # fmt: skip
+    got = richest_evaluation(rows)
+    assert got["richest"]["step"] == 2_000_000 and got["richest"]["overforce"] == 1.6
+    assert got["most_successful"] == {"step": 1_000_000, "success": 0.92, "episode_return": 840.0,
+                                      "overforce": 0.0, "touching": 3.0, "streak": 2.0}  # fmt: skip
+    assert richest_evaluation([{"step": 0.0}]) == {"richest": None, "most_successful": None}

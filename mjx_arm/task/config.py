@@ -145,6 +145,11 @@ class TaskConfig:
             target, and for Touch the force inside the band) before the episode succeeds.
         fail_on_overforce: a force reading above the band at any step of the episode rules out
             success for the rest of it.
+        pay_after_overforce: whether the terms that pay a press (``contact``, ``press`` and
+            ``streak``) keep paying once a reading above the band has ruled success out
+            (``fail_on_overforce``). True (as before the field): they do, so pressing over the
+            band once and then holding a press in it for the rest of the episode can pay more
+            than success. False: they pay nothing for the rest of that episode.
         terminate_on_overforce: end the episode at the first reading above ``strike_force``
             (a protective stop).
         strike_force: contact force norm (N) that ends the episode when
@@ -186,6 +191,7 @@ class TaskConfig:
     force_band: tuple[float, float] = (1.0, 50.0)
     success_hold_steps: int = 1
     fail_on_overforce: bool = False
+    pay_after_overforce: bool = True
     terminate_on_overforce: bool = False
     strike_force: float = 0.0
     variant: str = "seed"

@@ -79,9 +79,24 @@ def score_step(
     terms = reward_lib.band_reward_terms(
         xp, distance, force_norm, qpos, qvel, band, success, diverged, cfg, motion, extra
     )
+    terms = _forfeit_press_pay(terms, progress.over, cfg)
     terms = _masked(xp, sane, terms)
     done = reward_lib.ends_episode(success, xp.where(sane, force_norm, 0.0), diverged, cfg, xp)
     return StepScore(progress, success, over, terms, reward_lib.total_reward(terms, cfg), done)
+
+
+# The terms that pay a press, which a reading above the band can forfeit.
+PRESS_TERMS = ("contact", "press", "streak")
+
+
+def _forfeit_press_pay(terms: dict[str, Any], over, cfg: TaskConfig) -> dict[str, Any]:
+    """``terms`` with :data:`PRESS_TERMS` zero once success is ruled out by a reading above the
+    band (``over``, bool ``(...)``: seen at this step or before), unless the config pays them on
+    (``pay_after_overforce``, the default) or no reading rules success out."""
+    if cfg.pay_after_overforce or not cfg.fail_on_overforce:
+        return terms
+    keep = 1.0 - over * 1.0
+    return {k: v * keep if k in PRESS_TERMS else v for k, v in terms.items()}
 
 
 def _masked(xp: Any, sane, terms: dict[str, Any]) -> dict[str, Any]:
