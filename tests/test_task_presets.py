@@ -21,6 +21,7 @@ import pytest
 
 from mjx_arm.inputs import ConfigError
 from mjx_arm.task import task_config
+from mjx_arm.task.registry import get_task
 from mjx_arm.train.config import TrainConfig
 from mjx_arm.train.presets import PRESETS, preset_config
 
@@ -48,6 +49,9 @@ ADDED_NORMALIZER_FIELDS = {"after_update": False, "force_scale": 0.0}
 # Presets changed on purpose since the snapshot, case -> normaliser fields: Touch's ``fast``
 # divides the wrist wrench by 50 N (measured on fresh seeds 7700-7726, docs/training.md).
 CHANGED_NORMALIZER_FIELDS = {"fast/touch": {"force_scale": 50.0}}
+# ... case -> task config fields: Touch's ``fast`` stops paying a press once a reading over the
+# band rules success out (docs/training.md).
+CHANGED_TASK_FIELDS = {"fast/touch": {"pay_after_overforce": False}}
 
 
 def _drop_zero_terms(before: dict, after: dict) -> dict:
@@ -81,7 +85,10 @@ def test_preset_resolves_to_the_shipped_numbers(case: str) -> None:
     changed = CHANGED_NORMALIZER_FIELDS.get(case, {})
     normalizer = {**before["normalizer"], **ADDED_NORMALIZER_FIELDS, **changed}
     assert after == {**before, **ADDED_TRAIN_FIELDS, "normalizer": normalizer}
-    assert settings == _drop_zero_terms(before_task, settings)
+    assert settings == {
+        **_drop_zero_terms(before_task, settings),
+        **CHANGED_TASK_FIELDS.get(case, {}),
+    }
 
 
 @pytest.mark.parametrize("case", CASES)
@@ -133,6 +140,8 @@ def test_documented_task_settings_work(preset: str, items: list[str]) -> None:
     task = items[0].partition("=")[2]
     variant = next((i.partition("=")[2] for i in items if i.startswith("task.variant=")), None)
     expected = task_config(task, **({"variant": variant} if variant else {}))
+    budget = get_task(task).budgets.get(preset)
+    expected = expected.replace(**((budget and budget.task) or {}))  # the preset's own
     if "task.action_scale=0.2" in items:
         expected = expected.replace(action_scale=0.2, reward={"approach_speed": -50.0})
     assert settings == expected

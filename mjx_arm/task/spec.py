@@ -33,6 +33,8 @@ class Budget:
         randomization: the training draw by name (``mjx_arm.train.config.RANDOMIZATIONS``).
         force_scale: the observation normaliser's fixed scale of the wrist wrench, N
             (``normalizer.force_scale``).
+        task: task config fields this preset sets for the task, name -> value (on top of the
+            variant's preset; ``--set task.FIELD=...`` still changes them).
     """
 
     num_timesteps: int | None = None
@@ -42,6 +44,7 @@ class Budget:
     stop_at_success: float | None = None
     randomization: str | None = None
     force_scale: float | None = None
+    task: Mapping[str, Any] | None = None
 
     def changes(self) -> dict[str, Any]:
         """The fields this budget sets, name -> value."""

@@ -100,7 +100,9 @@ def preset_config(name: str, task: str | None = None, variant: str | None = None
         changes["normalizer"] = dataclasses.replace(config.normalizer, force_scale=scale)
     if spec.default_arm:
         changes["arm"] = ArmConfig(urdf=str(asset(spec.default_arm)))
-    settings = task_changes(task, None, {"variant": variant or PRESET_VARIANTS.get(name)})
+    task_fields = dict(changes.pop("task", {}))
+    variant = variant or PRESET_VARIANTS.get(name)
+    settings = task_changes(task, None, {"variant": variant, **task_fields})
     return config.replace(task=task, task_settings=settings, **changes)
 
 
