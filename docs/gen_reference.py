@@ -82,6 +82,10 @@ def preset_table(task: str) -> str:
     ]
     variants = [_cell(c.task_config().variant) for c in configs.values()]
     rows.append("| task variant | " + " | ".join(variants) + " |")
+    budgets = get_task(task).budgets.values()
+    for field in sorted({f for b in budgets for f in (b.task or {})}):  # task fields of a preset
+        cells = [_cell(getattr(c.task_config(), field)) for c in configs.values()]
+        rows.append(f"| `task.{field}` | " + " | ".join(cells) + " |")
     return "\n".join([head, "|---|" + "---|" * len(configs), *rows, ""])
 
 

@@ -27,8 +27,12 @@ class Headline:
 
 
 # Rows whose Touch `fast` figures were measured before that preset's fixed wrench scale
-# (normalizer.force_scale, commit 2b611b0) changed how Touch trains.
-BEFORE_FORCE_SCALE = " (its Touch `fast` training predates the fixed wrench scale of 2b611b0)"
+# (normalizer.force_scale, commit 2b611b0) and its end of press pay after a reading over the band
+# (task.pay_after_overforce, commit 0988846) changed how Touch trains.
+BEFORE_FORCE_SCALE = (
+    " (its Touch `fast` training predates the preset's fixed wrench scale and press pay rule of "
+    "2b611b0 and 0988846)"
+)
 
 
 def _before_force_scale(row: Headline) -> Headline:
@@ -236,7 +240,7 @@ ROBUSTNESS_GROUPS = (
 )
 TOUCH_TRANSFER = [f"contact/transfer/touch_fast_seed{i}.json" for i in range(3)]
 TOUCH_FRESH_TRANSFER = [
-    f"contact/transfer/touch_fast_fresh_seed{i}.json" for i in (7402, 7403, 7404, 7406, 7407)
+    f"contact/transfer/touch_fast_nopay_seed{i}.json" for i in (7800, 7801, 7802, 7803, 7804)
 ]
 GPU_SEEDS = ("scaling/seeds_touch_fast_2gpu_of_2.json", "scaling/seeds_touch_fast_1gpu_of_2.json")
 
@@ -363,15 +367,15 @@ def _seven_compile(load: Callable[[str], Json]) -> str:
 HEADLINES: tuple[Headline, ...] = (
     _seeds_row(
         "Touch",
-        "seeds/fresh/seeds_touch_fast_fresh_fscale50_7715.json",
-        "`--preset fast` as shipped (the wrist wrench at a fixed 50 N scale), 12 fresh seeds "
-        "(7715-7726), one GPU, one process per seed, time from the command's start",
+        "seeds/fresh/seeds_touch_fast_fresh_nopay_alone.json",
+        "`--preset fast` as shipped, 23 fresh seeds (7803-7805, 7815-7834), one GPU, one process "
+        "per seed, time from the command's start",
     ),
     _seeds_row(
         "Touch",
-        "seeds/fresh/seeds_touch_fast_fresh_fscale50.json",
-        "`--preset fast` as shipped, solve rate over 26 fresh seeds (7700-7726; 7700-7714 three "
-        "at a time on one GPU; 7712 was stopped by a call's deadline and is left out)",
+        "seeds/fresh/seeds_touch_fast_fresh_nopay.json",
+        "`--preset fast` as shipped, solve rate over 26 fresh seeds (7800-7805, 7815-7834; "
+        "7800-7802 three at a time on one GPU)",
         warm=None,
     ),
     _seeds_row(
@@ -391,8 +395,8 @@ HEADLINES: tuple[Headline, ...] = (
     _seeds_row("Reach", "seeds/seeds_reach_cpu_c_backend.json",
                "`--preset cpu --backend mujoco`, time to threshold", warm=False),
     _before_force_scale(_transfer_row("Touch", TOUCH_TRANSFER, ("mujoco", "pybullet"))),
-    _before_force_scale(_transfer_row("Touch, the solved fresh seeds 7402-7404, 7406 and 7407",
-                                      TOUCH_FRESH_TRANSFER, ("mujoco", "pybullet"))),
+    _transfer_row("Touch, `--preset fast` as shipped, fresh seeds 7800-7804 (GPU-trained)",
+                  TOUCH_FRESH_TRANSFER, ("mujoco", "pybullet")),
     _before_force_scale(Headline(_any_arm_row)),
     Headline(_pick_row),
     _arm_groups_row("Lift on the UR5e with a linkage gripper, `--preset fast` as shipped",
