@@ -48,6 +48,9 @@ GENTLE_ACTION_SCALE = 0.15
 # running std instead, the wrench reads exactly 0 until the first touch and its first readings
 # reached the policy as millions (normalizer.force_scale).
 FORCE_SCALE = 50.0
+# The task settings of ``--preset fast`` and ``cpu``: a press stops paying once a reading over the
+# band has ruled success out for the episode.
+NO_PAY_AFTER_OVERFORCE = {"pay_after_overforce": False}
 
 
 class Touch(Task):
@@ -59,18 +62,18 @@ class Touch(Task):
     uses_contact = True
     # Touch needs more env steps than Reach (it must learn to hold a press). Under latency
     # (``robust``) it needs up to 49M steps (seeds 0-4 of robustness/robust_seeds); at fast's
-    # 30M budget two of four seeds stopped unsolved. ``fast`` divides the wrist wrench by the
-    # force band's top (FORCE_SCALE) instead of its running std: 23 of 26 fresh seeds solved,
-    # and seeds found the press after a median 6.4M steps instead of 12.2M (docs/training.md).
-    # It also stops paying a press once a reading over the band has ruled success out
-    # (``pay_after_overforce``): with that pay, runs climbed towards pressing over once and then
-    # holding, a richer episode than a success, and fell from 0.9+ (docs/training.md).
+    # 30M budget two of four seeds stopped unsolved. ``fast`` and ``cpu`` divide the wrist
+    # wrench by the force band's top (FORCE_SCALE) instead of its running std, and stop paying a
+    # press once a reading over the band has ruled success out (``pay_after_overforce``): with
+    # the running std the first contacts reached the policy as millions; with that pay, runs
+    # climbed towards pressing over once and then holding, a richer episode than a success, and
+    # fell from 0.9+. With both, 26 of 26 fresh seeds solved on a GPU (docs/training.md).
     budgets: ClassVar[Mapping[str, Budget]] = {
         "fast": Budget(
             num_timesteps=30_000_000,
             num_evals=31,
             force_scale=FORCE_SCALE,
-            task={"pay_after_overforce": False},
+            task=NO_PAY_AFTER_OVERFORCE,
         ),
         "robust": Budget(num_timesteps=60_000_000, num_evals=61),
         "cpu": Budget(
@@ -79,6 +82,8 @@ class Touch(Task):
             batch_size=256,
             num_evals=33,
             stop_at_success=0.95,
+            force_scale=FORCE_SCALE,
+            task=NO_PAY_AFTER_OVERFORCE,
         ),
     }
 
