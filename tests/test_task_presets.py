@@ -184,3 +184,17 @@ def test_a_task_config_saved_with_every_terms_weight_loads(case: str) -> None:
         assert "lift" in saved["reward"]
         with pytest.raises(ConfigError, match="unknown reward keys"):
             TaskConfig.from_dict({**saved, "reward": {**saved["reward"], "lift": 1.0}})
+
+
+def test_a_presets_task_fields_apply_to_any_variant_and_yield_to_set() -> None:
+    """Touch's ``fast`` sets ``pay_after_overforce=false`` (its ``Budget.task``) on whichever
+    variant the run picks; ``--set task.pay_after_overforce=true`` takes it back; presets that
+    set no task field keep the variant's value."""
+    from mjx_arm.train.presets import load_config
+
+    def pays(preset: str, *items: str) -> bool:
+        return load_config(preset, None, ["task=touch", *items]).task_config().pay_after_overforce
+
+    assert not pays("fast") and not pays("fast", "task.variant=seed") and not pays("cpu")
+    assert pays("fast", "task.pay_after_overforce=true")
+    assert pays("robust") and pays("seed")
