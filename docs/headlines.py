@@ -29,18 +29,18 @@ class Headline:
 # Rows whose Touch `fast` figures were measured before that preset's fixed wrench scale
 # (normalizer.force_scale, commit 2b611b0) and its end of press pay after a reading over the band
 # (task.pay_after_overforce, commit 0988846) changed how Touch trains.
-BEFORE_FORCE_SCALE = (
+BEFORE_TOUCH_CHANGES = (
     " (its Touch `fast` training predates the preset's fixed wrench scale and press pay rule of "
     "2b611b0 and 0988846)"
 )
 
 
-def _before_force_scale(row: Headline) -> Headline:
-    """``row`` with :data:`BEFORE_FORCE_SCALE` after its figure."""
+def _before_touch_changes(row: Headline) -> Headline:
+    """``row`` with :data:`BEFORE_TOUCH_CHANGES` after its figure."""
 
     def read(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
         figure, value, rels = row.read(load)
-        return figure + BEFORE_FORCE_SCALE, value, rels
+        return figure + BEFORE_TOUCH_CHANGES, value, rels
 
     return Headline(read)
 
@@ -395,19 +395,19 @@ HEADLINES: tuple[Headline, ...] = (
                "threshold", warm=False),
     _seeds_row("Reach", "seeds/seeds_reach_cpu_c_backend.json",
                "`--preset cpu --backend mujoco`, time to threshold", warm=False),
-    _before_force_scale(_transfer_row("Touch", TOUCH_TRANSFER, ("mujoco", "pybullet"))),
+    _before_touch_changes(_transfer_row("Touch", TOUCH_TRANSFER, ("mujoco", "pybullet"))),
     _transfer_row("Touch, `--preset fast` as shipped, fresh seeds 7800-7804 (GPU-trained)",
                   TOUCH_FRESH_TRANSFER, ("mujoco", "pybullet")),
-    _before_force_scale(Headline(_any_arm_row)),
+    _before_touch_changes(Headline(_any_arm_row)),
     Headline(_pick_row),
     _arm_groups_row("Lift on the UR5e with a linkage gripper, `--preset fast` as shipped",
                     LINKAGE_GROUPS),
-    _before_force_scale(_arm_groups_row("Touch on 7-joint arms, `--preset fast` as shipped",
+    _before_touch_changes(_arm_groups_row("Touch on 7-joint arms, `--preset fast` as shipped",
                                         SEVEN_GROUPS, _seven_compile)),
-    _before_force_scale(_arm_groups_row(
+    _before_touch_changes(_arm_groups_row(
         "Small arm with a one-jaw gripper, `--preset fast` as shipped, no arm file beyond "
         "`repair_inertia` (a crashed seed counts as unsolved)", SMALL_GROUPS)),
-    _before_force_scale(_arm_groups_row(
+    _before_touch_changes(_arm_groups_row(
         "Published arm with a linkage gripper whose finger collisions are meshes "
         "(pybullet_data's xArm6), `--preset fast` as shipped, no arm file beyond "
         "`repair_inertia`", MESH_PAD_GROUPS)),
@@ -415,10 +415,10 @@ HEADLINES: tuple[Headline, ...] = (
     _summary_row(ROBUST_LIFT_SUMMARY, "Lift: `--preset robust` as shipped, seeds and transfer"),
     _summary_row(ROBUST_TOUCH_SUMMARY, "Touch: `--preset robust` as shipped, seeds and transfer",
                  task="touch"),
-    _before_force_scale(Headline(_robustness_row)),
-    _before_force_scale(Headline(_cold_row)),
-    _before_force_scale(Headline(_gpu_seeds_row)),
-    _before_force_scale(Headline(_gpu_scaling_row)),
+    _before_touch_changes(Headline(_robustness_row)),
+    _before_touch_changes(Headline(_cold_row)),
+    _before_touch_changes(Headline(_gpu_seeds_row)),
+    _before_touch_changes(Headline(_gpu_scaling_row)),
     Headline(_throughput_row),
     Headline(_parity_row),
     Headline(_cpu_row),
