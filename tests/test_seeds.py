@@ -170,3 +170,40 @@ def test_a_failed_seed_reports_the_exception_its_log_ends_with():
     assert "Failed to allocate 1006632960 bytes" in log_error(log)
     assert log_error("one\ntwo\nthree\nfour") == "two | three | four"
     assert len(log_error("ValueError: " + "x" * 1000)) == 400
+
+
+def test_gpus_per_seed_groups_the_gpus_and_trains_each_seed_on_its_group() -> None:
+    """``--gpus-per-seed 2`` on 4 GPUs runs two seeds at once, each on two GPUs (a
+    ``CUDA_VISIBLE_DEVICES`` pair) through ``train --devices 2``; a host short of the GPUs one
+    seed needs is a named error, and one GPU per seed is the plain one-GPU list."""
+    from mjx_arm.bench.cli import _seed_gpus
+    from mjx_arm.bench.seeds import seed_command
+    from mjx_arm.inputs import ConfigError
+
+    four = ["0", "1", "2", "3"]
+    assert _seed_gpus(four, 0, 2) == ["0,1", "2,3"]
+    assert _seed_gpus(four, 3, 2) == ["0,1"]  # the third GPU alone cannot take a seed
+    assert _seed_gpus(four, 0) == four and _seed_gpus(four, 2) == ["0", "1"]
+    with pytest.raises(ConfigError, match="needs 2 GPUs of one host; there is 1 GPU"):
+        _seed_gpus(["0"], 0, 2)
+    with pytest.raises(ConfigError, match="no GPU"):
+        _seed_gpus([], 0, 4)
+    config = SeedsConfig(task="touch", seeds="5", gpus_per_seed=2)
+    command = seed_command(config, 5, Path("runs/x"))
+    assert command[command.index("--devices") + 1] == "2" and "seed=5" in command
+    with pytest.raises(ConfigError, match="gpus_per_seed"):
+        SeedsConfig(gpus_per_seed=0)
+
+
+def test_a_seed_on_several_gpus_is_checked_on_its_grown_batch() -> None:
+    """The settings check of a seed on N GPUs uses the config ``train --devices N`` trains
+    (envs and minibatch grown N times), so a preset whose batch splits over N GPUs only once
+    grown passes, and a --set that breaks the split fails before any seed starts."""
+    from mjx_arm.bench.seeds import check_seed_settings
+    from mjx_arm.inputs import ConfigError
+
+    config = SeedsConfig(task="touch", preset="fast", seeds="0", gpus_per_seed=2)
+    odd = ("num_envs=2049", "batch_size=2049", "num_minibatches=1")  # grown: 4098 each
+    check_seed_settings(config, odd, devices=2)
+    with pytest.raises(ConfigError, match="multiple of the device count"):
+        check_seed_settings(config, (*odd, "scale_with_devices=false"), devices=2)

@@ -234,10 +234,10 @@ def cmd_seeds(args: argparse.Namespace) -> int:
     _out(args, "seeds")
     _check_pictures(args, "--plot")
     runs_dir = _runs_folder(args.runs, config)
-    gpus = _seed_gpus(visible_gpus(), config.devices)
+    gpus = _seed_gpus(visible_gpus(), config.devices, config.gpus_per_seed)
     if gpus:  # this process leaves each GPU's memory to the seed trained on it
         os.environ["XLA_PYTHON_CLIENT_PREALLOCATE"] = "false"
-    check_seed_settings(config, tuple(args.set or ()), 1 if gpus else None)
+    check_seed_settings(config, tuple(args.set or ()), config.gpus_per_seed if gpus else None)
     _enable_jax_cache()
     meta = environment_metadata(accelerator=True)
     overrides = tuple(args.set or ())
@@ -285,15 +285,25 @@ def _runs_folder(runs: Path | None, config: SeedsConfig) -> Path:
     return folder
 
 
-def _seed_gpus(gpus: list[str], devices: int) -> list[str]:
-    """The GPUs the seeds run on (``devices`` of them, 0: all).
+def _seed_gpus(gpus: list[str], devices: int, per_seed: int = 1) -> list[str]:
+    """The GPU groups the seeds run on: ``devices`` GPUs of ``gpus`` (0: all) in groups of
+    ``per_seed``, each a ``CUDA_VISIBLE_DEVICES`` value (``["0,1", "2,3"]`` for 4 GPUs, 2 per
+    seed); a group short of ``per_seed`` GPUs is left idle.
 
     Raises:
-        ConfigError: more GPUs asked for than there are.
+        ConfigError: more GPUs asked for than there are, or fewer than one seed needs (none
+            at all with ``per_seed`` > 1: a seed on several GPUs needs a GPU host).
     """
     if devices > len(gpus) and gpus:
         raise ConfigError(f"asked for {devices} GPUs, this host has {len(gpus)}")
-    return gpus[: devices or len(gpus)]
+    chosen = gpus[: devices or len(gpus)]
+    if per_seed > 1 and len(chosen) < per_seed:
+        where = f"{len(chosen)} GPU(s) to use" if gpus else "no GPU (JAX sees none)"
+        raise ConfigError(
+            f"--gpus-per-seed {per_seed} needs {per_seed} GPUs of one host; there is {where}"
+        )
+    groups = len(chosen) // per_seed
+    return [",".join(chosen[g * per_seed : (g + 1) * per_seed]) for g in range(groups)]
 
 
 def cmd_robustness(args: argparse.Namespace) -> int:

@@ -138,7 +138,8 @@ def seed_command(
 ) -> list[str]:
     """The ``mjx-arm train`` command line that trains ``seed`` in a process of its own."""
     command = [sys.executable, "-m", "mjx_arm.cli", "train", "--task", config.task]
-    command += ["--preset", config.preset, "--backend", config.backend, "--devices", "1"]
+    devices = str(config.gpus_per_seed)
+    command += ["--preset", config.preset, "--backend", config.backend, "--devices", devices]
     command += ["--set", *overrides, f"seed={seed}", "--run-dir", str(run_dir), "--quiet"]
     command += ["--deterministic"] if config.deterministic else []
     return command + (["--arm", config.arm] if config.arm else [])
@@ -194,7 +195,8 @@ def failed_seed(seed: int, gpu: str, wall: float, error: str) -> SeedRun:
 def _start_seed(
     config: SeedsConfig, seed: int, runs_dir: Path, gpu: str, overrides: tuple[str, ...]
 ) -> subprocess.Popen:
-    """Start ``seed``'s training on ``gpu`` in a process of its own, its output to
+    """Start ``seed``'s training on ``gpu`` (a ``CUDA_VISIBLE_DEVICES`` entry: one GPU, or
+    ``"0,1"`` for a seed on two) in a process of its own, its output to
     ``runs_dir/seedN.log``."""
     env = {k: v for k, v in os.environ.items() if k != "XLA_PYTHON_CLIENT_PREALLOCATE"}
     run_dir = seed_run_dir(config, seed, runs_dir)
@@ -314,7 +316,7 @@ def check_seed_settings(
     items = [f"task={config.task}", f"backend={config.backend}", *overrides]
     train_config = load_config(config.preset, None, items)
     count = devices if devices is not None else len(local_devices(config.devices))
-    train_config.check_devices(count)
+    train_config.scaled_for_devices(count).check_devices(count)
     arm = config.arm or train_config.arm
     validated_arm_info(default_arm(train_config.task_config(), arm), CONVERTER_ENGINE)
 
@@ -377,6 +379,8 @@ def write_report(
     table = seeds_table(runs, summary)
     changed = f", with {' '.join(overrides)}" if overrides else " as shipped"
     title = f"{config.task}, preset {config.preset}{changed}, {meta['device']['kind']}"
+    if config.gpus_per_seed > 1:
+        title += f", {config.gpus_per_seed} GPUs per seed"
     if pending:
         title += f" ({len(runs)} seeds finished, {pending} still to come)"
     payload = {

@@ -51,6 +51,11 @@ class SeedsConfig:
         "GPUs to train on, one seed per GPU at a time, each in its own process (0: all); "
         "on a CPU: local devices of each seed's run",
     )
+    gpus_per_seed: int = setting(
+        1,
+        "GPUs each seed trains on (train --devices N: a process per GPU, the batch grown with "
+        "them); --devices then counts GPUs in all, in groups of this size",
+    )
     arm: str = setting("", "the arm: a URDF or an arm file (.toml/.json); '' is the shipped arm")
     deterministic: bool = setting(
         False, "train each seed deterministically (train --deterministic): a seed repeats"
@@ -59,6 +64,7 @@ class SeedsConfig:
     def __post_init__(self) -> None:
         check_range(self, "threshold", low=0, high=1)
         check_range(self, "devices", low=0)
+        check_range(self, "gpus_per_seed", low=1, high=64)
         parse_seeds(self.seeds)
 
 
