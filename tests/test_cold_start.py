@@ -111,6 +111,11 @@ def test_after_warmup_a_new_process_loads_the_update_and_init(tmp_path: Path) ->
     # own, and the report says when the trainer started
     assert 0.0 < report["stages"]["first checkpoint"] < 60.0, report["stages"]
     assert report["opened_at"] > 1.7e9
+    # the start-up steps before the trainer's report, in the order they happen
+    marks = report["marks"]
+    order = ["command read", "trainer imported", "config read", "devices started"]
+    assert sorted(marks, key=marks.get)[:4] == order, marks
+    assert max(marks.values()) <= report["opened_at"]
     # loaded, not compiled: well under the rollout, which holds host callbacks and always
     # compiles (measured loaded 1.2 s against the rollout's 14.8 s on a loaded 2-core CPU)
     programs = report["slowest_programs"]

@@ -207,3 +207,17 @@ def test_a_seed_on_several_gpus_is_checked_on_its_grown_batch() -> None:
     check_seed_settings(config, odd, devices=2)
     with pytest.raises(ConfigError, match="multiple of the device count"):
         check_seed_settings(config, (*odd, "scale_with_devices=false"), devices=2)
+
+
+def test_the_seconds_before_training_are_split_at_the_start_up_marks() -> None:
+    """A seed's ``before training`` (its process start to the trainer's report) is split into
+    the seconds from one start-up mark to the next, in time order, summing to the whole."""
+    from mjx_arm.bench.seeds import with_time_before_training
+
+    report = {"opened_at": 110.0, "marks": {"config read": 106.5, "trainer imported": 104.0}}
+    stages = with_time_before_training(report, 100.0)["stages"]
+    assert stages["before training"] == 10.0
+    assert stages["of it trainer imported"] == 4.0 and stages["of it config read"] == 2.5
+    assert stages["of it up to the trainer's report"] == 3.5
+    assert list(stages)[1:3] == ["of it trainer imported", "of it config read"]
+    assert with_time_before_training({"stages": {}}, 1.0) == {"stages": {}}

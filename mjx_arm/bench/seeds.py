@@ -120,10 +120,18 @@ def with_time_before_training(report: dict[str, Any], start: float) -> dict[str,
     """A seed's compile report with a first stage, ``before training``: the seconds from
     ``start`` (``time.time()`` the seed's times count from) to the trainer's start (its
     report's ``opened_at``): a process's imports and CUDA's start, for a seed trained in a
-    process of its own. A report without ``opened_at`` is returned as it is."""
+    process of its own; then, where the report has ``marks``, the seconds from each start-up
+    step to the next ("of it trainer imported": from the step before to the trainer's
+    imports). A report without ``opened_at`` is returned as it is."""
     if "opened_at" not in report:
         return report
     before = {"before training": round(report["opened_at"] - start, 3)}
+    last = start
+    for name, at in sorted(report.get("marks", {}).items(), key=lambda kv: kv[1]):
+        before[f"of it {name}"] = round(at - last, 3)
+        last = at
+    if len(before) > 1:
+        before["of it up to the trainer's report"] = round(report["opened_at"] - last, 3)
     return {**report, "stages": {**before, **report.get("stages", {})}}
 
 

@@ -140,6 +140,7 @@ class MjxArmEnv(Env):
         self.build_seconds = {
             "model conversion": converted - start,
             "physics build": time.monotonic() - converted,
+            **getattr(self.physics, "build_stages", {}),
         }
         self.randomization = randomization or RandomizationConfig()
         self.task_spec = self.task.spec

@@ -147,6 +147,7 @@ class MjxPhysics:
         self.n_substeps = task.n_substeps
         self.batch_size = max(int(batch_size), 1)
         self.buffers: dict[str, int] = {}
+        self.build_stages: dict[str, float] = {}  # seconds of the build's parts (Warp's)
         self.precompile_seconds = 0.0
         self._precompile: Any = None  # MuJoCo Warp's kernels compiling in the background
         self._background = background_compile
@@ -176,7 +177,9 @@ class MjxPhysics:
             "model_convex_pairs": bounds.convex_pairs,
         }
         mj_model = warp_compatible(self.mj_model)
+        start = time.monotonic()
         model = mjx.put_model(mj_model, own_device(), impl="warp")
+        put = time.monotonic()
         # Warp prints a warning per env and substep on any overflow; this layer reads the bits.
         opt_impl = model.opt._impl.replace(warn_overflow=0)
         model = model.replace(opt=model.opt.replace(_impl=opt_impl))
@@ -189,6 +192,7 @@ class MjxPhysics:
             njmax=njmax,
             naccdmax=self.buffers["naccdmax"],
         )
+        made = time.monotonic()
         threads = self.config.compile_threads
         devices = warp_compile.cuda_devices() if threads else []
         if devices:
@@ -197,6 +201,11 @@ class MjxPhysics:
                 self._precompile = warp_compile.start_precompile(threads, loads, devices)
             else:
                 self.precompile_seconds = warp_compile.precompile(threads, loads, devices)
+        self.build_stages = {
+            "Warp model": put - start,
+            "Warp data": made - put,
+            "Warp step loads": time.monotonic() - made,
+        }
         return model, data
 
     def wait_precompiled(self) -> dict[str, float]:

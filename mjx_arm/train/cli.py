@@ -50,10 +50,15 @@ def cmd_train(args: argparse.Namespace) -> int:
     """
     import sys
 
+    from mjx_arm.train.compile_report import mark
+
+    mark("command read")
     from mjx_arm.train import launch
     from mjx_arm.train.distributed import Hosts, ProcessGroup
     from mjx_arm.train.ppo import train
     from mjx_arm.train.rundir import claim
+
+    mark("trainer imported")
 
     if args.resume:
         _check_resume_flags(args)
@@ -73,6 +78,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     group.join()
     enable_compilation_cache()
     config = _run_config(args)
+    mark("config read")
     run_dir = Path(named) if named else _default_run_dir(args, config.task)
     if getattr(args, "check_repeat", False):
         return check_repeat(config, run_dir, args.quiet)

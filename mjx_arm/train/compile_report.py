@@ -38,8 +38,17 @@ CACHE_USE = "/jax/compilation_cache/compile_requests_use_cache"
 COMPILE_STAGES = ("learner init", "trace + lower", "XLA compile (in parallel)", "waited for Warp")
 
 _ACTIVE: list[CompileReport] = []
+# Wall clock times (``time.time()``) of the steps of this process's start before the trainer
+# opens its report (:func:`mark`): where the seconds before training go.
+_MARKS: dict[str, float] = {}
 _LOCK = threading.Lock()
 _INSTALLED = False
+
+
+def mark(name: str) -> None:
+    """Note that this process has just finished start-up step ``name`` (imports, reading the
+    config, starting the devices); each report opened later records the marks."""
+    _MARKS[name] = time.time()
 
 
 def _on_duration(event: str, seconds: float, **kwargs: Any) -> None:
@@ -86,6 +95,7 @@ class CompileReport:
         self.counts: dict[str, int] = defaultdict(int)
         self.start = time.monotonic()
         self.opened_at = time.time()  # wall clock (s since the epoch), for other processes
+        self.marks = dict(_MARKS)  # the start-up steps before it (wall clock)
 
     def open(self) -> CompileReport:
         """Start listening to JAX's compile events; returns self."""
@@ -137,11 +147,13 @@ class CompileReport:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: the compile time (s), when the report opened (``time.time()``, at the
-        trainer's start), stages (s), JAX totals (s, summed over programs compiled at the same
-        time), counts and the slowest programs."""
+        trainer's start) and the start-up steps before it were done (``marks``), stages (s),
+        JAX totals (s, summed over programs compiled at the same time), counts and the slowest
+        programs."""
         return {
             "compile_s": round(self.compile_seconds, 3),
             "opened_at": round(self.opened_at, 3),
+            "marks": {k: round(v, 3) for k, v in self.marks.items()},
             "compile_stages": [name for name in COMPILE_STAGES if name in self.stages],
             "stages": {k: round(v, 3) for k, v in self.stages.items()},
             "jax_seconds": {k: round(v, 3) for k, v in self.seconds.items()},

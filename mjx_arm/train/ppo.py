@@ -34,7 +34,7 @@ from mjx_arm.train.checkpoints import (
     restore_brax_params,
     unusable_reason,
 )
-from mjx_arm.train.compile_report import CompileReport
+from mjx_arm.train.compile_report import CompileReport, mark
 from mjx_arm.train.config import TrainConfig
 from mjx_arm.train.distributed import barrier, is_leader
 from mjx_arm.train.launch import devices_for_physics
@@ -125,7 +125,9 @@ def train(
             without a usable checkpoint.
     """
     config = _checked(config)
+    mark("devices started")
     setup = resolve_run_task(config)
+    mark("arm and task resolved")
     if resume:
         _check_run_dir(run_dir)
     if not is_leader():  # process 0 holds the run directory; the others only read it
