@@ -5,7 +5,9 @@ calls (the first stopped at its deadline; the next trains the seeds it did not r
 writes the report of the whole range: every finished seed of the inputs, the summary computed
 again over all of them (solve rate with its 95 % interval, times, steps, collapses). The
 inputs must agree on task, preset, threshold, arm and ``--set`` items; a seed in two of them
-is an error. The machine's record is the newest input's; ``meta.merged_from`` names each
+is an error. A seed is warm as its record says; in a report written before records said so,
+every seed but the report's first (each call starts with its own caches). The machine's
+record is the newest input's; ``meta.merged_from`` names each
 input with its commit, date and seeds.
 
     python -m benchmarks.merge_seeds_reports A.json B.json --name seeds_reach_fast_fresh \\
@@ -23,7 +25,15 @@ from mjx_arm.bench.seeds import write_report
 from mjx_arm.bench.seeds_config import SeedRun, SeedsConfig
 
 # settings every input must share (the seeds differ)
-SHARED = ("task", "preset", "backend", "threshold", "devices", "arm", "deterministic")
+SHARED = (
+    "task", "preset", "backend", "threshold", "devices", "gpus_per_seed", "arm", "deterministic"
+)  # fmt: skip
+
+
+def _setting(report: dict[str, Any], key: str) -> Any:
+    """A shared setting of ``report``; one that reports written before it lack is the
+    default (``gpus_per_seed``: 1)."""
+    return report["settings"].get(key, getattr(SeedsConfig(), key))
 
 
 def merge(reports: list[dict[str, Any]], names: list[str]) -> tuple[SeedsConfig, list, list, dict]:
@@ -35,22 +45,24 @@ def merge(reports: list[dict[str, Any]], names: list[str]) -> tuple[SeedsConfig,
     first = reports[0]
     for report, name in zip(reports[1:], names[1:], strict=True):
         for key in SHARED:
-            if report["settings"][key] != first["settings"][key]:
+            if _setting(report, key) != _setting(first, key):
                 raise ValueError(
-                    f"{name}: {key} {report['settings'][key]!r}, not "
-                    f"{first['settings'][key]!r} as in {names[0]}"
+                    f"{name}: {key} {_setting(report, key)!r}, not "
+                    f"{_setting(first, key)!r} as in {names[0]}"
                 )
         if report["overrides"] != first["overrides"]:
             raise ValueError(f"{name}: --set {report['overrides']}, not {first['overrides']}")
     pairs: dict[int, tuple[dict, dict]] = {}
     for report, name in zip(reports, names, strict=True):
-        for record, config in zip(report["seeds"], report["configs"], strict=True):
+        for i, (record, config) in enumerate(zip(report["seeds"], report["configs"], strict=True)):
+            if record.get("warm") is None:  # a report from before the flag: its first is cold
+                record = {**record, "warm": i > 0}
             if record["seed"] in pairs:
                 raise ValueError(f"seed {record['seed']} is in two reports (again in {name})")
             pairs[record["seed"]] = (record, config)
     order = sorted(pairs)
     runs = [SeedRun(**pairs[s][0]) for s in order]
-    settings = {k: first["settings"][k] for k in SHARED}
+    settings = {k: _setting(first, k) for k in SHARED}
     config = SeedsConfig(**settings, seeds=",".join(str(s) for s in order))
     newest = max(reports, key=lambda r: r["meta"]["date"])
     merged_from = [

@@ -8,6 +8,7 @@ changed shape is left out, not an error, so renaming a result file never breaks 
 from __future__ import annotations
 
 import json
+import statistics
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -46,8 +47,9 @@ def _before_touch_changes(row: Headline) -> Headline:
 
 
 def _seeds_row(task: str, rel: str, what: str, warm: bool | None = True) -> Headline:
-    """A seeds run: seeds solved and the median time, of the warm seeds (all but the first,
-    which paid for empty caches) or of all; ``warm=None``: no time (runs that shared a GPU)."""
+    """A seeds run: seeds solved and the median time, of the warm seeds (started after a seed
+    had ended: the others paid for empty caches) or of all; ``warm=None``: no time (runs that
+    shared a GPU)."""
 
     def read(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
         s = load(rel)["summary"]
@@ -257,6 +259,40 @@ def _gpu_seeds_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
     return "Touch `--preset fast` seeds, one process per GPU", value, list(GPU_SEEDS)
 
 
+# Touch seeds trained on two GPUs each, and the same seeds on one GPU (the same commit and host)
+TWO_GPU_SEEDS = (
+    "seeds/fresh/seeds_touch_fast_fresh_7835_2gpu.json",
+    "seeds/fresh/seeds_touch_fast_fresh_7835_1gpu.json",
+)
+
+
+def _two_gpu_seeds_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
+    """Touch on 2 GPUs per seed: solve rate, and the warm median beside the one-GPU median of
+    the same seeds (steps to the threshold and env steps/s as the causes)."""
+    two, one = ({r["seed"]: r for r in load(rel)["seeds"]} for rel in TWO_GPU_SEEDS)
+    summary = load(TWO_GPU_SEEDS[0])["summary"]
+    both = [s for s in two if s in one and two[s].get("warm") and one[s].get("warm")]
+    both = [s for s in both if two[s]["time_to_threshold"] and one[s]["time_to_threshold"]]
+
+    def median(runs: dict, key: str) -> float:
+        return statistics.median(runs[s][key] for s in both)
+
+    t2, t1 = median(two, "time_to_threshold"), median(one, "time_to_threshold")
+    speed = median(two, "training_steps_per_s") / median(one, "training_steps_per_s")
+    steps = median(two, "steps_to_threshold") / median(one, "steps_to_threshold")
+    value = (
+        f"{summary['solved']} of {summary['seeds']} seeds at {fmt(summary['threshold'])}; on the "
+        f"{len(both)} warm seeds solved both ways, median {secs(t2)} against {secs(t1)} on one "
+        f"GPU ({t2 / t1:.2f}x): {speed:.2f}x the env steps/s, {steps:.1f}x the steps to the "
+        "threshold"
+    )
+    what = (
+        "Touch: `--preset fast` as shipped on 2 H200s per seed (`train --devices 2`, the batch "
+        "grown with the GPUs), fresh seeds 7835-7842, time from the command's start"
+    )
+    return what, value, list(TWO_GPU_SEEDS)
+
+
 GPU_SCALING = (
     "scaling/throughput_touch_1_2_4gpu_h100x4.json",
     "scaling/solve_touch_1_2gpu_h100x2.json",
@@ -367,17 +403,19 @@ def _seven_compile(load: Callable[[str], Json]) -> str:
 HEADLINES: tuple[Headline, ...] = (
     _seeds_row(
         "Touch",
-        "seeds/fresh/seeds_touch_fast_fresh_nopay_alone.json",
-        "`--preset fast` as shipped, 23 fresh seeds (7803-7805, 7815-7834), one GPU, one process "
-        "per seed, time from the command's start",
+        "seeds/fresh/seeds_touch_fast_fresh_7835_1gpu.json",
+        "`--preset fast` as shipped, 27 fresh seeds (7835-7849, 7852-7863), one H200 per seed "
+        "(two at once, one per GPU of a host of two), one process per seed, time from the "
+        "command's start",
     ),
     _seeds_row(
         "Touch",
-        "seeds/fresh/seeds_touch_fast_fresh_nopay.json",
-        "`--preset fast` as shipped, solve rate over 26 fresh seeds (7800-7805, 7815-7834; "
-        "7800-7802 three at a time on one GPU)",
+        "seeds/fresh/seeds_touch_fast_fresh_all_1gpu.json",
+        "`--preset fast` as shipped, solve rate over every fresh seed since its last change (53: "
+        "7800-7805, 7815-7849, 7852-7863; 7800-7802 three at a time on one GPU)",
         warm=None,
     ),
+    Headline(_two_gpu_seeds_row),
     _seeds_row(
         "Lift",
         "seeds/fresh/seeds_lift_fast_fresh_7600.json",

@@ -114,6 +114,7 @@ def test_two_tiny_seeds_on_the_c_backend(tmp_path: Path) -> None:
     assert next(iter(runs[0].compile_report["stages"])) == "before training"
     assert [r.seed for r in runs] == [0, 1]
     assert [c["train"]["seed"] for c in configs] == [0, 1]
+    assert [r.warm for r in runs] == [False, False]  # both started before either had ended
     for run in runs:
         assert run.curve[0][1] == 0 and run.total_steps >= 2560
         assert 0.0 <= run.final_success <= 1.0 and not math.isnan(run.wall_s)
@@ -221,3 +222,17 @@ def test_the_seconds_before_training_are_split_at_the_start_up_marks() -> None:
     assert stages["of it up to the trainer's report"] == 3.5
     assert list(stages)[1:3] == ["of it trainer imported", "of it config read"]
     assert with_time_before_training({"stages": {}}, 1.0) == {"stages": {}}
+
+
+def test_warm_seeds_are_those_started_after_a_seed_had_ended() -> None:
+    """On a host of two GPUs the first two seeds start at once with empty caches: a record's
+    ``warm`` flag leaves both out of the warm times, and records without the flag (reports
+    written before it) leave out the first alone."""
+    runs = [_run(0, 40.0), _run(1, 50.0), _run(2, 20.0), _run(3, 30.0)]
+    for run, warm in zip(runs, (False, False, True, True), strict=True):
+        run.warm = warm
+    assert summarize(runs, 0.95)["time_to_threshold_warm"]["n"] == 2
+    assert summarize(runs, 0.95)["time_to_threshold_warm"]["median"] == 25.0
+    for run in runs:
+        run.warm = None
+    assert summarize(runs, 0.95)["time_to_threshold_warm"]["median"] == 30.0

@@ -166,6 +166,8 @@ def test_seeds_reports_of_two_calls_merge_into_one(tmp_path):
     config, runs, configs, meta = merge([first, second], ["a.json", "b.json"])
     assert [r.seed for r in runs] == [7300, 7301, 7302] and config.seeds == "7300,7301,7302"
     assert [c["seed"] for c in configs] == [7300, 7301, 7302]
+    # each input's first seed started with that call's empty caches
+    assert {r.seed: r.warm for r in runs} == {7301: False, 7300: True, 7302: False}
     assert meta["git_commit"] == "05"
     assert [m["seeds"] for m in meta["merged_from"]] == [[7301, 7300], [7302]]
     write_report(config, runs, configs, meta, tmp_path, "merged")
@@ -176,6 +178,13 @@ def test_seeds_reports_of_two_calls_merge_into_one(tmp_path):
     other = {**second, "settings": {**second["settings"], "threshold": 0.9}}
     with pytest.raises(ValueError, match="threshold"):
         merge([first, other], ["a.json", "d.json"])
+    # a report from before --gpus-per-seed counts as one GPU per seed; two per seed differs
+    assert "gpus_per_seed" not in first["settings"]
+    assert merge([first, {**second, "settings": {**second["settings"], "gpus_per_seed": 1}}],
+                 ["a.json", "e.json"])[0].gpus_per_seed == 1  # fmt: skip
+    two = {**second, "settings": {**second["settings"], "gpus_per_seed": 2}}
+    with pytest.raises(ValueError, match="gpus_per_seed 2, not 1"):
+        merge([first, two], ["a.json", "f.json"])
 
 
 def test_the_normalisers_share_of_the_kl_is_read_where_logged():

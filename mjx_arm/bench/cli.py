@@ -214,16 +214,17 @@ def cmd_transfer(args: argparse.Namespace) -> int:
 
 
 def cmd_seeds(args: argparse.Namespace) -> int:
-    """Seeds benchmark: train a preset as shipped once per seed; on a GPU host each seed in its
-    own process, one per GPU at a time (--devices: how many GPUs).
+    """Seeds benchmark: train a preset as shipped once per seed; on a GPU host each seed in its own
+    process, one per GPU at a time (--devices: how many GPUs; --gpus-per-seed: K GPUs per seed).
 
-    For each seed: final and best evaluation success, steps and wall time (from that seed's
-    start, compilation included) to the first evaluation at --threshold, or "not reached".
-    Overall: the fraction of seeds solved and the median and interquartile range of the time
-    to the threshold, over all seeds and over the warm ones (all but the first, which pays
-    for any empty compilation cache). Writes NAME.md and NAME.json into --out (and NAME.png,
-    the success curves, with --plot); the runs and their logs go to --runs. The report is
-    written again as each seed finishes, so a benchmark stopped early keeps its finished seeds.
+    For each seed: final and best evaluation success, steps and wall time (from that seed's start,
+    compilation included) to the first evaluation at --threshold, or "not reached". Overall: the
+    fraction of seeds solved and the median and interquartile range of the time to the threshold,
+    over all seeds and over the warm ones (those started after a seed had ended: the seeds that
+    start at once on a fresh host pay for empty compilation caches). Writes NAME.md and NAME.json
+    into --out (and NAME.png, the success curves, with --plot); the runs and their logs go to
+    --runs. The report is written again as each seed finishes, so a benchmark stopped early keeps
+    its finished seeds.
     """
     start = time.time()
     from mjx_arm.bench.results import environment_metadata

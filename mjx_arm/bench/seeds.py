@@ -13,7 +13,7 @@ after another in this process (the compilation caches are warm after the first s
 - overall: the fraction of seeds that reached ``threshold``, and the median and interquartile
   range of the time to it, over every seed (a seed that never reached it counts as infinitely
   slow, so a median over a minority of solved seeds reads "not reached") and over the warm
-  seeds (all but the first).
+  seeds (those started after a seed had ended and so had filled the caches).
 
 It writes ``NAME.md`` and ``NAME.json`` (with the resolved config of every seed and the
 machine); asked for, ``NAME.png`` (each seed's success against wall time and against env steps).
@@ -245,28 +245,31 @@ def run_seeds_on_gpus(
 ) -> tuple[list[SeedRun], list[dict[str, Any]]]:
     """Train every seed in a process of its own, one per GPU of ``gpus`` at a time.
 
-    Each seed's times count from its own process's start (imports, cache loads and any
-    compilation included). A seed whose process fails is reported as not solved, with the
-    end of its log, and the others go on. ``on_seed`` is called with the seeds finished so
-    far (in seed order) each time one finishes.
+    Each seed's times count from its own process's start (imports, cache loads and any compilation
+    included); a seed is warm where another had ended before it started (the seeds started at once
+    on a fresh host all found the caches empty). A seed whose process fails is reported as not
+    solved, with the end of its log, and the others go on. ``on_seed`` is called with the seeds
+    finished so far (in seed order) each time one finishes.
     """
     seeds = parse_seeds(config.seeds)
     queue, free = list(seeds), list(gpus)
-    running: dict[int, tuple[subprocess.Popen, str, float]] = {}
+    running: dict[int, tuple[subprocess.Popen, str, float, bool]] = {}
     done: dict[int, tuple[SeedRun, dict[str, Any]]] = {}
     runs_dir.mkdir(parents=True, exist_ok=True)
     while queue or running:
         while queue and free:
             seed, gpu = queue.pop(0), free.pop(0)
-            running[seed] = (_start_seed(config, seed, runs_dir, gpu, overrides), gpu, time.time())
+            proc = _start_seed(config, seed, runs_dir, gpu, overrides)
+            running[seed] = (proc, gpu, time.time(), bool(done))  # warm: a seed has ended
             log(f"seed {seed}: training {config.task} / {config.preset} on GPU {gpu}")
-        for seed, (proc, gpu, start) in list(running.items()):
+        for seed, (proc, gpu, start, warm) in list(running.items()):
             if proc.poll() is None:
                 continue
             del running[seed]
             free.append(gpu)
             done[seed] = _finished_seed(config, seed, runs_dir, proc, gpu, start)
             run = done[seed][0]
+            run.warm = warm
             if run.error:
                 log(f"seed {seed}: its process failed ({run.error[:400]})")
             else:
@@ -349,6 +352,7 @@ def run_seeds(
         log(f"seed {seed} ({i + 1} of {len(seeds)}): training {config.task} / {config.preset}")
         start = first_start if i == 0 else None
         run, saved = train_seed(config, seed, runs_dir, overrides, start)
+        run.warm = i > 0
         runs.append(run)
         configs.append(saved)
         _log_run(log, config, run)

@@ -86,6 +86,9 @@ class SeedRun:
     compile_report: dict[str, Any] = dataclasses.field(default_factory=dict)
     gpu: str = ""  # the GPU of the seed's process ("" where it trained in this process)
     error: str = ""  # why the seed's process failed ("" where it ran to its end)
+    # whether the seed started after another seed of its benchmark had ended (so the caches
+    # were filled); None in records from before this field (then all but the first are warm)
+    warm: bool | None = None
 
     @property
     def solved(self) -> bool:
