@@ -55,10 +55,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     mark("command read")
     from mjx_arm.train import launch
     from mjx_arm.train.distributed import Hosts, ProcessGroup
-    from mjx_arm.train.ppo import train
     from mjx_arm.train.rundir import claim
-
-    mark("trainer imported")
 
     if args.resume:
         _check_resume_flags(args)
@@ -73,8 +70,11 @@ def cmd_train(args: argparse.Namespace) -> int:
                 claim(run_dir)
             print(f"run directory: {run_dir}")
             argv = _child_argv(sys.argv[1:], run_dir, bool(named))
-            return launch.run(plan, argv, run_dir / "logs")
+            return launch.run(plan, argv, run_dir / "logs")  # the trainer is never imported here
         group = plan.group
+    from mjx_arm.train.ppo import train  # JAX, MuJoCo, Brax, Warp: seconds on a GPU host
+
+    mark("trainer imported")
     group.join()
     enable_compilation_cache()
     config = _run_config(args)
