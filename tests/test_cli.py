@@ -313,3 +313,19 @@ def test_known_library_warnings_stay_off_the_console() -> None:
         warnings.warn("a warning of this project's own", UserWarning, stacklevel=1)
     assert [str(w.message) for w in seen] == ["a warning of this project's own"]
     assert len(LIBRARY_WARNINGS) >= 4
+
+
+def test_a_run_on_several_devices_says_what_was_measured_first(capsys) -> None:
+    """``--devices N`` with the batch grown says, on stderr, that a seed solved later on two
+    GPUs than on one and points at a seed per GPU; one device, or the preset's batch kept
+    (``scale_with_devices=false``), says nothing."""
+    from mjx_arm.train.cli import _devices_note
+    from mjx_arm.train.config import TrainConfig
+
+    _devices_note(2, TrainConfig())
+    err = capsys.readouterr().err
+    assert err.startswith("note: --devices 2 grows the batch 2 times") and "bench seeds" in err
+    for devices, config in ((None, TrainConfig()), (1, TrainConfig()),
+                            (4, TrainConfig(scale_with_devices=False))):  # fmt: skip
+        _devices_note(devices, config)
+        assert capsys.readouterr().err == ""

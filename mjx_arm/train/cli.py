@@ -86,6 +86,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         config = config.replace(devices=0)  # every process trains on all of its devices
     if group.leader:
         _start_lines(run_dir, config, None if args.resume else args.preset or DEFAULT_PRESET)
+        _devices_note(args.devices, config)
     result = train(config, run_dir, resume=bool(args.resume), quiet=args.quiet or not group.leader)
     if group.leader:
         _end_lines(result, run_dir, args.quiet)
@@ -117,6 +118,21 @@ def _start_lines(run_dir: Path, config: TrainConfig, preset: str | None) -> None
         f"{config.num_timesteps:,} env steps. On a 2-core CPU the cpu preset trains about "
         f"{CPU_STEPS_PER_S:,} env steps/s, so this run would take {minutes:.0f} min or more, "
         "plus compiling. For a CPU: --preset cpu --backend mujoco (Reach in about 2 min)",
+        file=sys.stderr,
+    )
+
+
+def _devices_note(devices: int | None, config: TrainConfig) -> None:
+    """Before a run on several devices with the batch grown with them, say on stderr what was
+    measured: more env steps/s, but a seed solved later than on one GPU."""
+    import sys
+
+    if not devices or devices < 2 or not config.scale_with_devices:
+        return
+    print(
+        f"note: --devices {devices} grows the batch {devices} times: more env steps/s, but Touch "
+        "seeds on 2 H200s each reached 0.95 later than on one (docs/training.md, 'Several "
+        "devices'). For results sooner, train a seed per GPU: mjx-arm bench seeds --devices N",
         file=sys.stderr,
     )
 
