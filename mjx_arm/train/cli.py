@@ -131,8 +131,8 @@ def _devices_note(devices: int | None, config: TrainConfig) -> None:
         return
     print(
         f"note: --devices {devices} grows the batch {devices} times: more env steps/s, but Touch "
-        "seeds on 2 H200s each reached 0.95 later than on one (docs/training.md, 'Several "
-        "devices'). For results sooner, train a seed per GPU: mjx-arm bench seeds --devices N",
+        "seeds on 2 H200s reached 0.95 later than on one, at the median (docs/training.md, "
+        "'Several devices'). For results sooner, train a seed per GPU: mjx-arm bench seeds",
         file=sys.stderr,
     )
 
