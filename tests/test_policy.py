@@ -257,3 +257,31 @@ def test_other_files_are_not_policies(tmp_path: Path):
         load(tmp_path / "policy.pt")
     with pytest.raises(FileNotFoundError):
         load(tmp_path / "missing.npz")
+
+
+SHIPPED_TOUCH = Path(__file__).parent.parent / "benchmarks/results/policies/touch_fast_seed0.npz"
+
+
+def test_an_observation_the_policy_never_trained_on_is_refused_by_name():
+    """The first observations of 50 CPU MuJoCo episodes of a shipped Touch policy's own task
+    lie within 10 training stds (measured: at most 4.1 over 200), while a target 1 mm above the
+    box top, a height training held at 0.05 m, is 1,000 stds out and refused, named."""
+    from mjx_arm.evaluate import eval_task, make_eval_env
+    from mjx_arm.policy.familiar import (
+        UnfamiliarObservationError,
+        check_familiar,
+        unfamiliar_inputs,
+    )
+
+    policy = load(SHIPPED_TOUCH)
+    env = make_eval_env(eval_task(policy)[0], "mujoco")
+    for seed in range(50):
+        obs, _ = env.reset(seed=seed)
+        check_familiar(policy, obs)
+    env.close()
+    obs["target_rel"] = obs["target_rel"] + np.array([0.0, 0.0, 0.001], np.float32)
+    (entry,) = unfamiliar_inputs(policy, obs)
+    assert entry.name == "target_rel[2]" and entry.distance == pytest.approx(1000, rel=0.01)
+    with pytest.raises(UnfamiliarObservationError, match=r"target_rel\[2\] = 0.051 is 1,0\d\d "):
+        check_familiar(policy, obs)
+    assert unfamiliar_inputs(object(), obs) == []  # no normaliser arrays (ONNX): not checked

@@ -8,8 +8,10 @@ Each control period (the policy's ``ctrl_dt``) the node builds the observation f
 policy, passes its joint velocities through :class:`VelocityToPositionAdapter` and
 :class:`SafetyLimiter`, and publishes the command as a one-point
 ``trajectory_msgs/JointTrajectory`` due one period later. Before the first command it checks
-with tf that the robot's base frame sits where the simulation put it (:func:`check_frame_alignment`)
-and refuses to start otherwise.
+with tf that the robot's base frame sits where the simulation put it
+(:func:`check_frame_alignment`), and that the first observation (the target, the start pose)
+lies inside what the policy was trained on (:func:`~mjx_arm.policy.familiar.check_familiar`);
+it refuses to start otherwise.
 
 Run it::
 
@@ -44,6 +46,7 @@ import numpy as np
 from mjx_arm.envs.base import check_action
 from mjx_arm.evaluate import eval_task
 from mjx_arm.policy import load
+from mjx_arm.policy.familiar import check_familiar
 from mjx_arm.sim2real.adapter import VelocityToPositionAdapter
 from mjx_arm.sim2real.commands import duration
 from mjx_arm.sim2real.frames import Pose, check_frame_alignment
@@ -113,6 +116,8 @@ class PolicyNode(Node):
                 SIM_BASE, robot, self._param("tol_m"), self._param("tol_rad")
             )
             self.get_logger().info(f"base frame check passed: {report.message()}")
+        # a target (or start pose) the policy never trained on: refuse before the first command
+        check_familiar(self.policy, self.builder(self.q, self.target, self.wrench))
         dt = self.task.ctrl_dt
         adapter = VelocityToPositionAdapter(
             dt, self._param("tau"), self.q, self.limits.lower, self.limits.upper
