@@ -114,7 +114,7 @@ def test_short_run_says_why_it_has_no_speed() -> None:
     """Too few evaluations for the compile/steady split: a sentence, not NaN."""
     from types import SimpleNamespace
 
-    from mjx_arm.train.cli import done_line
+    from mjx_arm.train.run_lines import done_line
 
     nan = float("nan")
     short = SimpleNamespace(
@@ -135,7 +135,7 @@ def test_the_done_line_gives_the_last_and_the_best_evaluation() -> None:
     """A run that ended under its best says both, with their steps."""
     from types import SimpleNamespace
 
-    from mjx_arm.train.cli import done_line
+    from mjx_arm.train.run_lines import done_line
 
     result = SimpleNamespace(
         steps=30_900_000,
@@ -206,12 +206,13 @@ def test_train_help_lists_each_preset_on_a_line(capsys):
 def test_a_gpu_preset_on_a_cpu_says_how_long_first(tmp_path: Path, capsys):
     import jax
 
-    from mjx_arm.train.cli import CPU_STEPS_PER_S, _start_lines, config_from_args
+    from mjx_arm.train.cli import config_from_args
+    from mjx_arm.train.run_lines import CPU_STEPS_PER_S, start_lines
 
     if jax.default_backend() != "cpu":
         pytest.skip("an accelerator is present: no note")
     config = config_from_args(_train_args())  # no flags: the seed preset
-    _start_lines(tmp_path, config, "seed")
+    start_lines(tmp_path, config, "seed")
     captured = capsys.readouterr()
     assert captured.out == f"run directory: {tmp_path}\n"
     minutes = round(config.num_timesteps / CPU_STEPS_PER_S / 60)
@@ -219,7 +220,7 @@ def test_a_gpu_preset_on_a_cpu_says_how_long_first(tmp_path: Path, capsys):
     assert f"would take {minutes} min or more" in captured.err
     assert "--preset cpu --backend mujoco" in captured.err
     for preset in ("cpu", None):  # the cpu preset, a resumed run: no note
-        _start_lines(tmp_path, config, preset)
+        start_lines(tmp_path, config, preset)
         assert capsys.readouterr().err == ""
 
 
@@ -319,13 +320,13 @@ def test_a_run_on_several_devices_says_what_was_measured_first(capsys) -> None:
     """``--devices N`` with the batch grown says, on stderr, that a seed solved later on two
     GPUs than on one and points at a seed per GPU; one device, or the preset's batch kept
     (``scale_with_devices=false``), says nothing."""
-    from mjx_arm.train.cli import _devices_note
     from mjx_arm.train.config import TrainConfig
+    from mjx_arm.train.run_lines import devices_note
 
-    _devices_note(2, TrainConfig())
+    devices_note(2, TrainConfig())
     err = capsys.readouterr().err
     assert err.startswith("note: --devices 2 grows the batch 2 times") and "bench seeds" in err
     for devices, config in ((None, TrainConfig()), (1, TrainConfig()),
                             (4, TrainConfig(scale_with_devices=False))):  # fmt: skip
-        _devices_note(devices, config)
+        devices_note(devices, config)
         assert capsys.readouterr().err == ""

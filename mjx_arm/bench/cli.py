@@ -292,8 +292,7 @@ def _seed_gpus(gpus: list[str], devices: int, per_seed: int = 1) -> list[str]:
     seed); a group short of ``per_seed`` GPUs is left idle.
 
     Raises:
-        ConfigError: more GPUs asked for than there are, or fewer than one seed needs (none
-            at all with ``per_seed`` > 1: a seed on several GPUs needs a GPU host).
+        ConfigError: more GPUs asked for than there are, or fewer than one seed needs.
     """
     if devices > len(gpus) and gpus:
         raise ConfigError(f"asked for {devices} GPUs, this host has {len(gpus)}")

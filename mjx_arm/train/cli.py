@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -19,6 +18,7 @@ from mjx_arm.settings import (
     field_flag_settings,
 )
 from mjx_arm.task.registry import task_names
+from mjx_arm.train.run_lines import devices_note, done_line, end_lines, start_lines
 from mjx_arm.urdf.repair_args import add_repair_arguments, with_repair_arguments
 
 if TYPE_CHECKING:
@@ -34,10 +34,6 @@ PRESET_USES = {
     "cpu": "a small run for a CPU, with --backend mujoco",
     "robust": "fast under randomised physics, for transfer; for a GPU",
 }
-# Env steps per second the cpu preset trains at on a 2-core CPU on the C MuJoCo backend
-# (benchmarks/results/seeds/seeds_reach_cpu_c_backend.json: 2,008 for Reach); a GPU preset's
-# larger networks and epochs are not faster.
-CPU_STEPS_PER_S = 2000
 
 
 def cmd_train(args: argparse.Namespace) -> int:
@@ -48,30 +44,15 @@ def cmd_train(args: argparse.Namespace) -> int:
     SLURM_NODEID), joined by jax.distributed. On MuJoCo Warp, --devices N starts a process per
     GPU of this host (docs/training.md, "Several devices").
     """
-    import sys
-
     from mjx_arm.train.compile_report import mark
 
     mark("command read")
-    from mjx_arm.train import launch
-    from mjx_arm.train.distributed import Hosts, ProcessGroup
-    from mjx_arm.train.rundir import claim
-
     if args.resume:
         _check_resume_flags(args)
-    group = ProcessGroup.from_env()  # set where a launcher started this process
     named = args.resume or args.run_dir
-    if not group.joined:
-        hosts = Hosts.from_args(args.coordinator, args.hosts, args.host_rank, args.join_timeout)
-        plan = launch.plan(hosts, args.devices, per_gpu=_per_gpu(args))
-        if plan.spawns:  # one run directory, named, for every process
-            run_dir = Path(named) if named else _default_run_dir(args)
-            if not args.resume:  # checked (rundir.claim) before the processes write logs/
-                claim(run_dir)
-            print(f"run directory: {run_dir}")
-            argv = _child_argv(sys.argv[1:], run_dir, bool(named))
-            return launch.run(plan, argv, run_dir / "logs")  # the trainer is never imported here
-        group = plan.group
+    group, launched = _group_or_launch(args, named)
+    if group is None:
+        return launched
     from mjx_arm.train.ppo import train  # JAX, MuJoCo, Brax, Warp: seconds on a GPU host
 
     mark("trainer imported")
@@ -85,56 +66,37 @@ def cmd_train(args: argparse.Namespace) -> int:
     if group.joined:
         config = config.replace(devices=0)  # every process trains on all of its devices
     if group.leader:
-        _start_lines(run_dir, config, None if args.resume else args.preset or DEFAULT_PRESET)
-        _devices_note(args.devices, config)
+        start_lines(run_dir, config, None if args.resume else args.preset or DEFAULT_PRESET)
+        devices_note(args.devices, config)
     result = train(config, run_dir, resume=bool(args.resume), quiet=args.quiet or not group.leader)
     if group.leader:
-        _end_lines(result, run_dir, args.quiet)
+        end_lines(result, run_dir, args.quiet)
     return EXIT_OK
 
 
-def _end_lines(result, run_dir: Path, quiet: bool) -> None:
-    """The lines a run ends with: the done line, then the compile line where ``quiet`` kept it
-    from coming after the first epoch, else where the compile report is (once is enough)."""
-    print(done_line(result))
-    print(result.compile_summary if quiet else f"compile report: {run_dir / 'compile.json'}")
-
-
-def _start_lines(run_dir: Path, config: TrainConfig, preset: str | None) -> None:
-    """The lines a run starts with: its folder, and, before a GPU preset trains on a CPU, how
-    long it would take at the CPU rate measured (:data:`CPU_STEPS_PER_S`) and what to run
-    instead, on stderr (not for the cpu preset, a resumed run: ``preset`` None, or on an
-    accelerator)."""
+def _group_or_launch(args: argparse.Namespace, named: str | None):
+    """``(group, None)``: the process group this process trains in (started by a launcher, or
+    this host's share of several). ``(None, exit code)`` where this host starts a process per
+    GPU instead: they ran under this launcher, which never imports the trainer."""
     import sys
 
-    import jax
+    from mjx_arm.train import launch
+    from mjx_arm.train.distributed import Hosts, ProcessGroup
+    from mjx_arm.train.rundir import claim
 
+    group = ProcessGroup.from_env()  # set where a launcher started this process
+    if group.joined:
+        return group, None
+    hosts = Hosts.from_args(args.coordinator, args.hosts, args.host_rank, args.join_timeout)
+    plan = launch.plan(hosts, args.devices, per_gpu=_per_gpu(args))
+    if not plan.spawns:
+        return plan.group, None
+    run_dir = Path(named) if named else _default_run_dir(args)  # one, named, for every process
+    if not args.resume:  # checked (rundir.claim) before the processes write logs/
+        claim(run_dir)
     print(f"run directory: {run_dir}")
-    if preset in (None, "cpu") or jax.default_backend() != "cpu":
-        return
-    minutes = config.num_timesteps / CPU_STEPS_PER_S / 60
-    print(
-        f"note: preset {preset} is meant for a GPU: {config.num_envs:,} envs, "
-        f"{config.num_timesteps:,} env steps. On a 2-core CPU the cpu preset trains about "
-        f"{CPU_STEPS_PER_S:,} env steps/s, so this run would take {minutes:.0f} min or more, "
-        "plus compiling. For a CPU: --preset cpu --backend mujoco (Reach in about 2 min)",
-        file=sys.stderr,
-    )
-
-
-def _devices_note(devices: int | None, config: TrainConfig) -> None:
-    """Before a run on several devices with the batch grown with them, say on stderr what was
-    measured: more env steps/s, but a seed solved later than on one GPU."""
-    import sys
-
-    if not devices or devices < 2 or not config.scale_with_devices:
-        return
-    print(
-        f"note: --devices {devices} grows the batch {devices} times: more env steps/s, but Touch "
-        "seeds on 2 H200s reached 0.95 later than on one, at the median (docs/training.md, "
-        "'Several devices'). For results sooner, train a seed per GPU: mjx-arm bench seeds",
-        file=sys.stderr,
-    )
+    argv = _child_argv(sys.argv[1:], run_dir, bool(named))
+    return None, launch.run(plan, argv, run_dir / "logs")
 
 
 def check_repeat(config: TrainConfig, run_dir: Path, quiet: bool = False) -> int:
@@ -290,21 +252,6 @@ def _with_arm(config, source: str | None, ee_link: str | None):
     if ee_link:
         arm = arm.replace(ee_link=ee_link, joints=())  # the chain follows the new ee link
     return config.replace(arm=arm)
-
-
-def done_line(result) -> str:
-    """The closing line of a run. Compile time and steady speed need two trained epochs after
-    the first evaluation; a shorter run says so instead of printing NaN."""
-    success = result.metrics.get("eval/episode_success", float("nan"))
-    if math.isfinite(result.compile_seconds) and math.isfinite(result.steps_per_second):
-        speed = f"compile {result.compile_seconds:.1f} s, {result.steps_per_second:,.0f} steps/s"
-    else:
-        speed = "compile time and steps/s need 3 or more evaluations"
-    evals = f"last eval success {success:.3f} at step {result.steps:,}"
-    if result.best is not None:
-        best, step = result.best
-        evals += f", best {best:.3f} at step {step:,}"
-    return f"done: {result.steps:,} steps in {result.train_seconds:.1f} s ({speed}); {evals}"
 
 
 def _add_config_arguments(p: argparse.ArgumentParser) -> None:
