@@ -223,6 +223,9 @@ def test_the_seconds_before_training_are_split_at_the_start_up_marks() -> None:
     assert stages["of it up to the trainer's report"] == 3.5
     assert list(stages)[1:3] == ["of it trainer imported", "of it config read"]
     assert with_time_before_training({"stages": {}}, 1.0) == {"stages": {}}
+    # a mark from before the seed's start (the process's, for seeds trained in turn) is left out
+    report["marks"]["command read"] = 90.0
+    assert "of it command read" not in with_time_before_training(report, 100.0)["stages"]
 
 
 def test_warm_seeds_are_those_started_after_a_seed_had_ended() -> None:

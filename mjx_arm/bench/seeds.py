@@ -128,6 +128,8 @@ def with_time_before_training(report: dict[str, Any], start: float) -> dict[str,
     before = {"before training": round(report["opened_at"] - start, 3)}
     last = start
     for name, at in sorted(report.get("marks", {}).items(), key=lambda kv: kv[1]):
+        if at < start:  # the process's own start, before this seed (seeds trained in turn)
+            continue
         before[f"of it {name}"] = round(at - last, 3)
         last = at
     if len(before) > 1:
