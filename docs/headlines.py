@@ -428,8 +428,8 @@ HEADLINES: tuple[Headline, ...] = (
         "`--preset fast` as shipped, 20 fresh seeds (7300-7319), one GPU, one process per seed, "
         "time from the command's start",
     ),
-    _seeds_row("Touch", "seeds/cpu_touch/cpu_fresh_shipped_7903.json",
-               "`--preset cpu --backend mujoco` as shipped, 6 fresh seeds (7903-7908), time to "
+    _seeds_row("Touch", "seeds/cpu_touch/cpu_fresh_shipped_all.json",
+               "`--preset cpu --backend mujoco` as shipped, 20 fresh seeds (7903-7922), time to "
                "threshold", warm=False),
     _seeds_row("Reach", "seeds/seeds_reach_cpu_c_backend.json",
                "`--preset cpu --backend mujoco`, time to threshold", warm=False),
