@@ -23,6 +23,7 @@ from typing import Any
 
 from mjx_arm.bench.seeds import write_report
 from mjx_arm.bench.seeds_config import SeedRun, SeedsConfig
+from mjx_arm.bench.seeds_summary import warm_flags
 
 # settings every input must share (the seeds differ)
 SHARED = (
@@ -52,16 +53,17 @@ def merge(reports: list[dict[str, Any]], names: list[str]) -> tuple[SeedsConfig,
                 )
         if report["overrides"] != first["overrides"]:
             raise ValueError(f"{name}: --set {report['overrides']}, not {first['overrides']}")
-    pairs: dict[int, tuple[dict, dict]] = {}
+    pairs: dict[int, tuple[SeedRun, dict]] = {}
     for report, name in zip(reports, names, strict=True):
-        for i, (record, config) in enumerate(zip(report["seeds"], report["configs"], strict=True)):
-            if record.get("warm") is None:  # a report from before the flag: its first is cold
-                record = {**record, "warm": i > 0}
-            if record["seed"] in pairs:
-                raise ValueError(f"seed {record['seed']} is in two reports (again in {name})")
-            pairs[record["seed"]] = (record, config)
+        runs = [SeedRun(**record) for record in report["seeds"]]
+        # each report's own rule (a report from before the flag: its first is cold)
+        for run, warm, config in zip(runs, warm_flags(runs), report["configs"], strict=True):
+            run.warm = warm
+            if run.seed in pairs:
+                raise ValueError(f"seed {run.seed} is in two reports (again in {name})")
+            pairs[run.seed] = (run, config)
     order = sorted(pairs)
-    runs = [SeedRun(**pairs[s][0]) for s in order]
+    runs = [pairs[s][0] for s in order]
     settings = {k: _setting(first, k) for k in SHARED}
     config = SeedsConfig(**settings, seeds=",".join(str(s) for s in order))
     newest = max(reports, key=lambda r: r["meta"]["date"])
