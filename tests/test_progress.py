@@ -122,3 +122,18 @@ def test_a_setup_names_the_backend_the_run_resolves() -> None:
     picked = load_config("cpu", None, [f"backend={resolve_backend('auto')}"])
     assert compile_setup(auto) == compile_setup(picked)
     assert compile_setup(auto).startswith(f"reach {resolve_backend('auto')} 64/64 envs ur5e.urdf")
+
+
+def test_each_report_takes_only_the_start_up_marks_made_since_the_last() -> None:
+    """Trainings in turn in one process (seeds in turn, ``--check-repeat``): the first report
+    records the process's start-up marks, the second only those made after the first opened."""
+    from mjx_arm.train.compile_report import mark
+
+    mark("command read")
+    mark("devices started")
+    first = CompileReport()
+    mark("arm and task resolved")
+    second = CompileReport()
+    assert set(first.marks) == {"command read", "devices started"}
+    assert set(second.marks) == {"arm and task resolved"}
+    assert CompileReport().marks == {}

@@ -211,6 +211,24 @@ def test_a_seed_on_several_gpus_is_checked_on_its_grown_batch() -> None:
         check_seed_settings(config, (*odd, "scale_with_devices=false"), devices=2)
 
 
+def test_the_threshold_defaults_to_where_the_task_counts_as_solved() -> None:
+    """Without --threshold a seed counts as solved at its task's ``solved_at`` (where ``fast``
+    stops: Lift 0.9); a threshold over the training's stop is refused before any seed starts,
+    since every seed would stop short of it."""
+    from mjx_arm.bench.seeds import check_seed_settings
+    from mjx_arm.inputs import ConfigError
+
+    assert SeedsConfig(task="lift").threshold == 0.9
+    assert SeedsConfig(task="touch").threshold == 0.95
+    assert SeedsConfig(task="lift", threshold=0.8).threshold == 0.8
+    check_seed_settings(SeedsConfig(task="lift", seeds="0"), devices=1)
+    with pytest.raises(ConfigError, match=r"stops at its first evaluation at 0\.9 .*--threshold"):
+        check_seed_settings(SeedsConfig(task="lift", seeds="0", threshold=0.95), devices=1)
+    check_seed_settings(
+        SeedsConfig(task="lift", seeds="0", threshold=0.95), ("stop_at_success=0.95",), devices=1
+    )
+
+
 def test_the_seconds_before_training_are_split_at_the_start_up_marks() -> None:
     """A seed's ``before training`` (its process start to the trainer's report) is split into
     the seconds from one start-up mark to the next, in time order, summing to the whole."""

@@ -52,6 +52,13 @@ CHANGED_NORMALIZER_FIELDS = {
     "fast/touch": {"force_scale": 50.0},
     "cpu/touch": {"force_scale": 50.0},
 }
+# ... case -> training fields: ``fast`` stops at the task's ``solved_at`` instead of 0.97, so that a
+# run ends on the evaluation that solved it (docs/training.md).
+CHANGED_TRAIN_FIELDS = {
+    "fast/reach": {"stop_at_success": 0.95},
+    "fast/touch": {"stop_at_success": 0.95},
+    "fast/lift": {"stop_at_success": 0.9},
+}
 # ... case -> task config fields: Touch's ``fast`` and ``cpu`` stop paying a press once a reading
 # over the band rules success out (docs/training.md).
 CHANGED_TASK_FIELDS = {
@@ -90,7 +97,8 @@ def test_preset_resolves_to_the_shipped_numbers(case: str) -> None:
     before = {k: v for k, v in before_train.items() if k != "task_overrides"}
     changed = CHANGED_NORMALIZER_FIELDS.get(case, {})
     normalizer = {**before["normalizer"], **ADDED_NORMALIZER_FIELDS, **changed}
-    assert after == {**before, **ADDED_TRAIN_FIELDS, "normalizer": normalizer}
+    expected = {**before, **ADDED_TRAIN_FIELDS, **CHANGED_TRAIN_FIELDS.get(case, {})}
+    assert after == {**expected, "normalizer": normalizer}
     assert settings == {
         **_drop_zero_terms(before_task, settings),
         **CHANGED_TASK_FIELDS.get(case, {}),
@@ -198,3 +206,13 @@ def test_a_presets_task_fields_apply_to_any_variant_and_yield_to_set() -> None:
     assert not pays("fast") and not pays("fast", "task.variant=seed") and not pays("cpu")
     assert pays("fast", "task.pay_after_overforce=true")
     assert pays("robust") and pays("seed")
+
+
+@pytest.mark.parametrize("task", ["reach", "touch", "lift"])
+def test_fast_stops_where_its_task_counts_as_solved(task: str) -> None:
+    """``fast`` ends a run at its first evaluation at the task's ``solved_at`` (Lift 0.9, the
+    others 0.95), so its last evaluation is the one that solved it; ``robust`` keeps 0.97."""
+    solved_at = get_task(task).solved_at
+    assert solved_at == (0.9 if task == "lift" else 0.95)
+    assert preset_config("fast", task).stop_at_success == solved_at
+    assert preset_config("robust", task).stop_at_success == 0.97

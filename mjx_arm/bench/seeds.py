@@ -37,6 +37,7 @@ import numpy as np
 from mjx_arm.bench.results import save_results
 from mjx_arm.bench.seeds_config import SeedRun, SeedsConfig, parse_seeds
 from mjx_arm.bench.seeds_summary import seed_line, seeds_table, start_up_line, summarize
+from mjx_arm.inputs import ConfigError
 
 SUCCESS_KEY = "eval/episode_success"
 
@@ -318,7 +319,8 @@ def check_seed_settings(
     and the arm.
 
     Raises:
-        InputError: a bad override, an arm that does not validate, a bad device count.
+        InputError: a bad override, an arm that does not validate, a bad device count, or a
+            training that stops under ``config.threshold`` (no seed could count as solved).
     """
     from mjx_arm.arm.info import validated_arm_info
     from mjx_arm.arm.resolve import default_arm
@@ -328,10 +330,22 @@ def check_seed_settings(
 
     items = [f"task={config.task}", f"backend={config.backend}", *overrides]
     train_config = load_config(config.preset, None, items)
+    _check_stop(train_config.stop_at_success, config.threshold)
     count = devices if devices is not None else len(local_devices(config.devices))
     train_config.scaled_for_devices(count).check_devices(count)
     arm = config.arm or train_config.arm
     validated_arm_info(default_arm(train_config.task_config(), arm), CONVERTER_ENGINE)
+
+
+def _check_stop(stop: float, threshold: float) -> None:
+    """Refuse a training that stops at ``stop`` (``stop_at_success``; 0: never) under the
+    benchmark's ``threshold``: its seeds would end before they could count as solved."""
+    if 0 < stop < threshold:
+        raise ConfigError(
+            f"the training stops at its first evaluation at {stop:g} success "
+            f"(stop_at_success), under --threshold {threshold:g}, so no seed could count as "
+            f"solved: give --threshold {stop:g}, or --set stop_at_success={threshold:g}"
+        )
 
 
 def run_seeds(

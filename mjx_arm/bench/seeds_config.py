@@ -10,7 +10,7 @@ from mjx_arm.bench.settings import setting
 from mjx_arm.inputs import MAX_SEED, ConfigError
 from mjx_arm.names import BACKENDS, PRESET_NAMES
 from mjx_arm.settings import check_range
-from mjx_arm.task.registry import task_names
+from mjx_arm.task.registry import get_task, task_names
 
 
 def parse_seeds(text: str) -> tuple[int, ...]:
@@ -45,7 +45,11 @@ class SeedsConfig:
     preset: str = setting("fast", "training preset, as shipped", PRESET_NAMES)
     seeds: str = setting("0-9", "seeds: a range 0-9, a list 0,3,7 or both")
     backend: str = setting("auto", "physics backend", BACKENDS)
-    threshold: float = setting(0.95, "evaluation success that counts as solved")
+    threshold: float = setting(
+        0.0,
+        "evaluation success that counts as solved (0: the task's own, where its fast preset "
+        "stops: 0.95, Lift 0.9)",
+    )
     devices: int = setting(
         0,
         "GPUs to train on, one seed per GPU at a time, each in its own process (0: all); "
@@ -63,6 +67,8 @@ class SeedsConfig:
 
     def __post_init__(self) -> None:
         check_range(self, "threshold", low=0, high=1)
+        if not self.threshold and self.task in task_names():
+            object.__setattr__(self, "threshold", get_task(self.task).solved_at)
         check_range(self, "devices", low=0)
         check_range(self, "gpus_per_seed", low=1, high=64)
         parse_seeds(self.seeds)

@@ -76,6 +76,9 @@ class Task:
             file (``assets/``), or "" for the shipped arm.
         metrics: the :meth:`measures` the batched envs report as training metrics, measure
             name -> metric name.
+        solved_at: the evaluation success at which a run counts as solved: the ``fast``
+            preset stops there (``stop_at_success``) and ``bench seeds`` counts a seed solved
+            from there unless given ``--threshold``.
     """
 
     name: ClassVar[str]
@@ -89,6 +92,7 @@ class Task:
     budgets: ClassVar[Mapping[str, Budget]] = {}
     default_arm: ClassVar[str] = ""
     metrics: ClassVar[Mapping[str, str]] = {}
+    solved_at: ClassVar[float] = 0.95
 
     @property
     def env_id(self) -> str:

@@ -47,7 +47,8 @@ _INSTALLED = False
 
 def mark(name: str) -> None:
     """Note that this process has just finished start-up step ``name`` (imports, reading the
-    config, starting the devices); each report opened later records the marks."""
+    config, starting the devices); the next report opened takes the marks, so a second training
+    in the same process records only the marks made since the first report opened."""
     _MARKS[name] = time.time()
 
 
@@ -95,7 +96,8 @@ class CompileReport:
         self.counts: dict[str, int] = defaultdict(int)
         self.start = time.monotonic()
         self.opened_at = time.time()  # wall clock (s since the epoch), for other processes
-        self.marks = dict(_MARKS)  # the start-up steps before it (wall clock)
+        self.marks = dict(_MARKS)  # the start-up steps before it (wall clock), taken
+        _MARKS.clear()
 
     def open(self) -> CompileReport:
         """Start listening to JAX's compile events; returns self."""
