@@ -238,6 +238,17 @@ def test_seed_runs_never_go_into_benchmarks_results(tmp_path: Path, capsys):
     assert not runs.exists()
 
 
+def test_seeds_on_the_command_line_count_a_task_solved_where_it_is(tmp_path: Path, capsys):
+    """``bench seeds --task lift`` counts a seed solved at Lift's 0.9 unless --threshold says
+    otherwise: a training stopped under it is refused, naming the threshold it defaulted to."""
+    argv = ["bench", "seeds", "--task", "lift", "--seeds", "0", "--out", str(tmp_path)]
+    argv += ["--runs", str(tmp_path / "runs")]
+    assert main([*argv, "--set", "stop_at_success=0.85"]) == EXIT_INVALID
+    assert "under --threshold 0.9," in capsys.readouterr().err
+    assert main([*argv, "--threshold", "0.95"]) == EXIT_INVALID
+    assert "stops at its first evaluation at 0.9 success" in capsys.readouterr().err
+
+
 # --------------------------------------------------------------------------- transfer
 
 

@@ -231,7 +231,7 @@ def cmd_seeds(args: argparse.Namespace) -> int:
     from mjx_arm.bench.seeds import SeedsConfig, check_seed_settings, write_report
     from mjx_arm.train.launch import visible_gpus
 
-    config = from_arguments(SeedsConfig(), args)
+    config = from_arguments(SeedsConfig(task=args.task or SeedsConfig.task), args)
     _out(args, "seeds")
     _check_pictures(args, "--plot")
     runs_dir = _runs_folder(args.runs, config)
