@@ -258,3 +258,16 @@ def test_warm_seeds_are_those_started_after_a_seed_had_ended() -> None:
     for run in runs:
         run.warm = None
     assert summarize(runs, 0.95)["time_to_threshold_warm"]["median"] == 30.0
+
+
+def test_the_report_lines_give_the_median_steps_and_speed() -> None:
+    """The markdown summary names the median env steps to the threshold and the median
+    training env steps/s, which the time alone does not separate."""
+    from mjx_arm.bench.seeds_summary import summary_lines
+
+    text = summary_lines(summarize([_run(0, 12.0), _run(1, 14.0), _run(2, None, 0.5)], 0.95))
+    assert "- median env steps to it: 2,000; median training env steps/s: 1,000\n" in text
+    assert "median env steps" not in summary_lines(
+        {**summarize([_run(0, 9.0)], 0.95)}
+        | {"median_steps_to_threshold": None, "median_training_steps_per_s": None}
+    )

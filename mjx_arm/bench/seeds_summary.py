@@ -155,4 +155,17 @@ def summary_lines(summary: dict[str, Any]) -> str:
         f"{_quartile_text(summary['time_to_threshold_all'])}\n"
         f"- time to {summary['threshold']:.2f}, warm seeds (started after a seed had ended): "
         f"{_quartile_text(summary['time_to_threshold_warm'])}\n"
+        f"{_steps_line(summary)}"
     )
+
+
+def _steps_line(summary: dict[str, Any]) -> str:
+    """The median env steps to the threshold and training env steps/s, as a list line ("" in
+    a summary that has neither)."""
+    steps = summary.get("median_steps_to_threshold")
+    speed = summary.get("median_training_steps_per_s")
+    if steps is None and speed is None:
+        return ""
+    steps_text = "not reached" if steps is None else f"{steps:,.0f}"
+    speed_text = "unknown" if speed is None else f"{speed:,.0f}"
+    return f"- median env steps to it: {steps_text}; median training env steps/s: {speed_text}\n"
