@@ -7,7 +7,10 @@ for a Touch seed that has not reached it, the trap its last evaluation shows
 reaching the threshold (the call's deadline stopped it) says so and is left out of its
 campaign's count. Printed at the end of a campaign, so that the next call can be chosen at once.
 
-    python -m benchmarks.campaign_brief runs/gpu_suite --threshold 0.95
+    python -m benchmarks.campaign_brief runs/gpu_suite [--threshold 0.95]
+
+Without ``--threshold`` each run counts as solved where its task does (``Task.solved_at``: 0.95,
+Lift 0.9), read from its ``config.json``.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ import math
 from pathlib import Path
 
 from benchmarks.training_diagnosis import SEED_DIR, _col, _rows, short_of_budget, trap
+from mjx_arm.task.registry import get_task
 
 STATES = ("solved", "unsolved", "stopped")
 
@@ -42,23 +46,37 @@ def brief(run: Path, threshold: float) -> tuple[str, str]:
     return f"{text} unsolved at {steps} ({trap(rows[-1])})", "unsolved"
 
 
+def run_threshold(run: Path, given: float | None) -> float:
+    """``given``, or where the run's task counts as solved (its ``config.json``; 0.95 when the
+    file or its task cannot be read)."""
+    if given is not None:
+        return given
+    config = run / "config.json"
+    try:
+        return get_task(json.loads(config.read_text())["train"]["task"]).solved_at
+    except (OSError, ValueError, KeyError, TypeError):
+        return 0.95
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("work", type=Path, help="the campaign's WORK folder")
-    parser.add_argument("--threshold", type=float, default=0.95)
+    parser.add_argument("--threshold", type=float, default=None, help="default: the task's")
     args = parser.parse_args(argv)
     runs = sorted(args.work.glob("*/*"), key=lambda p: (p.parent.name, p.name))
-    counts: dict[str, dict[str, int]] = {}
+    counts: dict[str, dict[str, float]] = {}
     for run in runs:
         if SEED_DIR.search(run.name) and (run / "metrics.csv").is_file():
-            line, state = brief(run, args.threshold)
+            threshold = run_threshold(run, args.threshold)
+            line, state = brief(run, threshold)
             print(line)
-            count = counts.setdefault(run.parent.name, dict.fromkeys(STATES, 0))
+            count = counts.setdefault(run.parent.name, {**dict.fromkeys(STATES, 0), "at": 0})
             count[state] += 1
+            count["at"] = threshold
     for name, count in counts.items():
         finished = count["solved"] + count["unsolved"]
         stopped = f" ({count['stopped']} stopped, left out)" if count["stopped"] else ""
-        print(f"{name}: {count['solved']} of {finished} at {args.threshold}{stopped}")
+        print(f"{name}: {count['solved']} of {finished} at {count['at']:g}{stopped}")
     return 0
 
 

@@ -177,7 +177,7 @@ campaign)
     fi
   done
   wait
-  python3 -m benchmarks.campaign_brief "$WORK" --threshold "${THRESHOLD:-0.95}"
+  python3 -m benchmarks.campaign_brief "$WORK" ${THRESHOLD:+--threshold "$THRESHOLD"}
   ;;
 sweep)
   # Candidate changes to the fast preset, each trained on SWEEP_SEEDS (exploration: the

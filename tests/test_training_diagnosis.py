@@ -241,3 +241,19 @@ def test_the_richest_evaluation_beside_the_most_successful():
     assert got["most_successful"] == {"step": 1_000_000, "success": 0.92, "episode_return": 840.0,
                                       "overforce": 0.0, "touching": 3.0, "streak": 2.0}  # fmt: skip
     assert richest_evaluation([{"step": 0.0}]) == {"richest": None, "most_successful": None}
+
+
+def test_a_brief_counts_each_run_solved_where_its_task_is(tmp_path):
+    """Without --threshold, ``campaign_brief`` takes each run's task from its config: a Lift
+    run at 0.92 counts as solved (Lift's 0.9), a Touch run at 0.92 does not (0.95)."""
+    from benchmarks.campaign_brief import run_threshold
+
+    for task, seed in (("lift", 1), ("touch", 2)):
+        _run(tmp_path, seed, 0.92, 3.0, 2.0)
+        config = tmp_path / f"touch-fast-seed{seed}" / "config.json"
+        data = json.loads(config.read_text())
+        config.write_text(json.dumps({"train": {**data["train"], "task": task}}))
+    assert run_threshold(tmp_path / "touch-fast-seed1", None) == 0.9
+    assert run_threshold(tmp_path / "touch-fast-seed2", None) == 0.95
+    assert run_threshold(tmp_path / "touch-fast-seed2", 0.5) == 0.5
+    assert run_threshold(tmp_path / "nowhere", None) == 0.95
