@@ -46,11 +46,13 @@ SeedsDone = Callable[[list[SeedRun], list[dict[str, Any]]], None]
 
 
 def read_curve(run_dir: Path, start: float) -> list[tuple[float, int, float]]:
-    """``(seconds since start, step, success)`` of each evaluation in a run's metrics.csv."""
+    """``(seconds since start, step, success)`` of each evaluation in a run's metrics.csv (a
+    row without one, an epoch before ``eval_from_step``, is left out)."""
     from mjx_arm.train.rundir import RunDir
 
     rows = RunDir(run_dir).read_metrics()
-    return [(r["time"] - start, int(r["step"]), r.get(SUCCESS_KEY, 0.0)) for r in rows]
+    rows = [r for r in rows if math.isfinite(r.get(SUCCESS_KEY, math.nan))]
+    return [(r["time"] - start, int(r["step"]), r[SUCCESS_KEY]) for r in rows]
 
 
 def final_policy_success(run_dir: Path, curve: list[tuple[float, int, float]]) -> float:

@@ -84,6 +84,12 @@ class TrainConfig:
             to [-1, 1] by the env. Only "tanh_normal" policies export (:mod:`mjx_arm.policy`).
         num_evals: evaluations over the run (metrics are written at each).
         num_eval_envs: envs per evaluation (one episode each).
+        eval_from_step: env steps before which the policy is not evaluated: neither the initial
+            policy nor an epoch that ends before this step (its metrics row holds its training
+            figures alone; it cannot stop the run or become its best). An evaluation takes as
+            long as a few hundred thousand env steps and a policy under training solves nothing
+            in its first epochs; the run's last epoch is always evaluated. 0: every epoch, and
+            the initial policy, as Brax does.
         checkpoint_every: save a checkpoint every this many evaluations (and at the end).
         env_state_every: the training envs' state (hundreds of MB for 8192 MJX envs) goes
             into every this many evaluations' checkpoint; a resume starts from the newest
@@ -138,6 +144,7 @@ class TrainConfig:
     policy_distribution: str = "tanh_normal"
     num_evals: int = 10
     num_eval_envs: int = 128
+    eval_from_step: int = 0
     checkpoint_every: int = 1
     env_state_every: int = 5
     stop_at_success: float = 0.0
@@ -156,7 +163,7 @@ class TrainConfig:
         check_range(self, ("policy_hidden", "value_hidden"), low=1, high=MAX_LAYER)
         check_range(self, ("num_envs", "num_eval_envs", "batch_size"), high=MAX_BATCH)
         check_range(self, ("seed",), low=0, high=MAX_SEED)
-        check_range(self, ("devices",), low=0)
+        check_range(self, ("devices", "eval_from_step"), low=0)
         check_range(self, ("learning_rate", "clipping_epsilon", "max_grad_norm"), above=0)
         check_range(self, ("reward_scaling", "discounting"), above=0)
         check_range(self, ("discounting", "gae_lambda", "stop_at_success"), low=0, high=1)

@@ -289,7 +289,7 @@ def run_ppo(
     report = report or CompileReport()
     run = prepare_ppo(config, env, eval_env, episode_length, restore, step_offset, report)
     state, env_state, local_key = run.state, run.env_state, run.local_key
-    if config.num_evals > 1 and step_offset == 0:
+    if config.num_evals > 1 and step_offset == 0 and not config.eval_from_step:
         _first_evaluation(run, callbacks, report)
     walltime, step = 0.0, step_offset
     while step < config.num_timesteps:
@@ -324,13 +324,24 @@ def _epoch_done(
     training: dict[str, Any],
 ) -> None:
     """After the epoch that reached ``step``: check it, hand out its params and a snapshot of
-    ``taken`` (state, env state, epochs' key), evaluate and report with ``training``."""
+    ``taken`` (state, env state, epochs' key), evaluate (:func:`evaluates_at`) and report with
+    ``training``."""
     state = taken[0]
     check_epoch(config, step, state, metrics)  # before anything of the epoch is saved
     params = run.learner.params(state)
     callbacks.policy_params(step, run.learner.make_policy, params)
     callbacks.snapshot(step, functools.partial(run.snapshot, *taken))
+    if not evaluates_at(config, step):
+        callbacks.progress(step, dict(training))
+        return
     callbacks.progress(step, _evaluate(run.evaluate, params, training))
+
+
+def evaluates_at(config: TrainConfig, step: int) -> bool:
+    """Whether the epoch that ends at env step ``step`` is evaluated: from
+    ``config.eval_from_step`` on, and the run's last epoch always. The same on every process
+    (it reads the step alone), so that all stop at the same evaluation."""
+    return step >= config.eval_from_step or step >= config.num_timesteps
 
 
 def _evaluate(evaluate: Evaluator, params: Params, training: dict[str, Any]) -> dict[str, Any]:

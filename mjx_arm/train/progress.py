@@ -212,7 +212,8 @@ class _Progress:
         if self.evals == 1:
             self._start_up_done()
         success = row.get("eval/episode_success", 0.0)
-        self._remember_best(step, success)
+        if "eval/episode_success" in row:  # an epoch before eval_from_step has no evaluation
+            self._remember_best(step, success)
         due = self.evals % self.config.checkpoint_every == 0
         if (due or solved or step >= self.total) and self.latest is not None:
             self._checkpoint(step, success, solved)
@@ -265,10 +266,11 @@ class _Progress:
 
     def _show(self, step: int, row: dict[str, float]) -> None:
         self.bar.n = step
-        self.bar.set_postfix(
-            reward=f"{row.get('eval/episode_reward', float('nan')):.1f}",
-            success=f"{row.get('eval/episode_success', float('nan')):.2f}",
-        )
+        if "eval/episode_success" in row:  # else the last evaluation's figures stay
+            self.bar.set_postfix(
+                reward=f"{row.get('eval/episode_reward', float('nan')):.1f}",
+                success=f"{row['eval/episode_success']:.2f}",
+            )
         self.bar.refresh()
 
     def _save_job(

@@ -66,6 +66,8 @@ def done_line(result) -> str:
     else:
         speed = "compile time and steps/s need 3 or more evaluations"
     evals = f"last eval success {success:.3f} at step {result.steps:,}"
+    if not math.isfinite(success):  # stopped before eval_from_step
+        evals = f"no evaluation by step {result.steps:,} (eval_from_step)"
     if result.best is not None:
         best, step = result.best
         evals += f", best {best:.3f} at step {step:,}"

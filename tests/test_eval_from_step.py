@@ -1,0 +1,95 @@
+"""``eval_from_step``: no evaluation of the initial policy nor of the epochs before that step.
+
+The tiny run of ``tiny_run`` (three epochs of Reach on the C MuJoCo batch) with its evaluations
+from the second epoch on, beside the same run evaluated at every epoch: the training is the same
+to the bit (evaluations draw from their own key and change no state), the skipped epoch logs its
+training figures alone, and a run stopped after that epoch resumes into the run it continues.
+"""
+
+from __future__ import annotations
+
+import math
+import shutil
+from pathlib import Path
+
+import pytest
+from tiny_run import EPOCH_STEPS, EPOCHS, SETTINGS
+
+from mjx_arm.bench.seeds import read_curve
+from mjx_arm.train.loop import evaluates_at
+from mjx_arm.train.ppo import train
+from mjx_arm.train.presets import load_config
+from mjx_arm.train.rundir import RunDir
+
+SETS = [f"{k}={v}" for k, v in SETTINGS.items()]
+EVERY_EPOCH = load_config("cpu", None, SETS)
+FROM_SECOND = load_config("cpu", None, [*SETS, f"eval_from_step={2 * EPOCH_STEPS}"])
+SUCCESS = "eval/episode_success"
+
+
+def _rows(run_dir: Path) -> list[dict[str, float]]:
+    return RunDir(run_dir).read_metrics()
+
+
+def _training(row: dict[str, float]) -> dict[str, float]:
+    """A row's training figures without timings."""
+    timings = ("walltime", "sps", "_s")
+    return {k: v for k, v in row.items() if k.startswith("training/") and not k.endswith(timings)}
+
+
+def _same(a: dict[str, float], b: dict[str, float]) -> bool:
+    """Equal rows, NaN (an empty cell) equal to NaN."""
+    return a.keys() == b.keys() and all(
+        a[k] == b[k] or (math.isnan(a[k]) and math.isnan(b[k])) for k in a
+    )
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """The run evaluated at every epoch, and from the second epoch on."""
+    folder = tmp_path_factory.mktemp("eval_from_step")
+    train(EVERY_EPOCH, folder / "every", quiet=True)
+    train(FROM_SECOND, folder / "from_second", quiet=True)
+    return {"every": folder / "every", "from_second": folder / "from_second"}
+
+
+def test_the_epochs_before_eval_from_step_log_training_figures_only(runs) -> None:
+    rows = _rows(runs["from_second"])
+    assert [int(r["step"]) for r in rows] == [i * EPOCH_STEPS for i in range(1, EPOCHS + 1)]
+    assert math.isnan(rows[0].get(SUCCESS, math.nan)) and _training(rows[0])
+    assert all(math.isfinite(r[SUCCESS]) for r in rows[1:])
+    # the seeds benchmark reads the evaluations alone
+    steps = [step for _, step, _ in read_curve(runs["from_second"], 0.0)]
+    assert steps == [i * EPOCH_STEPS for i in range(2, EPOCHS + 1)]
+
+
+def test_skipping_evaluations_leaves_the_training_as_it_was(runs) -> None:
+    """Every epoch's losses, KL and gradient norm equal those of the run evaluated throughout,
+    exactly: evaluations read the params and their own key, nothing else."""
+    every = {int(r["step"]): _training(r) for r in _rows(runs["every"])[1:]}
+    skipped = {int(r["step"]): _training(r) for r in _rows(runs["from_second"])}
+    assert every.keys() == skipped.keys()
+    for step, figures in skipped.items():
+        assert figures and _same(figures, every[step]), step
+
+
+def test_a_run_stopped_before_eval_from_step_resumes_into_the_same_run(runs, tmp_path) -> None:
+    run_dir = tmp_path / "stopped"
+    result = train(FROM_SECOND, run_dir, quiet=True, stop_after=1)
+    assert result.steps == EPOCH_STEPS and math.isnan(result.metrics.get(SUCCESS, math.nan))
+    resumed = tmp_path / "resumed"
+    shutil.copytree(run_dir, resumed)
+    assert train(FROM_SECOND, resumed, resume=True, quiet=True).steps == EPOCHS * EPOCH_STEPS
+    timings = ("time", "walltime", "sps", "_s")
+    whole, got = _rows(runs["from_second"]), _rows(resumed)
+    assert len(got) == len(whole)
+    for a, b in zip(got, whole, strict=True):
+        keep = [k for k in a if not k.endswith(timings)]
+        assert _same({k: a[k] for k in keep}, {k: b[k] for k in keep})
+
+
+def test_the_last_epoch_is_always_evaluated() -> None:
+    config = load_config("cpu", None, [*SETS, "eval_from_step=10000000"])
+    assert not evaluates_at(config, EPOCH_STEPS)
+    assert evaluates_at(config, EPOCHS * EPOCH_STEPS)
+    assert evaluates_at(EVERY_EPOCH, EPOCH_STEPS)
