@@ -249,6 +249,10 @@ TOUCH_TRANSFER = [f"contact/transfer/touch_fast_seed{i}.json" for i in range(3)]
 TOUCH_FRESH_TRANSFER = [
     f"contact/transfer/touch_fast_stop095_seed{i}.json" for i in (7880, 7873, 7892, 7865, 7870)
 ]
+# ... and of seeds_lift_fast_fresh_7660 (0.917-0.920)
+LIFT_FRESH_TRANSFER = [
+    f"contact/transfer/lift_fast_stop090_seed{i}.json" for i in (7671, 7674, 7668)
+]
 GPU_SEEDS = ("scaling/seeds_touch_fast_2gpu_of_2.json", "scaling/seeds_touch_fast_1gpu_of_2.json")
 
 
@@ -434,6 +438,9 @@ HEADLINES: tuple[Headline, ...] = (
     _transfer_row("Touch, `--preset fast` as shipped, the five fresh seeds of 7864-7899 that "
                   "stopped lowest (0.950-0.959 on the GPU)",
                   TOUCH_FRESH_TRANSFER, ("mujoco", "pybullet")),
+    _transfer_row("Lift, `--preset fast` as shipped, the three fresh seeds of 7660-7679 that "
+                  "stopped lowest (0.917-0.920 on the GPU)",
+                  LIFT_FRESH_TRANSFER, ("mujoco", "pybullet")),
     _before_touch_changes(Headline(_any_arm_row)),
     Headline(_pick_row),
     _arm_groups_row("Lift on the UR5e with a linkage gripper, `--preset fast` as shipped",
