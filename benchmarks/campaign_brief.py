@@ -22,6 +22,7 @@ from pathlib import Path
 
 from benchmarks.training_diagnosis import SEED_DIR, _col, _rows, short_of_budget, trap
 from mjx_arm.task.registry import get_task
+from mjx_arm.task.spec import Task
 
 STATES = ("solved", "unsolved", "stopped")
 
@@ -47,15 +48,15 @@ def brief(run: Path, threshold: float) -> tuple[str, str]:
 
 
 def run_threshold(run: Path, given: float | None) -> float:
-    """``given``, or where the run's task counts as solved (its ``config.json``; 0.95 when the
-    file or its task cannot be read)."""
+    """``given``, or where the run's task counts as solved (its ``config.json``; a task's
+    default ``solved_at`` when the file or its task cannot be read)."""
     if given is not None:
         return given
     config = run / "config.json"
     try:
         return get_task(json.loads(config.read_text())["train"]["task"]).solved_at
     except (OSError, ValueError, KeyError, TypeError):
-        return 0.95
+        return Task.solved_at
 
 
 def main(argv: list[str] | None = None) -> int:
