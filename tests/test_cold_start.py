@@ -50,6 +50,24 @@ def test_stages_add_up_and_jax_compiles_are_counted() -> None:
     assert "other start-up (s): a " in report.summary()
 
 
+def test_each_program_s_tracing_and_lowering_is_timed_under_its_own_name() -> None:
+    def deep(x: jax.Array) -> jax.Array:
+        for _ in range(300):  # a long trace beside a short one
+            x = jnp.sin(x) * 1.0001
+        return x
+
+    x = jax.ShapeDtypeStruct((3,), jnp.float32)
+    report = CompileReport().open()
+    jax.jit(deep).lower(x)
+    jax.jit(lambda x: x + 0.25).lower(x)
+    report.close()
+    traced = report.to_dict()["slowest_traces"]
+    assert set(traced) == {"deep", "<lambda>"}, traced  # "jit(deep)" while lowering
+    assert traced["deep"] > traced["<lambda>"] > 0.0
+    total = report.seconds["trace"] + report.seconds["lower"]
+    assert sum(traced.values()) == pytest.approx(total, abs=0.01)
+
+
 def _child(cache: Path) -> dict:
     env = {**os.environ, "MJX_ARM_JAX_CACHE": str(cache), "JAX_PLATFORMS": "cpu"}
     done = subprocess.run(

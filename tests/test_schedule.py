@@ -116,6 +116,7 @@ def test_devices_scale_the_envs_minibatch_and_budget() -> None:
     two = config.scaled_for_devices(2)
     assert (two.num_envs, two.batch_size) == (2 * config.num_envs, 2 * config.batch_size)
     assert two.num_timesteps == 2 * config.num_timesteps
+    assert two.eval_from_step == 2 * config.eval_from_step > 0  # as many updates unevaluated
     assert two.num_minibatches == config.num_minibatches
     assert config.scaled_for_devices(1) == config
     kept = config.replace(scale_with_devices=False)

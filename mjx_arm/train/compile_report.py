@@ -93,6 +93,7 @@ class CompileReport:
         # XLA backend seconds per program: compiling it, or loading it from the persistent cache
         self.programs: dict[str, float] = defaultdict(float)
         self.seconds: dict[str, float] = defaultdict(float)  # trace / lower / backend totals
+        self.traced: dict[str, float] = defaultdict(float)  # trace + lower seconds per program
         self.counts: dict[str, int] = defaultdict(int)
         self.start = time.monotonic()
         self.opened_at = time.time()  # wall clock (s since the epoch), for other processes
@@ -128,7 +129,9 @@ class CompileReport:
         if key is None:
             return
         self.seconds[key] += seconds
-        if key == "backend_compile":
+        if key != "backend_compile":  # JAX names a program "f" when tracing, "jit(f)" lowering
+            self.traced[fun_name.removeprefix("jit(").removesuffix(")")] += seconds
+        else:
             self.counts["programs"] += 1
             self.programs[fun_name] += seconds
 
@@ -142,16 +145,18 @@ class CompileReport:
         """The run's compile time: wall seconds of the :data:`COMPILE_STAGES` it went through."""
         return sum(self.stages.get(name, 0.0) for name in COMPILE_STAGES)
 
-    def top_programs(self, count: int = 5) -> dict[str, float]:
-        """The ``count`` programs with the most XLA compile seconds: name -> seconds."""
-        ranked = sorted(self.programs.items(), key=lambda kv: -kv[1])
+    def top_programs(self, count: int = 5, traced: bool = False) -> dict[str, float]:
+        """The ``count`` programs with the most XLA compile seconds (``traced``: the most
+        seconds of tracing and lowering to MLIR): name -> seconds."""
+        seconds = self.traced if traced else self.programs
+        ranked = sorted(seconds.items(), key=lambda kv: -kv[1])
         return {name: round(s, 3) for name, s in ranked[:count]}
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: the compile time (s), when the report opened (``time.time()``, at the
         trainer's start) and the start-up steps before it were done (``marks``), stages (s),
         JAX totals (s, summed over programs compiled at the same time), counts and the slowest
-        programs."""
+        programs to compile and to trace and lower."""
         return {
             "compile_s": round(self.compile_seconds, 3),
             "opened_at": round(self.opened_at, 3),
@@ -161,6 +166,7 @@ class CompileReport:
             "jax_seconds": {k: round(v, 3) for k, v in self.seconds.items()},
             "jax_counts": dict(self.counts),
             "slowest_programs": self.top_programs(),
+            "slowest_traces": self.top_programs(traced=True),
         }
 
     def summary(self) -> str:

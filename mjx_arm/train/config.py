@@ -107,8 +107,9 @@ class TrainConfig:
         devices: local devices to train on (0: all of them). The env batch is split evenly
             over them, so ``num_envs`` and ``batch_size`` must be multiples of the count.
         scale_with_devices: ``train --devices N`` (N > 1) multiplies ``num_envs``,
-            ``batch_size`` and ``num_timesteps`` by N (:meth:`scaled_for_devices`): each GPU
-            keeps the preset's envs and minibatch share, and a run takes as many updates.
+            ``batch_size``, ``num_timesteps`` and ``eval_from_step`` by N
+            (:meth:`scaled_for_devices`): each GPU keeps the preset's envs and minibatch share,
+            and a run takes as many updates and skips the evaluations of as many.
         partition: how the batched physics is spread over the devices: "xla" (XLA partitions
             the jitted env graph), "per_device" (``shard_map``: each device steps its own
             envs; needed for MuJoCo Warp, whose kernels XLA cannot partition) or "auto"
@@ -186,14 +187,15 @@ class TrainConfig:
         return self.batch_size * self.num_minibatches * self.unroll_length
 
     def scaled_for_devices(self, count: int) -> TrainConfig:
-        """The config for ``count`` devices: envs, minibatch size and budget times ``count``
-        where ``scale_with_devices`` (else unchanged)."""
+        """The config for ``count`` devices: envs, minibatch size, budget and the first
+        evaluated step times ``count`` where ``scale_with_devices`` (else unchanged)."""
         if not self.scale_with_devices or count < 2:
             return self
         return self.replace(
             num_envs=self.num_envs * count,
             batch_size=self.batch_size * count,
             num_timesteps=self.num_timesteps * count,
+            eval_from_step=self.eval_from_step * count,
         )
 
     def replace(self, **changes: Any) -> TrainConfig:
