@@ -3,11 +3,13 @@
 The tiny run of ``tiny_run`` (three epochs of Reach on the C MuJoCo batch) with its evaluations
 from the second epoch on, beside the same run evaluated at every epoch: the training is the same
 to the bit (evaluations draw from their own key and change no state), the skipped epoch logs its
-training figures alone, and a run stopped after that epoch resumes into the run it continues.
+training figures alone, a run stopped after that epoch resumes into the run it continues, and
+the evaluation, first needed epochs later, compiles on a thread of its own meanwhile.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import shutil
 from pathlib import Path
@@ -16,6 +18,7 @@ import pytest
 from tiny_run import EPOCH_STEPS, EPOCHS, SETTINGS
 
 from mjx_arm.bench.seeds import read_curve
+from mjx_arm.train.evaluation import Evaluator, run_aside
 from mjx_arm.train.loop import evaluates_at
 from mjx_arm.train.ppo import train
 from mjx_arm.train.presets import load_config
@@ -93,3 +96,42 @@ def test_the_last_epoch_is_always_evaluated() -> None:
     assert not evaluates_at(config, EPOCH_STEPS)
     assert evaluates_at(config, EPOCHS * EPOCH_STEPS)
     assert evaluates_at(EVERY_EPOCH, EPOCH_STEPS)
+
+
+def _stages(run_dir: Path) -> dict[str, float]:
+    return json.loads((run_dir / "compile.json").read_text())[-1]["stages"]
+
+
+def test_an_evaluation_epochs_away_compiles_aside_while_they_train(runs) -> None:
+    """From the second epoch on: the evaluation compiles on its own thread (timed apart from
+    the start-up's compile) and the first evaluation waits for it where it is not done yet;
+    evaluated from the start, it compiles with the training's programs."""
+    aside, every = _stages(runs["from_second"]), _stages(runs["every"])
+    assert aside["evaluation compiled aside"] > 0.0
+    assert aside["waited for the evaluation's compile"] >= 0.0
+    assert "evaluation compiled aside" not in every and "first evaluation run" in every
+
+
+def test_the_evaluation_compiled_aside_evaluates_as_one_compiled_before(
+    runs, tmp_path, monkeypatch
+) -> None:
+    """The same run with its evaluation compiled on the main thread, up front: every metric
+    of every row but the timings is equal."""
+
+    def up_front(self: Evaluator, params, report) -> None:
+        self.use(self.lower(params).compile())
+
+    monkeypatch.setattr(Evaluator, "compile_aside", up_front)
+    train(FROM_SECOND, tmp_path / "up_front", quiet=True)
+    assert "evaluation compiled aside" not in _stages(tmp_path / "up_front")
+    timings = ("time", "walltime", "sps", "_s")
+    for a, b in zip(_rows(tmp_path / "up_front"), _rows(runs["from_second"]), strict=True):
+        keep = [k for k in a if not k.endswith(timings)]
+        assert _same({k: a[k] for k in keep}, {k: b[k] for k in keep})
+
+
+def test_an_error_of_a_compile_aside_is_raised_where_it_is_waited_for() -> None:
+    future = run_aside(lambda: 1 / 0, "failing")
+    with pytest.raises(ZeroDivisionError):
+        future.result(timeout=30)
+    assert run_aside(lambda: 7, "fine").result(timeout=30) == 7

@@ -3,15 +3,19 @@
 Brax's ``acting.Evaluator`` compiles a reset of the evaluation batch in its constructor (only to
 have a state to donate) and its unroll on the first evaluation, one after the other. This
 evaluator is one program, ``(params, key) -> final state``, that can be lowered ahead of time
-and compiled beside the training epoch (:func:`mjx_arm.train.loop.prepare_ppo`). Its metrics
+and compiled beside the training epoch (:func:`mjx_arm.train.loop.prepare_ppo`), or, where the
+first evaluation comes after some epochs, on a thread of its own while they train
+(:meth:`Evaluator.compile_aside`). Its metrics
 are Brax's: ``eval/episode_<name>`` (mean over the episodes) and ``..._std``,
 ``eval/avg_episode_length``, ``eval/epoch_eval_time``, ``eval/sps``, ``eval/walltime``.
 """
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable
+from concurrent.futures import Future
 from typing import Any
 
 import jax
@@ -47,6 +51,7 @@ class Evaluator:
             return generate_unroll(env, first, policy, key, unroll_length=episode_length)[0]
 
         self._unroll: Callable = jax.jit(unroll)
+        self._pending: tuple[Future, Any] | None = None  # compile_aside's program and report
         self._key = key
         self._walltime = 0.0
         self._steps = episode_length * num_eval_envs
@@ -64,8 +69,28 @@ class Evaluator:
         """Run evaluations with ``compiled``, the compiled result of :meth:`lower`."""
         self._unroll = compiled
 
+    def compile_aside(self, params: Any, report: Any) -> None:
+        """Trace, lower and compile the evaluation on a thread of its own, for a run whose first
+        evaluation comes after some epochs: they train meanwhile, and the first evaluation
+        waits for the program. ``params`` gives the shapes and shardings alone (the epochs may
+        donate its buffers); ``report`` (a ``CompileReport``) gets the thread's seconds
+        ("evaluation compiled aside") and the first evaluation's wait for it."""
+        shapes = jax.tree.map(_shape_of, params)
+        key = self._key
+
+        def build() -> Callable:
+            with report.stage("evaluation compiled aside"):
+                return self._unroll.lower(shapes, key).compile()
+
+        self._pending = (run_aside(build, "evaluation compile"), report)
+
     def run_evaluation(self, params: Any, training_metrics: dict[str, Any]) -> dict[str, Any]:
         """One evaluation of ``params``; its metrics merged after ``training_metrics``."""
+        if self._pending is not None:  # compile_aside's program (its error raises here)
+            future, report = self._pending
+            with report.stage("waited for the evaluation's compile"):
+                self._unroll = future.result()
+            self._pending = None
         self._key, key = jax.random.split(self._key)
         start = time.time()
         state = self._unroll(params, key)
@@ -83,3 +108,24 @@ class Evaluator:
         out["eval/epoch_eval_time"] = seconds
         out["eval/sps"] = self._steps / seconds
         return {"eval/walltime": self._walltime, **training_metrics, **out}
+
+
+def _shape_of(leaf: Any) -> jax.ShapeDtypeStruct:
+    """An array's shape, dtype and sharding (a NumPy array has none), without its buffer."""
+    return jax.ShapeDtypeStruct(leaf.shape, leaf.dtype, sharding=getattr(leaf, "sharding", None))
+
+
+def run_aside(fn: Callable[[], Any], name: str) -> Future:
+    """Start ``fn()`` on a daemon thread called ``name``; the future holds its value or error.
+    A daemon, so that a run stopped meanwhile (Ctrl-C, an error) does not wait for it at exit.
+    """
+    future: Future = Future()
+
+    def run() -> None:
+        try:
+            future.set_result(fn())
+        except BaseException as error:  # handed to whoever waits on the future
+            future.set_exception(error)
+
+    threading.Thread(target=run, name=name, daemon=True).start()
+    return future

@@ -159,7 +159,8 @@ def prepare_ppo(
     evaluate = _evaluator(config, eval_env, learner, episode_length, key_eval)
     sizes = EpochSizes.of(config, config.num_timesteps)
     keys = jax.random.split(key_env, config.num_envs)
-    programs = _Programs(train_env, mesh, keys, learner, evaluate)
+    aside = not evaluates_initial_policy(config, step_offset) and jax.process_count() == 1
+    programs = _Programs(train_env, mesh, keys, learner, evaluate, aside)
     epoch, reset = programs.compile(state, sizes, local_key, report)
     _wait_for_kernels((env, eval_env), report)
     env_state, paths = _first_envs(reset, keys, env.physics.splits, restore, report)
@@ -171,31 +172,36 @@ def prepare_ppo(
 @dataclass(frozen=True)
 class _Programs:
     """What the run's programs are built from: the wrapped training envs on ``mesh``, their
-    reset keys (``[num_envs, 2]``), the learner and the evaluator."""
+    reset keys (``[num_envs, 2]``), the learner and the evaluator; ``aside``: the evaluation
+    is compiled on a thread of its own once the rest is (its first use is epochs away)."""
 
     train_env: Any
     mesh: Any
     keys: jax.Array
     learner: Learner
     evaluate: Evaluator
+    aside: bool = False
 
     def compile(
         self, state: Any, sizes: EpochSizes, local_key: jax.Array, report: CompileReport
     ) -> tuple[Any, Callable]:
         """Trace and lower the reset, the epoch and (process 0) the evaluation, then compile
-        them at once; the evaluator takes its program. Returns (the compiled epoch, the
-        compiled reset ``keys -> env_state``)."""
+        them at once; the evaluator takes its program (or, ``aside``, compiles it on a thread
+        of its own afterwards). Returns (the compiled epoch, the compiled reset
+        ``keys -> env_state``)."""
         with report.stage("trace + lower"):
             reset, shardings = _reset_fn(self.train_env, self.mesh, self.keys)
             env_shapes = jax.tree.map(_strong_shape, jax.eval_shape(reset, self.keys), shardings)
             epoch = self.learner.epoch_programs(self.train_env, sizes, shardings)
             lowered = {"reset": reset.lower(self.keys), **epoch.lower(state, env_shapes, local_key)}
-            if is_leader():
+            if is_leader() and not self.aside:
                 lowered["evaluation"] = self.evaluate.lower(self.learner.params(state))
         with report.stage("XLA compile (in parallel)"):
             compiled = compile_all(lowered)
         if "evaluation" in compiled:
             self.evaluate.use(compiled["evaluation"])
+        elif is_leader():
+            self.evaluate.compile_aside(self.learner.params(state), report)
         return epoch.with_programs(compiled["rollout"], compiled["update"]), compiled["reset"]
 
 
@@ -289,7 +295,7 @@ def run_ppo(
     report = report or CompileReport()
     run = prepare_ppo(config, env, eval_env, episode_length, restore, step_offset, report)
     state, env_state, local_key = run.state, run.env_state, run.local_key
-    if config.num_evals > 1 and step_offset == 0 and not config.eval_from_step:
+    if evaluates_initial_policy(config, step_offset):
         _first_evaluation(run, callbacks, report)
     walltime, step = 0.0, step_offset
     while step < config.num_timesteps:
@@ -335,6 +341,12 @@ def _epoch_done(
         callbacks.progress(step, dict(training))
         return
     callbacks.progress(step, _evaluate(run.evaluate, params, training))
+
+
+def evaluates_initial_policy(config: TrainConfig, step_offset: int) -> bool:
+    """Whether a run from ``step_offset`` evaluates its policy before the first epoch: a new
+    run (not a resumed one) with evaluations during training and no ``eval_from_step``."""
+    return config.num_evals > 1 and step_offset == 0 and not config.eval_from_step
 
 
 def evaluates_at(config: TrainConfig, step: int) -> bool:
