@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import math
 import shutil
+import sys
 from pathlib import Path
 
 import pytest
@@ -110,6 +111,7 @@ def test_an_evaluation_epochs_away_compiles_aside_while_they_train(runs) -> None
     assert aside["evaluation compiled aside"] > 0.0
     assert aside["waited for the evaluation's compile"] >= 0.0
     assert "evaluation compiled aside" not in every and "first evaluation run" in every
+    assert sys.getswitchinterval() == pytest.approx(0.005)  # Python's default, given back
 
 
 def test_the_evaluation_compiled_aside_evaluates_as_one_compiled_before(

@@ -313,12 +313,14 @@ def test_robust_preset_is_the_measured_training():
         "randomization.frictionloss=[0,0.1]",
     ]
     # Touch's robust runs trained before fast's fixed wrench scale (normalizer.force_scale) and
-    # its end of press pay after a reading over the band, which robust does not take
+    # its end of press pay after a reading over the band, and before fast's evaluations from
+    # 5M steps on; robust takes none of them
     budget = [
         "num_timesteps=60000000",
         "num_evals=61",
         "normalizer.force_scale=0",
         "task.pay_after_overforce=true",
+        "eval_from_step=0",
     ]
     for task, sets in (("touch", [*latency, *budget]), ("lift", selected)):
         # robust runs stopped at 0.97; fast stops where its task counts as solved since
