@@ -24,7 +24,6 @@ import numpy as np
 from brax.envs.wrappers.training import EvalWrapper
 from brax.training.acting import generate_unroll
 
-
 # Python's thread switch interval (s) while the evaluation traces aside (default 0.005). MuJoCo
 # Warp's foreign calls run a Python callback each, which waits for the interpreter lock that
 # the tracing thread holds: at the default, the first reset of the training envs took 1.39 s
