@@ -31,20 +31,22 @@ def brief(run: Path, threshold: float) -> tuple[str, str]:
     """``campaign/run: best B last L``, then the steps at the threshold or the trap, of one
     seed run; and where it stands: "solved", "unsolved" (its budget spent) or "stopped"."""
     rows = _rows(run)
-    if not rows:
-        return f"{run.parent.name}/{run.name}: no evaluation yet", "stopped"
-    success = _col(rows, "eval/episode_success")
-    hit = next((r for r in rows if r.get("eval/episode_success", 0.0) >= threshold), None)
-    best = float(success.max()) if success.size else math.nan
-    text = f"{run.parent.name}/{run.name}: best {best:.3f} last {success[-1]:.3f}"
-    steps = f"{rows[-1]['step'] / 1e6:.1f}M steps"
+    steps = f"{rows[-1]['step'] / 1e6:.1f}M steps" if rows else "0 steps"
+    # the rows of epochs before eval_from_step hold training figures alone
+    evaluated = [r for r in rows if math.isfinite(r.get("eval/episode_success", math.nan))]
+    if not evaluated:
+        return f"{run.parent.name}/{run.name}: no evaluation yet (stopped at {steps})", "stopped"
+    success = _col(evaluated, "eval/episode_success")
+    hit = next((r for r in evaluated if r["eval/episode_success"] >= threshold), None)
+    text = f"{run.parent.name}/{run.name}: best {success.max():.3f} last {success[-1]:.3f}"
     if hit is not None:
         return f"{text} solved at {hit['step'] / 1e6:.1f}M steps", "solved"
     config = run / "config.json"
     train = json.loads(config.read_text()).get("train", {}) if config.is_file() else {}
+    last = trap(evaluated[-1])
     if short_of_budget(train, rows[-1]["step"]):
-        return f"{text} stopped at {steps}, before its budget (so far {trap(rows[-1])})", "stopped"
-    return f"{text} unsolved at {steps} ({trap(rows[-1])})", "unsolved"
+        return f"{text} stopped at {steps}, before its budget (so far {last})", "stopped"
+    return f"{text} unsolved at {steps} ({last})", "unsolved"
 
 
 def run_threshold(run: Path, given: float | None) -> float:

@@ -243,6 +243,26 @@ def test_the_richest_evaluation_beside_the_most_successful():
     assert richest_evaluation([{"step": 0.0}]) == {"richest": None, "most_successful": None}
 
 
+def test_a_brief_reads_the_evaluated_rows_alone(tmp_path):
+    """Epochs before ``eval_from_step`` log training figures alone: a run stopped before its
+    first evaluation has "no evaluation yet", and one stopped after an unevaluated epoch
+    reads its best, last and trap from the evaluated rows."""
+    from benchmarks.campaign_brief import brief
+
+    _run(tmp_path, 1, 0.5, 31.9, 0.1, budget=30_000_000)
+    path = tmp_path / "touch-fast-seed1" / "metrics.csv"
+    lines = path.read_text().splitlines()
+    unevaluated = "2000,,,,,,,0.1,0.3"
+    path.write_text("\n".join([*lines, unevaluated]) + "\n")
+    line, state = brief(tmp_path / "touch-fast-seed1", 0.95)
+    assert state == "stopped" and "best 0.500 last 0.500 stopped at 0.0M steps" in line
+    assert line.endswith("(so far tapping)")
+    path.write_text("\n".join([lines[0], unevaluated]) + "\n")
+    line, state = brief(tmp_path / "touch-fast-seed1", 0.95)
+    assert state == "stopped"
+    assert line.endswith("/touch-fast-seed1: no evaluation yet (stopped at 0.0M steps)")
+
+
 def test_a_brief_counts_each_run_solved_where_its_task_is(tmp_path):
     """Without --threshold, ``campaign_brief`` takes each run's task from its config: a Lift
     run at 0.92 counts as solved (Lift's 0.9), a Touch run at 0.92 does not (0.95)."""
