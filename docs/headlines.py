@@ -268,36 +268,38 @@ def _gpu_seeds_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
     return "Touch `--preset fast` seeds, one process per GPU", value, list(GPU_SEEDS)
 
 
-# Touch seeds trained on two GPUs each, and the same seeds on one GPU (the same commit and host)
+# Touch seeds trained on two GPUs each, and fresh seeds on one GPU (the same commit and host)
 TWO_GPU_SEEDS = (
-    "seeds/fresh/seeds_touch_fast_fresh_7835_2gpu.json",
-    "seeds/fresh/seeds_touch_fast_fresh_7835_1gpu.json",
+    "seeds/fresh/seeds_touch_fast_fresh_8100_2gpu.json",
+    "seeds/fresh/seeds_touch_fast_fresh_8036.json",
 )
 
 
 def _two_gpu_seeds_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
-    """Touch on 2 GPUs per seed: solve rate, and the warm median beside the one-GPU median of
-    the same seeds (steps to the threshold and env steps/s as the causes)."""
-    two, one = ({r["seed"]: r for r in load(rel)["seeds"]} for rel in TWO_GPU_SEEDS)
+    """Touch on 2 GPUs per seed: solve rate, and its warm median beside the one-GPU campaign's
+    (steps to the threshold and env steps/s as the causes); medians over each file's warm
+    solved seeds."""
     summary = load(TWO_GPU_SEEDS[0])["summary"]
-    both = [s for s in two if s in one and two[s].get("warm") and one[s].get("warm")]
-    both = [s for s in both if two[s]["time_to_threshold"] and one[s]["time_to_threshold"]]
+    two, one = (
+        [r for r in load(rel)["seeds"] if r.get("warm") and r["time_to_threshold"]]
+        for rel in TWO_GPU_SEEDS
+    )
 
-    def median(runs: dict, key: str) -> float:
-        return statistics.median(runs[s][key] for s in both)
+    def ratio(key: str) -> float:
+        return statistics.median(r[key] for r in two) / statistics.median(r[key] for r in one)
 
-    t2, t1 = median(two, "time_to_threshold"), median(one, "time_to_threshold")
-    speed = median(two, "training_steps_per_s") / median(one, "training_steps_per_s")
-    steps = median(two, "steps_to_threshold") / median(one, "steps_to_threshold")
+    t2 = statistics.median(r["time_to_threshold"] for r in two)
+    t1 = statistics.median(r["time_to_threshold"] for r in one)
     value = (
-        f"{summary['solved']} of {summary['seeds']} seeds at {fmt(summary['threshold'])}; on the "
-        f"{len(both)} warm seeds solved both ways, median {secs(t2)} against {secs(t1)} on one "
-        f"GPU ({t2 / t1:.2f}x): {speed:.2f}x the env steps/s, {steps:.1f}x the steps to the "
-        "threshold"
+        f"{summary['solved']} of {summary['seeds']} seeds at {fmt(summary['threshold'])}; warm "
+        f"median {secs(t2)} ({len(two)} seeds) against {secs(t1)} on one GPU ({len(one)} "
+        f"seeds, {t2 / t1:.2f}x): {ratio('training_steps_per_s'):.2f}x the env steps/s, "
+        f"{ratio('steps_to_threshold'):.1f}x the steps to the threshold"
     )
     what = (
-        "Touch: `--preset fast` (then stopping at 0.97) on 2 H200s per seed (`train --devices "
-        "2`, the batch grown with the GPUs), fresh seeds 7835-7842, time from the command's start"
+        "Touch: `--preset fast` as shipped on 2 H200s per seed (`train --devices 2`, the batch "
+        "grown with the GPUs), fresh seeds 8100-8105, beside fresh seeds 8036-8066 on one H200 "
+        "each on the same host, time from the command's start"
     )
     return what, value, list(TWO_GPU_SEEDS)
 
@@ -412,9 +414,10 @@ def _seven_compile(load: Callable[[str], Json]) -> str:
 HEADLINES: tuple[Headline, ...] = (
     _seeds_row(
         "Touch",
-        "seeds/fresh/seeds_touch_fast_fresh_7864.json",
-        "`--preset fast` as shipped, 36 fresh seeds (7864-7899), one H200 per seed (two at "
-        "once, one per GPU of a host of two), one process per seed, time from the command's start",
+        "seeds/fresh/seeds_touch_fast_fresh_8036.json",
+        "`--preset fast` as shipped, 25 fresh seeds (8036-8047, 8054-8066), one H200 per seed "
+        "(two at once, one per GPU of a host of two), one process per seed, time from the "
+        "command's start",
     ),
     Headline(_two_gpu_seeds_row),
     _seeds_row(
