@@ -274,8 +274,8 @@ def _add_config_arguments(p: argparse.ArgumentParser) -> None:
         "--devices",
         type=nonnegative_int,
         help="devices of this host to train on: N > 1 multiplies the preset's envs, minibatch "
-        "size and budget by N, split evenly over them; on a GPU host one process per GPU "
-        "(default: all; also on --resume, which keeps the run's totals)",
+        "size, budget and first evaluated step by N, split evenly over them; on a GPU host one "
+        "process per GPU (default: all; also on --resume, which keeps the run's totals)",
     )
     p.add_argument(
         "--arm",
