@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
+from pathlib import Path
 
 import pytest
 
@@ -277,3 +278,26 @@ def test_a_brief_counts_each_run_solved_where_its_task_is(tmp_path):
     assert run_threshold(tmp_path / "touch-fast-seed2", None) == 0.95
     assert run_threshold(tmp_path / "touch-fast-seed2", 0.5) == 0.5
     assert run_threshold(tmp_path / "nowhere", None) == 0.95
+
+
+def test_eval_from_step_is_chosen_one_epoch_short_of_the_earliest_tuning_solve():
+    """``choose_eval_from_step``: with epochs every 1.06M steps and the earliest solve at the
+    sixth, the fifth stays evaluated and the value is the roundest step after the fourth; the
+    shipped Touch value comes out of its tuning report; fresh seeds are refused."""
+    from benchmarks.choose_eval_from_step import _curves, choose, main, round_step
+
+    assert round_step(4_259_840, 5_324_800) == 5_000_000
+    assert round_step(1_000_000, 1_146_880) == 1_100_000  # one digit would not pass the low end
+    assert round_step(0, 573_440) == 500_000
+    epoch = 1_064_960
+    early = [(i * epoch, 0.0) for i in range(5)] + [(5 * epoch, 0.4), (6 * epoch, 0.96)]
+    late = [(i * epoch, 0.01) for i in range(9)] + [(9 * epoch, 0.99)]
+    got = choose({1000: early, 1001: late}, 0.95)
+    assert (got["eval_from_step"], got["first_kept_evaluation"]) == (5_000_000, 5 * epoch)
+    assert got["best_success_before_it"] == 0.01 and got["evaluations_skipped_per_run"] == 5
+    seeds = Path(__file__).parent.parent / "benchmarks" / "results" / "seeds"
+    report = seeds / "tuning" / "seeds_touch_fast_tuning_nopay.json"
+    assert choose(*_curves([json.loads(report.read_text())]))["eval_from_step"] == 5_000_000
+    fresh = seeds / "fresh" / "seeds_touch_fast_fresh_8036.json"
+    with pytest.raises(SystemExit, match="not a tuning seed"):
+        main([str(fresh)])
