@@ -200,7 +200,7 @@ class _Programs:
             compiled = compile_all(lowered)
         if "evaluation" in compiled:
             self.evaluate.use(compiled["evaluation"])
-        elif is_leader():
+        elif self.aside:
             self.evaluate.compile_aside(self.learner.params(state), report)
         return epoch.with_programs(compiled["rollout"], compiled["update"]), compiled["reset"]
 
