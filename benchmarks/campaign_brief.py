@@ -17,10 +17,16 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 from pathlib import Path
 
-from benchmarks.training_diagnosis import SEED_DIR, _col, _rows, short_of_budget, trap
+from benchmarks.training_diagnosis import (
+    SEED_DIR,
+    _col,
+    _rows,
+    evaluated_rows,
+    short_of_budget,
+    trap,
+)
 from mjx_arm.task.registry import get_task
 from mjx_arm.task.spec import Task
 
@@ -32,8 +38,7 @@ def brief(run: Path, threshold: float) -> tuple[str, str]:
     seed run; and where it stands: "solved", "unsolved" (its budget spent) or "stopped"."""
     rows = _rows(run)
     steps = f"{rows[-1]['step'] / 1e6:.1f}M steps" if rows else "0 steps"
-    # the rows of epochs before eval_from_step hold training figures alone
-    evaluated = [r for r in rows if math.isfinite(r.get("eval/episode_success", math.nan))]
+    evaluated = evaluated_rows(rows)
     if not evaluated:
         return f"{run.parent.name}/{run.name}: no evaluation yet (stopped at {steps})", "stopped"
     success = _col(evaluated, "eval/episode_success")

@@ -74,6 +74,12 @@ def _rows(run: Path) -> list[dict[str, float]]:
         ]
 
 
+def evaluated_rows(rows: list[dict[str, float]]) -> list[dict[str, float]]:
+    """The rows that hold an evaluation (an epoch before ``eval_from_step`` logs its training
+    figures alone)."""
+    return [r for r in rows if math.isfinite(r.get("eval/episode_success", math.nan))]
+
+
 def _col(rows: list[dict[str, float]], name: str) -> np.ndarray:
     values = np.array([r.get(name, math.nan) for r in rows], dtype=float)
     return values[np.isfinite(values)]
@@ -83,12 +89,12 @@ def seed_record(run: Path, threshold: float) -> dict[str, Any]:
     """What one seed's run logged, condensed (see the module docstring)."""
     rows = _rows(run)
     trained = [r for r in rows if math.isfinite(r.get("training/kl_mean", math.nan))]
-    success = _col(rows, "eval/episode_success")
+    evaluated = evaluated_rows(rows)
+    success = _col(evaluated, "eval/episode_success")
     kl = _col(trained, "training/kl_mean")
-    hit = next(
-        (int(r["step"]) for r in rows if r.get("eval/episode_success", 0) >= threshold), None
-    )
+    hit = next((int(r["step"]) for r in evaluated if r["eval/episode_success"] >= threshold), None)
     last = rows[-1]
+    last_eval = evaluated[-1] if evaluated else {}  # the last row may hold no evaluation
     train = json.loads((run / "config.json").read_text())["train"]
     return {
         "seed": int(SEED_DIR.search(run.name)["seed"]),
@@ -105,11 +111,11 @@ def seed_record(run: Path, threshold: float) -> dict[str, Any]:
         "learning_rate_last": last.get("training/learning_rate", math.nan),
         "policy_std_last": last.get("training/policy_dist_mean_std", math.nan),
         "explained_variance_last": last.get("training/explained_variance", math.nan),
-        "touching_last": last.get("eval/episode_touching", math.nan),
-        "overforce_last": last.get("eval/episode_overforce", math.nan),
-        "mean_distance_last": last.get("eval/episode_distance", math.nan)
-        / last.get("eval/avg_episode_length", math.nan),
-        "trap": None if hit is not None else trap(last),
+        "touching_last": last_eval.get("eval/episode_touching", math.nan),
+        "overforce_last": last_eval.get("eval/episode_overforce", math.nan),
+        "mean_distance_last": last_eval.get("eval/episode_distance", math.nan)
+        / last_eval.get("eval/avg_episode_length", math.nan),
+        "trap": None if hit is not None else trap(last_eval),
         **early_drift(trained),
         **normaliser_share(trained),
         **success_course(rows),
@@ -138,7 +144,7 @@ def success_course(rows: list[dict[str, float]]) -> dict[str, Any]:
     """The evaluations' success over the run: every value (``success_curve``, with its
     ``curve_steps``), the step of the first at :data:`FIRST` or more (None: never), and the
     falls, evaluations at least :data:`FALL` under the one before."""
-    evaluated = [r for r in rows if math.isfinite(r.get("eval/episode_success", math.nan))]
+    evaluated = evaluated_rows(rows)
     curve = [float(r["eval/episode_success"]) for r in evaluated]
     first = next((int(r["step"]) for r in evaluated if r["eval/episode_success"] >= FIRST), None)
     return {

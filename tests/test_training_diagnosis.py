@@ -247,8 +247,9 @@ def test_the_richest_evaluation_beside_the_most_successful():
 def test_a_brief_reads_the_evaluated_rows_alone(tmp_path):
     """Epochs before ``eval_from_step`` log training figures alone: a run stopped before its
     first evaluation has "no evaluation yet", and one stopped after an unevaluated epoch
-    reads its best, last and trap from the evaluated rows."""
+    reads its best, last and trap from the evaluated rows, in the brief and the diagnosis."""
     from benchmarks.campaign_brief import brief
+    from benchmarks.training_diagnosis import seed_record
 
     _run(tmp_path, 1, 0.5, 31.9, 0.1, budget=30_000_000)
     path = tmp_path / "touch-fast-seed1" / "metrics.csv"
@@ -258,6 +259,9 @@ def test_a_brief_reads_the_evaluated_rows_alone(tmp_path):
     line, state = brief(tmp_path / "touch-fast-seed1", 0.95)
     assert state == "stopped" and "best 0.500 last 0.500 stopped at 0.0M steps" in line
     assert line.endswith("(so far tapping)")
+    record = seed_record(tmp_path / "touch-fast-seed1", 0.95)  # the diagnosis reads them too
+    assert (record["trap"], record["touching_last"], record["last_step"]) == ("tapping", 31.9, 2000)
+    assert record["best_success"] == record["last_success"] == 0.5 and record["stopped"]
     path.write_text("\n".join([lines[0], unevaluated]) + "\n")
     line, state = brief(tmp_path / "touch-fast-seed1", 0.95)
     assert state == "stopped"
