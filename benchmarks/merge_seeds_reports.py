@@ -21,8 +21,8 @@ import json
 from pathlib import Path
 from typing import Any
 
-from mjx_arm.bench.seeds import write_report
 from mjx_arm.bench.seeds_config import SeedRun, SeedsConfig
+from mjx_arm.bench.seeds_report import write_report
 from mjx_arm.bench.seeds_summary import warm_flags
 
 # settings every input must share (the seeds differ)

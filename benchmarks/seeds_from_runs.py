@@ -34,8 +34,9 @@ import statistics
 from pathlib import Path
 
 from benchmarks.training_diagnosis import SEED_DIR
-from mjx_arm.bench.seeds import read_curve, read_seed_run, write_report
+from mjx_arm.bench.seeds import read_curve, read_seed_run
 from mjx_arm.bench.seeds_config import SeedsConfig
+from mjx_arm.bench.seeds_report import write_report
 
 LOGGED = re.compile(r"^seed (?P<seed>\d+): final .*?at (?:(?P<t>[\d.]+) s|not reached)", re.M)
 

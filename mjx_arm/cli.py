@@ -14,6 +14,7 @@ shows and the exit code is 1.
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 import re
 import shlex
@@ -22,7 +23,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from mjx_arm.inputs import InputError
+from mjx_arm.inputs import InputError, float_in
 from mjx_arm.jax_cache import enable_compilation_cache
 from mjx_arm.names import EXIT_INVALID, EXIT_OK
 from mjx_arm.urdf.repair_args import add_repair_arguments
@@ -150,6 +151,39 @@ def _add_demo(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=cmd_demo)
 
 
+def cmd_serve(args: argparse.Namespace) -> int:
+    """Start a warm trainer: it keeps JAX, the envs and the compiled programs between the
+    ``mjx-arm train --server`` commands it runs, so that a new seed of a config it has trained
+    starts training at once (docs/training.md, "A warm trainer"). One command at a time; the
+    others wait. It holds its GPU's memory while it runs: stop it with Ctrl-C, or let
+    --idle-minutes stop it."""
+    from mjx_arm.train.server import Server
+    from mjx_arm.train.server_protocol import default_socket
+
+    path = Path(args.socket) if args.socket else default_socket()
+    parse = build_parser().parse_args
+    log = functools.partial(print, flush=True)
+    return Server(path, main, parse, args.idle_minutes * 60.0, log).serve_forever()
+
+
+def _add_serve(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "serve", help="a warm trainer for train --server", description=cmd_serve.__doc__
+    )
+    p.add_argument(
+        "--socket",
+        help="the socket to listen at (default: $MJX_ARM_SERVER, else trainer.sock in "
+        "$XDG_RUNTIME_DIR/mjx-arm or in a folder of this user's under the temp folder)",
+    )
+    p.add_argument(
+        "--idle-minutes",
+        type=float_in(0.0, 7 * 24 * 60.0),
+        default=30.0,
+        help="stop after this many minutes without a command (0: never; default 30)",
+    )
+    p.set_defaults(func=cmd_serve)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every subcommand, in the order of the pipeline."""
     from mjx_arm import __version__
@@ -169,6 +203,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for package in (urdf_cli, arm_cli, train_cli, policy_cli, evaluate_cli):
         package.register(sub)
+    _add_serve(sub)
     _add_demo(sub)
     sim2real_cli.register(sub)
     bench_cli.register(sub)
@@ -285,6 +320,7 @@ def main(argv: list[str] | None = None) -> int:
     for category, message in LIBRARY_WARNINGS:
         warnings.filterwarnings("ignore", message, category)
     args = build_parser().parse_args(argv)
+    args.argv = list(sys.argv[1:] if argv is None else argv)  # as given (train --server)
     try:
         return int(args.func(args) or 0)
     except Exception as err:

@@ -9,8 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from mjx_arm.bench.seeds import first_at, write_report
+from mjx_arm.bench.seeds import first_at
 from mjx_arm.bench.seeds_config import SeedRun, SeedsConfig, parse_seeds
+from mjx_arm.bench.seeds_report import write_report
 from mjx_arm.bench.seeds_summary import quartiles, summarize
 
 

@@ -160,7 +160,7 @@ def test_seeds_reports_of_two_calls_merge_into_one(tmp_path):
     one summary over all of them, the newest machine record and each input named; a seed in
     both reports, or another threshold, is refused."""
     from benchmarks.merge_seeds_reports import merge
-    from mjx_arm.bench.seeds import write_report
+    from mjx_arm.bench.seeds_report import write_report
 
     first = _seeds_report([7301, 7300], 20.0, "2026-11-29T01")
     second = _seeds_report([7302], None, "2026-11-29T05")

@@ -215,20 +215,20 @@ def cmd_transfer(args: argparse.Namespace) -> int:
 
 def cmd_seeds(args: argparse.Namespace) -> int:
     """Seeds benchmark: train a preset as shipped once per seed; on a GPU host each seed in its own
-    process, one per GPU at a time (--devices: how many GPUs; --gpus-per-seed: K GPUs per seed).
+    process, one per GPU at a time (--devices: how many GPUs; --gpus-per-seed: K GPUs per seed;
+    --server: each seed's command run by its GPU's warm trainer, mjx-arm serve).
 
     For each seed: final and best evaluation success, steps and wall time (from that seed's start,
     compilation included) to the first evaluation at --threshold, or "not reached". Overall: the
     fraction of seeds solved and the median and interquartile range of the time to the threshold,
-    over all seeds and over the warm ones (those started after a seed had ended: the seeds that
-    start at once on a fresh host pay for empty compilation caches). Writes NAME.md and NAME.json
-    into --out (and NAME.png, the success curves, with --plot); the runs and their logs go to
-    --runs. The report is written again as each seed finishes, so a benchmark stopped early keeps
-    its finished seeds.
+    over all seeds and over the warm ones (started after a seed had ended, on filled caches). Writes
+    NAME.md and NAME.json into --out (and NAME.png, the success curves, with --plot); the runs and
+    their logs go to --runs. The report is written again as each seed finishes.
     """
     start = time.time()
     from mjx_arm.bench.results import environment_metadata
-    from mjx_arm.bench.seeds import SeedsConfig, check_seed_settings, write_report
+    from mjx_arm.bench.seeds import SeedsConfig, check_seed_settings
+    from mjx_arm.bench.seeds_report import write_report
     from mjx_arm.train.launch import visible_gpus
 
     config = from_arguments(SeedsConfig(task=args.task or SeedsConfig.task), args)

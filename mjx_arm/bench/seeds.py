@@ -21,7 +21,6 @@ machine); asked for, ``NAME.png`` (each seed's success against wall time and aga
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import os
 import re
@@ -34,9 +33,9 @@ from typing import Any
 
 import numpy as np
 
-from mjx_arm.bench.results import save_results
+from mjx_arm.bench.seed_servers import SeedServers, check_server_settings
 from mjx_arm.bench.seeds_config import SeedRun, SeedsConfig, parse_seeds
-from mjx_arm.bench.seeds_summary import seed_line, seeds_table, start_up_line, summarize
+from mjx_arm.bench.seeds_summary import seed_line, start_up_line
 from mjx_arm.inputs import ConfigError
 
 SUCCESS_KEY = "eval/episode_success"
@@ -206,16 +205,23 @@ def failed_seed(seed: int, gpu: str, wall: float, error: str) -> SeedRun:
 
 
 def _start_seed(
-    config: SeedsConfig, seed: int, runs_dir: Path, gpu: str, overrides: tuple[str, ...]
+    config: SeedsConfig,
+    seed: int,
+    runs_dir: Path,
+    gpu: str,
+    overrides: tuple[str, ...],
+    servers: SeedServers | None = None,
 ) -> subprocess.Popen:
     """Start ``seed``'s training on ``gpu`` (a ``CUDA_VISIBLE_DEVICES`` entry: one GPU, or
-    ``"0,1"`` for a seed on two) in a process of its own, its output to
-    ``runs_dir/seedN.log``."""
+    ``"0,1"`` for a seed on two) in a process of its own (with ``servers``, a ``train --server``
+    command that the GPU's warm trainer runs), its output to ``runs_dir/seedN.log``."""
     env = {k: v for k, v in os.environ.items() if k != "XLA_PYTHON_CLIENT_PREALLOCATE"}
+    env.update(servers.seed_env(gpu) if servers else {})
     run_dir = seed_run_dir(config, seed, runs_dir)
+    command = seed_command(config, seed, run_dir, overrides)
     with (runs_dir / f"seed{seed}.log").open("wb") as out:
         return subprocess.Popen(
-            seed_command(config, seed, run_dir, overrides),
+            command + (["--server"] if servers else []),
             env={**env, "CUDA_VISIBLE_DEVICES": gpu},
             stdout=out,
             stderr=subprocess.STDOUT,
@@ -254,18 +260,39 @@ def run_seeds_on_gpus(
     included); a seed is warm where another had ended before it started (the seeds started at once
     on a fresh host all found the caches empty). A seed whose process fails is reported as not
     solved, with the end of its log, and the others go on. ``on_seed`` is called with the seeds
-    finished so far (in seed order) each time one finishes.
+    finished so far (in seed order) each time one finishes. With ``config.server`` each GPU's
+    warm trainer (:class:`~mjx_arm.bench.seed_servers.SeedServers`) runs its seeds' commands;
+    a seed is then warm where that server had finished a seed before it.
     """
+    runs_dir.mkdir(parents=True, exist_ok=True)
+    servers = SeedServers(gpus, runs_dir, log).start() if config.server else None
+    try:
+        return _train_on_gpus(config, runs_dir, gpus, overrides, log, on_seed, servers)
+    finally:
+        if servers:
+            servers.stop()
+
+
+def _train_on_gpus(
+    config: SeedsConfig,
+    runs_dir: Path,
+    gpus: list[str],
+    overrides: tuple[str, ...],
+    log,
+    on_seed: SeedsDone | None,
+    servers: SeedServers | None,
+) -> tuple[list[SeedRun], list[dict[str, Any]]]:
+    """:func:`run_seeds_on_gpus` once its warm trainers (if any) have started."""
     seeds = parse_seeds(config.seeds)
     queue, free = list(seeds), list(gpus)
     running: dict[int, tuple[subprocess.Popen, str, float, bool]] = {}
     done: dict[int, tuple[SeedRun, dict[str, Any]]] = {}
-    runs_dir.mkdir(parents=True, exist_ok=True)
     while queue or running:
         while queue and free:
             seed, gpu = queue.pop(0), free.pop(0)
-            proc = _start_seed(config, seed, runs_dir, gpu, overrides)
-            running[seed] = (proc, gpu, time.time(), bool(done))  # warm: a seed has ended
+            proc = _start_seed(config, seed, runs_dir, gpu, overrides, servers)
+            warm = servers.served[gpu] > 0 if servers else bool(done)  # caches filled
+            running[seed] = (proc, gpu, time.time(), warm)
             log(f"seed {seed}: training {config.task} / {config.preset} on GPU {gpu}")
         for seed, (proc, gpu, start, warm) in list(running.items()):
             if proc.poll() is None:
@@ -275,6 +302,8 @@ def run_seeds_on_gpus(
             done[seed] = _finished_seed(config, seed, runs_dir, proc, gpu, start)
             run = done[seed][0]
             run.warm = warm
+            if servers:
+                servers.served[gpu] += 1
             if run.error:
                 log(f"seed {seed}: its process failed ({run.error[:400]})")
             else:
@@ -287,43 +316,20 @@ def run_seeds_on_gpus(
     return [r for r, _ in ordered], [c for _, c in ordered]
 
 
-def plot_curves(runs: list[SeedRun], threshold: float, title: str, path: Path) -> Path:
-    """Each seed's success against wall time (left) and env steps (right), as a PNG."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, (by_time, by_step) = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
-    for run in runs:
-        t, s, v = zip(*run.curve, strict=True) if run.curve else ((), (), ())
-        by_time.plot(t, v, marker=".", label=f"seed {run.seed}")
-        by_step.plot(np.asarray(s) / 1e6, v, marker=".")
-    for ax, label in ((by_time, "seconds from the seed's start"), (by_step, "env steps (M)")):
-        ax.axhline(threshold, color="grey", linestyle="--", linewidth=1)
-        ax.set_xlabel(label)
-        ax.grid(alpha=0.3)
-    by_time.set_ylabel("evaluation success")
-    by_time.legend(fontsize=7, ncol=2)
-    fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
-
-
 def check_seed_settings(
     config: SeedsConfig, overrides: tuple[str, ...] = (), devices: int | None = None
 ) -> None:
     """Check everything the seeds' trainings take before the first starts: the preset with
     the task, backend and ``overrides`` (:func:`~mjx_arm.train.presets.load_config`), the
     device count of each seed's run (``devices``; default: ``config.devices`` local devices)
-    and the arm.
+    and the arm; with ``--server``, the settings a warm trainer takes.
 
     Raises:
-        InputError: a bad override, an arm that does not validate, a bad device count, or a
-            training that stops under ``config.threshold`` (no seed could count as solved).
+        InputError: a bad override, an arm that does not validate, a bad device count, a
+            training that stops under ``config.threshold`` (no seed could count as solved), or
+            ``--server`` with settings it cannot take (:func:`check_server_settings`).
     """
+    check_server_settings(config)
     from mjx_arm.arm.info import validated_arm_info
     from mjx_arm.arm.resolve import default_arm
     from mjx_arm.engines import CONVERTER_ENGINE
@@ -362,10 +368,15 @@ def run_seeds(
 
     The first seed's times count from ``first_start`` (the command's start: imports and any
     cold compilation included), the others' from their own start. ``on_seed`` is called with
-    the seeds finished so far each time one finishes.
+    the seeds finished so far each time one finishes. With ``config.server`` this process keeps
+    the envs and programs from one seed to the next (:mod:`mjx_arm.train.warm`).
     """
     seeds = parse_seeds(config.seeds)
     runs, configs = [], []
+    if config.server:  # the seeds train in turn in this process, which keeps what they share
+        from mjx_arm.train import warm
+
+        warm.enable()
     for i, seed in enumerate(seeds):
         log(f"seed {seed} ({i + 1} of {len(seeds)}): training {config.task} / {config.preset}")
         start = first_start if i == 0 else None
@@ -383,46 +394,3 @@ def _log_run(log, config: SeedsConfig, run: SeedRun) -> None:
     """A finished seed's result line, then its start-up line."""
     log(seed_line(config, run))
     log(f"seed {run.seed} {start_up_line(run.compile_report)}")
-
-
-def write_report(
-    config: SeedsConfig,
-    runs: list[SeedRun],
-    configs: list[dict[str, Any]],
-    meta: dict[str, Any],
-    out: Path,
-    name: str,
-    overrides: tuple[str, ...] = (),
-    wall_s: float | None = None,
-    png: bool = False,
-    pending: int = 0,
-) -> list[Path]:
-    """Write NAME.json and NAME.md (and with ``png``, NAME.png) into ``out``; return their paths.
-
-    ``wall_s``: the whole benchmark's wall time (recorded with the GPUs the seeds ran on).
-    ``pending``: seeds still training or queued (a report written while the benchmark runs,
-    so that one stopped early keeps its finished seeds); recorded as ``pending_seeds``."""
-    summary = summarize(runs, config.threshold)
-    if wall_s is not None:
-        summary["wall_s"] = wall_s
-        summary["gpus"] = sorted({r.gpu for r in runs if r.gpu})
-    table = seeds_table(runs, summary)
-    changed = f", with {' '.join(overrides)}" if overrides else " as shipped"
-    title = f"{config.task}, preset {config.preset}{changed}, {meta['device']['kind']}"
-    if config.gpus_per_seed > 1:
-        title += f", {config.gpus_per_seed} GPUs per seed"
-    if pending:
-        title += f" ({len(runs)} seeds finished, {pending} still to come)"
-    payload = {
-        "meta": meta,
-        "settings": dataclasses.asdict(config),
-        "overrides": list(overrides),
-        "pending_seeds": pending,
-        "summary": summary,
-        "seeds": [dataclasses.asdict(r) for r in runs],
-        "configs": configs,
-    }
-    paths = list(save_results(name, payload, f"# Seeds: {title}\n\n{table}", out))
-    if png:
-        paths.append(plot_curves(runs, config.threshold, title, out / f"{name}.png"))
-    return paths

@@ -64,6 +64,11 @@ class SeedsConfig:
     deterministic: bool = setting(
         False, "train each seed deterministically (train --deterministic): a seed repeats"
     )
+    server: bool = setting(
+        False,
+        "train each seed's command with train --server, in a warm trainer per GPU (mjx-arm "
+        "serve) that keeps the envs and programs between seeds; on a CPU, kept in this process",
+    )
 
     def __post_init__(self) -> None:
         check_range(self, "threshold", low=0, high=1)

@@ -47,6 +47,12 @@ def cmd_train(args: argparse.Namespace) -> int:
     from mjx_arm.train.compile_report import mark
 
     mark("command read")
+    if getattr(args, "server", False):
+        from mjx_arm.train.client import train_through_server
+
+        code = train_through_server(args.argv)
+        if code is not None:
+            return code
     if args.resume:
         _check_resume_flags(args)
     named = args.resume or args.run_dir
@@ -378,6 +384,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="train the config twice (RUN_DIR/repeat-a and repeat-b) and report the first "
         "step where the runs differ (exit 0: identical, 1: they differ); give a short budget "
         "with --set num_timesteps=N",
+    )
+    p.add_argument(
+        "--server",
+        action="store_true",
+        help="train in the warm trainer `mjx-arm serve` started (socket: $MJX_ARM_SERVER or "
+        "its default): a seed of a config it has trained starts at once; where none answers, "
+        "train in this process",
     )
     _add_host_arguments(p)
     p.set_defaults(func=cmd_train)

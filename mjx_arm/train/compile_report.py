@@ -95,6 +95,7 @@ class CompileReport:
         self.seconds: dict[str, float] = defaultdict(float)  # trace / lower / backend totals
         self.traced: dict[str, float] = defaultdict(float)  # trace + lower seconds per program
         self.counts: dict[str, int] = defaultdict(int)
+        self.kept: list[str] = []  # what a warm trainer kept from a run before (train.warm)
         self.start = time.monotonic()
         self.opened_at = time.time()  # wall clock (s since the epoch), for other processes
         self.marks = dict(_MARKS)  # the start-up steps before it (wall clock), taken
@@ -167,6 +168,7 @@ class CompileReport:
             "jax_counts": dict(self.counts),
             "slowest_programs": self.top_programs(),
             "slowest_traces": self.top_programs(traced=True),
+            **({"kept_warm": list(self.kept)} if self.kept else {}),
         }
 
     def summary(self) -> str:
@@ -181,6 +183,8 @@ class CompileReport:
             line += " (" + ", ".join(f"{name} {s:.1f}" for name, s in parts) + ")"
         if others:
             line += "; other start-up (s): " + ", ".join(f"{n} {s:.1f}" for n, s in others)
+        if self.kept:
+            line += f"; kept warm from an earlier run: {', '.join(self.kept)}"
         return (
             f"{line}; {self.counts.get('programs', 0)} programs, persistent cache "
             f"{self.counts.get('cache_hits', 0)} hits of {self.counts.get('cache_requests', 0)} "

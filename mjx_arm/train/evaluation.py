@@ -76,6 +76,11 @@ class Evaluator:
         """Run evaluations with ``compiled``, the compiled result of :meth:`lower`."""
         self._unroll = compiled
 
+    def compiled(self) -> Callable:
+        """The evaluation program (:meth:`compile_aside`'s waited for), for another evaluator
+        of the same config (a warm trainer's next run: :mod:`mjx_arm.train.warm`)."""
+        return self._pending[0].result() if self._pending is not None else self._unroll
+
     def compile_aside(self, params: Any, report: Any) -> None:
         """Trace, lower and compile the evaluation on a thread of its own, for a run whose first
         evaluation comes after some epochs: they train meanwhile, and the first evaluation

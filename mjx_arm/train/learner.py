@@ -157,6 +157,8 @@ class Learner:
         self.optimizer = make_optimizer(config.learning_rate, config.max_grad_norm, config.schedule)
         self._loss_and_grad = loss_and_grad(config, self.network)
         self.replicated = NamedSharding(mesh, P())
+        # one jitted init per learner: a warm trainer's next run finds it traced
+        self._init = jax.jit(self._fresh_state, out_shardings=self.replicated)
 
     # ------------------------------------------------------------------ state
 
@@ -166,7 +168,7 @@ class Learner:
         One jitted program: built op by op, the initialisers compile some fifty small
         programs one after another.
         """
-        return jax.jit(self._fresh_state, out_shardings=self.replicated)(key_policy, key_value)
+        return self._init(key_policy, key_value)
 
     def _fresh_state(self, key_policy: jax.Array, key_value: jax.Array) -> TrainingState:
         params = init_params(self.network, key_policy, key_value)

@@ -22,6 +22,7 @@ from jax.sharding import NamedSharding
 from jax.sharding import PartitionSpec as P
 
 from mjx_arm.envs.wrappers import wrap_for_training
+from mjx_arm.train import warm
 from mjx_arm.train.compile_report import CompileReport
 from mjx_arm.train.config import TrainConfig
 from mjx_arm.train.distributed import gather, is_leader, share
@@ -136,14 +137,12 @@ def prepare_ppo(
 
     The reset, the training step's rollout and update (:meth:`Learner.epoch_programs`) and
     the evaluation are traced and lowered one after the other (Python), then compiled by XLA
-    at the same time on a thread pool; MuJoCo Warp's kernels, started when the env was built,
-    compile meanwhile (:meth:`mjx_arm.envs.mjx_physics.MjxPhysics.wait_precompiled` is
-    called before anything runs). Every stage is timed into ``report``.
-
-    ``restore`` is a checkpoint's whole state (:class:`ResumeState`: the run goes on exactly
-    where it stopped) or, from an older checkpoint, its params alone (new keys, fresh
-    optimiser moments, reset envs). Where several processes train, only process 0 compiles
-    the evaluation.
+    at the same time on a thread pool while MuJoCo Warp's kernels, started when the env was
+    built, compile. A warm trainer's run takes the programs of an earlier run of its config
+    (:mod:`.warm`). Each stage is timed into ``report``. ``restore`` is a checkpoint's whole
+    state (:class:`ResumeState`: the run goes on exactly where it stopped) or, from an older
+    checkpoint, its params alone (new keys, fresh optimiser moments, reset envs). Where
+    several processes train, only process 0 compiles the evaluation.
     """
     report = report or CompileReport()
     devices = train_devices(config.devices)
@@ -152,17 +151,20 @@ def prepare_ppo(
     partition = resolve_partition(config, env.physics.impl)
     run_keys = _run_keys(config.seed + step_offset, restore)
     key_policy, key_value, key_env, key_eval, local_key = run_keys
-    split_mesh = mesh if partition == "per_device" else None
-    train_env = wrap_for_training(env, episode_length, mesh=split_mesh, axis=ENV_AXIS)
+    kept = warm.programs_of(env)  # a warm trainer's, of an earlier run of this config
     with report.stage("learner init"):
-        learner, state = _learner(config, env, mesh, (key_policy, key_value), restore)
+        learner, state = _learner(config, env, mesh, (key_policy, key_value), restore, kept)
     evaluate = _evaluator(config, eval_env, learner, episode_length, key_eval)
     sizes = EpochSizes.of(config, config.num_timesteps)
     keys = jax.random.split(key_env, config.num_envs)
+    split_mesh = mesh if partition == "per_device" else None
+    train_env = wrap_for_training(env, episode_length, mesh=split_mesh, axis=ENV_AXIS)
     aside = not evaluates_initial_policy(config, step_offset) and jax.process_count() == 1
     programs = _Programs(train_env, mesh, keys, learner, evaluate, aside)
-    epoch, reset = programs.compile(state, sizes, local_key, report)
-    _wait_for_kernels((env, eval_env), report)
+    epoch, reset = programs.kept_or_compiled(kept, state, sizes, local_key, report)
+    if kept is None:
+        _wait_for_kernels((env, eval_env), report)
+        warm.keep_programs(env, warm.Programs(learner, epoch, reset, evaluate))
     env_state, paths = _first_envs(reset, keys, env.physics.splits, restore, report)
     return Prepared(
         learner, state, env_state, epoch, evaluate, sizes, local_key, devices, partition, paths
@@ -181,6 +183,22 @@ class _Programs:
     learner: Learner
     evaluate: Evaluator
     aside: bool = False
+
+    def kept_or_compiled(
+        self,
+        kept: warm.Programs | None,
+        state: Any,
+        sizes: EpochSizes,
+        local_key: jax.Array,
+        report: CompileReport,
+    ) -> tuple[Any, Callable]:
+        """``kept``'s programs (a warm trainer's, of an earlier run of this config: the
+        evaluator takes its evaluation), else :meth:`compile`'s."""
+        if kept is None:
+            return self.compile(state, sizes, local_key, report)
+        self.evaluate.use(kept.evaluator.compiled())
+        report.kept.append("programs")
+        return kept.epoch, kept.reset
 
     def compile(
         self, state: Any, sizes: EpochSizes, local_key: jax.Array, report: CompileReport
@@ -235,10 +253,20 @@ def _restored_envs(env_state: Any, paths: list, leaves: list[np.ndarray]) -> Any
 
 
 def _learner(
-    config: TrainConfig, env: Any, mesh: Any, keys: tuple[jax.Array, jax.Array], restore: Any
+    config: TrainConfig,
+    env: Any,
+    mesh: Any,
+    keys: tuple[jax.Array, jax.Array],
+    restore: Any,
+    kept: warm.Programs | None = None,
 ) -> tuple[Learner, Any]:
-    """The learner and its first state: fresh from ``keys`` (policy, value), or restored."""
-    learner = Learner(config, env.observation_size, env.action_size, mesh, env.contact_force_dims)
+    """The learner (``kept``'s, a warm trainer's of an earlier run of this config) and its
+    first state: fresh from ``keys`` (policy, value), or restored."""
+    if kept is not None:
+        learner = kept.learner
+    else:
+        sizes = (env.observation_size, env.action_size)
+        learner = Learner(config, *sizes, mesh, env.contact_force_dims)
     state = learner.init(*keys)
     if restore is None:
         return learner, state

@@ -13,6 +13,7 @@ run directory; the others read a checkpoint to resume from and write nothing.
 from __future__ import annotations
 
 import contextlib
+import functools
 import itertools
 import time
 import warnings
@@ -28,6 +29,7 @@ from mjx_arm.engines import CONVERTER_ENGINE
 from mjx_arm.envs.backend import make_batched_env, resolve_backend
 from mjx_arm.inputs import ConfigError, MissingInputError
 from mjx_arm.task.config import TaskConfig
+from mjx_arm.train import warm
 from mjx_arm.train.checkpoints import (
     CheckpointError,
     latest_checkpoint,
@@ -309,9 +311,12 @@ def _envs_and_restore(
     """The training and evaluation envs (their build timed into ``report``) and what to
     restore (a checkpoint folder read: :func:`_restore_state`); a new run's config saved."""
     with report.stage("build env"):
-        env, eval_env = make_envs(config, setup, background_compile=True)
+        build = functools.partial(make_envs, config, setup, background_compile=True)
+        env, eval_env, kept = warm.envs(config, setup, build)
     check_training_memory(config, env)  # before the config is saved and anything allocated
-    for name, seconds in env.build_seconds.items():
+    if kept:
+        report.kept.append("envs")
+    for name, seconds in ({} if kept else env.build_seconds).items():
         report.add(f"of it {name}", seconds)
     if restore is None and run is not None:
         run.save_config(full_config(config, setup.task, env.physics.describe(), setup.arm))

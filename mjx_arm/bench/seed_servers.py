@@ -1,0 +1,97 @@
+"""The warm trainers of ``mjx-arm bench seeds --server``: one ``mjx-arm serve`` per GPU.
+
+Each seed still runs as its own ``mjx-arm train`` command, timed from that command's start, but
+with ``--server``: the GPU's warm trainer trains it, on the envs and programs the seed before
+it on that GPU left (:mod:`mjx_arm.train.warm`). A seed is warm where its GPU's server had
+finished a seed before it; the first seed on each GPU pays the start-up a new process pays.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from mjx_arm.bench.seeds_config import SeedsConfig
+from mjx_arm.inputs import ConfigError
+
+READY_TIMEOUT_S = 600.0  # a server's imports and device start, at most
+
+
+class SeedServers:
+    """A warm trainer per GPU of ``gpus`` (``CUDA_VISIBLE_DEVICES`` entries), logging to
+    ``runs_dir/server_gpuN.log``."""
+
+    def __init__(self, gpus: list[str], runs_dir: Path, log=print) -> None:
+        folder = Path(tempfile.gettempdir()) / f"mjx-arm-{os.getuid()}"
+        folder.mkdir(parents=True, exist_ok=True, mode=0o700)
+        self.sockets = {gpu: folder / f"bench-{os.getpid()}-{i}.sock" for i, gpu in enumerate(gpus)}
+        self.served = dict.fromkeys(gpus, 0)
+        self.ready_s: dict[str, float] = {}
+        self.log = log
+        self._procs: dict[str, subprocess.Popen] = {}
+        self._runs_dir = runs_dir
+
+    def start(self) -> SeedServers:
+        """Start every server and wait until each answers (the imports and device start).
+
+        Raises:
+            ConfigError: a server that ended or did not answer within READY_TIMEOUT_S.
+        """
+        from mjx_arm.train.client import ping
+
+        start = time.time()
+        for gpu, path in self.sockets.items():
+            command = [sys.executable, "-m", "mjx_arm.cli", "serve", "--socket", str(path)]
+            log_file = (self._runs_dir / f"server_gpu{gpu.replace(',', '_')}.log").open("wb")
+            env = {k: v for k, v in os.environ.items() if k != "XLA_PYTHON_CLIENT_PREALLOCATE"}
+            env["CUDA_VISIBLE_DEVICES"] = gpu  # the server takes its GPU as a seed's process does
+            self._procs[gpu] = subprocess.Popen(command, env=env, stdout=log_file, stderr=log_file)
+        for gpu, path in self.sockets.items():
+            while ping(path) is None:
+                if self._procs[gpu].poll() is not None or time.time() - start > READY_TIMEOUT_S:
+                    self.stop()
+                    raise ConfigError(f"the warm trainer of GPU {gpu} did not start ({path})")
+                time.sleep(0.5)
+            self.ready_s[gpu] = round(time.time() - start, 3)
+            self.log(f"warm trainer on GPU {gpu} ready after {self.ready_s[gpu]:.1f} s")
+        return self
+
+    def seed_env(self, gpu: str) -> dict[str, str]:
+        """The environment a seed's ``train --server`` command finds its GPU's server by."""
+        return {"MJX_ARM_SERVER": str(self.sockets[gpu])}
+
+    def stop(self) -> None:
+        """Stop every server (Ctrl-C, as a user would) and wait for it."""
+        for proc in self._procs.values():
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+        for proc in self._procs.values():
+            try:
+                proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+
+
+def check_server_settings(config: SeedsConfig) -> None:
+    """A warm trainer trains a seed on one GPU, with the devices it started.
+
+    Raises:
+        ConfigError: ``--server`` with ``--gpus-per-seed`` over 1, or with ``--deterministic``.
+    """
+    if not config.server:
+        return
+    if config.gpus_per_seed > 1:
+        raise ConfigError(
+            "--server trains each seed in its GPU's warm trainer, on that GPU alone: drop "
+            "--gpus-per-seed or --server"
+        )
+    if config.deterministic:
+        raise ConfigError(
+            "--deterministic sets XLA's flags before a process starts its devices, which a "
+            "warm trainer has done: drop --deterministic or --server"
+        )
