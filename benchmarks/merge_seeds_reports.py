@@ -27,13 +27,14 @@ from mjx_arm.bench.seeds_summary import warm_flags
 
 # settings every input must share (the seeds differ)
 SHARED = (
-    "task", "preset", "backend", "threshold", "devices", "gpus_per_seed", "arm", "deterministic"
+    "task", "preset", "backend", "threshold", "devices", "gpus_per_seed", "arm", "deterministic",
+    "server",
 )  # fmt: skip
 
 
 def _setting(report: dict[str, Any], key: str) -> Any:
     """A shared setting of ``report``; one that reports written before it lack is the
-    default (``gpus_per_seed``: 1)."""
+    default (``gpus_per_seed``: 1, ``server``: False)."""
     return report["settings"].get(key, getattr(SeedsConfig(), key))
 
 
