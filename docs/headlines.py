@@ -419,7 +419,27 @@ HEADLINES: tuple[Headline, ...] = (
         "(two at once, one per GPU of a host of two), one process per seed, time from the "
         "command's start",
     ),
+    _seeds_row(
+        "Touch",
+        "seeds/fresh/seeds_touch_fast_fresh_8200_server.json",
+        "`--preset fast` as shipped, each seed's `train --server` command run by the warm "
+        "trainer (`mjx-arm serve`, one per H200 of a host of two: `bench seeds --server`), 52 "
+        "fresh seeds (8200-8225, 8230-8255), time from the command's start; warm: its GPU's "
+        "server had trained a seed before",
+    ),
     Headline(_two_gpu_seeds_row),
+    _seeds_row(
+        "Lift",
+        "seeds/fresh/seeds_lift_fast_fresh_8400_server.json",
+        "`--preset fast` as shipped through the warm trainer (`bench seeds --server`, one per "
+        "H200 of a host of two), 23 fresh seeds (8400-8422), time from the command's start",
+    ),
+    _seeds_row(
+        "Reach",
+        "seeds/fresh/seeds_reach_fast_fresh_8300_server.json",
+        "`--preset fast` as shipped through the warm trainer (`bench seeds --server`, one "
+        "H200), 20 fresh seeds (8300-8319), time from the command's start",
+    ),
     _seeds_row(
         "Lift",
         "seeds/fresh/seeds_lift_fast_fresh_7660.json",
