@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import stat
 import subprocess
 import sys
 import tempfile
@@ -61,6 +62,7 @@ def server():
     while ping(path) is None:
         assert proc.poll() is None and time.time() < deadline, log.read_text()
         time.sleep(0.2)
+    assert stat.S_IMODE(path.stat().st_mode) == 0o600  # only this user may send commands
     yield SimpleNamespace(path=path, log=log, env={**ENV, "MJX_ARM_SERVER": str(path)})
     proc.send_signal(signal.SIGINT)
     proc.wait(timeout=30)

@@ -161,6 +161,8 @@ class Server:
         if self.path.exists() and ping(self.path) is not None:
             raise ConfigError(f"a warm trainer already listens at {self.path}; stop it first")
         self.path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
+        if self.path.parent.stat().st_uid != os.getuid():  # whoever can connect runs commands
+            raise ConfigError(f"{self.path.parent} belongs to another user: give --socket")
         self.path.unlink(missing_ok=True)
         start = time.monotonic()
         import jax
@@ -173,6 +175,7 @@ class Server:
         devices = jax.devices()
         sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         sock.bind(str(self.path))
+        os.chmod(self.path, 0o600)  # this user's commands only
         sock.listen(16)
         sock.settimeout(self.idle_s or None)
         self.log(
