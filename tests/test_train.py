@@ -308,6 +308,23 @@ def test_the_kl_before_an_update_is_the_normalisers_alone(tmp_path: Path, monkey
     assert json.loads((run.path / "config.json").read_text())["train"]["normalizer"]["after_update"]
 
 
+def test_each_networks_gradient_and_the_largest_targets_are_logged(tmp_path: Path) -> None:
+    """``policy_grad_norm`` and ``value_grad_norm`` are the two parts of ``grad_norm`` (per
+    minibatch each is at most the whole and the whole at most their sum, so also their means
+    over an epoch); ``reward_abs_max`` and ``value_target_abs_max`` are the largest of their
+    minibatch (at least 0; the targets of a reward that is never 0 are not all 0)."""
+    config = load_config("cpu", None, _tiny(600))
+    row = RunDir(train(config, tmp_path / "run", quiet=True).run_dir).read_metrics()[-1]
+    whole, policy, value = (
+        float(row[f"training/{name}"])
+        for name in ("grad_norm", "policy_grad_norm", "value_grad_norm")
+    )
+    assert 0 < policy <= whole * (1 + 1e-5) and 0 < value <= whole * (1 + 1e-5)
+    assert whole <= (policy + value) * (1 + 1e-5)
+    assert float(row["training/reward_abs_max"]) > 0
+    assert float(row["training/value_target_abs_max"]) > 0
+
+
 def test_a_fixed_force_scale_reaches_the_policy_file(tmp_path: Path) -> None:
     """``normalizer.force_scale``: the six ``contact_force`` entries of the saved policy are
     normalised by mean 0 and the fixed scale, every other entry by its running statistics."""

@@ -65,7 +65,7 @@ def write_report(
     if config.gpus_per_seed > 1:
         title += f", {config.gpus_per_seed} GPUs per seed"
     if config.server:
-        title += ", each seed's command run by a warm trainer (--server)"
+        title += ", --server (envs and programs kept from seed to seed)"
     if pending:
         title += f" ({len(runs)} seeds finished, {pending} still to come)"
     payload = {

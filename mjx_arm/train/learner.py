@@ -323,6 +323,8 @@ class Learner:
                 optimizer_state, adapted_rate(rate, metrics["kl_mean"], schedule)
             )
         metrics["grad_norm"] = optax.tree_utils.tree_norm(grads)
+        metrics["policy_grad_norm"] = optax.tree_utils.tree_norm(grads.policy)
+        metrics["value_grad_norm"] = optax.tree_utils.tree_norm(grads.value)
         updates, optimizer_state = self.optimizer.update(grads, optimizer_state)
         params = optax.apply_updates(params, updates)
         if self.config.kl_stop > 0:

@@ -72,8 +72,10 @@ def diagnostics(
         Scalars: ``clip_fraction`` (share of transitions whose probability ratio left
         ``1 +- clipping_epsilon``), ``approx_kl`` (the estimator ``mean(r - 1 - log r)`` of
         KL(rollout policy || current), from log-probabilities), ``entropy`` (the policy's
-        entropy itself, not its cost) and ``explained_variance`` (``1 - var(vs - V) / var(vs)``
-        of the GAE value targets ``vs``; 1 is a perfect fit, 0 no better than their mean).
+        entropy itself, not its cost), ``explained_variance`` (``1 - var(vs - V) / var(vs)``
+        of the GAE value targets ``vs``; 1 is a perfect fit, 0 no better than their mean), and
+        the largest ``|reward|`` (scaled) and ``|vs|`` of the minibatch (``reward_abs_max``,
+        ``value_target_abs_max``: what a value loss far from its usual size comes from).
     """
     params, data = jax.lax.stop_gradient((params, data))
     data = jax.tree.map(lambda x: jnp.swapaxes(x, 0, 1), data)  # time first, as Brax's loss
@@ -90,6 +92,8 @@ def diagnostics(
         "approx_kl": jnp.mean(ratio - 1.0 - log_ratio),
         "entropy": jnp.mean(dist.entropy(logits, key)),
         "explained_variance": 1.0 - residual,
+        "reward_abs_max": jnp.max(jnp.abs(data.reward * config.reward_scaling)),
+        "value_target_abs_max": jnp.max(jnp.abs(targets)),
     }
 
 
