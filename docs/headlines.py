@@ -455,8 +455,12 @@ HEADLINES: tuple[Headline, ...] = (
     _seeds_row("Touch", "seeds/cpu_touch/cpu_fresh_shipped_all.json",
                "`--preset cpu --backend mujoco` as shipped, 20 fresh seeds (7903-7922), time to "
                "threshold", warm=False),
-    _seeds_row("Reach", "seeds/seeds_reach_cpu_c_backend.json",
-               "`--preset cpu --backend mujoco`, time to threshold", warm=False),
+    _seeds_row("Reach", "seeds/cpu_reach/cpu_reach_process.json",
+               "`--preset cpu --backend mujoco` as shipped, 3 fresh seeds (7930-7932) in turn in "
+               "one process, time to threshold"),
+    _seeds_row("Reach", "seeds/cpu_reach/cpu_reach_server.json",
+               "`--preset cpu --backend mujoco` as shipped, the same seeds with `bench seeds "
+               "--server` (envs and programs kept from seed to seed), time to threshold"),
     _before_touch_changes(_transfer_row("Touch", TOUCH_TRANSFER, ("mujoco", "pybullet"))),
     _transfer_row("Touch, `--preset fast` as shipped, the five fresh seeds of 7864-7899 that "
                   "stopped lowest (0.950-0.959 on the GPU)",
