@@ -143,6 +143,29 @@ def test_the_kept_envs_are_keyed_on_all_but_the_seed(tmp_path: Path) -> None:
     assert warm.config_key(TrainConfig(), setup) != base
 
 
+def test_one_config_is_kept_and_another_replaces_it(tmp_path: Path, keeps_nothing_after) -> None:
+    """The envs of the last config alone: the same config but its seed finds them; another
+    config builds its own and drops the first's; nothing is kept where not enabled."""
+    setup = SimpleNamespace(arm=SimpleNamespace(urdf=tmp_path / "none.urdf"))
+    built = []
+
+    def build(name: str):
+        return lambda: built.append(name) or (f"{name}-env", f"{name}-eval")
+
+    a, b = TrainConfig(), TrainConfig(learning_rate=1e-3)
+    assert warm.envs(a, setup, build("a")) == ("a-env", "a-eval", False)  # not enabled
+    warm.enable()
+    assert warm.envs(a, setup, build("a"))[2] is False
+    env, eval_env, kept = warm.envs(a.replace(seed=9), setup, build("a"))
+    assert (env, eval_env, kept) == ("a-env", "a-eval", True)
+    warm.keep_programs(env, "a-programs")  # the envs are known by identity
+    assert warm.programs_of(env) == "a-programs" and warm.programs_of(object()) is None
+    assert warm.envs(b, setup, build("b"))[2] is False
+    assert warm.programs_of(env) is None  # dropped with its envs
+    assert warm.envs(a, setup, build("a"))[2] is False
+    assert built == ["a", "a", "b", "a"]
+
+
 @pytest.fixture
 def keeps_nothing_after():
     yield
