@@ -130,7 +130,8 @@ cold-arm)
 campaign)
   # One `bench seeds` per JOBS line: "GPU|NAME|TASK|SEEDS|SETS[|ARGS]" (SETS: a --set list, "-"
   # for the preset as shipped; ARGS: more `bench seeds` arguments, such as --arm A --threshold
-  # 0.9). The GPUs run at once; the lines of one GPU run one after another (several runs on one
+  # 0.9, or --server: each seed's command run by a warm trainer per GPU). The GPUs run at once;
+  # the lines of one GPU run one after another (several runs on one
   # GPU at once make their times incomparable, and three SO-101 runs on one H200 ran out of
   # memory). GPU may name a lane, "0:b": each lane of a GPU runs at once beside the others
   # (success over seeds, not times). GPU may also list several, "0,1", for seeds trained on all

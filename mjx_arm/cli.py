@@ -163,7 +163,8 @@ def cmd_serve(args: argparse.Namespace) -> int:
     path = Path(args.socket) if args.socket else default_socket()
     parse = build_parser().parse_args
     log = functools.partial(print, flush=True)
-    return Server(path, main, parse, args.idle_minutes * 60.0, log).serve_forever()
+    warmup = shlex.split(args.warmup) if args.warmup is not None else None
+    return Server(path, main, parse, args.idle_minutes * 60.0, log, warmup).serve_forever()
 
 
 def _add_serve(sub: argparse._SubParsersAction) -> None:
@@ -180,6 +181,13 @@ def _add_serve(sub: argparse._SubParsersAction) -> None:
         type=float_in(0.0, 7 * 24 * 60.0),
         default=30.0,
         help="stop after this many minutes without a command (0: never; default 30)",
+    )
+    p.add_argument(
+        "--warmup",
+        metavar="ARGS",
+        help="build the envs and programs of a config before the first command: the flags of "
+        '`mjx-arm warmup`, quoted (e.g. "--task touch --preset fast"); a later train '
+        "--server with the same flags, any seed, then starts at once",
     )
     p.set_defaults(func=cmd_serve)
 

@@ -8,9 +8,11 @@ minute on a 2-core CPU.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
+import socket
 import stat
 import subprocess
 import sys
@@ -50,23 +52,39 @@ def _start_up(run: Path) -> dict:
     return json.loads((run / "compile.json").read_text())[-1]
 
 
-@pytest.fixture(scope="module")
-def server():
-    """A warm trainer on a short socket path; its log file."""
+@contextlib.contextmanager
+def _serving(*flags: str):
+    """A warm trainer (``mjx-arm serve FLAGS``) on a short socket path, once it answers."""
     folder = Path(tempfile.mkdtemp(prefix="mjxs"))
     path, log = folder / "t.sock", folder / "server.log"
     with log.open("wb") as out:
-        command = [sys.executable, "-m", "mjx_arm.cli", "serve", "--socket", str(path)]
+        command = [sys.executable, "-m", "mjx_arm.cli", "serve", "--socket", str(path), *flags]
         proc = subprocess.Popen(command, env=ENV, stdout=out, stderr=subprocess.STDOUT)
     deadline = time.time() + 120
     while ping(path) is None:
         assert proc.poll() is None and time.time() < deadline, log.read_text()
         time.sleep(0.2)
-    assert stat.S_IMODE(path.stat().st_mode) == 0o600  # only this user may send commands
     yield SimpleNamespace(path=path, log=log, env={**ENV, "MJX_ARM_SERVER": str(path)})
     proc.send_signal(signal.SIGINT)
     proc.wait(timeout=30)
     assert not path.exists()  # the socket file goes with the server
+
+
+@pytest.fixture(scope="module")
+def server():
+    """A warm trainer; its socket, log file and the environment that finds it."""
+    with _serving() as served:
+        assert stat.S_IMODE(served.path.stat().st_mode) == 0o600  # this user's commands only
+        yield served
+
+
+def test_a_warmup_makes_the_first_command_warm(tmp_path: Path) -> None:
+    with _serving("--warmup", " ".join(TRAIN[1:])) as served:
+        run = tmp_path / "first"
+        done = _cli(*TRAIN, "--seed", "8", "--run-dir", str(run), "--server", env=served.env)
+        assert done.returncode == 0, done.stderr
+        assert _start_up(run)["kept_warm"] == ["envs", "programs"]
+        assert "warming up reach" in served.log.read_text()
 
 
 def test_a_seed_trained_warm_is_the_seed_trained_alone(server, tmp_path: Path) -> None:
@@ -113,6 +131,14 @@ def test_a_client_that_goes_away_stops_its_run_and_the_server_goes_on(server, tm
         *TRAIN, "--seed", "5", "--run-dir", str(tmp_path / "again"), "--server", env=server.env
     )
     assert again.returncode == 0, again.stderr
+
+
+def test_garbage_on_the_socket_leaves_the_server_serving(server) -> None:
+    for garbage in (b"not json\n", b"[1, 2]\n", b'{"argv": 3}\n', b""):
+        with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as sock:
+            sock.connect(str(server.path))
+            sock.sendall(garbage)
+    assert ping(server.path)["pong"] > 0
 
 
 def test_the_server_refuses_what_one_process_cannot_train() -> None:

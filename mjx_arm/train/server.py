@@ -146,10 +146,17 @@ class Server:
     (:func:`refusal`), and stops after ``idle_s`` seconds without a command (0: never)."""
 
     def __init__(
-        self, path: Path, command: Command, parse: Parse, idle_s: float = 0.0, log=print
+        self,
+        path: Path,
+        command: Command,
+        parse: Parse,
+        idle_s: float = 0.0,
+        log=print,
+        warmup: list[str] | None = None,
     ) -> None:
         self.path, self.idle_s, self.log = path, idle_s, log
         self.command, self.parse = command, parse
+        self.warmup = warmup  # `mjx-arm warmup` arguments to run before the first command
         self.code = code_digest()
         self.devices = os.environ.get("CUDA_VISIBLE_DEVICES")
         self.served = 0
@@ -185,9 +192,13 @@ class Server:
         return sock
 
     def serve_forever(self) -> int:
-        """Serve commands one at a time until idle or Ctrl-C; returns 0."""
+        """Run the warmup (if any), then serve commands one at a time until idle or Ctrl-C;
+        returns 0, or the warmup's exit code where it failed."""
         sock = self.start()
         try:
+            if self.warmup is not None and (code := self.command(["warmup", *self.warmup])):
+                self.log(f"warmup {' '.join(self.warmup)}: exit {code}; stopped")
+                return code
             while self._serve_one(sock):
                 pass
         except KeyboardInterrupt:
@@ -205,14 +216,22 @@ class Server:
             self.log(f"idle for {self.idle_s:.0f} s: stopped")
             return False
         with conn:
-            request = Reader(conn).next()
-            if request is None:
-                return True
-            if request.get("ping"):
-                send(conn, {"pong": os.getpid(), "code": self.code, "served": self.served})
-                return True
-            self._run(conn, request)
+            try:
+                self._answer(conn)
+            except (OSError, ValueError, KeyError, TypeError) as err:  # a client gone, or garbage
+                self.log(f"a connection ended without its answer ({type(err).__name__}: {err})")
         return True
+
+    def _answer(self, conn: socket.socket) -> None:
+        """Read one request from ``conn`` and answer it: a ping, or a command to run."""
+        request = Reader(conn).next()
+        if not isinstance(request, dict):
+            return
+        if request.get("ping"):  # a ping that gave up meanwhile (a long warmup) wants no answer
+            with contextlib.suppress(OSError):
+                send(conn, {"pong": os.getpid(), "code": self.code, "served": self.served})
+            return
+        self._run(conn, request)
 
     def _run(self, conn: socket.socket, request: dict[str, Any]) -> None:
         why = refusal(request, self.code, self.devices, self.parse)
