@@ -12,14 +12,22 @@ import os
 import signal
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 from mjx_arm.bench.seeds_config import SeedsConfig
 from mjx_arm.inputs import ConfigError
+from mjx_arm.train.server_protocol import user_folder
 
 READY_TIMEOUT_S = 600.0  # a server's imports and device start, at most
+
+
+def gpu_env(gpu: str) -> dict[str, str]:
+    """This process's environment for a process that trains on ``gpu`` (a
+    ``CUDA_VISIBLE_DEVICES`` entry): its GPU's memory taken as a training takes it (this
+    benchmark's own process does not preallocate)."""
+    env = {k: v for k, v in os.environ.items() if k != "XLA_PYTHON_CLIENT_PREALLOCATE"}
+    return {**env, "CUDA_VISIBLE_DEVICES": gpu}
 
 
 class SeedServers:
@@ -27,11 +35,9 @@ class SeedServers:
     ``runs_dir/server_gpuN.log``."""
 
     def __init__(self, gpus: list[str], runs_dir: Path, log=print) -> None:
-        folder = Path(tempfile.gettempdir()) / f"mjx-arm-{os.getuid()}"
-        folder.mkdir(parents=True, exist_ok=True, mode=0o700)
+        folder = user_folder()  # each server makes it (mode 0700) and checks it is this user's
         self.sockets = {gpu: folder / f"bench-{os.getpid()}-{i}.sock" for i, gpu in enumerate(gpus)}
         self.served = dict.fromkeys(gpus, 0)
-        self.ready_s: dict[str, float] = {}
         self.log = log
         self._procs: dict[str, subprocess.Popen] = {}
         self._runs_dir = runs_dir
@@ -47,18 +53,17 @@ class SeedServers:
         start = time.time()
         for gpu, path in self.sockets.items():
             command = [sys.executable, "-m", "mjx_arm.cli", "serve", "--socket", str(path)]
-            log_file = (self._runs_dir / f"server_gpu{gpu.replace(',', '_')}.log").open("wb")
-            env = {k: v for k, v in os.environ.items() if k != "XLA_PYTHON_CLIENT_PREALLOCATE"}
-            env["CUDA_VISIBLE_DEVICES"] = gpu  # the server takes its GPU as a seed's process does
-            self._procs[gpu] = subprocess.Popen(command, env=env, stdout=log_file, stderr=log_file)
+            with (self._runs_dir / f"server_gpu{gpu.replace(',', '_')}.log").open("wb") as out:
+                self._procs[gpu] = subprocess.Popen(
+                    command, env=gpu_env(gpu), stdout=out, stderr=subprocess.STDOUT
+                )
         for gpu, path in self.sockets.items():
             while ping(path) is None:
                 if self._procs[gpu].poll() is not None or time.time() - start > READY_TIMEOUT_S:
                     self.stop()
                     raise ConfigError(f"the warm trainer of GPU {gpu} did not start ({path})")
                 time.sleep(0.5)
-            self.ready_s[gpu] = round(time.time() - start, 3)
-            self.log(f"warm trainer on GPU {gpu} ready after {self.ready_s[gpu]:.1f} s")
+            self.log(f"warm trainer on GPU {gpu} ready after {time.time() - start:.1f} s")
         return self
 
     def seed_env(self, gpu: str) -> dict[str, str]:

@@ -22,7 +22,6 @@ machine); asked for, ``NAME.png`` (each seed's success against wall time and aga
 from __future__ import annotations
 
 import math
-import os
 import re
 import subprocess
 import sys
@@ -33,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from mjx_arm.bench.seed_servers import SeedServers, check_server_settings
+from mjx_arm.bench.seed_servers import SeedServers, check_server_settings, gpu_env
 from mjx_arm.bench.seeds_config import SeedRun, SeedsConfig, parse_seeds
 from mjx_arm.bench.seeds_summary import seed_line, start_up_line
 from mjx_arm.inputs import ConfigError
@@ -215,14 +214,13 @@ def _start_seed(
     """Start ``seed``'s training on ``gpu`` (a ``CUDA_VISIBLE_DEVICES`` entry: one GPU, or
     ``"0,1"`` for a seed on two) in a process of its own (with ``servers``, a ``train --server``
     command that the GPU's warm trainer runs), its output to ``runs_dir/seedN.log``."""
-    env = {k: v for k, v in os.environ.items() if k != "XLA_PYTHON_CLIENT_PREALLOCATE"}
-    env.update(servers.seed_env(gpu) if servers else {})
+    env = {**gpu_env(gpu), **(servers.seed_env(gpu) if servers else {})}
     run_dir = seed_run_dir(config, seed, runs_dir)
     command = seed_command(config, seed, run_dir, overrides)
     with (runs_dir / f"seed{seed}.log").open("wb") as out:
         return subprocess.Popen(
             command + (["--server"] if servers else []),
-            env={**env, "CUDA_VISIBLE_DEVICES": gpu},
+            env=env,
             stdout=out,
             stderr=subprocess.STDOUT,
         )

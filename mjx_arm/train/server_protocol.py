@@ -27,16 +27,20 @@ ENV_SOCKET = "MJX_ARM_SERVER"  # the socket's path, where not given on the comma
 MAX_LINE = 1 << 20  # bytes of one message line at most (a request is a few kB)
 
 
+def user_folder() -> Path:
+    """The folder of this user's sockets: ``$XDG_RUNTIME_DIR/mjx-arm``, else
+    ``TMPDIR/mjx-arm-UID`` (the server makes it, mode 0700, and refuses another user's)."""
+    runtime = os.environ.get("XDG_RUNTIME_DIR")
+    if runtime:
+        return Path(runtime) / "mjx-arm"
+    return Path(tempfile.gettempdir()) / f"mjx-arm-{os.getuid()}"
+
+
 def default_socket() -> Path:
-    """``$MJX_ARM_SERVER``, else ``$XDG_RUNTIME_DIR/mjx-arm/trainer.sock``, else
-    ``TMPDIR/mjx-arm-UID/trainer.sock`` (a folder of this user's)."""
+    """``$MJX_ARM_SERVER``, else ``trainer.sock`` in :func:`user_folder`."""
     if os.environ.get(ENV_SOCKET):
         return Path(os.environ[ENV_SOCKET])
-    runtime = os.environ.get("XDG_RUNTIME_DIR")
-    folder = Path(runtime) / "mjx-arm" if runtime else Path(tempfile.gettempdir())
-    if not runtime:
-        folder = folder / f"mjx-arm-{os.getuid()}"
-    return folder / "trainer.sock"
+    return user_folder() / "trainer.sock"
 
 
 def code_digest() -> str:

@@ -55,7 +55,6 @@ class Record:
     env: Any
     eval_env: Any
     programs: Programs | None = None
-    runs: int = 0  # runs that used this record's envs
 
 
 _STATE: dict[str, Record | None] = {}  # "record": the one kept; no key at all: not enabled
@@ -105,11 +104,10 @@ def envs(config: Any, setup: Any, build: Callable[[], tuple[Any, Any]]) -> tuple
     key = config_key(config, setup)
     record = _STATE["record"]
     if record is not None and record.key == key:
-        record.runs += 1
         return record.env, record.eval_env, True
     _STATE["record"] = None  # the old envs go before the new ones take memory
     env, eval_env = build()
-    _STATE["record"] = Record(key, env, eval_env, runs=1)
+    _STATE["record"] = Record(key, env, eval_env)
     return env, eval_env, False
 
 
