@@ -430,9 +430,10 @@ HEADLINES: tuple[Headline, ...] = (
     Headline(_two_gpu_seeds_row),
     _seeds_row(
         "Lift",
-        "seeds/fresh/seeds_lift_fast_fresh_8400_server.json",
-        "`--preset fast` as shipped through the warm trainer (`bench seeds --server`, one per "
-        "H200 of a host of two), 23 fresh seeds (8400-8422), time from the command's start",
+        "seeds/fresh/seeds_lift_fast_fresh_8600_server.json",
+        "`--preset fast` as shipped (evaluations from 3M steps) through the warm trainer "
+        "(`bench seeds --server`, one per H200 of a host of two), 19 fresh seeds (8600-8618), "
+        "time from the command's start",
     ),
     _seeds_row(
         "Reach",
