@@ -1,4 +1,5 @@
-"""``eval_from_step``: no evaluation of the initial policy nor of the epochs before that step.
+"""``eval_from_step`` and ``eval_gate``: no evaluation of the initial policy, nor of the epochs
+before that step or whose training episodes succeeded under the gate's rate.
 
 The tiny run of ``tiny_run`` (three epochs of Reach on the C MuJoCo batch) with its evaluations
 from the second epoch on, beside the same run evaluated at every epoch: the training is the same
@@ -28,6 +29,7 @@ from mjx_arm.train.rundir import RunDir
 SETS = [f"{k}={v}" for k, v in SETTINGS.items()]
 EVERY_EPOCH = load_config("cpu", None, SETS)
 FROM_SECOND = load_config("cpu", None, [*SETS, f"eval_from_step={2 * EPOCH_STEPS}"])
+GATED = load_config("cpu", None, [*SETS, "eval_gate=1"])  # no epoch of it passes the gate
 SUCCESS = "eval/episode_success"
 
 
@@ -54,7 +56,8 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     folder = tmp_path_factory.mktemp("eval_from_step")
     train(EVERY_EPOCH, folder / "every", quiet=True)
     train(FROM_SECOND, folder / "from_second", quiet=True)
-    return {"every": folder / "every", "from_second": folder / "from_second"}
+    train(GATED, folder / "gated", quiet=True)
+    return {name: folder / name for name in ("every", "from_second", "gated")}
 
 
 def test_the_epochs_before_eval_from_step_log_training_figures_only(runs) -> None:
@@ -67,14 +70,38 @@ def test_the_epochs_before_eval_from_step_log_training_figures_only(runs) -> Non
     assert steps == [i * EPOCH_STEPS for i in range(2, EPOCHS + 1)]
 
 
-def test_skipping_evaluations_leaves_the_training_as_it_was(runs) -> None:
+@pytest.mark.parametrize("skipped", ["from_second", "gated"])
+def test_skipping_evaluations_leaves_the_training_as_it_was(runs, skipped: str) -> None:
     """Every epoch's losses, KL and gradient norm equal those of the run evaluated throughout,
     exactly: evaluations read the params and their own key, nothing else."""
     every = {int(r["step"]): _training(r) for r in _rows(runs["every"])[1:]}
-    skipped = {int(r["step"]): _training(r) for r in _rows(runs["from_second"])}
-    assert every.keys() == skipped.keys()
-    for step, figures in skipped.items():
+    figures_of = {int(r["step"]): _training(r) for r in _rows(runs[skipped])}
+    assert every.keys() == figures_of.keys()
+    for step, figures in figures_of.items():
         assert figures and _same(figures, every[step]), step
+
+
+def test_epochs_under_the_gate_log_training_figures_only(runs) -> None:
+    """With ``eval_gate=1``: the initial policy is not evaluated, an epoch is where every
+    training episode that ended in it succeeded, and the last epoch always is (in this tiny run
+    few episodes end: those of a success, before the 150-step limit)."""
+    rows = _rows(runs["gated"])
+    assert [int(r["step"]) for r in rows] == [i * EPOCH_STEPS for i in range(1, EPOCHS + 1)]
+    evaluated = [math.isfinite(r.get(SUCCESS, math.nan)) for r in rows]
+    rates = [float(r["training/episode_success"]) for r in rows]
+    assert evaluated == [rate >= 1 for rate in rates[:-1]] + [True]
+    assert not all(evaluated), rates
+
+
+def test_the_gate_reads_the_epochs_training_success() -> None:
+    config = load_config("cpu", None, [*SETS, "eval_gate=0.3"])
+    rate = "training/episode_success"
+    assert not evaluates_at(config, EPOCH_STEPS, {rate: 0.29})
+    assert evaluates_at(config, EPOCH_STEPS, {rate: 0.3})
+    assert evaluates_at(config, EPOCHS * EPOCH_STEPS, {rate: 0.0})  # the last epoch
+    both = load_config("cpu", None, [*SETS, "eval_gate=0.3", f"eval_from_step={2 * EPOCH_STEPS}"])
+    assert not evaluates_at(both, EPOCH_STEPS, {rate: 0.9})
+    assert evaluates_at(both, 2 * EPOCH_STEPS, {rate: 0.9})
 
 
 def test_a_run_stopped_before_eval_from_step_resumes_into_the_same_run(runs, tmp_path) -> None:
@@ -94,9 +121,9 @@ def test_a_run_stopped_before_eval_from_step_resumes_into_the_same_run(runs, tmp
 
 def test_the_last_epoch_is_always_evaluated() -> None:
     config = load_config("cpu", None, [*SETS, "eval_from_step=10000000"])
-    assert not evaluates_at(config, EPOCH_STEPS)
-    assert evaluates_at(config, EPOCHS * EPOCH_STEPS)
-    assert evaluates_at(EVERY_EPOCH, EPOCH_STEPS)
+    assert not evaluates_at(config, EPOCH_STEPS, {})
+    assert evaluates_at(config, EPOCHS * EPOCH_STEPS, {})
+    assert evaluates_at(EVERY_EPOCH, EPOCH_STEPS, {})
 
 
 def _stages(run_dir: Path) -> dict[str, float]:

@@ -43,7 +43,12 @@ def _portable(value):
 # Task config fields added after the snapshot, with the value every preset leaves them at.
 ADDED_FIELDS = {"object_scale": 0.0, "grasp_closure": 0.0, "pay_after_overforce": True}
 # Training config fields added after the snapshot, with the value every preset leaves them at.
-ADDED_TRAIN_FIELDS = {"policy_distribution": "tanh_normal", "kl_stop": 0.0, "eval_from_step": 0}
+ADDED_TRAIN_FIELDS = {
+    "policy_distribution": "tanh_normal",
+    "kl_stop": 0.0,
+    "eval_from_step": 0,
+    "eval_gate": 0.0,
+}
 # ... and inside its ``normalizer`` section.
 ADDED_NORMALIZER_FIELDS = {"after_update": False, "force_scale": 0.0}
 # Presets changed on purpose since the snapshot, case -> normaliser fields: Touch's ``fast`` and

@@ -365,3 +365,45 @@ def test_kl_stop_skips_the_rest_of_an_update(tmp_path: Path) -> None:
     assert sum(float(r["training/kl_mean"]) for r in tight[1:]) < sum(
         float(r["training/kl_mean"]) for r in free[1:]
     )
+
+
+def test_episode_counts_read_the_ends_and_successes_of_the_rollout() -> None:
+    """``episode_success`` is 1 exactly where an episode ended with a success (its summed
+    ``success`` metric over 0), and an epoch's rate is its successes over its ended episodes."""
+    import jax.numpy as jnp
+    from brax.training.types import Transition
+
+    from mjx_arm.train.learner import _episode_counts, _update_view, episode_rates
+
+    done = jnp.array([[0, 1, 0], [1, 0, 1]], dtype=jnp.float32)  # (N=2, T=3)
+    success = jnp.array([[0, 2, 1], [0, 0, 1]], dtype=jnp.float32)  # summed over the episode
+    extras = {"episode_done": done, "episode_metrics": {"success": success}, "truncation": done}
+    zeros = jnp.zeros((2, 3))
+    data = Transition(zeros, zeros, zeros, zeros, zeros, {"state_extras": extras})
+    view = _update_view(data)
+    assert "episode_metrics" not in view.extras["state_extras"]
+    np.testing.assert_array_equal(
+        view.extras["state_extras"]["episode_success"], [[0, 1, 0], [0, 0, 1]]
+    )
+    counts = _episode_counts(view)
+    assert float(counts["episodes"]) == 3 and float(counts["episode_successes"]) == 2
+    # two training steps of an epoch: (3 ended, 2 succeeded) and (1 ended, 0 succeeded)
+    rates = episode_rates({"episodes": 2.0, "episode_successes": 1.0, "v_loss": 0.5}, steps=2)
+    assert rates == {"episodes": 4, "episode_success": 0.5, "v_loss": 0.5}
+    assert episode_rates({"episodes": 0.0, "episode_successes": 0.0}, 3)["episode_success"] == 0.0
+
+
+def test_each_epoch_logs_its_training_episodes_and_their_success(tmp_path: Path) -> None:
+    """32 envs step 60 times in the run's three epochs. An episode ends at its time limit of
+    ``L`` control steps (read from an evaluation that did not succeed: 30, the shortest Reach
+    takes on this arm, though ``task.episode_steps=5`` asks for less) or at a success, so every
+    env ends at least ``60 // L`` episodes; the rate is a fraction of them."""
+    sets = _tiny(1900, num_evals="4", **{"task.episode_steps": "5"})
+    rows = RunDir(train(load_config("cpu", None, sets), tmp_path / "run", quiet=True).run_dir)
+    initial, *epochs = rows.read_metrics()
+    assert float(initial["eval/episode_success"]) == 0
+    length = round(float(initial["eval/avg_episode_length"]))
+    ended = [float(row["training/episodes"]) for row in epochs]
+    assert all(n == int(n) and n >= 0 for n in ended)
+    assert sum(ended) >= 32 * (60 // length) >= 32
+    assert all(0 <= float(row["training/episode_success"]) <= 1 for row in epochs)

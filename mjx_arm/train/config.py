@@ -90,6 +90,10 @@ class TrainConfig:
             long as a few hundred thousand env steps and a policy under training solves nothing
             in its first epochs; the run's last epoch is always evaluated. 0: every epoch, and
             the initial policy, as Brax does.
+        eval_gate: an epoch whose training episodes (those that ended in it, their actions
+            sampled) succeeded at a rate under this is not evaluated either, nor is the initial
+            policy; the run's last epoch always is. The training rate of each epoch is logged
+            (``training/episode_success``) whether or not the gate is on. 0: off.
         checkpoint_every: save a checkpoint every this many evaluations (and at the end).
         env_state_every: the training envs' state (hundreds of MB for 8192 MJX envs) goes
             into every this many evaluations' checkpoint; a resume starts from the newest
@@ -146,6 +150,7 @@ class TrainConfig:
     num_evals: int = 10
     num_eval_envs: int = 128
     eval_from_step: int = 0
+    eval_gate: float = 0.0
     checkpoint_every: int = 1
     env_state_every: int = 5
     stop_at_success: float = 0.0
@@ -167,7 +172,9 @@ class TrainConfig:
         check_range(self, ("devices", "eval_from_step"), low=0)
         check_range(self, ("learning_rate", "clipping_epsilon", "max_grad_norm"), above=0)
         check_range(self, ("reward_scaling", "discounting"), above=0)
-        check_range(self, ("discounting", "gae_lambda", "stop_at_success"), low=0, high=1)
+        check_range(
+            self, ("discounting", "gae_lambda", "stop_at_success", "eval_gate"), low=0, high=1
+        )
         check_range(self, ("vf_loss_coefficient", "entropy_cost", "kl_stop"), low=0)
         if self.policy_distribution not in POLICY_DISTRIBUTIONS:
             raise ConfigError(

@@ -265,7 +265,8 @@ class Learner:
             normalizer_params=normalizer,
             env_steps=state.env_steps + env_steps,
         )
-        return state, {**jax.tree.map(jnp.mean, metrics), **_before_update(metrics)}
+        means = jax.tree.map(jnp.mean, metrics)
+        return state, {**means, **_before_update(metrics), **_episode_counts(data)}
 
     def _rollout(self, env: Any, env_state: Any, policy: Any, key: jax.Array, unrolls: int):
         """``unrolls`` unrolls of every env; transitions as ``(num_envs * unrolls, T, ...)``."""
@@ -357,13 +358,39 @@ def _before_update(metrics: dict[str, jax.Array]) -> dict[str, jax.Array]:
 
 
 def _update_view(data: Any) -> Any:
-    """The transitions as the update reads them: the task's episode metrics dropped (they are
-    the env's, and would make the update's program differ from task to task)."""
+    """The transitions as the update reads them: the task's episode metrics (the env's, which
+    would make the update's program differ from task to task) replaced by ``episode_success``
+    ``(N, T)``: 1 where an episode ended with a success, else 0."""
     extras = dict(data.extras)
-    extras["state_extras"] = {
-        k: v for k, v in extras["state_extras"].items() if k != "episode_metrics"
-    }
+    state_extras = dict(extras["state_extras"])
+    episode = state_extras.pop("episode_metrics")
+    ended = state_extras["episode_done"]
+    success = episode.get("success", jnp.zeros_like(ended))
+    state_extras["episode_success"] = ended * (success > 0).astype(ended.dtype)
+    extras["state_extras"] = state_extras
     return data._replace(extras=extras)
+
+
+def _episode_counts(data: Any) -> dict[str, jax.Array]:
+    """The training episodes that ended in ``data`` and those of them that succeeded (their
+    policy samples its actions, unlike an evaluation's): scalar sums over every env."""
+    extras = data.extras["state_extras"]
+    return {
+        "episodes": jnp.sum(extras["episode_done"]),
+        "episode_successes": jnp.sum(extras["episode_success"]),
+    }
+
+
+def episode_rates(mean: dict[str, Any], steps: int) -> dict[str, Any]:
+    """``mean`` (an epoch's metrics, each the mean over its ``steps`` training steps) with the
+    episode counts of :func:`_episode_counts` turned into ``episodes`` (ended in the epoch) and
+    ``episode_success`` (the fraction of them that succeeded; 0 where none ended)."""
+    mean = dict(mean)
+    episodes = float(mean.pop("episodes")) * steps
+    successes = float(mean.pop("episode_successes")) * steps
+    mean["episodes"] = round(episodes)
+    mean["episode_success"] = successes / episodes if episodes else 0.0
+    return mean
 
 
 @dataclass(frozen=True)
@@ -407,4 +434,4 @@ class EpochPrograms:
             key = keys[1]
             metrics.append(step_metrics)
         mean = jax.tree.map(lambda *xs: np.mean(np.stack(xs)), *jax.device_get(metrics))
-        return state, env_state, {**mean, **seconds}
+        return state, env_state, {**episode_rates(mean, self.steps), **seconds}

@@ -365,7 +365,7 @@ def _epoch_done(
     params = run.learner.params(state)
     callbacks.policy_params(step, run.learner.make_policy, params)
     callbacks.snapshot(step, functools.partial(run.snapshot, *taken))
-    if not evaluates_at(config, step):
+    if not evaluates_at(config, step, training):
         callbacks.progress(step, dict(training))
         return
     callbacks.progress(step, _evaluate(run.evaluate, params, training))
@@ -373,15 +373,21 @@ def _epoch_done(
 
 def evaluates_initial_policy(config: TrainConfig, step_offset: int) -> bool:
     """Whether a run from ``step_offset`` evaluates its policy before the first epoch: a new
-    run (not a resumed one) with evaluations during training and no ``eval_from_step``."""
-    return config.num_evals > 1 and step_offset == 0 and not config.eval_from_step
+    run (not a resumed one) with evaluations during training, no ``eval_from_step`` and no
+    ``eval_gate``."""
+    skipped = config.eval_from_step or config.eval_gate
+    return config.num_evals > 1 and step_offset == 0 and not skipped
 
 
-def evaluates_at(config: TrainConfig, step: int) -> bool:
-    """Whether the epoch that ends at env step ``step`` is evaluated: from
-    ``config.eval_from_step`` on, and the run's last epoch always. The same on every process
-    (it reads the step alone), so that all stop at the same evaluation."""
-    return step >= config.eval_from_step or step >= config.num_timesteps
+def evaluates_at(config: TrainConfig, step: int, training: dict[str, Any]) -> bool:
+    """Whether the epoch that ends at env step ``step``, with ``training`` metrics, is
+    evaluated: from ``config.eval_from_step`` on where its training episodes' success rate is
+    at least ``config.eval_gate``, and the run's last epoch always. The same on every process
+    (the step, and a rate over every process's envs), so that all stop at the same evaluation."""
+    if step >= config.num_timesteps:
+        return True
+    rate = float(training.get("training/episode_success", 1.0))
+    return step >= config.eval_from_step and rate >= config.eval_gate
 
 
 def _evaluate(evaluate: Evaluator, params: Params, training: dict[str, Any]) -> dict[str, Any]:
