@@ -305,3 +305,40 @@ def test_eval_from_step_is_chosen_one_epoch_short_of_the_earliest_tuning_solve()
     fresh = seeds / "fresh" / "seeds_touch_fast_fresh_8036.json"
     with pytest.raises(SystemExit, match="not a tuning seed"):
         main([str(fresh)])
+
+
+def _gate_run(folder: Path, seed: int, rows: list[tuple[int, float, float]]) -> Path:
+    """A run directory of ``seed`` whose evaluations are ``(step, success, training rate)``
+    (step 0: the initial policy, no training rate), each taking 1.5 s."""
+    folder.mkdir(parents=True)
+    train = {"seed": seed, "stop_at_success": 0.9}
+    (folder / "config.json").write_text(json.dumps({"train": train}))
+    lines = ["step,eval/episode_success,training/episode_success,eval/epoch_eval_time"]
+    lines += [f"{s},{x},{'' if s == 0 else r},1.5" for s, x, r in rows]
+    (folder / "metrics.csv").write_text("\n".join(lines) + "\n")
+    return folder
+
+
+def test_eval_gate_is_half_the_lowest_training_rate_at_a_tuning_solve(tmp_path: Path) -> None:
+    """``choose_eval_gate``: seed 1000 solved where its training episodes succeeded at 0.5,
+    1001 at 0.37, so the gate is 0.18; the evaluations under it before each solve (the initial
+    policy's included) are the ones skipped. A fresh seed is refused."""
+    from benchmarks.choose_eval_gate import choose, main, read_run, run_dirs
+
+    runs = tmp_path / "runs"
+    _gate_run(runs / "a", 1000, [(0, 0, 0), (1, 0.0, 0.02), (2, 0.3, 0.2), (3, 0.92, 0.5)])
+    rows = [(0, 0, 0), (1, 0.0, 0.0), (2, 0.0, 0.1), (3, 0.1, 0.17), (4, 0.95, 0.37)]
+    _gate_run(runs / "b", 1001, rows)
+    seed, threshold, evaluations = read_run(runs / "b")
+    assert (seed, threshold, len(evaluations)) == (1001, 0.9, 5)
+    assert evaluations[0].rate != evaluations[0].rate and evaluations[-1].rate == 0.37  # NaN
+    got = choose({read_run(p)[0]: read_run(p)[2] for p in run_dirs([runs])}, 0.9)
+    assert got["eval_gate"] == 0.18 and got["lowest_rate_at_a_solve"] == 0.37
+    # 1000 skips the initial policy and step 1 (2 evaluations), 1001 the initial policy and
+    # steps 1-3: a median of 3 evaluations, 4.5 s
+    assert got["evaluations_skipped_per_solved_run"] == 3
+    assert got["seconds_saved_per_solved_run"] == 4.5
+    assert main([str(runs)]) == 0
+    _gate_run(tmp_path / "fresh" / "c", 8600, rows)
+    with pytest.raises(SystemExit, match="not a tuning seed"):
+        main([str(tmp_path / "fresh")])
