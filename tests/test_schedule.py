@@ -13,6 +13,7 @@ from mjx_arm.train.presets import load_config
 from mjx_arm.train.schedule import (
     ScheduleConfig,
     adapted_rate,
+    clip_each_network,
     current_rate,
     make_optimizer,
     with_rate,
@@ -63,6 +64,27 @@ def test_a_constant_schedule_keeps_adams_plain_state() -> None:
     state = optimizer.init({"w": jnp.ones(2)})
     assert not hasattr(state[1], "hyperparams")
     assert float(current_rate(state, 3e-4)) == pytest.approx(3e-4)
+
+
+def test_each_network_is_clipped_apart_with_the_same_state() -> None:
+    """A value gradient of norm 1e6 beside a policy gradient of norm 10 (as seed 8219's
+    second epoch had): one global clip to 0.5 leaves the policy 5e-6 of it, the per-network clip
+    0.5 each. Both optimisers keep the same state layout, so checkpoints resume under either."""
+    import jax
+    import optax
+
+    from mjx_arm.train.losses import PPONetworkParams
+
+    grads = PPONetworkParams(policy={"w": jnp.array([6.0, 8.0])}, value={"w": jnp.array([1e6])})
+
+    def norms(clip: optax.GradientTransformation) -> tuple[float, float]:
+        out, _ = clip.update(grads, clip.init(grads))
+        return float(jnp.linalg.norm(out.policy["w"])), float(jnp.linalg.norm(out.value["w"]))
+
+    assert norms(optax.clip_by_global_norm(0.5)) == pytest.approx((5e-6, 0.5), rel=1e-4)
+    assert norms(clip_each_network(0.5)) == pytest.approx((0.5, 0.5), rel=1e-5)
+    states = [make_optimizer(1e-3, 0.5, ScheduleConfig(), each).init(grads) for each in (0, 1)]
+    assert jax.tree.structure(states[0]) == jax.tree.structure(states[1])
 
 
 def test_bad_schedule_and_normalizer_settings_are_named() -> None:

@@ -48,6 +48,7 @@ ADDED_TRAIN_FIELDS = {
     "kl_stop": 0.0,
     "eval_from_step": 0,
     "eval_gate": 0.0,
+    "clip_per_network": False,
 }
 # ... and inside its ``normalizer`` section.
 ADDED_NORMALIZER_FIELDS = {"after_update": False, "force_scale": 0.0}

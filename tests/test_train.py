@@ -373,19 +373,19 @@ def test_episode_counts_read_the_ends_and_successes_of_the_rollout() -> None:
     import jax.numpy as jnp
     from brax.training.types import Transition
 
-    from mjx_arm.train.learner import _episode_counts, _update_view, episode_rates
+    from mjx_arm.train.epoch_metrics import episode_counts, episode_rates, update_view
 
     done = jnp.array([[0, 1, 0], [1, 0, 1]], dtype=jnp.float32)  # (N=2, T=3)
     success = jnp.array([[0, 2, 1], [0, 0, 1]], dtype=jnp.float32)  # summed over the episode
     extras = {"episode_done": done, "episode_metrics": {"success": success}, "truncation": done}
     zeros = jnp.zeros((2, 3))
     data = Transition(zeros, zeros, zeros, zeros, zeros, {"state_extras": extras})
-    view = _update_view(data)
+    view = update_view(data)
     assert "episode_metrics" not in view.extras["state_extras"]
     np.testing.assert_array_equal(
         view.extras["state_extras"]["episode_success"], [[0, 1, 0], [0, 0, 1]]
     )
-    counts = _episode_counts(view)
+    counts = episode_counts(view)
     assert float(counts["episodes"]) == 3 and float(counts["episode_successes"]) == 2
     # two training steps of an epoch: (3 ended, 2 succeeded) and (1 ended, 0 succeeded)
     rates = episode_rates({"episodes": 2.0, "episode_successes": 1.0, "v_loss": 0.5}, steps=2)
@@ -407,3 +407,17 @@ def test_each_epoch_logs_its_training_episodes_and_their_success(tmp_path: Path)
     assert all(n == int(n) and n >= 0 for n in ended)
     assert sum(ended) >= 32 * (60 // length) >= 32
     assert all(0 <= float(row["training/episode_success"]) <= 1 for row in epochs)
+
+
+def test_clip_per_network_reaches_the_optimiser(tmp_path: Path) -> None:
+    """``clip_per_network=true`` trains another run than the shared clip (this tiny run's
+    gradients are over ``max_grad_norm``, so the two clips differ), and is saved with it."""
+    last = {}
+    for each in ("false", "true"):
+        config = load_config("cpu", None, _tiny(600, clip_per_network=each))
+        run = RunDir(train(config, tmp_path / each, quiet=True).run_dir)
+        last[each] = run.read_metrics()[-1]
+        saved = json.loads((run.path / "config.json").read_text())["train"]["clip_per_network"]
+        assert saved is (each == "true")
+    assert float(last["false"]["training/grad_norm"]) > 0.5
+    assert last["false"]["training/total_loss"] != last["true"]["training/total_loss"]

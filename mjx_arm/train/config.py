@@ -68,6 +68,10 @@ class TrainConfig:
         num_updates_per_batch: epochs over each rollout batch (the seed's n_epochs = 10).
         learning_rate, discounting, gae_lambda, clipping_epsilon, vf_loss_coefficient,
             max_grad_norm, entropy_cost, reward_scaling: PPO settings.
+        clip_per_network: clip the policy's and the value's gradients to ``max_grad_norm``
+            each, instead of one global norm over both (where the value's gradient is
+            thousands of times the policy's, the shared clip shrinks the policy's step to
+            nothing: docs/training.md, "A seed the value loss froze"). Off in every preset.
         schedule: how the learning rate moves (constant, or adapted to a KL target).
         kl_stop: an update takes no more gradient steps once a minibatch's KL between the
             rollout's policy and the current one, measured before its step, exceeds this (the
@@ -138,6 +142,7 @@ class TrainConfig:
     clipping_epsilon: float = 0.2
     vf_loss_coefficient: float = 0.5
     max_grad_norm: float = 0.5
+    clip_per_network: bool = False
     entropy_cost: float = 1e-3
     reward_scaling: float = 0.1
     schedule: ScheduleConfig = field(default_factory=ScheduleConfig)

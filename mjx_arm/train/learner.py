@@ -39,6 +39,7 @@ from jax.sharding import PartitionSpec as P
 
 from mjx_arm.inputs import ConfigError
 from mjx_arm.train.config import TrainConfig
+from mjx_arm.train.epoch_metrics import before_update, episode_counts, episode_rates, update_view
 from mjx_arm.train.losses import init_params, loss_and_grad
 from mjx_arm.train.networks import make_networks
 from mjx_arm.train.normalizer import fix_force_scale
@@ -154,7 +155,9 @@ class Learner:
         self.observation_size = observation_size
         self.network = make_networks(config, observation_size, action_size)
         self.make_policy = ppo_networks.make_inference_fn(self.network)
-        self.optimizer = make_optimizer(config.learning_rate, config.max_grad_norm, config.schedule)
+        self.optimizer = make_optimizer(
+            config.learning_rate, config.max_grad_norm, config.schedule, config.clip_per_network
+        )
         self._loss_and_grad = loss_and_grad(config, self.network)
         self.replicated = NamedSharding(mesh, P())
         # one jitted init per learner: a warm trainer's next run finds it traced
@@ -243,7 +246,7 @@ class Learner:
         env_state, data = self._rollout(env, env_state, policy, key_unroll, unrolls)
         # strong types: the compiled rollout takes back exactly the types it returns
         env_state = jax.tree.map(lambda x: x.astype(x.dtype), env_state)
-        return env_state, _update_view(data), jnp.stack([key_sgd, key_next])
+        return env_state, update_view(data), jnp.stack([key_sgd, key_next])
 
     def _update_step(self, env_steps: int, state: TrainingState, data: Any, key_sgd: jax.Array):
         """The PPO update of one training step on ``data``: ``(state, mean metrics)``."""
@@ -266,7 +269,7 @@ class Learner:
             env_steps=state.env_steps + env_steps,
         )
         means = jax.tree.map(jnp.mean, metrics)
-        return state, {**means, **_before_update(metrics), **_episode_counts(data)}
+        return state, {**means, **before_update(metrics), **episode_counts(data)}
 
     def _rollout(self, env: Any, env_state: Any, policy: Any, key: jax.Array, unrolls: int):
         """``unrolls`` unrolls of every env; transitions as ``(num_envs * unrolls, T, ...)``."""
@@ -345,52 +348,6 @@ def _rollouts_statistics(rollout: Any, moved: Any) -> Any:
     count = rollout.count  # Brax's UInt64 (two uint32 halves), or an integer array
     empty = (count.hi == 0) & (count.lo == 0) if hasattr(count, "hi") else count == 0
     return jax.tree.map(lambda old, new: jnp.where(empty, new, old), rollout, moved)
-
-
-def _before_update(metrics: dict[str, jax.Array]) -> dict[str, jax.Array]:
-    """The first minibatch's KL and clip fraction, ``(passes, minibatches)`` metrics at
-    ``[0, 0]``: measured before the update's first gradient step, so the policy differs from the
-    rollout's only by the observation normaliser, which the update moved first."""
-    return {
-        "kl_before_update": metrics["kl_mean"][0, 0],
-        "clip_fraction_before_update": metrics["clip_fraction"][0, 0],
-    }
-
-
-def _update_view(data: Any) -> Any:
-    """The transitions as the update reads them: the task's episode metrics (the env's, which
-    would make the update's program differ from task to task) replaced by ``episode_success``
-    ``(N, T)``: 1 where an episode ended with a success, else 0."""
-    extras = dict(data.extras)
-    state_extras = dict(extras["state_extras"])
-    episode = state_extras.pop("episode_metrics")
-    ended = state_extras["episode_done"]
-    success = episode.get("success", jnp.zeros_like(ended))
-    state_extras["episode_success"] = ended * (success > 0).astype(ended.dtype)
-    extras["state_extras"] = state_extras
-    return data._replace(extras=extras)
-
-
-def _episode_counts(data: Any) -> dict[str, jax.Array]:
-    """The training episodes that ended in ``data`` and those of them that succeeded (their
-    policy samples its actions, unlike an evaluation's): scalar sums over every env."""
-    extras = data.extras["state_extras"]
-    return {
-        "episodes": jnp.sum(extras["episode_done"]),
-        "episode_successes": jnp.sum(extras["episode_success"]),
-    }
-
-
-def episode_rates(mean: dict[str, Any], steps: int) -> dict[str, Any]:
-    """``mean`` (an epoch's metrics, each the mean over its ``steps`` training steps) with the
-    episode counts of :func:`_episode_counts` turned into ``episodes`` (ended in the epoch) and
-    ``episode_success`` (the fraction of them that succeeded; 0 where none ended)."""
-    mean = dict(mean)
-    episodes = float(mean.pop("episodes")) * steps
-    successes = float(mean.pop("episode_successes")) * steps
-    mean["episodes"] = round(episodes)
-    mean["episode_success"] = successes / episodes if episodes else 0.0
-    return mean
 
 
 @dataclass(frozen=True)

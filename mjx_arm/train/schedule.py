@@ -72,20 +72,43 @@ class ScheduleConfig:
 
 
 def make_optimizer(
-    learning_rate: float, max_grad_norm: float, schedule: ScheduleConfig
+    learning_rate: float,
+    max_grad_norm: float,
+    schedule: ScheduleConfig,
+    per_network: bool = False,
 ) -> optax.GradientTransformation:
     """Adam after global-norm clipping; with an adaptive schedule the rate is a hyperparameter
     held in the optimiser's state (read and set with :func:`current_rate`, :func:`with_rate`).
+    ``per_network``: the policy's and the value's gradients are clipped to ``max_grad_norm``
+    each (:func:`clip_each_network`), instead of one norm over both.
 
     A constant schedule builds the same optimiser (and state layout) as runs before schedules
-    existed, so their checkpoints resume unchanged.
+    existed, so their checkpoints resume unchanged; so does either clip.
     """
     import optax
 
+    clip = clip_each_network(max_grad_norm) if per_network else None
+    clip = clip or optax.clip_by_global_norm(max_grad_norm)
     if not schedule.adaptive:
-        return optax.chain(optax.clip_by_global_norm(max_grad_norm), optax.adam(learning_rate))
+        return optax.chain(clip, optax.adam(learning_rate))
     adam = optax.inject_hyperparams(optax.adam)(learning_rate=learning_rate)
-    return optax.chain(optax.clip_by_global_norm(max_grad_norm), adam)
+    return optax.chain(clip, adam)
+
+
+def clip_each_network(max_norm: float) -> optax.GradientTransformation:
+    """Global-norm clipping applied to the ``policy`` and the ``value`` part of the updates
+    apart (Brax's PPO params), so that a value gradient thousands of times the policy's does not
+    shrink the policy's step with it. Its state is the global clip's (empty)."""
+    import optax
+
+    clip = optax.clip_by_global_norm(max_norm)
+
+    def update(updates: Any, state: Any, params: Any = None) -> tuple[Any, Any]:
+        policy, _ = clip.update(updates.policy, state)
+        value, _ = clip.update(updates.value, state)
+        return updates.replace(policy=policy, value=value), state
+
+    return optax.GradientTransformation(clip.init, update)
 
 
 def current_rate(optimizer_state: Any, learning_rate: float) -> Any:
