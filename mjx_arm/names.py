@@ -40,8 +40,9 @@ BACKENDS = ("auto", "mjx", "mujoco")
 IMPLS = ("auto", "jax", "warp")
 PRESET_NAMES = ("seed", "fast", "cpu", "robust")
 
-# Exit codes of every command: success, and an invalid input or setting (a named error).
-EXIT_OK, EXIT_INVALID = 0, 2
+# Exit codes of every command: success, and an invalid input or setting (a named error); a
+# benchmark stopped by SIGTERM after writing what it had exits as a shell reports that signal.
+EXIT_OK, EXIT_INVALID, EXIT_STOPPED = 0, 2, 143
 
 
 def engine_label(engine: str, backend: str | None = None) -> str:

@@ -96,7 +96,7 @@ def test_two_tiny_seeds_on_the_c_backend(tmp_path: Path) -> None:
     """Two seeds of a few thousand steps: each trains, its curve starts at step 0, and the
     report sees the saved config of each seed (its own seed); the command writes the report
     of the first seed before the second trains (a benchmark stopped early keeps it)."""
-    from mjx_arm.bench.cli import _train_seeds
+    from mjx_arm.bench.seeds_gpus import train_seeds
 
     config = SeedsConfig(task="reach", preset="cpu", seeds="0,1", backend="mujoco")
     sets = ("num_timesteps=2560", "num_evals=2", "num_eval_envs=8")
@@ -106,7 +106,10 @@ def test_two_tiny_seeds_on_the_c_backend(tmp_path: Path) -> None:
         reports.append(([r.seed for r in runs], kwargs["pending"]))
 
     command_start = time.time() - 5.0  # the command started 5 s ago (its imports)
-    runs, configs = _train_seeds(config, tmp_path, [], sets, command_start, lambda _: None, report)
+    runs, configs, pending = train_seeds(
+        config, tmp_path, [], sets, command_start, lambda _: None, report
+    )
+    assert pending == 0
     assert reports == [([0], 1)]  # the final report is the command's own
     # the first seed's time before training counts from the command's start, the next's from
     # its own: a few hundredths of a second in this process
@@ -126,7 +129,7 @@ def test_seeds_in_processes_of_their_own(tmp_path: Path) -> None:
     """Each seed trains in a process of its own (as on each GPU of a host; here two CPU
     processes at once): the same report, each seed's own config, the GPU it ran on, and a seed
     whose process fails is reported unsolved with its error while the others go on."""
-    from mjx_arm.bench.seeds import run_seeds_on_gpus
+    from mjx_arm.bench.seeds_gpus import run_seeds_on_gpus
 
     config = SeedsConfig(task="reach", preset="cpu", seeds="0-1", backend="mujoco")
     sets = ("num_timesteps=2560", "num_evals=2", "num_eval_envs=8")
@@ -153,6 +156,40 @@ def test_seeds_in_processes_of_their_own(tmp_path: Path) -> None:
                          tmp_path, "p", sets, wall_s=12.5)  # fmt: skip
     summary = json.loads(paths[0].read_text())["summary"]
     assert summary["wall_s"] == 12.5 and summary["solved"] <= 2
+
+
+@pytest.mark.slow
+def test_a_sigterm_keeps_the_finished_seeds_and_stops_the_rest(tmp_path: Path) -> None:
+    """A SIGTERM (here sent as the third of three seeds starts, two GPUs' worth at a time):
+    the finished seeds are kept, those training are stopped and waited for, and the benchmark
+    hands back how many it left out; the SIGTERM handler is the caller's again."""
+    import os
+    import signal
+
+    from mjx_arm.bench.seeds_gpus import train_seeds
+
+    config = SeedsConfig(task="reach", preset="cpu", seeds="0-2", backend="mujoco")
+    sets = ("num_timesteps=2560", "num_evals=2", "num_eval_envs=8")
+    reports, lines = [], []
+
+    def log(line: str) -> None:
+        lines.append(line)
+        if line.startswith("seed 2: training"):
+            os.kill(os.getpid(), signal.SIGTERM)  # as a deadline's timeout would
+
+    def report(runs, configs, **kwargs) -> None:
+        reports.append((len(runs), kwargs["pending"]))
+
+    before = signal.getsignal(signal.SIGTERM)
+    runs, configs, pending = train_seeds(config, tmp_path, ["", ""], sets, time.time(), log, report)
+    assert signal.getsignal(signal.SIGTERM) == before
+    # seed 2 starts on the first GPU freed: seed 1 has ended by then, or is stopped with it
+    finished = [r.seed for r in runs]
+    assert finished in ([0, 1], [0], [1]) and pending == 3 - len(runs)
+    assert not any(r.error for r in runs) and [c["train"]["seed"] for c in configs] == finished
+    assert reports[-1] == (len(runs), pending)  # the last report the benchmark wrote
+    assert lines[-1] == f"stopped by SIGTERM: {len(runs)} of 3 seeds finished"
+    assert (tmp_path / "seed2.log").exists()  # it had started; train_seeds waited for its end
 
 
 def test_a_failed_seed_reports_the_exception_its_log_ends_with():

@@ -24,8 +24,9 @@ from types import SimpleNamespace
 import pytest
 
 from mjx_arm.bench.seed_servers import check_server_settings
-from mjx_arm.bench.seeds import run_seeds, run_seeds_on_gpus
+from mjx_arm.bench.seeds import run_seeds
 from mjx_arm.bench.seeds_config import SeedsConfig
+from mjx_arm.bench.seeds_gpus import run_seeds_on_gpus
 from mjx_arm.cli import build_parser
 from mjx_arm.inputs import ConfigError
 from mjx_arm.train import warm

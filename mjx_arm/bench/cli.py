@@ -18,7 +18,7 @@ from mjx_arm import engines
 from mjx_arm.bench.results import check_outside_results
 from mjx_arm.bench.settings import add_arguments, from_arguments
 from mjx_arm.inputs import ConfigError, check_folder
-from mjx_arm.names import EXIT_OK
+from mjx_arm.names import EXIT_OK, EXIT_STOPPED
 from mjx_arm.settings import add_set_argument
 
 if TYPE_CHECKING:
@@ -228,6 +228,7 @@ def cmd_seeds(args: argparse.Namespace) -> int:
     start = time.time()
     from mjx_arm.bench.results import environment_metadata
     from mjx_arm.bench.seeds import SeedsConfig, check_seed_settings
+    from mjx_arm.bench.seeds_gpus import train_seeds
     from mjx_arm.bench.seeds_report import write_report
     from mjx_arm.train.launch import visible_gpus
 
@@ -245,30 +246,12 @@ def cmd_seeds(args: argparse.Namespace) -> int:
     log = functools.partial(print, flush=True)
     name = args.name or f"seeds_{config.task}_{config.preset}"
     report = functools.partial(write_report, config, meta=meta, out=args.out, name=name)
-    runs, configs = _train_seeds(config, runs_dir, gpus, overrides, start, log, report)
+    runs, configs, pending = train_seeds(config, runs_dir, gpus, overrides, start, log, report)
     wall = time.time() - start
-    paths = report(runs, configs, overrides=overrides, wall_s=wall, png=args.plot)
+    paths = report(runs, configs, overrides=overrides, wall_s=wall, png=args.plot, pending=pending)
     print(paths[1].read_text())
     _print_paths(paths)
-    return EXIT_OK
-
-
-def _train_seeds(config, runs_dir: Path, gpus: list[str], overrides, start: float, log, report):
-    """Train the seeds (a process per seed on ``gpus``, else in turn here); after each seed
-    but the last, ``report`` writes the report of the seeds finished so far, so that a
-    benchmark stopped early keeps them. Returns the seed runs and their saved configs."""
-    from mjx_arm.bench.seeds import parse_seeds, run_seeds, run_seeds_on_gpus
-
-    total = len(parse_seeds(config.seeds))
-
-    def on_seed(runs: list, configs: list) -> None:
-        if len(runs) < total:
-            wall = time.time() - start
-            report(runs, configs, overrides=overrides, wall_s=wall, pending=total - len(runs))
-
-    if gpus:
-        return run_seeds_on_gpus(config, runs_dir, gpus, overrides, log, on_seed)
-    return run_seeds(config, runs_dir, overrides, start, log, on_seed)
+    return EXIT_STOPPED if pending else EXIT_OK
 
 
 def _runs_folder(runs: Path | None, config: SeedsConfig) -> Path:

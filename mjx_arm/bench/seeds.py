@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import math
 import re
-import subprocess
 import sys
 import time
 from collections.abc import Callable
@@ -32,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from mjx_arm.bench.seed_servers import SeedServers, check_server_settings, gpu_env
+from mjx_arm.bench.seed_servers import check_server_settings
 from mjx_arm.bench.seeds_config import SeedRun, SeedsConfig, parse_seeds
 from mjx_arm.bench.seeds_summary import seed_line, start_up_line
 from mjx_arm.inputs import ConfigError
@@ -203,117 +202,6 @@ def failed_seed(seed: int, gpu: str, wall: float, error: str) -> SeedRun:
     return SeedRun(seed, nan, nan, None, None, 0, wall, nan, nan, [], {}, gpu, error)
 
 
-def _start_seed(
-    config: SeedsConfig,
-    seed: int,
-    runs_dir: Path,
-    gpu: str,
-    overrides: tuple[str, ...],
-    servers: SeedServers | None = None,
-) -> subprocess.Popen:
-    """Start ``seed``'s training on ``gpu`` (a ``CUDA_VISIBLE_DEVICES`` entry: one GPU, or
-    ``"0,1"`` for a seed on two) in a process of its own (with ``servers``, a ``train --server``
-    command that the GPU's warm trainer runs), its output to ``runs_dir/seedN.log``."""
-    env = {**gpu_env(gpu), **(servers.seed_env(gpu) if servers else {})}
-    run_dir = seed_run_dir(config, seed, runs_dir)
-    command = seed_command(config, seed, run_dir, overrides)
-    with (runs_dir / f"seed{seed}.log").open("wb") as out:
-        return subprocess.Popen(
-            command + (["--server"] if servers else []),
-            env=env,
-            stdout=out,
-            stderr=subprocess.STDOUT,
-        )
-
-
-def _finished_seed(
-    config: SeedsConfig, seed: int, runs_dir: Path, proc: subprocess.Popen, gpu: str, start: float
-) -> tuple[SeedRun, dict[str, Any]]:
-    """The result and saved config of a seed whose process has ended (a failed one: not
-    solved, with the end of its log)."""
-    from mjx_arm.train.rundir import RunDir
-
-    end = time.time()
-    if proc.returncode != 0:
-        log = (runs_dir / f"seed{seed}.log").read_text(errors="replace")
-        error = f"exit code {proc.returncode}: {log_error(log)}"
-        return failed_seed(seed, gpu, end - start, error), {}
-    run_dir = seed_run_dir(config, seed, runs_dir)
-    run = read_seed_run(config, seed, run_dir, start, end)
-    run.gpu = gpu
-    return run, RunDir(run_dir).load_config()
-
-
-def run_seeds_on_gpus(
-    config: SeedsConfig,
-    runs_dir: Path,
-    gpus: list[str],
-    overrides: tuple[str, ...] = (),
-    log=print,
-    on_seed: SeedsDone | None = None,
-) -> tuple[list[SeedRun], list[dict[str, Any]]]:
-    """Train every seed in a process of its own, one per GPU of ``gpus`` at a time.
-
-    Each seed's times count from its own process's start (imports, cache loads and any compilation
-    included); a seed is warm where another had ended before it started (the seeds started at once
-    on a fresh host all found the caches empty). A seed whose process fails is reported as not
-    solved, with the end of its log, and the others go on. ``on_seed`` is called with the seeds
-    finished so far (in seed order) each time one finishes. With ``config.server`` each GPU's
-    warm trainer (:class:`~mjx_arm.bench.seed_servers.SeedServers`) runs its seeds' commands;
-    a seed is then warm where that server had finished a seed before it.
-    """
-    runs_dir.mkdir(parents=True, exist_ok=True)
-    servers = SeedServers(gpus, runs_dir, log).start() if config.server else None
-    try:
-        return _train_on_gpus(config, runs_dir, gpus, overrides, log, on_seed, servers)
-    finally:
-        if servers:
-            servers.stop()
-
-
-def _train_on_gpus(
-    config: SeedsConfig,
-    runs_dir: Path,
-    gpus: list[str],
-    overrides: tuple[str, ...],
-    log,
-    on_seed: SeedsDone | None,
-    servers: SeedServers | None,
-) -> tuple[list[SeedRun], list[dict[str, Any]]]:
-    """:func:`run_seeds_on_gpus` once its warm trainers (if any) have started."""
-    seeds = parse_seeds(config.seeds)
-    queue, free = list(seeds), list(gpus)
-    running: dict[int, tuple[subprocess.Popen, str, float, bool]] = {}
-    done: dict[int, tuple[SeedRun, dict[str, Any]]] = {}
-    while queue or running:
-        while queue and free:
-            seed, gpu = queue.pop(0), free.pop(0)
-            proc = _start_seed(config, seed, runs_dir, gpu, overrides, servers)
-            warm = servers.served[gpu] > 0 if servers else bool(done)  # caches filled
-            running[seed] = (proc, gpu, time.time(), warm)
-            log(f"seed {seed}: training {config.task} / {config.preset} on GPU {gpu}")
-        for seed, (proc, gpu, start, warm) in list(running.items()):
-            if proc.poll() is None:
-                continue
-            del running[seed]
-            free.append(gpu)
-            done[seed] = _finished_seed(config, seed, runs_dir, proc, gpu, start)
-            run = done[seed][0]
-            run.warm = warm
-            if servers:
-                servers.served[gpu] += 1
-            if run.error:
-                log(f"seed {seed}: its process failed ({run.error[:400]})")
-            else:
-                _log_run(log, config, run)
-            if on_seed is not None:
-                finished = [done[s] for s in seeds if s in done]
-                on_seed([r for r, _ in finished], [c for _, c in finished])
-        time.sleep(0.5)
-    ordered = [done[s] for s in seeds]
-    return [r for r, _ in ordered], [c for _, c in ordered]
-
-
 def check_seed_settings(
     config: SeedsConfig, overrides: tuple[str, ...] = (), devices: int | None = None
 ) -> None:
@@ -382,13 +270,13 @@ def run_seeds(
         run.warm = i > 0
         runs.append(run)
         configs.append(saved)
-        _log_run(log, config, run)
+        log_run(log, config, run)
         if on_seed is not None:
             on_seed(list(runs), list(configs))
     return runs, configs
 
 
-def _log_run(log, config: SeedsConfig, run: SeedRun) -> None:
+def log_run(log, config: SeedsConfig, run: SeedRun) -> None:
     """A finished seed's result line, then its start-up line."""
     log(seed_line(config, run))
     log(f"seed {run.seed} {start_up_line(run.compile_report)}")

@@ -54,7 +54,8 @@ def write_report(
 
     ``wall_s``: the whole benchmark's wall time (recorded with the GPUs the seeds ran on).
     ``pending``: seeds still training or queued (a report written while the benchmark runs,
-    so that one stopped early keeps its finished seeds); recorded as ``pending_seeds``."""
+    so that one stopped early keeps its finished seeds), or left out by a SIGTERM; recorded
+    as ``pending_seeds``."""
     summary = summarize(runs, config.threshold)
     if wall_s is not None:
         summary["wall_s"] = wall_s
