@@ -71,15 +71,10 @@ class SeedServers:
         return {"MJX_ARM_SERVER": str(self.sockets[gpu])}
 
     def stop(self) -> None:
-        """Stop every server (Ctrl-C, as a user would) and wait for it."""
-        for proc in self._procs.values():
-            if proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
-        for proc in self._procs.values():
-            try:
-                proc.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                proc.kill()
+        """Stop every server (Ctrl-C, as a user would) and wait for it (30 s, then killed)."""
+        from mjx_arm.train.launch import stop_processes
+
+        stop_processes(list(self._procs.values()), signal.SIGINT, 30)
 
 
 def check_server_settings(config: SeedsConfig) -> None:

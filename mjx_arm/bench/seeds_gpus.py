@@ -32,6 +32,7 @@ from mjx_arm.bench.seeds import (
     seed_run_dir,
 )
 from mjx_arm.bench.seeds_config import SeedRun, SeedsConfig, parse_seeds
+from mjx_arm.train.launch import stop_processes
 
 STOP_WAIT_S = 20  # for a stopped seed's process to save and end, before it is killed
 
@@ -219,12 +220,4 @@ def _collect(config, runs_dir: Path, running: dict, done: dict, servers, log) ->
 def _stop_seeds(procs: list[subprocess.Popen]) -> None:
     """Stop seeds still training as Ctrl-C does (a ``train --server`` command passes it on to
     its server), then wait for them; one still running after ``STOP_WAIT_S`` is killed."""
-    for proc in procs:
-        proc.send_signal(signal.SIGINT)
-    deadline = time.time() + STOP_WAIT_S
-    for proc in procs:
-        try:
-            proc.wait(timeout=max(deadline - time.time(), 0.1))
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+    stop_processes(procs, signal.SIGINT, STOP_WAIT_S)

@@ -230,10 +230,18 @@ def _failure(group: ProcessGroup, gpu: str, code: int, path: Path | None) -> str
 
 def _stop(procs: list[subprocess.Popen]) -> None:
     """End every process still running: SIGTERM, then SIGKILL after a grace period."""
+    stop_processes(procs)
+
+
+def stop_processes(
+    procs: list[subprocess.Popen], sig: int = signal.SIGTERM, grace_s: float = STOP_GRACE_S
+) -> None:
+    """Send ``sig`` to every process of ``procs`` still running and wait for them; one still
+    running ``grace_s`` seconds later is killed."""
     running = [p for p in procs if p.poll() is None]
     for p in running:
-        p.send_signal(signal.SIGTERM)
-    deadline = time.monotonic() + STOP_GRACE_S
+        p.send_signal(sig)
+    deadline = time.monotonic() + grace_s
     for p in running:
         try:
             p.wait(timeout=max(deadline - time.monotonic(), 0.1))
