@@ -70,8 +70,13 @@ def _env(**extra: str) -> dict[str, str]:
     return {**env, "JAX_PLATFORMS": "cpu", "MJX_ARM_JAX_CACHE": cache, "XLA_FLAGS": flags, **extra}
 
 
+# Under an evaluation gate, so that the processes must agree on which epochs they evaluate
+# (each reads the epoch's training success rate, reduced over both processes' envs).
+GATE = 0.5
+
+
 def _train_args(run_dir: Path, *flags: str) -> list[str]:
-    sets = [f"{k}={v}" for k, v in SETTINGS.items()]
+    sets = [f"{k}={v}" for k, v in SETTINGS.items()] + [f"eval_gate={GATE}"]
     return [sys.executable, "-m", "mjx_arm.cli", "train", "--quiet", "--preset", "cpu",
             "--run-dir", str(run_dir), *flags, "--set", *sets]  # fmt: skip
 
@@ -148,7 +153,14 @@ def test_two_processes_train_what_one_process_of_two_devices_does(runs: Runs) ->
 
 def test_process_0_alone_writes_and_reports(runs: Runs) -> None:
     rows = RunDir(runs.pair).read_metrics()
-    assert [int(r["step"]) for r in rows] == [i * EPOCH_STEPS for i in range(EPOCHS + 1)]
+    assert [int(r["step"]) for r in rows] == [i * EPOCH_STEPS for i in range(1, EPOCHS + 1)]
+    # the pair evaluated where the gate let it (and at its last epoch), as the single process
+    evaluated = [np.isfinite(r.get("eval/episode_success", np.nan)) for r in rows]
+    rates = [r["training/episode_success"] for r in rows]
+    assert evaluated == [rate >= GATE for rate in rates[:-1]] + [True] and not all(evaluated)
+    single = RunDir(runs.single).read_metrics()
+    assert [np.isfinite(r.get("eval/episode_success", np.nan)) for r in single] == evaluated
+    assert [r["training/episode_success"] for r in single] == rates
     assert sorted(p.name for p in runs.pair.iterdir()) == sorted(
         p.name for p in runs.single.iterdir()
     )  # nothing of process 1's own: one config.json, one metrics.csv, no logs
