@@ -388,9 +388,14 @@ def test_episode_counts_read_the_ends_and_successes_of_the_rollout() -> None:
     counts = episode_counts(view)
     assert float(counts["episodes"]) == 3 and float(counts["episode_successes"]) == 2
     # two training steps of an epoch: (3 ended, 2 succeeded) and (1 ended, 0 succeeded)
-    rates = episode_rates({"episodes": 2.0, "episode_successes": 1.0, "v_loss": 0.5}, steps=2)
-    assert rates == {"episodes": 4, "episode_success": 0.5, "v_loss": 0.5}
-    assert episode_rates({"episodes": 0.0, "episode_successes": 0.0}, 3)["episode_success"] == 0.0
+    steps = [
+        {"episodes": 3.0, "episode_successes": 2.0, "v_loss": 0.5},
+        {"episodes": 1.0, "episode_successes": 0.0, "v_loss": 0.5},
+    ]
+    assert episode_rates(steps) == {"episodes": 4, "episode_success": 0.5}
+    assert steps == [{"v_loss": 0.5}, {"v_loss": 0.5}]  # the counts taken out, the rest kept
+    none = [{"episodes": 0.0, "episode_successes": 0.0}] * 3
+    assert episode_rates([dict(m) for m in none])["episode_success"] == 0.0
 
 
 def test_each_epoch_logs_its_training_episodes_and_their_success(tmp_path: Path) -> None:

@@ -17,6 +17,7 @@ from pathlib import Path
 
 from mjx_arm.bench.seeds_config import SeedsConfig
 from mjx_arm.inputs import ConfigError
+from mjx_arm.train.launch import stop_processes
 from mjx_arm.train.server_protocol import user_folder
 
 READY_TIMEOUT_S = 600.0  # a server's imports and device start, at most
@@ -72,8 +73,6 @@ class SeedServers:
 
     def stop(self) -> None:
         """Stop every server (Ctrl-C, as a user would) and wait for it (30 s, then killed)."""
-        from mjx_arm.train.launch import stop_processes
-
         stop_processes(list(self._procs.values()), signal.SIGINT, 30)
 
 

@@ -188,7 +188,8 @@ def _train_on_gpus(
         time.sleep(0.5)
     if flag["stop"]:
         _collect(config, runs_dir, running, done, servers, log)  # those that ended meanwhile
-        _stop_seeds([proc for proc, *_ in running.values()])
+        # as Ctrl-C stops a run (a `train --server` command passes it on to its server)
+        stop_processes([proc for proc, *_ in running.values()], signal.SIGINT, STOP_WAIT_S)
     ordered = [done[s] for s in seeds if s in done]
     runs, configs = [r for r, _ in ordered], [c for _, c in ordered]
     if flag["stop"]:
@@ -215,9 +216,3 @@ def _collect(config, runs_dir: Path, running: dict, done: dict, servers, log) ->
             log_run(log, config, run)
         ended.append(gpu)
     return ended
-
-
-def _stop_seeds(procs: list[subprocess.Popen]) -> None:
-    """Stop seeds still training as Ctrl-C does (a ``train --server`` command passes it on to
-    its server), then wait for them; one still running after ``STOP_WAIT_S`` is killed."""
-    stop_processes(procs, signal.SIGINT, STOP_WAIT_S)

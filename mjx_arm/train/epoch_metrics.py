@@ -44,13 +44,15 @@ def episode_counts(data: Any) -> dict[str, jax.Array]:
     }
 
 
-def episode_rates(mean: dict[str, Any], steps: int) -> dict[str, Any]:
-    """``mean`` (an epoch's metrics, each the mean over its ``steps`` training steps) with the
-    episode counts of :func:`episode_counts` turned into ``episodes`` (ended in the epoch) and
+EPISODE_COUNTS = ("episodes", "episode_successes")
+
+
+def episode_rates(steps_metrics: list[dict[str, Any]]) -> dict[str, Any]:
+    """The episode counts of :func:`episode_counts` taken out of each training step's metrics
+    (host values, in place) and summed over the epoch: ``episodes`` (ended in the epoch) and
     ``episode_success`` (the fraction of them that succeeded; 0 where none ended)."""
-    mean = dict(mean)
-    episodes = float(mean.pop("episodes")) * steps
-    successes = float(mean.pop("episode_successes")) * steps
-    mean["episodes"] = round(episodes)
-    mean["episode_success"] = successes / episodes if episodes else 0.0
-    return mean
+    episodes, successes = (sum(float(m.pop(k)) for m in steps_metrics) for k in EPISODE_COUNTS)
+    return {
+        "episodes": round(episodes),
+        "episode_success": successes / episodes if episodes else 0.0,
+    }

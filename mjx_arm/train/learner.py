@@ -390,5 +390,7 @@ class EpochPrograms:
             seconds["update_s"] += time.perf_counter() - middle
             key = keys[1]
             metrics.append(step_metrics)
-        mean = jax.tree.map(lambda *xs: np.mean(np.stack(xs)), *jax.device_get(metrics))
-        return state, env_state, {**episode_rates(mean, self.steps), **seconds}
+        metrics = jax.device_get(metrics)
+        rates = episode_rates(metrics)  # sums over the epoch, not means
+        mean = jax.tree.map(lambda *xs: np.mean(np.stack(xs)), *metrics)
+        return state, env_state, {**mean, **rates, **seconds}

@@ -87,8 +87,8 @@ def make_optimizer(
     """
     import optax
 
-    clip = clip_each_network(max_grad_norm) if per_network else None
-    clip = clip or optax.clip_by_global_norm(max_grad_norm)
+    global_clip = optax.clip_by_global_norm
+    clip = (clip_each_network if per_network else global_clip)(max_grad_norm)
     if not schedule.adaptive:
         return optax.chain(clip, optax.adam(learning_rate))
     adam = optax.inject_hyperparams(optax.adam)(learning_rate=learning_rate)
