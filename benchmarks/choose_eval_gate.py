@@ -12,10 +12,14 @@ what any gate would have skipped. The rule, over tuning runs that log that rate:
   their evaluation further.
 
 It prints the gate, the evaluations it would have skipped before each run's solve and the
-seconds they took (``eval/epoch_eval_time``). Only tuning seeds (1000-1099) may be given: a value
-chosen on the seeds it is reported on proves nothing.
+seconds they took (``eval/epoch_eval_time``); with ``--from-step``, only those at or after the
+task's ``eval_from_step`` count (the earlier ones are skipped without the gate). With ``--out``
+it also saves the choice and every run's course (step, evaluation, training rate) as JSON.
+Only tuning seeds (1000-1099) may be given: a value chosen on the seeds it is reported on
+proves nothing.
 
-    python -m benchmarks.choose_eval_gate runs/seeds-lift-fast-20261201/
+    python -m benchmarks.choose_eval_gate runs/seeds-lift-fast-20261201/ --from-step 3000000 \
+        --out benchmarks/results/diagnosis --name lift_fast_eval_gate_tuning
 """
 
 from __future__ import annotations
@@ -23,9 +27,10 @@ from __future__ import annotations
 import argparse
 import math
 import statistics
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from benchmarks.common import environment_metadata, markdown_table, save_results
 from mjx_arm.train.rundir import RunDir, is_run_dir
 
 TUNING = range(1000, 1100)
@@ -71,8 +76,11 @@ def read_run(path: Path) -> tuple[int, float, list[Evaluation]]:
     return int(train["seed"]), float(train["stop_at_success"]), evaluations
 
 
-def choose(runs: dict[int, list[Evaluation]], threshold: float) -> dict[str, object]:
-    """The rule of the module docstring over ``runs`` (seed -> evaluated epochs in order)."""
+def choose(
+    runs: dict[int, list[Evaluation]], threshold: float, from_step: int = 0
+) -> dict[str, object]:
+    """The rule of the module docstring over ``runs`` (seed -> evaluated epochs in order); the
+    savings count the evaluations at or after ``from_step`` alone."""
     solves = {
         seed: next((e for e in evals if e.success >= threshold), None)
         for seed, evals in runs.items()
@@ -82,7 +90,11 @@ def choose(runs: dict[int, list[Evaluation]], threshold: float) -> dict[str, obj
         raise SystemExit(f"no run reached {threshold} after its first epoch: nothing to choose")
     gate = math.floor(min(rates) / 2 * 100) / 100
     skipped = {
-        seed: [e for e in evals if e.step < solves[seed].step and not e.rate >= gate]
+        seed: [
+            e
+            for e in evals
+            if from_step <= e.step < solves[seed].step and not e.rate >= gate
+        ]
         for seed, evals in runs.items()
         if solves[seed] is not None
     }
@@ -90,6 +102,7 @@ def choose(runs: dict[int, list[Evaluation]], threshold: float) -> dict[str, obj
     return {
         "eval_gate": gate,
         "threshold": threshold,
+        "from_step": from_step,
         "lowest_rate_at_a_solve": min(rates),
         "evaluations_skipped_per_solved_run": statistics.median(map(len, skipped.values())),
         "seconds_saved_per_solved_run": round(statistics.median(seconds), 2),
@@ -104,6 +117,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--threshold", type=float, help="success that counts as solved (default: the runs' stop)"
     )
+    parser.add_argument(
+        "--from-step", type=int, default=0, help="the task's eval_from_step (default: 0)"
+    )
+    parser.add_argument("--out", type=Path, help="also save NAME.json and NAME.md here")
+    parser.add_argument("--name", default="eval_gate_tuning", help="file stem for --out")
     args = parser.parse_args(argv)
     runs, thresholds = {}, set()
     for path in run_dirs(args.paths):
@@ -114,9 +132,28 @@ def main(argv: list[str] | None = None) -> int:
         thresholds.add(args.threshold or threshold)
     if len(thresholds) != 1 or not min(thresholds):
         raise SystemExit(f"the runs stopped at {sorted(thresholds)}: give --threshold")
-    for key, value in choose(runs, thresholds.pop()).items():
+    choice = choose(runs, thresholds.pop(), args.from_step)
+    for key, value in choice.items():
         print(f"{key}: {value}")
+    if args.out:
+        save_choice(args.out, args.name, choice, runs)
     return 0
+
+
+def save_choice(
+    out: Path, name: str, choice: dict[str, object], runs: dict[int, list[Evaluation]]
+) -> None:
+    """``choice`` and each run's evaluated epochs as ``out/name.json``, with a table per
+    seed (the training rate and the evaluation of each epoch) as ``out/name.md``."""
+    courses = {str(seed): [asdict(e) for e in evals] for seed, evals in sorted(runs.items())}
+    rows = [
+        [seed, " ".join(f"{e.rate:.2f}/{e.success:.2f}" for e in evals[1:])]
+        for seed, evals in sorted(runs.items())
+    ]
+    table = markdown_table(["seed", "each epoch: training rate / evaluation"], rows)
+    payload = {"meta": environment_metadata(), "choice": choice, "runs": courses}
+    for path in save_results(name, payload, table, out):
+        print(f"saved {path}")
 
 
 if __name__ == "__main__":

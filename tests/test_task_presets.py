@@ -63,7 +63,7 @@ CHANGED_NORMALIZER_FIELDS = {
 CHANGED_TRAIN_FIELDS = {
     "fast/reach": {"stop_at_success": 0.95},
     "fast/touch": {"stop_at_success": 0.95, "eval_from_step": 5_000_000},
-    "fast/lift": {"stop_at_success": 0.9, "eval_from_step": 3_000_000},
+    "fast/lift": {"stop_at_success": 0.9, "eval_from_step": 3_000_000, "eval_gate": 0.01},
 }
 # ... case -> task config fields: Touch's ``fast`` and ``cpu`` stop paying a press once a reading
 # over the band rules success out (docs/training.md).

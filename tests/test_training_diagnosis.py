@@ -338,7 +338,14 @@ def test_eval_gate_is_half_the_lowest_training_rate_at_a_tuning_solve(tmp_path: 
     # steps 1-3: a median of 3 evaluations, 4.5 s
     assert got["evaluations_skipped_per_solved_run"] == 3
     assert got["seconds_saved_per_solved_run"] == 4.5
-    assert main([str(runs)]) == 0
+    # from step 2 on, 1000 skips nothing (its step 2 trained at 0.2) and 1001 steps 2 and 3
+    later = choose({read_run(p)[0]: read_run(p)[2] for p in run_dirs([runs])}, 0.9, 2)
+    assert later["eval_gate"] == 0.18 and later["evaluations_skipped_per_solved_run"] == 1
+    assert later["seconds_saved_per_solved_run"] == 1.5
+    assert main([str(runs), "--out", str(tmp_path / "out"), "--name", "gate"]) == 0
+    saved = json.loads((tmp_path / "out" / "gate.json").read_text())
+    assert saved["choice"]["eval_gate"] == 0.18 and len(saved["runs"]["1001"]) == 5
+    assert saved["runs"]["1000"][3] == {"step": 3, "success": 0.92, "rate": 0.5, "seconds": 1.5}
     _gate_run(tmp_path / "fresh" / "c", 8600, rows)
     with pytest.raises(SystemExit, match="not a tuning seed"):
         main([str(tmp_path / "fresh")])

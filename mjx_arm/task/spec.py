@@ -29,8 +29,8 @@ class Budget:
     preset's value. The fields are those of ``mjx_arm.train.config.TrainConfig``.
 
     Attributes:
-        num_timesteps, num_evals, num_envs, batch_size, stop_at_success, eval_from_step: as
-            in the preset.
+        num_timesteps, num_evals, num_envs, batch_size, stop_at_success, eval_from_step,
+            eval_gate: as in the preset.
         randomization: the training draw by name (``mjx_arm.train.config.RANDOMIZATIONS``).
         force_scale: the observation normaliser's fixed scale of the wrist wrench, N
             (``normalizer.force_scale``).
@@ -44,6 +44,7 @@ class Budget:
     batch_size: int | None = None
     stop_at_success: float | None = None
     eval_from_step: int | None = None
+    eval_gate: float | None = None
     randomization: str | None = None
     force_scale: float | None = None
     task: Mapping[str, Any] | None = None
