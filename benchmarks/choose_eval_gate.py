@@ -90,11 +90,7 @@ def choose(
         raise SystemExit(f"no run reached {threshold} after its first epoch: nothing to choose")
     gate = math.floor(min(rates) / 2 * 100) / 100
     skipped = {
-        seed: [
-            e
-            for e in evals
-            if from_step <= e.step < solves[seed].step and not e.rate >= gate
-        ]
+        seed: [e for e in evals if from_step <= e.step < solves[seed].step and not e.rate >= gate]
         for seed, evals in runs.items()
         if solves[seed] is not None
     }
