@@ -6,9 +6,11 @@ writes the report of the whole range: every finished seed of the inputs, the sum
 again over all of them (solve rate with its 95 % interval, times, steps, collapses). The
 inputs must agree on task, preset, threshold, arm and ``--set`` items; a seed in two of them
 is an error. A seed is warm as its record says; in a report written before records said so,
-every seed but the report's first (each call starts with its own caches). The machine's
-record is the newest input's; ``meta.merged_from`` names each
-input with its commit, date and seeds.
+every seed but the report's first (each call starts with its own caches). A seed whose
+process a deadline's SIGTERM ended (``mjx_arm.bench.seeds.stopped_from_outside``; reports
+written before that rule list it as failed) is left out and counted in ``pending_seeds``.
+The machine's record is the newest input's; ``meta.merged_from`` names each input with its
+commit, date, seeds and the seeds it left out.
 
     python -m benchmarks.merge_seeds_reports A.json B.json --name seeds_reach_fast_fresh \\
         --out benchmarks/results/seeds/fresh
@@ -21,6 +23,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+from mjx_arm.bench.seeds import stopped_from_outside
 from mjx_arm.bench.seeds_config import SeedRun, SeedsConfig
 from mjx_arm.bench.seeds_report import write_report
 from mjx_arm.bench.seeds_summary import warm_flags
@@ -60,6 +63,8 @@ def merge(reports: list[dict[str, Any]], names: list[str]) -> tuple[SeedsConfig,
         # each report's own rule (a report from before the flag: its first is cold)
         for run, warm, config in zip(runs, warm_flags(runs), report["configs"], strict=True):
             run.warm = warm
+            if stopped_from_outside(run):
+                continue
             if run.seed in pairs:
                 raise ValueError(f"seed {run.seed} is in two reports (again in {name})")
             pairs[run.seed] = (run, config)
@@ -74,6 +79,7 @@ def merge(reports: list[dict[str, Any]], names: list[str]) -> tuple[SeedsConfig,
             "git_commit": r["meta"].get("git_commit"),
             "date": r["meta"]["date"],
             "seeds": [s["seed"] for s in r["seeds"]],
+            "left_out": [s["seed"] for s in r["seeds"] if s["seed"] not in pairs],
         }
         for r, name in zip(reports, names, strict=True)
     ]
@@ -93,7 +99,12 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as err:
         parser.error(str(err))
     overrides = tuple(reports[0]["overrides"])
-    for path in write_report(config, runs, configs, meta, args.out, args.name, overrides):
+    left_out = [s for source in meta["merged_from"] for s in source["left_out"]]
+    if left_out:
+        print(f"left out, stopped by a SIGTERM: seeds {left_out}")
+    pending = len(left_out) + sum(r.get("pending_seeds", 0) for r in reports)
+    out, name = args.out, args.name
+    for path in write_report(config, runs, configs, meta, out, name, overrides, pending=pending):
         print(path)
     return 0
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 import time
 from pathlib import Path
 
@@ -88,7 +89,7 @@ def test_report_files(tmp_path: Path) -> None:
     # written while the benchmark runs: the seeds finished so far, and how many are to come
     paths = write_report(config, runs[:1], [{}], meta, tmp_path, "s", pending=1)
     assert json.loads(paths[0].read_text())["pending_seeds"] == 1
-    assert "1 seeds finished, 1 still to come" in paths[1].read_text()
+    assert "1 seeds finished, 1 not: still to come or stopped" in paths[1].read_text()
 
 
 @pytest.mark.slow
@@ -190,6 +191,30 @@ def test_a_sigterm_keeps_the_finished_seeds_and_stops_the_rest(tmp_path: Path) -
     assert reports[-1] == (len(runs), pending)  # the last report the benchmark wrote
     assert lines[-1] == f"stopped by SIGTERM: {len(runs)} of 3 seeds finished"
     assert (tmp_path / "seed2.log").exists()  # it had started; train_seeds waited for its end
+
+
+def test_a_seed_whose_process_a_sigterm_ended_is_left_out(tmp_path: Path) -> None:
+    """A deadline's ``timeout`` signals the whole process group: a seed's process killed by
+    that SIGTERM frees its GPU but is left out of the results (not a seed that failed to
+    learn); one that failed of itself is kept as not solved."""
+    import signal
+    import subprocess
+
+    from mjx_arm.bench.seeds_gpus import _collect
+
+    config = SeedsConfig(task="reach", preset="cpu", seeds="0-1", backend="mujoco")
+    killed = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    failed = subprocess.Popen([sys.executable, "-c", "raise SystemExit(3)"])
+    killed.send_signal(signal.SIGTERM)
+    killed.wait(), failed.wait()
+    for seed in (0, 1):
+        (tmp_path / f"seed{seed}.log").write_text("RuntimeError: boom\n")
+    running = {0: (killed, "0", time.time(), True), 1: (failed, "1", time.time(), True)}
+    done, lines = {}, []
+    assert sorted(_collect(config, tmp_path, running, done, None, lines.append)) == ["0", "1"]
+    assert running == {} and list(done) == [1]
+    assert done[1][0].error == "exit code 3: RuntimeError: boom"
+    assert lines[0].startswith("seed 0: its process was stopped by a SIGTERM; left out")
 
 
 def test_a_failed_seed_reports_the_exception_its_log_ends_with():

@@ -188,6 +188,30 @@ def test_seeds_reports_of_two_calls_merge_into_one(tmp_path):
         merge([first, two], ["a.json", "f.json"])
 
 
+def test_a_merge_leaves_out_the_seeds_a_sigterm_ended(tmp_path):
+    """A seed whose process a deadline's SIGTERM ended (listed as failed, exit code -15, by
+    reports written before the rule) is left out of the merged report and counted with the
+    inputs' own pending seeds; a seed that failed of itself still counts as not solved."""
+    from benchmarks.merge_seeds_reports import main
+
+    first = _seeds_report([8700, 8701, 8702], 20.0, "2026-11-30T01")
+    first["seeds"][1] |= {"error": "exit code -15: run directory: /w/lift-fast-seed8701"}
+    first["seeds"][2] |= {"error": "exit code 1: RuntimeError: out of memory"}
+    first["seeds"][2] |= {"steps_to_threshold": None, "time_to_threshold": None}
+    first["pending_seeds"] = 2
+    second = _seeds_report([8703], 30.0, "2026-11-30T05")
+    second["seeds"][0] |= {"error": "exit code 143: stopped"}
+    paths = [tmp_path / "a.json", tmp_path / "b.json"]
+    for path, report in zip(paths, (first, second), strict=True):
+        path.write_text(json.dumps(report))
+    assert main([*map(str, paths), "--name", "m", "--out", str(tmp_path)]) == 0
+    merged = json.loads((tmp_path / "m.json").read_text())
+    assert [s["seed"] for s in merged["seeds"]] == [8700, 8702]
+    assert (merged["summary"]["solved"], merged["summary"]["seeds"]) == (1, 2)
+    assert merged["pending_seeds"] == 4  # 8701, 8703 and the first input's two
+    assert [m["left_out"] for m in merged["meta"]["merged_from"]] == [[8701], [8703]]
+
+
 def test_the_normalisers_share_of_the_kl_is_read_where_logged():
     """``normaliser_share``: largest and median KL before each update's first gradient step and
     the median clip fraction there; NaN for runs from before the columns existed."""

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 import re
+import signal
 import sys
 import time
 from collections.abc import Callable
@@ -35,6 +36,7 @@ from mjx_arm.bench.seed_servers import check_server_settings
 from mjx_arm.bench.seeds_config import SeedRun, SeedsConfig, parse_seeds
 from mjx_arm.bench.seeds_summary import seed_line, start_up_line
 from mjx_arm.inputs import ConfigError
+from mjx_arm.names import EXIT_STOPPED
 
 SUCCESS_KEY = "eval/episode_success"
 
@@ -196,10 +198,23 @@ def log_error(log: str, chars: int = 400) -> str:
     return text if len(text) <= chars else text[: chars - 3] + "..."
 
 
+# Exit codes of a seed's process that a SIGTERM ended: killed by it, or the trainer's own exit
+# on it. A deadline's ``timeout`` signals its whole process group, the seeds' processes with
+# the benchmark, so such a seed was stopped from outside: it is left out of the report like a
+# seed never started, not counted as a seed that failed to learn.
+STOPPED_EXIT_CODES = (-int(signal.SIGTERM), EXIT_STOPPED)
+
+
 def failed_seed(seed: int, gpu: str, wall: float, error: str) -> SeedRun:
     """The result of a seed whose process failed: not solved, the error kept."""
     nan = math.nan
     return SeedRun(seed, nan, nan, None, None, 0, wall, nan, nan, [], {}, gpu, error)
+
+
+def stopped_from_outside(run: SeedRun) -> bool:
+    """Whether ``run`` is a seed whose process a SIGTERM ended (:data:`STOPPED_EXIT_CODES`,
+    read from the error :func:`failed_seed` keeps, so reports written before the rule too)."""
+    return any(run.error.startswith(f"exit code {code}:") for code in STOPPED_EXIT_CODES)
 
 
 def check_seed_settings(

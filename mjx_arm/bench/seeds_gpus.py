@@ -30,6 +30,7 @@ from mjx_arm.bench.seeds import (
     run_seeds,
     seed_command,
     seed_run_dir,
+    stopped_from_outside,
 )
 from mjx_arm.bench.seeds_config import SeedRun, SeedsConfig, parse_seeds
 from mjx_arm.train.launch import stop_processes
@@ -68,7 +69,8 @@ def train_seeds(config, runs_dir: Path, gpus: list[str], overrides, start: float
 
     Returns:
         ``(runs, configs, pending)``: the seeds that finished, their saved configs, and how
-        many a SIGTERM left out (0 where every seed finished).
+        many a SIGTERM left out (0 where every seed finished): those it stopped or never let
+        start, and any seed whose own process a SIGTERM ended.
     """
     total = len(parse_seeds(config.seeds))
 
@@ -80,7 +82,8 @@ def train_seeds(config, runs_dir: Path, gpus: list[str], overrides, start: float
     if not gpus:
         return (*run_seeds(config, runs_dir, overrides, start, log, on_seed), 0)
     try:
-        return (*run_seeds_on_gpus(config, runs_dir, gpus, overrides, log, on_seed), 0)
+        runs, configs = run_seeds_on_gpus(config, runs_dir, gpus, overrides, log, on_seed)
+        return runs, configs, total - len(runs)
     except SeedsStopped as stopped:
         log(f"stopped by SIGTERM: {len(stopped.runs)} of {total} seeds finished")
         return stopped.runs, stopped.configs, total - len(stopped.runs)
@@ -140,7 +143,9 @@ def run_seeds_on_gpus(
     Each seed's times count from its own process's start (imports, cache loads and any compilation
     included); a seed is warm where another had ended before it started (the seeds started at once
     on a fresh host all found the caches empty). A seed whose process fails is reported as not
-    solved, with the end of its log, and the others go on. ``on_seed`` is called with the seeds
+    solved, with the end of its log, and the others go on; one whose process a SIGTERM ended
+    was stopped from outside and is left out (:data:`~mjx_arm.bench.seeds.STOPPED_EXIT_CODES`).
+    ``on_seed`` is called with the seeds
     finished so far (in seed order) each time one finishes. With ``config.server`` each GPU's
     warm trainer (:class:`~mjx_arm.bench.seed_servers.SeedServers`) runs its seeds' commands;
     a seed is then warm where that server had finished a seed before it.
@@ -198,15 +203,20 @@ def _train_on_gpus(
 
 
 def _collect(config, runs_dir: Path, running: dict, done: dict, servers, log) -> list:
-    """Move the seeds of ``running`` whose processes have ended into ``done`` (logging each);
-    the GPUs they leave free."""
+    """Move the seeds of ``running`` whose processes have ended into ``done`` (logging each;
+    one a SIGTERM ended is dropped, :func:`~mjx_arm.bench.seeds.stopped_from_outside`); the
+    GPUs they leave free."""
     ended = []
     for seed, (proc, gpu, start, warm) in list(running.items()):
         if proc.poll() is None:
             continue
         del running[seed]
-        done[seed] = _finished_seed(config, seed, runs_dir, proc, gpu, start)
-        run = done[seed][0]
+        ended.append(gpu)
+        run, saved = _finished_seed(config, seed, runs_dir, proc, gpu, start)
+        if stopped_from_outside(run):
+            log(f"seed {seed}: its process was stopped by a SIGTERM; left out ({run.error[:80]})")
+            continue
+        done[seed] = run, saved
         run.warm = warm
         if servers:
             servers.served[gpu] += 1
@@ -214,5 +224,4 @@ def _collect(config, runs_dir: Path, running: dict, done: dict, servers, log) ->
             log(f"seed {seed}: its process failed ({run.error[:400]})")
         else:
             log_run(log, config, run)
-        ended.append(gpu)
     return ended

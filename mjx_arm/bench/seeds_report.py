@@ -68,7 +68,7 @@ def write_report(
     if config.server:
         title += ", --server (envs and programs kept from seed to seed)"
     if pending:
-        title += f" ({len(runs)} seeds finished, {pending} still to come)"
+        title += f" ({len(runs)} seeds finished, {pending} not: still to come or stopped)"
     payload = {
         "meta": meta,
         "settings": dataclasses.asdict(config),
