@@ -373,3 +373,39 @@ def test_eval_gate_is_half_the_lowest_training_rate_at_a_tuning_solve(tmp_path: 
     _gate_run(tmp_path / "fresh" / "c", 8600, rows)
     with pytest.raises(SystemExit, match="not a tuning seed"):
         main([str(tmp_path / "fresh")])
+
+
+def _lift_run(folder: Path, seed: int, rows: list[tuple[float, float, float, float]]) -> None:
+    """A Lift run directory whose evaluations are ``(success, strike share, height sum, grasp
+    sum)`` over 40-step episodes, one per million steps."""
+    run = folder / f"lift-fast-seed{seed}"
+    run.mkdir(parents=True)
+    (run / "config.json").write_text(json.dumps({"train": {"seed": seed}}))
+    names = ["step", "eval/episode_success", "eval/episode_strike", "eval/episode_lift_height",
+             "eval/episode_grasp", "eval/avg_episode_length", "training/approx_kl"]  # fmt: skip
+    lines = [",".join(names)]
+    lines += [f"{i * 10**6},{s},{k},{h},{g},40,0.5" for i, (s, k, h, g) in enumerate(rows, 1)]
+    (run / "metrics.csv").write_text("\n".join(lines) + "\n")
+
+
+def test_lift_falls_are_found_and_told_apart(tmp_path: Path) -> None:
+    """``lift_falls``: a drop of 0.3 or more from 0.3 or more is a fall. One whose strike
+    share rose by 0.2 is a strike; one whose cube rode higher with half the grasp, a lift
+    without grasp; a smaller drop, or one from under 0.3, is none."""
+    from benchmarks.lift_falls import campaign, main, summary
+
+    _lift_run(tmp_path / "a", 1000, [(0.2, 0.0, 0, 0), (0.0, 0.0, 0, 0), (0.8, 0.1, 4, 16),
+                                     (0.2, 0.6, 1, 4), (0.9, 0.0, 4, 16)])  # fmt: skip
+    _lift_run(tmp_path / "a", 1001, [(0.7, 0.1, 4, 16), (0.3, 0.1, 12, 4), (0.5, 0.1, 4, 16),
+                                     (0.3, 0.1, 4, 16)])  # fmt: skip
+    got = campaign("a", [tmp_path / "a"])
+    assert got["runs"] == 2 and [f["step"] for f in got["falls"][1000]] == [4 * 10**6]
+    strike, lifted = got["falls"][1000][0], got["falls"][1001][0]
+    assert strike["kind"] == "strike" and strike["before"]["grasp"] == 0.4
+    assert lifted["kind"] == "lift without grasp" and lifted["after"]["height"] == 0.3
+    assert len(got["falls"][1001]) == 1  # 0.5 -> 0.3 is under the fall's 0.3
+    counts = summary([got])
+    assert counts == {"runs": 2, "runs_with_a_fall": 2, "falls": 2,
+                      "kinds": {"strike": 1, "lift without grasp": 1, "other": 0}}  # fmt: skip
+    assert main(["--campaign", f"a={tmp_path / 'a'}", "--out", str(tmp_path), "--name", "f"]) == 0
+    assert json.loads((tmp_path / "f.json").read_text())["summary"] == counts
