@@ -14,7 +14,7 @@ from mjx_arm.task import lift as lift_lib
 from mjx_arm.task.grip import ObjectStart
 from mjx_arm.task.lift import LIFT_HEIGHT, lift_config
 from mjx_arm.task.observation import obs_size
-from mjx_arm.train.presets import preset_config
+from mjx_arm.train.presets import load_config, preset_config
 from mjx_arm.urdf.scene_shapes import CUBE_HALF
 
 GRIPPER = str(asset("ur5e_gripper.urdf"))
@@ -143,6 +143,23 @@ def test_success_needs_height_and_both_pads():
     grasp = np.array([1.0, 0.0, 1.0])
     holds = task.holds(np, 0.0 * height, 0.0 * height, cfg, {"height": height, "grasp": grasp})
     assert holds.tolist() == [True, False, False]
+
+
+def test_held_lift_pays_the_height_only_while_both_pads_hold_the_cube():
+    """``held_lift`` is ``lift`` (the height over LIFT_HEIGHT, capped at 1) where grasped and 0
+    where not; every preset weighs it 0, so no preset's reward changes."""
+    task = lift_lib.LIFT
+    height = np.array([0.15, 0.15, 0.05, -0.02])
+    extra = {"height": height, "grasp": np.array([1.0, 0.0, 1.0, 1.0]),
+             "cradle": 0.0 * height, "stray": 0.0 * height}  # fmt: skip
+    terms = task.task_terms(np, extra, 0.0 * height)
+    np.testing.assert_allclose(terms["lift"], [1.0, 1.0, 0.5, 0.0], atol=1e-12)
+    np.testing.assert_allclose(terms["held_lift"], [1.0, 0.0, 0.5, 0.0], atol=1e-12)
+    for preset in ("fast", "robust", "cpu"):
+        assert preset_config(preset, "lift").task_settings.reward.held_lift == 0.0
+    sets = ["task=lift", "task.reward.lift=0", "task.reward.held_lift=20"]
+    reward = load_config("fast", overrides=sets).task_settings.reward
+    assert (reward.lift, reward.held_lift) == (0, 20)
 
 
 def test_grasp_needs_the_cube_between_the_pads():

@@ -71,14 +71,18 @@ class LiftReward(RewardConfig):
     Terms: ``lift`` = how far the cube is up, as a fraction of :data:`LIFT_HEIGHT` (0 to 1),
     ``grasp`` = 1 while both finger pads press the cube, ``cradle`` = the fingers' closure (0
     open, 1 closed) while the cube's centre sits between them, ``stray`` = 1 while a finger
-    presses something (the cube's top, the table) with the cube's centre not between the pads.
+    presses something (the cube's top, the table) with the cube's centre not between the pads,
+    ``held_lift`` = ``lift`` while ``grasp`` is 1, else 0 (the height paid only for a cube
+    the pads hold: weight 0 in every preset, a candidate against the runs that fall back to
+    lifting without a grasp, docs/training.md).
     """
 
-    task_terms: ClassVar[tuple[str, ...]] = ("lift", "grasp", "cradle", "stray")
+    task_terms: ClassVar[tuple[str, ...]] = ("lift", "grasp", "cradle", "stray", "held_lift")
     lift: float = 0.0
     grasp: float = 0.0
     cradle: float = 0.0
     stray: float = 0.0
+    held_lift: float = 0.0
 
 
 LIFT_REWARD = LiftReward(
@@ -242,13 +246,14 @@ class Lift(Task):
 
     def task_terms(self, xp: Any, extra: dict[str, Any], zero) -> dict[str, Any]:
         """``lift``: the height as a fraction of :data:`LIFT_HEIGHT`, in [0, 1]; ``grasp``;
-        ``cradle``; ``stray``."""
+        ``cradle``; ``stray``; ``held_lift``: ``lift`` times ``grasp``."""
         lift = xp.clip(extra["height"] / LIFT_HEIGHT, 0.0, 1.0)
         return {
             "lift": lift + zero,
             "grasp": extra["grasp"] + zero,
             "cradle": extra["cradle"] + zero,
             "stray": extra["stray"] + zero,
+            "held_lift": lift * extra["grasp"] + zero,
         }
 
     def holds(self, xp: Any, distance, force_norm, cfg: TaskConfig, extra=None):
