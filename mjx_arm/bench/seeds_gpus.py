@@ -145,8 +145,8 @@ def run_seeds_on_gpus(
     on a fresh host all found the caches empty). A seed whose process fails is reported as not
     solved, with the end of its log, and the others go on; one whose process a SIGTERM ended
     was stopped from outside and is left out (:data:`~mjx_arm.bench.seeds.STOPPED_EXIT_CODES`).
-    ``on_seed`` is called with the seeds
-    finished so far (in seed order) each time one finishes. With ``config.server`` each GPU's
+    ``on_seed`` is called with the seeds finished so far (in seed order) each time one
+    finishes. With ``config.server`` each GPU's
     warm trainer (:class:`~mjx_arm.bench.seed_servers.SeedServers`) runs its seeds' commands;
     a seed is then warm where that server had finished a seed before it.
 
