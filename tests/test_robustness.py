@@ -322,8 +322,10 @@ def test_robust_preset_is_the_measured_training():
         "task.pay_after_overforce=true",
         "eval_from_step=0",
     ]
-    # Lift's robust runs also trained before fast's evaluations from 3M steps on
-    for task, sets in (("touch", [*latency, *budget]), ("lift", [*selected, "eval_from_step=0"])):
+    # Lift's robust runs also trained before fast's evaluations from 3M steps on, and before its
+    # evaluation gate
+    lift = [*selected, "eval_from_step=0", "eval_gate=0"]
+    for task, sets in (("touch", [*latency, *budget]), ("lift", lift)):
         # robust runs stopped at 0.97; fast stops where its task counts as solved since
         sets = [*sets, "stop_at_success=0.97"]
         measured = load_config("fast", None, [f"task={task}", *sets])

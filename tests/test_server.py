@@ -67,7 +67,7 @@ def _serving(*flags: str):
         time.sleep(0.2)
     yield SimpleNamespace(path=path, log=log, env={**ENV, "MJX_ARM_SERVER": str(path)})
     proc.send_signal(signal.SIGINT)
-    proc.wait(timeout=30)
+    proc.wait(timeout=90)  # a JAX process ends in seconds alone, slower on a busy 2-core CPU
     assert not path.exists()  # the socket file goes with the server
 
 
@@ -115,7 +115,9 @@ def test_a_seed_trained_warm_is_the_seed_trained_alone(server, tmp_path: Path) -
 
 def test_a_client_that_goes_away_stops_its_run_and_the_server_goes_on(server, tmp_path) -> None:
     run = tmp_path / "gone"
-    command = [sys.executable, "-m", "mjx_arm.cli", *TRAIN, "--seed", "5", "--server"]
+    # a budget the run cannot finish before the signal, however late the poll below sees it start
+    longer = ["--set", "num_timesteps=5000000"]
+    command = [sys.executable, "-m", "mjx_arm.cli", *TRAIN, *longer, "--seed", "5", "--server"]
     client = subprocess.Popen([*command, "--run-dir", str(run)], env=server.env)
     deadline = time.time() + 60
     while not (run / "config.json").exists():  # saved before the first epoch
