@@ -18,8 +18,10 @@ import functools
 import os
 import re
 import shlex
+import signal
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -315,6 +317,21 @@ def _write_report(body: str, folders: list[Path]) -> Path | None:
     return None
 
 
+def take_ctrl_c() -> None:
+    """Stop on SIGINT (Ctrl-C) even where this process started with SIGINT ignored.
+
+    A non-interactive shell starts its background jobs (``cmd &`` in a script, each line of a
+    ``gpu_suite.sh`` campaign) with SIGINT ignored, and Python then installs no handler for it.
+    The processes this package starts and stops as Ctrl-C does (a training's per-GPU
+    processes, a benchmark's seeds, the warm trainers and their clients) would ignore the
+    signal and be killed after their grace period, instead of saving and ending. Only the main
+    thread may set a handler; elsewhere (a command that a warm trainer runs) nothing changes.
+    """
+    main_thread = threading.current_thread() is threading.main_thread()
+    if main_thread and signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``mjx-arm`` console script: parse, run the command, and turn a named
     input error (:func:`named_errors`) into one ``error:`` line and :data:`EXIT_INVALID`.
@@ -325,6 +342,7 @@ def main(argv: list[str] | None = None) -> int:
     """
     import warnings
 
+    take_ctrl_c()
     for category, message in LIBRARY_WARNINGS:
         warnings.filterwarnings("ignore", message, category)
     args = build_parser().parse_args(argv)

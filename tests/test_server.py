@@ -53,14 +53,23 @@ def _start_up(run: Path) -> dict:
     return json.loads((run / "compile.json").read_text())[-1]
 
 
+def _sigint_ignored(command: list[str]) -> list[str]:
+    """``command`` started as a non-interactive shell starts a background job: SIGINT ignored
+    (a shell's ``trap '' INT`` before the ``exec``)."""
+    return ["sh", "-c", 'trap "" INT; exec "$@"', "sh", *command]
+
+
 @contextlib.contextmanager
 def _serving(*flags: str):
-    """A warm trainer (``mjx-arm serve FLAGS``) on a short socket path, once it answers."""
+    """A warm trainer (``mjx-arm serve FLAGS``) on a short socket path, once it answers. It
+    starts with SIGINT ignored, and must stop on it all the same (``mjx_arm.cli.take_ctrl_c``)."""
     folder = Path(tempfile.mkdtemp(prefix="mjxs"))
     path, log = folder / "t.sock", folder / "server.log"
     with log.open("wb") as out:
         command = [sys.executable, "-m", "mjx_arm.cli", "serve", "--socket", str(path), *flags]
-        proc = subprocess.Popen(command, env=ENV, stdout=out, stderr=subprocess.STDOUT)
+        proc = subprocess.Popen(
+            _sigint_ignored(command), env=ENV, stdout=out, stderr=subprocess.STDOUT
+        )
     deadline = time.time() + 120
     while ping(path) is None:
         assert proc.poll() is None and time.time() < deadline, log.read_text()
@@ -118,7 +127,7 @@ def test_a_client_that_goes_away_stops_its_run_and_the_server_goes_on(server, tm
     # a budget the run cannot finish before the signal, however late the poll below sees it start
     longer = ["--set", "num_timesteps=5000000"]
     command = [sys.executable, "-m", "mjx_arm.cli", *TRAIN, *longer, "--seed", "5", "--server"]
-    client = subprocess.Popen([*command, "--run-dir", str(run)], env=server.env)
+    client = subprocess.Popen(_sigint_ignored([*command, "--run-dir", str(run)]), env=server.env)
     deadline = time.time() + 60
     while not (run / "config.json").exists():  # saved before the first epoch
         assert time.time() < deadline and client.poll() is None
