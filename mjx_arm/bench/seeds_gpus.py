@@ -146,7 +146,7 @@ def run_seeds_on_gpus(
     solved, with the end of its log, and the others go on; one whose process a SIGTERM ended
     was stopped from outside and is left out (:data:`~mjx_arm.bench.seeds.STOPPED_EXIT_CODES`).
     ``on_seed`` is called with the seeds finished so far (in seed order) each time one
-    finishes. With ``config.server`` each GPU's
+    or more finish. With ``config.server`` each GPU's
     warm trainer (:class:`~mjx_arm.bench.seed_servers.SeedServers`) runs its seeds' commands;
     a seed is then warm where that server had finished a seed before it.
 
@@ -185,11 +185,11 @@ def _train_on_gpus(
             warm = servers.served[gpu] > 0 if servers else bool(done)  # caches filled
             running[seed] = (proc, gpu, time.time(), warm)
             log(f"seed {seed}: training {config.task} / {config.preset} on GPU {gpu}")
-        for gpu in _collect(config, runs_dir, running, done, servers, log):
-            free.append(gpu)
-            if on_seed is not None:
-                finished = [done[s] for s in seeds if s in done]
-                on_seed([r for r, _ in finished], [c for _, c in finished])
+        before = len(done)
+        free += _collect(config, runs_dir, running, done, servers, log)
+        if on_seed is not None and len(done) > before:  # not for a seed left out
+            finished = [done[s] for s in seeds if s in done]
+            on_seed([r for r, _ in finished], [c for _, c in finished])
         time.sleep(0.5)
     if flag["stop"]:
         _collect(config, runs_dir, running, done, servers, log)  # those that ended meanwhile

@@ -195,7 +195,7 @@ def run(plan: Plan, argv: list[str], logs: Path, log=print) -> int:
             children.append((group, gpu, proc, path))
         return _wait(children, log)
     finally:
-        _stop([c[2] for c in children])
+        stop_processes([c[2] for c in children])  # SIGTERM, then SIGKILL after a grace
 
 
 def _wait(children: list, log) -> int:
@@ -226,11 +226,6 @@ def _failure(group: ProcessGroup, gpu: str, code: int, path: Path | None) -> str
         tail = path.read_text(errors="replace").strip().splitlines()[-15:]
         text += f"; the end of {path}:\n" + "\n".join(f"  {line}" for line in tail)
     return text
-
-
-def _stop(procs: list[subprocess.Popen]) -> None:
-    """End every process still running: SIGTERM, then SIGKILL after a grace period."""
-    stop_processes(procs)
 
 
 def stop_processes(
