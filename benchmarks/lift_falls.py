@@ -24,9 +24,10 @@ import math
 from pathlib import Path
 from typing import Any
 
+from benchmarks.choose_eval_gate import run_dirs
 from benchmarks.common import environment_metadata, markdown_table, save_results
 from benchmarks.training_diagnosis import FALL, SEED_DIR, evaluated_rows
-from mjx_arm.train.rundir import RunDir, is_run_dir
+from mjx_arm.train.rundir import RunDir
 
 STARTED = 0.3  # evaluation success from which a drop can count as a fall
 STRIKE_RISE = 0.2  # the share of episodes ending on a strike rose at least this much
@@ -89,9 +90,7 @@ def falls(rows: list[dict[str, float]]) -> list[dict[str, Any]]:
 
 def campaign(label: str, folders: list[Path]) -> dict[str, Any]:
     """The falls of every run under ``folders``, by seed, with how many runs they hold."""
-    runs = sorted(p for folder in folders for p in folder.iterdir() if is_run_dir(p))
-    if not runs:
-        raise SystemExit(f"{[str(f) for f in folders]}: no run directory")
+    runs = run_dirs(folders)
     seeds = {int(SEED_DIR.search(r.name)["seed"]): falls(RunDir(r).read_metrics()) for r in runs}
     return {"label": label, "runs": len(runs), "falls": seeds}
 
