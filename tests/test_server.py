@@ -124,8 +124,9 @@ def test_a_seed_trained_warm_is_the_seed_trained_alone(server, tmp_path: Path) -
 
 def test_a_client_that_goes_away_stops_its_run_and_the_server_goes_on(server, tmp_path) -> None:
     run = tmp_path / "gone"
-    # a budget the run cannot finish before the signal, however late the poll below sees it start
-    longer = ["--set", "num_timesteps=5000000"]
+    # a budget the run cannot finish before the signal, however late the poll below sees it
+    # start, in epochs as short as the others': the client's going is seen between them
+    longer = ["--set", "num_timesteps=4000000", "num_evals=400"]
     command = [sys.executable, "-m", "mjx_arm.cli", *TRAIN, *longer, "--seed", "5", "--server"]
     client = subprocess.Popen(_sigint_ignored([*command, "--run-dir", str(run)]), env=server.env)
     deadline = time.time() + 60
