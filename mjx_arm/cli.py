@@ -25,7 +25,7 @@ import threading
 import time
 from pathlib import Path
 
-from mjx_arm.inputs import InputError, float_in
+from mjx_arm.inputs import InputError, float_in, int_in
 from mjx_arm.jax_cache import enable_compilation_cache
 from mjx_arm.names import EXIT_INVALID, EXIT_OK
 from mjx_arm.urdf.repair_args import add_repair_arguments
@@ -166,6 +166,11 @@ def cmd_serve(args: argparse.Namespace) -> int:
     parse = build_parser().parse_args
     log = functools.partial(print, flush=True)
     warmup = shlex.split(args.warmup) if args.warmup is not None else None
+    if args.devices > 1:
+        from mjx_arm.train.server_group import ServerGroup, group_gpus
+
+        gpus = group_gpus(args.devices, warmup)
+        return ServerGroup(path, parse, gpus, args.idle_minutes * 60.0, log).serve_forever()
     return Server(path, main, parse, args.idle_minutes * 60.0, log, warmup).serve_forever()
 
 
@@ -190,6 +195,13 @@ def _add_serve(sub: argparse._SubParsersAction) -> None:
         help="build the envs and programs of a config before the first command: the flags of "
         '`mjx-arm warmup`, quoted (e.g. "--task touch --preset fast"); a later train '
         "--server with the same flags, any seed, then starts at once",
+    )
+    p.add_argument(
+        "--devices",
+        type=int_in(1, 64),
+        default=1,
+        help="GPUs of this host to train on, a process per GPU joined once, for train "
+        "--devices N --server commands (default 1)",
     )
     p.set_defaults(func=cmd_serve)
 

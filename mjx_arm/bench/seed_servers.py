@@ -1,4 +1,5 @@
-"""The warm trainers of ``mjx-arm bench seeds --server``: one ``mjx-arm serve`` per GPU.
+"""The warm trainers of ``mjx-arm bench seeds --server``: one ``mjx-arm serve`` per GPU (per
+group of GPUs with ``--gpus-per-seed N``: ``serve --devices N``, a process per GPU joined once).
 
 Each seed still runs as its own ``mjx-arm train`` command, timed from that command's start, but
 with ``--server``: the GPU's warm trainer trains it, on the envs and programs the seed before
@@ -32,8 +33,8 @@ def gpu_env(gpu: str) -> dict[str, str]:
 
 
 class SeedServers:
-    """A warm trainer per GPU of ``gpus`` (``CUDA_VISIBLE_DEVICES`` entries), logging to
-    ``runs_dir/server_gpuN.log``."""
+    """A warm trainer per entry of ``gpus`` (``CUDA_VISIBLE_DEVICES`` entries: ``"0"``, or
+    ``"0,1"`` for a joined group), logging to ``runs_dir/server_gpuN.log``."""
 
     def __init__(self, gpus: list[str], runs_dir: Path, log=print) -> None:
         folder = user_folder()  # each server makes it (mode 0700) and checks it is this user's
@@ -54,6 +55,7 @@ class SeedServers:
         start = time.time()
         for gpu, path in self.sockets.items():
             command = [sys.executable, "-m", "mjx_arm.cli", "serve", "--socket", str(path)]
+            command += ["--devices", str(len(gpu.split(",")))]  # "0,1": a joined group
             with (self._runs_dir / f"server_gpu{gpu.replace(',', '_')}.log").open("wb") as out:
                 self._procs[gpu] = subprocess.Popen(
                     command, env=gpu_env(gpu), stdout=out, stderr=subprocess.STDOUT
@@ -77,18 +79,13 @@ class SeedServers:
 
 
 def check_server_settings(config: SeedsConfig) -> None:
-    """A warm trainer trains a seed on one GPU, with the devices it started.
+    """A warm trainer trains a seed with the devices it started.
 
     Raises:
-        ConfigError: ``--server`` with ``--gpus-per-seed`` over 1, or with ``--deterministic``.
+        ConfigError: ``--server`` with ``--deterministic``.
     """
     if not config.server:
         return
-    if config.gpus_per_seed > 1:
-        raise ConfigError(
-            "--server trains each seed in its GPU's warm trainer, on that GPU alone: drop "
-            "--gpus-per-seed or --server"
-        )
     if config.deterministic:
         raise ConfigError(
             "--deterministic sets XLA's flags before a process starts its devices, which a "

@@ -66,7 +66,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     enable_compilation_cache()
     config = _run_config(args)
     mark("config read")
-    run_dir = Path(named) if named else _default_run_dir(args, config.task)
+    run_dir = Path(named) if named else default_run_dir(args, config.task)
     if getattr(args, "check_repeat", False):
         return check_repeat(config, run_dir, args.quiet)
     if group.joined:
@@ -97,7 +97,7 @@ def _group_or_launch(args: argparse.Namespace, named: str | None):
     plan = launch.plan(hosts, args.devices, per_gpu=_per_gpu(args))
     if not plan.spawns:
         return plan.group, None
-    run_dir = Path(named) if named else _default_run_dir(args)  # one, named, for every process
+    run_dir = Path(named) if named else default_run_dir(args)  # one, named, for every process
     if not args.resume:  # checked (rundir.claim) before the processes write logs/
         claim(run_dir)
     print(f"run directory: {run_dir}")
@@ -162,7 +162,7 @@ def _check_resume_flags(args: argparse.Namespace) -> None:
         )
 
 
-def _default_run_dir(args: argparse.Namespace, task: str | None = None) -> Path:
+def default_run_dir(args: argparse.Namespace, task: str | None = None) -> Path:
     """``runs/TASK-TIMESTAMP`` (the task of the flags, else of the preset)."""
     import time
 

@@ -34,6 +34,7 @@ ENV_HOSTS = "MJX_ARM_HOSTS"
 ENV_HOST_RANK = "MJX_ARM_HOST_RANK"
 DEFAULT_JOIN_TIMEOUT = 300  # seconds a process waits for the others at the start
 HELLO = "mjx-arm-join"  # the first word a process sends to process 0 when it joins
+_JOINED: list = []  # the group this process joined (jax.distributed starts once per process)
 
 
 class JoinError(InputError):
@@ -140,16 +141,18 @@ class ProcessGroup:
     def join(self) -> None:
         """Join the other processes (``jax.distributed.initialize``); a no-op alone.
 
-        Must run before anything else uses JAX. The processes first meet on the coordinator's
-        port (:meth:`_meet`): JAX's own join ends the process natively (SIGABRT, no Python
-        error) when one does not come, so a missing process is told apart here, before it.
+        Must run before anything else uses JAX; a second call in the same process (each
+        command a joined warm trainer runs) does nothing. The processes first meet on the
+        coordinator's port (:meth:`_meet`): JAX's own join ends the process natively
+        (SIGABRT, no Python error) when one does not come, so a missing process is told apart
+        here, before it.
         Afterwards computations that name no device run on this process's own first device,
         and CPU processes reduce through gloo.
 
         Raises:
             JoinError: not every process joined within ``join_timeout`` seconds.
         """
-        if not self.joined:
+        if not self.joined or _JOINED:  # a warm trainer's process joins once, then trains
             return
         self._meet(time.monotonic() + self.join_timeout)
         import jax
@@ -165,6 +168,7 @@ class ProcessGroup:
         except Exception as err:  # XlaRuntimeError: DEADLINE_EXCEEDED, UNAVAILABLE, ...
             raise self._join_error(str(err).splitlines()[0][:200]) from err
         jax.config.update("jax_default_device", jax.local_devices()[0])
+        _JOINED.append(self)
 
     def _join_error(self, reason: str) -> JoinError:
         return JoinError(

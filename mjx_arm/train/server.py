@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from mjx_arm.inputs import ConfigError
+from mjx_arm.train.distributed import ProcessGroup
 from mjx_arm.train.server_protocol import Reader, code_digest, send
 
 EXIT_INTERRUPTED = 130
@@ -74,9 +75,13 @@ class _Watch:
             _thread.interrupt_main()
 
 
-def refusal(request: dict[str, Any], code: str, devices: str | None, parse: Parse) -> str:
+def refusal(
+    request: dict[str, Any], code: str, devices: str | None, parse: Parse, processes: int = 1
+) -> str:
     """Why this server cannot run ``request`` ("" where it can); ``parse`` reads its command
-    line (``argv -> argparse.Namespace``, ``mjx-arm``'s parser)."""
+    line (``argv -> argparse.Namespace``, ``mjx-arm``'s parser). ``processes``: the count of
+    processes joined in this warm trainer (:mod:`mjx_arm.train.server_group`; 1 alone), which
+    take ``--devices`` of that count only."""
     if request.get("code") != code:
         return "it runs other mjx_arm code (started before a change); restart it"
     if request.get("devices") != devices:
@@ -88,8 +93,15 @@ def refusal(request: dict[str, Any], code: str, devices: str | None, parse: Pars
         return ""  # a bad command line: the run reports it as a local one would
     if args.command != "train":
         return "it runs mjx-arm train commands only"
-    if (args.devices or 0) > 1 or args.hosts or args.coordinator:
-        return "several devices or hosts train in processes of their own"
+    if args.hosts or args.coordinator:
+        return "several hosts train in processes of their own"
+    if processes > 1 and args.devices != processes:
+        return f"it trains on {processes} GPUs joined: give --devices {processes}"
+    if processes == 1 and (args.devices or 0) > 1:
+        return (
+            "several devices train in processes of their own (a warm trainer of several GPUs: "
+            "mjx-arm serve --devices N)"
+        )
     if args.deterministic:
         return "--deterministic is set before the devices start"
     return ""
@@ -159,6 +171,7 @@ class Server:
         self.warmup = warmup  # `mjx-arm warmup` arguments to run before the first command
         self.code = code_digest()
         self.devices = os.environ.get("CUDA_VISIBLE_DEVICES")
+        self.group = ProcessGroup.from_env()  # set where a joined warm trainer started this one
         self.served = 0
 
     def start(self) -> socket.socket:
@@ -172,6 +185,7 @@ class Server:
             raise ConfigError(f"{self.path.parent} belongs to another user: give --socket")
         self.path.unlink(missing_ok=True)
         start = time.monotonic()
+        self.group.join()  # before JAX starts; alone: nothing
         import jax
 
         from mjx_arm.jax_cache import enable_compilation_cache
@@ -185,9 +199,12 @@ class Server:
         os.chmod(self.path, 0o600)  # this user's commands only
         sock.listen(16)
         sock.settimeout(self.idle_s or None)
+        joined = self.group.num_processes
+        place = f", process {self.group.process_id} of {joined}" if joined > 1 else ""
         self.log(
             f"warm trainer ready in {time.monotonic() - start:.1f} s on {devices} (pid "
-            f"{os.getpid()}); train with: MJX_ARM_SERVER={self.path} mjx-arm train --server ..."
+            f"{os.getpid()}{place}); train with: MJX_ARM_SERVER={self.path} mjx-arm train "
+            "--server ..."
         )
         return sock
 
@@ -234,7 +251,7 @@ class Server:
         self._run(conn, request)
 
     def _run(self, conn: socket.socket, request: dict[str, Any]) -> None:
-        why = refusal(request, self.code, self.devices, self.parse)
+        why = refusal(request, self.code, self.devices, self.parse, self.group.num_processes)
         if why:
             send(conn, {"refused": why})
             return
