@@ -148,7 +148,7 @@ def run_seeds_on_gpus(
     ``on_seed`` is called with the seeds finished so far (in seed order) each time one
     or more finish. With ``config.server`` each GPU's
     warm trainer (:class:`~mjx_arm.bench.seed_servers.SeedServers`) runs its seeds' commands;
-    a seed is then warm where that server had finished a seed before it.
+    a seed is then warm where that server had finished a seed before it and kept its programs.
 
     Raises:
         SeedsStopped: a SIGTERM came (the module's docstring), with the seeds that finished.
@@ -217,7 +217,8 @@ def _collect(config, runs_dir: Path, running: dict, done: dict, servers, log) ->
             log(f"seed {seed}: its process was stopped by a SIGTERM; left out ({run.error[:80]})")
             continue
         done[seed] = run, saved
-        run.warm = warm
+        # on a server, a seed after a group's restart (a run stopped on it) starts cold again
+        run.warm = warm and (not servers or bool((run.compile_report or {}).get("kept_warm")))
         if servers:
             servers.served[gpu] += 1
         if run.error:
