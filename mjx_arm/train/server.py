@@ -176,14 +176,7 @@ class Server:
 
     def start(self) -> socket.socket:
         """Import the trainer, start the devices and listen (a stale socket file replaced)."""
-        from mjx_arm.train.client import ping
-
-        if self.path.exists() and ping(self.path) is not None:
-            raise ConfigError(f"a warm trainer already listens at {self.path}; stop it first")
-        self.path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
-        if self.path.parent.stat().st_uid != os.getuid():  # whoever can connect runs commands
-            raise ConfigError(f"{self.path.parent} belongs to another user: give --socket")
-        self.path.unlink(missing_ok=True)
+        free_socket_path(self.path)
         start = time.monotonic()
         self.group.join()  # before JAX starts; alone: nothing
         import jax
@@ -194,11 +187,7 @@ class Server:
         enable_compilation_cache()
         warm.enable()
         devices = jax.devices()
-        sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-        sock.bind(str(self.path))
-        os.chmod(self.path, 0o600)  # this user's commands only
-        sock.listen(16)
-        sock.settimeout(self.idle_s or None)
+        sock = listen_at(self.path, self.idle_s)
         joined = self.group.num_processes
         place = f", process {self.group.process_id} of {joined}" if joined > 1 else ""
         self.log(
@@ -227,23 +216,10 @@ class Server:
 
     def _serve_one(self, sock: socket.socket) -> bool:
         """Serve the next command; False once idle for ``idle_s``."""
-        try:
-            conn, _ = sock.accept()
-        except TimeoutError:
-            self.log(f"idle for {self.idle_s:.0f} s: stopped")
-            return False
-        with conn:
-            try:
-                self._answer(conn)
-            except (OSError, ValueError, KeyError, TypeError) as err:  # a client gone, or garbage
-                self.log(f"a connection ended without its answer ({type(err).__name__}: {err})")
-        return True
+        return serve_one(sock, self.idle_s, self._answer, self.log)
 
-    def _answer(self, conn: socket.socket) -> None:
-        """Read one request from ``conn`` and answer it: a ping, or a command to run."""
-        request = Reader(conn).next()
-        if not isinstance(request, dict):
-            return
+    def _answer(self, conn: socket.socket, request: dict[str, Any]) -> None:
+        """Answer a request: a ping, or a command to run."""
         if request.get("ping"):  # a ping that gave up meanwhile (a long warmup) wants no answer
             with contextlib.suppress(OSError):
                 send(conn, {"pong": os.getpid(), "code": self.code, "served": self.served})
@@ -264,3 +240,52 @@ class Server:
         ended = "the client went away" if gone else f"exit {code}"
         command = " ".join(request["argv"])
         self.log(f"{command}: {ended} after {time.monotonic() - start:.1f} s")
+
+
+def free_socket_path(path: Path) -> None:
+    """Make ``path`` ready for a server to listen at: its folder made (mode 0700) and this
+    user's, a stale socket file removed.
+
+    Raises:
+        ConfigError: a server already listens at ``path``, or its folder is another user's.
+    """
+    from mjx_arm.train.client import ping
+
+    if path.exists() and ping(path) is not None:
+        raise ConfigError(f"a warm trainer already listens at {path}; stop it first")
+    path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
+    if path.parent.stat().st_uid != os.getuid():  # whoever can connect runs commands
+        raise ConfigError(f"{path.parent} belongs to another user: give --socket")
+    path.unlink(missing_ok=True)
+
+
+def listen_at(path: Path, idle_s: float) -> socket.socket:
+    """A socket listening at ``path`` (made ready by :func:`free_socket_path`), this user's
+    only, whose ``accept`` gives up after ``idle_s`` seconds (0: never)."""
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    sock.bind(str(path))
+    os.chmod(path, 0o600)  # this user's commands only
+    sock.listen(16)
+    sock.settimeout(idle_s or None)
+    return sock
+
+
+def serve_one(
+    sock: socket.socket, idle_s: float, answer: Callable[[socket.socket, dict], None], log
+) -> bool:
+    """Accept the next connection on ``sock`` and ``answer`` its request (garbage and a
+    client gone before its answer are logged, the server goes on); False once idle for
+    ``idle_s`` seconds."""
+    try:
+        conn, _ = sock.accept()
+    except TimeoutError:
+        log(f"idle for {idle_s:.0f} s: stopped")
+        return False
+    with conn:
+        try:
+            request = Reader(conn).next()
+            if isinstance(request, dict):
+                answer(conn, request)
+        except (OSError, ValueError, KeyError, TypeError) as err:  # a client gone, or garbage
+            log(f"a connection ended without its answer ({type(err).__name__}: {err})")
+    return True

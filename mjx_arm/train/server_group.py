@@ -37,7 +37,14 @@ from mjx_arm.train.distributed import (
     Hosts,
 )
 from mjx_arm.train.launch import plan, stop_processes
-from mjx_arm.train.server import EXIT_INTERRUPTED, Parse, refusal
+from mjx_arm.train.server import (
+    EXIT_INTERRUPTED,
+    Parse,
+    free_socket_path,
+    listen_at,
+    refusal,
+    serve_one,
+)
 from mjx_arm.train.server_protocol import Reader, code_digest, send
 
 READY_TIMEOUT_S = 600.0  # the processes' imports, devices' start and join, at most
@@ -156,31 +163,11 @@ class ServerGroup:
         stop_processes(self._procs, signal.SIGINT, STOP_S)
         self._procs = []
 
-    def listen(self) -> socket.socket:
-        """The front's socket, this user's only (a stale socket file replaced).
-
-        Raises:
-            ConfigError: a warm trainer already listens at ``path``.
-        """
-        from mjx_arm.train.client import ping
-
-        if self.path.exists() and ping(self.path) is not None:
-            raise ConfigError(f"a warm trainer already listens at {self.path}; stop it first")
-        self.path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
-        if self.path.parent.stat().st_uid != os.getuid():  # whoever can connect runs commands
-            raise ConfigError(f"{self.path.parent} belongs to another user: give --socket")
-        self.path.unlink(missing_ok=True)
-        sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-        sock.bind(str(self.path))
-        os.chmod(self.path, 0o600)
-        sock.listen(16)
-        sock.settimeout(self.idle_s or None)
-        return sock
-
     def serve_forever(self) -> int:
         """Start the group, then serve commands one at a time until idle, Ctrl-C or SIGTERM
         (the group stopped with it); 0."""
-        sock = self.listen()
+        free_socket_path(self.path)
+        sock = listen_at(self.path, self.idle_s)
         previous = signal.signal(signal.SIGTERM, _interrupt)  # a timeout's stop: as Ctrl-C
         try:
             self.start_processes()
@@ -198,19 +185,7 @@ class ServerGroup:
 
     def _serve_one(self, sock: socket.socket) -> bool:
         """Serve the next connection; False once idle for ``idle_s``."""
-        try:
-            conn, _ = sock.accept()
-        except TimeoutError:
-            self.log(f"idle for {self.idle_s:.0f} s: stopped")
-            return False
-        with conn:
-            try:
-                request = Reader(conn).next()
-                if isinstance(request, dict):
-                    self._answer(conn, request)
-            except (OSError, ValueError, KeyError, TypeError) as err:  # a client gone, garbage
-                self.log(f"a connection ended without its answer ({type(err).__name__}: {err})")
-        return True
+        return serve_one(sock, self.idle_s, self._answer, self.log)
 
     def _answer(self, conn: socket.socket, request: dict[str, Any]) -> None:
         """Answer a ping, or run a command on every process of the group."""
