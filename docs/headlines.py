@@ -205,6 +205,25 @@ def _cold_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
     return "Start-up, every cache empty (cold) and after", "; ".join(parts), rels
 
 
+def _group_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
+    rel = "scaling/server_group_reach_tiny.json"
+    data = load(rel)
+    s = data["summary"]
+    value = (
+        f"new processes per command {secs(s['processes']['median_wall_s'])}, the warm group "
+        f"{secs(s['group, warm']['median_wall_s'])} ({fmt(s['warm_over_processes'], 2)}x; its "
+        f"first command {secs(s['group, first command']['median_wall_s'])}); each seed's two "
+        f"runs identical, bit for bit: {sum(data['identical'])} of {len(data['identical'])}"
+    )
+    figure = (
+        "A training on two devices per command (`train --devices 2`, the CPU preset cut down "
+        "to three epochs; two CPU processes joined through gloo), new processes each time "
+        "against a warm trainer of two (`mjx-arm serve --devices 2`), median from the "
+        "command's start to its exit"
+    )
+    return figure, value, [rel]
+
+
 def _robustness_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
     """Per group of shipped policies: perturbations held at the goal and the joint draw."""
     parts, rels = [], []
@@ -489,6 +508,7 @@ HEADLINES: tuple[Headline, ...] = (
                  task="touch"),
     _before_touch_changes(Headline(_robustness_row)),
     _before_touch_changes(Headline(_cold_row)),
+    Headline(_group_row),
     _before_touch_changes(Headline(_gpu_seeds_row)),
     _before_touch_changes(Headline(_gpu_scaling_row)),
     Headline(_throughput_row),
