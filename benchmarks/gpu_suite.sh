@@ -135,7 +135,8 @@ campaign)
   # GPU at once make their times incomparable, and three SO-101 runs on one H200 ran out of
   # memory). GPU may name a lane, "0:b": each lane of a GPU runs at once beside the others
   # (success over seeds, not times). GPU may also list several, "0,1", for seeds trained on all
-  # of them (ARGS "--gpus-per-seed 2"). Where lanes share a GPU, each process takes 0.6 / lanes of
+  # of them (ARGS "--gpus-per-seed 2"; with --server, one warm group of those GPUs trains each
+  # seed: `mjx-arm serve --devices 2`). Where lanes share a GPU, each process takes 0.6 / lanes of
   # its memory unless XLA_PYTHON_CLIENT_MEM_FRACTION says otherwise (three Lift runs at 0.3 each
   # left Warp out of memory). Every line stops DEADLINE seconds (default 540) after the
   # campaign's start. The runs' metrics, configs and start-up reports, and every report, go
