@@ -157,8 +157,9 @@ def cmd_serve(args: argparse.Namespace) -> int:
     """Start a warm trainer: it keeps JAX, the envs and the compiled programs between the
     ``mjx-arm train --server`` commands it runs, so that a new seed of a config it has trained
     starts training at once (docs/training.md, "A warm trainer"). One command at a time; the
-    others wait. It holds its GPU's memory while it runs: stop it with Ctrl-C, or let
-    --idle-minutes stop it."""
+    others wait. With --devices N it is a process per GPU, joined once, for train --devices N
+    commands ("A warm trainer of several GPUs"). It holds its GPUs' memory while it runs: stop
+    it with Ctrl-C, or let --idle-minutes stop it."""
     from mjx_arm.train.server import Server
     from mjx_arm.train.server_protocol import default_socket
 
