@@ -126,8 +126,8 @@ def _wait_for(front: SimpleNamespace, text: str, count: int = 1, timeout: float 
         time.sleep(0.2)
 
 
-@pytest.fixture(scope="module")
-def front():
+def _start_front() -> SimpleNamespace:
+    """A group's front (``serve --devices 2`` on two CPU processes), once they have joined."""
     folder = Path(tempfile.mkdtemp(prefix="mjxg"))
     path, log = folder / "g.sock", folder / "front.log"
     env = _env()
@@ -138,9 +138,15 @@ def front():
     client_env = {**env, "MJX_ARM_SERVER": str(path)}
     served = SimpleNamespace(path=path, log=log, proc=proc, env=client_env)
     _wait_for(served, "warm trainers joined")
+    return served
+
+
+@pytest.fixture(scope="module")
+def front():
+    served = _start_front()
     yield served
-    if proc.poll() is None:
-        proc.kill()
+    if served.proc.poll() is None:
+        served.proc.kill()
 
 
 @pytest.mark.slow
@@ -189,3 +195,15 @@ def _ready_lines(front: SimpleNamespace) -> list[str]:
 def _zombie(pid: int) -> bool:
     with open(f"/proc/{pid}/stat") as stat:
         return stat.read().split(")")[-1].split()[0] == "Z"
+
+
+def test_the_group_ends_with_its_front_even_killed() -> None:
+    """A front killed at once (SIGKILL: no handler runs) leaves no process holding a GPU."""
+    served = _start_front()
+    children = [int(line.split("pid ")[1].split(",")[0]) for line in _ready_lines(served)]
+    served.proc.kill()
+    served.proc.wait(timeout=30)
+    deadline = time.time() + 30
+    while any(Path(f"/proc/{pid}").exists() and not _zombie(pid) for pid in children):
+        assert time.time() < deadline, f"processes {children} outlived their front"
+        time.sleep(0.2)

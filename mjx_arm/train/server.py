@@ -35,6 +35,8 @@ from mjx_arm.train.distributed import ProcessGroup
 from mjx_arm.train.server_protocol import Reader, code_digest, send
 
 EXIT_INTERRUPTED = 130
+EXIT_FRONT_GONE = 143  # a process of a group whose front ended: as one ended by SIGTERM
+FRONT_PID = "MJX_ARM_FRONT_PID"  # the front of a group (mjx_arm.train.server_group)
 Command = Callable[[list[str]], int]  # a command line -> its exit code
 Parse = Callable[[list[str]], argparse.Namespace]  # a command line -> its parsed flags
 
@@ -178,6 +180,8 @@ class Server:
         """Import the trainer, start the devices and listen (a stale socket file replaced)."""
         free_socket_path(self.path)
         start = time.monotonic()
+        if self.group.joined:
+            watch_front()  # a process of a group ends with its front
         self.group.join()  # before JAX starts; alone: nothing
         import jax
 
@@ -289,3 +293,19 @@ def serve_one(
         except (OSError, ValueError, KeyError, TypeError) as err:  # a client gone, or garbage
             log(f"a connection ended without its answer ({type(err).__name__}: {err})")
     return True
+
+
+def watch_front(interval_s: float = 1.0) -> None:
+    """In a process of a group: end this process, at once, when the front that started it
+    (``MJX_ARM_FRONT_PID``) has ended, even killed (``SIGKILL``), so that no process holds its
+    GPU with nobody to stop it. Nothing where no front started this process."""
+    front = os.environ.get(FRONT_PID)
+    if not front or not front.isdigit():
+        return
+
+    def watch() -> None:
+        while os.getppid() == int(front):
+            time.sleep(interval_s)
+        os._exit(EXIT_FRONT_GONE)
+
+    threading.Thread(target=watch, daemon=True, name="front-watch").start()

@@ -39,6 +39,7 @@ from mjx_arm.train.distributed import (
 from mjx_arm.train.launch import plan, stop_processes
 from mjx_arm.train.server import (
     EXIT_INTERRUPTED,
+    FRONT_PID,
     Parse,
     free_socket_path,
     listen_at,
@@ -58,6 +59,7 @@ GROUP_VARIABLES = (
     ENV_HOSTS,
     ENV_HOST_RANK,
     "MJX_ARM_JOIN_TIMEOUT",
+    FRONT_PID,
 )
 # Exit codes after which the group goes on: a run every process ended alike, by its end or a
 # named error (a bug, 1, or an interruption may have stopped them at different collectives).
@@ -129,6 +131,7 @@ class ServerGroup:
         groups = plan(Hosts(), len(self.gpus), self.gpus, per_gpu=True).groups
         for gpu, group, path, log in zip(self.gpus, groups, self.sockets, self.logs, strict=True):
             env = {**self.env, **group.env(), "CUDA_VISIBLE_DEVICES": gpu}
+            env[FRONT_PID] = str(os.getpid())
             command = [sys.executable, "-m", "mjx_arm.cli", "serve", "--socket", str(path)]
             with log.open("ab") as out:
                 self._procs.append(
@@ -154,8 +157,9 @@ class ServerGroup:
         )
 
     def _child_idle_minutes(self) -> float:
-        """A process's own idle limit: the front's and a margin (the front stops them first),
-        so that processes whose front was killed do not hold their GPUs for ever (0: never)."""
+        """A process's own idle limit: the front's and a margin (the front stops them first;
+        a process also ends within seconds of its front's end,
+        :func:`~mjx_arm.train.server.watch_front`)."""
         return self.idle_s / 60.0 + CHILD_IDLE_MARGIN_MIN if self.idle_s else 0.0
 
     def stop_processes(self) -> None:
