@@ -172,6 +172,7 @@ def test_a_joined_group_trains_warm_and_restarts_after_a_client_goes(front, tmp_
     assert gone.wait(timeout=60) == 130
     _wait_for(front, "restarting the group")
     _wait_for(front, "warm trainers joined", count=2)
+    assert ping(front.path)["restarts"] == 1
     _done(_train(front, tmp_path / "again", 4))  # a cold group again, the same run
     assert compare_runs(tmp_path / "a4", tmp_path / "again").identical
 

@@ -195,7 +195,8 @@ class ServerGroup:
         """Answer a ping, or run a command on every process of the group."""
         if request.get("ping"):
             with contextlib.suppress(OSError):
-                send(conn, {"pong": os.getpid(), "code": self.code, "served": self.served})
+                pong = {"pong": os.getpid(), "code": self.code, "served": self.served}
+                send(conn, {**pong, "restarts": self.restarts})
             return
         why = refusal(request, self.code, self.devices, self.parse, len(self.gpus))
         if why:
