@@ -150,7 +150,7 @@ def front():
 
 
 @pytest.mark.slow
-def test_a_joined_group_trains_warm_and_restarts_after_a_client_goes(front, tmp_path) -> None:
+def test_a_joined_group_trains_warm_and_restarts_after_a_stopped_run(front, tmp_path) -> None:
     cold = _train(front, tmp_path / "a4", 4)
     _done(cold)
     assert "kept_warm" not in _kept(tmp_path / "a4")  # the group's first run builds all
@@ -163,11 +163,7 @@ def test_a_joined_group_trains_warm_and_restarts_after_a_client_goes(front, tmp_
     second = front.path.with_name("g.sock.p1.log").read_text()  # process 1 ran them too
     assert second.count(": exit 0 after") == 3 and "done:" not in second  # 0 alone reports
 
-    gone = _train(front, tmp_path / "gone", 6, "--set", "num_timesteps=1920000", "num_evals=3001")
-    deadline = time.time() + 120
-    while not (tmp_path / "gone" / "config.json").exists():
-        assert time.time() < deadline and gone.poll() is None
-        time.sleep(0.05)
+    gone = _long_run(front, tmp_path / "gone")
     gone.send_signal(signal.SIGINT)
     assert gone.wait(timeout=60) == 130
     _wait_for(front, "restarting the group")
@@ -176,12 +172,29 @@ def test_a_joined_group_trains_warm_and_restarts_after_a_client_goes(front, tmp_
     _done(_train(front, tmp_path / "again", 4))  # a cold group again, the same run
     assert compare_runs(tmp_path / "a4", tmp_path / "again").identical
 
+    lost = _long_run(front, tmp_path / "lost")
+    os.kill(int(_ready_lines(front)[1].split("pid ")[1].split(",")[0]), signal.SIGKILL)
+    _, err = lost.communicate(timeout=120)  # the others may wait for it at a collective
+    assert lost.returncode != 0 and b"process 1 of the group ended during the run" in err
+    _wait_for(front, "warm trainers joined", count=3)
+    assert ping(front.path)["restarts"] == 2
+
     children = [int(line.split("pid ")[1].split(",")[0]) for line in _ready_lines(front)]
     front.proc.send_signal(signal.SIGTERM)  # a timeout's stop: the group goes with the front
     assert front.proc.wait(timeout=90) == 0
     assert not front.path.exists() and ping(front.path) is None
     for pid in children:
         assert not Path(f"/proc/{pid}").exists() or _zombie(pid), f"process {pid} still runs"
+
+
+def _long_run(front: SimpleNamespace, run: Path) -> subprocess.Popen:
+    """A run the group cannot finish soon, once it has started (its config saved)."""
+    proc = _train(front, run, 6, "--set", "num_timesteps=1920000", "num_evals=3001")
+    deadline = time.time() + 120
+    while not (run / "config.json").exists():
+        assert time.time() < deadline and proc.poll() is None
+        time.sleep(0.05)
+    return proc
 
 
 def _ready_lines(front: SimpleNamespace) -> list[str]:

@@ -229,7 +229,7 @@ class ServerGroup:
     def _run(self, conn: socket.socket, request: dict[str, Any]) -> tuple[list[int], bool]:
         """Run ``request`` on every process; process 0's output to ``conn``. Returns each
         process's exit code (EXIT_INTERRUPTED for one that did not end within STOP_S of its
-        client going away) and whether the client went away."""
+        run being stopped) and whether the client went away."""
         links = [_Link(path, {**request, "devices": gpu}) for path, gpu in self._pairs()]
         refused = next((link.refused for link in links if link.refused), "")
         if refused:
@@ -241,22 +241,20 @@ class ServerGroup:
         links[0].sink = lambda message: _forward(conn, message)
         for link, log in zip(links[1:], self.logs[1:], strict=True):
             link.sink = _to_log(log)
-        pumps = [threading.Thread(target=link.pump, daemon=True) for link in links]
-        for pump in pumps:
-            pump.start()
-        gone = _wait_or_gone(conn, pumps)
-        if gone:
-            for link in links:
-                link.end_request()  # each process's watcher stops its run, as Ctrl-C would
-            deadline = time.monotonic() + STOP_S
-            for pump in pumps:
-                pump.join(max(deadline - time.monotonic(), 0.0))
+        for link in links:
+            link.start()
+        why = _wait_run(conn, links)
+        if why:
+            _stop_run(links)
+        if why == "process":
+            lost = [i for i, link in enumerate(links) if link.lost]
+            _forward(conn, {"err": f"error: process {lost[0]} of the group ended during the run\n"})
         codes = [EXIT_INTERRUPTED if link.code is None else link.code for link in links]
         with contextlib.suppress(OSError):
-            send(conn, {"exit": codes[0]})
+            send(conn, {"exit": codes[0] or int(why == "process")})
         for link in links:
             link.close()
-        return codes, gone
+        return codes, why == "client"
 
     def _pairs(self) -> list[tuple[Path, str]]:
         return list(zip(self.sockets, self.gpus, strict=True))
@@ -285,6 +283,11 @@ class _Link:
             answer = {"refused": f"no answer at {path} ({err.strerror or err})"}
         self.refused = str(answer.get("refused", ""))
 
+    def start(self) -> None:
+        """Pump the process's output on a thread of its own (:meth:`pump`)."""
+        self.thread = threading.Thread(target=self.pump, daemon=True)
+        self.thread.start()
+
     def pump(self) -> None:
         """Pass the process's output to ``sink`` until its exit code comes (or it ends)."""
         with contextlib.suppress(OSError, ValueError):
@@ -293,6 +296,16 @@ class _Link:
                     self.code = int(message["exit"])
                     return
                 self.sink(message)
+
+    @property
+    def running(self) -> bool:
+        """Whether the process's run has not answered yet."""
+        return self.thread.is_alive()
+
+    @property
+    def lost(self) -> bool:
+        """Whether the process went away without its exit code (it died, or its server)."""
+        return not self.thread.is_alive() and self.code is None
 
     def end_request(self) -> None:
         """Tell the process its client went away (the output still comes back)."""
@@ -326,9 +339,10 @@ def _to_log(path: Path):
     return write
 
 
-def _wait_or_gone(conn: socket.socket, pumps: list[threading.Thread]) -> bool:
-    """Wait until every process answered its exit code; True where the client went away
-    first (its end of ``conn`` closed)."""
+def _wait_run(conn: socket.socket, links: list[_Link]) -> str:
+    """Wait until every process answered its exit code (""), the client went away first
+    ("client": its end of ``conn`` closed), or a process went away without its exit code
+    ("process": the others may wait for it at a collective for ever)."""
     gone = threading.Event()
 
     def watch() -> None:
@@ -338,7 +352,19 @@ def _wait_or_gone(conn: socket.socket, pumps: list[threading.Thread]) -> bool:
         gone.set()
 
     threading.Thread(target=watch, daemon=True).start()
-    while any(p.is_alive() for p in pumps):
-        if gone.wait(0.1):
-            return any(p.is_alive() for p in pumps)
-    return False
+    while any(link.running for link in links):
+        if any(link.lost for link in links):
+            return "process"
+        if gone.wait(0.1) and any(link.running for link in links):
+            return "client"
+    return "process" if any(link.lost for link in links) else ""
+
+
+def _stop_run(links: list[_Link]) -> None:
+    """Stop a run on every process (each one's watcher stops it, as Ctrl-C would) and give
+    them STOP_S seconds to answer."""
+    for link in links:
+        link.end_request()
+    deadline = time.monotonic() + STOP_S
+    for link in links:
+        link.thread.join(max(deadline - time.monotonic(), 0.0))
