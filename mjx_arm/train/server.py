@@ -205,17 +205,12 @@ class Server:
         """Run the warmup (if any), then serve commands one at a time until idle or Ctrl-C;
         returns 0, or the warmup's exit code where it failed."""
         sock = self.start()
-        try:
+        with until_stopped(sock, self.path, self.log):
             if self.warmup is not None and (code := self.command(["warmup", *self.warmup])):
                 self.log(f"warmup {' '.join(self.warmup)}: exit {code}; stopped")
                 return code
             while self._serve_one(sock):
                 pass
-        except KeyboardInterrupt:
-            self.log("stopped (Ctrl-C)")
-        finally:
-            sock.close()
-            self.path.unlink(missing_ok=True)
         return 0
 
     def _serve_one(self, sock: socket.socket) -> bool:
@@ -272,6 +267,19 @@ def listen_at(path: Path, idle_s: float) -> socket.socket:
     sock.listen(16)
     sock.settimeout(idle_s or None)
     return sock
+
+
+@contextlib.contextmanager
+def until_stopped(sock: socket.socket, path: Path, log) -> Iterator[None]:
+    """The block serves on ``sock`` until it returns or Ctrl-C ends it (logged); the socket
+    is closed and its file at ``path`` removed either way."""
+    try:
+        yield
+    except KeyboardInterrupt:
+        log("stopped (Ctrl-C)")
+    finally:
+        sock.close()
+        path.unlink(missing_ok=True)
 
 
 def serve_one(

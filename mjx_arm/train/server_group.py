@@ -45,6 +45,7 @@ from mjx_arm.train.server import (
     listen_at,
     refusal,
     serve_one,
+    until_stopped,
 )
 from mjx_arm.train.server_protocol import Reader, code_digest, send
 
@@ -174,15 +175,12 @@ class ServerGroup:
         sock = listen_at(self.path, self.idle_s)
         previous = signal.signal(signal.SIGTERM, _interrupt)  # a timeout's stop: as Ctrl-C
         try:
-            self.start_processes()
-            self.log(f"train with: MJX_ARM_SERVER={self.path} mjx-arm train --server ...")
-            while self._serve_one(sock):
-                pass
-        except KeyboardInterrupt:
-            self.log("stopped (Ctrl-C)")
+            with until_stopped(sock, self.path, self.log):
+                self.start_processes()
+                self.log(f"train with: MJX_ARM_SERVER={self.path} mjx-arm train --server ...")
+                while self._serve_one(sock):
+                    pass
         finally:
-            sock.close()
-            self.path.unlink(missing_ok=True)
             self.stop_processes()
             signal.signal(signal.SIGTERM, previous)
         return 0
