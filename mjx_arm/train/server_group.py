@@ -36,7 +36,7 @@ from mjx_arm.train.distributed import (
     ENV_PROCESS_ID,
     Hosts,
 )
-from mjx_arm.train.launch import plan, stop_processes, visible_gpus
+from mjx_arm.train.launch import plan, stop_processes
 from mjx_arm.train.server import (
     EXIT_INTERRUPTED,
     FRONT_PID,
@@ -75,6 +75,8 @@ def group_gpus(count: int, warmup: list[str] | None = None) -> list[str]:
         ConfigError: fewer GPUs than ``count``, or a ``--warmup`` (a joined group builds its
             programs with its first command).
     """
+    from mjx_arm.train.launch import visible_gpus
+
     if warmup is not None:
         raise ConfigError(
             "serve --devices N takes no --warmup: the group's first command builds the envs "
@@ -141,14 +143,13 @@ class ServerGroup:
                         stderr=subprocess.STDOUT,
                     )
                 )
-        for gpu, path, log, proc in zip(
-            self.gpus, self.sockets, self.logs, self._procs, strict=True
-        ):
+        for gpu, path, proc in zip(self.gpus, self.sockets, self._procs, strict=True):
             while ping(path) is None:
                 if proc.poll() is not None or time.monotonic() - start > READY_TIMEOUT_S:
                     self.stop_processes()
                     raise ConfigError(
-                        f"the warm trainer of GPU {gpu} did not start; its log: {log}"
+                        f"the warm trainer of GPU {gpu} did not start; its log: "
+                        f"{self.logs[self.gpus.index(gpu)]}"
                     )
                 time.sleep(0.2)
         self.log(
