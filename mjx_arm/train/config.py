@@ -118,6 +118,13 @@ class TrainConfig:
             ``batch_size``, ``num_timesteps`` and ``eval_from_step`` by N
             (:meth:`scaled_for_devices`): each GPU keeps the preset's envs and minibatch share,
             and a run takes as many updates and skips the evaluations of as many.
+        devices_lr_power: where the batch grows with N devices, ``learning_rate`` is
+            multiplied by N to this power (1: the rate grows as the batch, the linear scaling
+            rule; 0: unchanged). A batch N times larger with the same rate makes about as much
+            progress per update, so it needs about N times the env steps (docs/training.md).
+        devices_clip: where the batch grows with N devices, PPO's ``clipping_epsilon``
+            becomes this (0: unchanged), so that the larger steps the grown rate takes are not
+            clipped back.
         partition: how the batched physics is spread over the devices: "xla" (XLA partitions
             the jitted env graph), "per_device" (``shard_map``: each device steps its own
             envs; needed for MuJoCo Warp, whose kernels XLA cannot partition) or "auto"
@@ -164,6 +171,8 @@ class TrainConfig:
     deterministic: bool = False
     devices: int = 0
     scale_with_devices: bool = True
+    devices_lr_power: float = 1.0
+    devices_clip: float = 0.4
     partition: str = "auto"
 
     def __post_init__(self) -> None:
@@ -181,6 +190,7 @@ class TrainConfig:
             self, ("discounting", "gae_lambda", "stop_at_success", "eval_gate"), low=0, high=1
         )
         check_range(self, ("vf_loss_coefficient", "entropy_cost", "kl_stop"), low=0)
+        check_range(self, ("devices_lr_power", "devices_clip"), low=0)
         if self.policy_distribution not in POLICY_DISTRIBUTIONS:
             raise ConfigError(
                 f"policy_distribution must be one of {list(POLICY_DISTRIBUTIONS)}, got "
@@ -200,7 +210,8 @@ class TrainConfig:
 
     def scaled_for_devices(self, count: int) -> TrainConfig:
         """The config for ``count`` devices: envs, minibatch size, budget and the first
-        evaluated step times ``count`` where ``scale_with_devices`` (else unchanged)."""
+        evaluated step times ``count`` where ``scale_with_devices`` (else unchanged), the
+        learning rate times ``count ** devices_lr_power`` and the clip ``devices_clip``."""
         if not self.scale_with_devices or count < 2:
             return self
         return self.replace(
@@ -208,6 +219,8 @@ class TrainConfig:
             batch_size=self.batch_size * count,
             num_timesteps=self.num_timesteps * count,
             eval_from_step=self.eval_from_step * count,
+            learning_rate=self.learning_rate * count**self.devices_lr_power,
+            clipping_epsilon=self.devices_clip or self.clipping_epsilon,
         )
 
     def replace(self, **changes: Any) -> TrainConfig:
