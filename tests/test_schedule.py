@@ -140,9 +140,11 @@ def test_devices_scale_the_envs_minibatch_and_budget() -> None:
     assert two.num_timesteps == 2 * config.num_timesteps
     assert two.eval_from_step == 2 * config.eval_from_step > 0  # as many updates unevaluated
     assert two.num_minibatches == config.num_minibatches
-    assert two.learning_rate == pytest.approx(2 * config.learning_rate, rel=1e-12)
-    assert two.clipping_epsilon == config.devices_clip == 0.4
-    four = config.replace(devices_lr_power=0.5, devices_clip=0.0).scaled_for_devices(4)
+    assert (two.learning_rate, two.clipping_epsilon) == (1e-3, 0.2)  # kept by default
+    rule = config.replace(devices_lr_power=1.0, devices_clip=0.4).scaled_for_devices(2)
+    assert rule.learning_rate == pytest.approx(2 * config.learning_rate, rel=1e-12)
+    assert rule.clipping_epsilon == 0.4
+    four = config.replace(devices_lr_power=0.5).scaled_for_devices(4)
     assert four.learning_rate == pytest.approx(2 * config.learning_rate, rel=1e-12)
     assert four.clipping_epsilon == config.clipping_epsilon
     assert config.scaled_for_devices(1) == config

@@ -49,8 +49,8 @@ ADDED_TRAIN_FIELDS = {
     "eval_from_step": 0,
     "eval_gate": 0.0,
     "clip_per_network": False,
-    "devices_lr_power": 1.0,
-    "devices_clip": 0.4,
+    "devices_lr_power": 0.0,
+    "devices_clip": 0.0,
 }
 # ... and inside its ``normalizer`` section.
 ADDED_NORMALIZER_FIELDS = {"after_update": False, "force_scale": 0.0}

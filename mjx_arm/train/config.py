@@ -120,11 +120,11 @@ class TrainConfig:
             and a run takes as many updates and skips the evaluations of as many.
         devices_lr_power: where the batch grows with N devices, ``learning_rate`` is
             multiplied by N to this power (1: the rate grows as the batch, the linear scaling
-            rule; 0: unchanged). A batch N times larger with the same rate makes about as much
-            progress per update, so it needs about N times the env steps (docs/training.md).
+            rule; 0, the default: unchanged).
         devices_clip: where the batch grows with N devices, PPO's ``clipping_epsilon``
-            becomes this (0: unchanged), so that the larger steps the grown rate takes are not
-            clipped back.
+            becomes this (0, the default: unchanged). Both are off: on two H200s the rate
+            doubled with the clip at 0.4 still needed twice one GPU's env steps on Touch and
+            lost a seed to strikes (docs/training.md, "Several devices").
         partition: how the batched physics is spread over the devices: "xla" (XLA partitions
             the jitted env graph), "per_device" (``shard_map``: each device steps its own
             envs; needed for MuJoCo Warp, whose kernels XLA cannot partition) or "auto"
@@ -171,8 +171,8 @@ class TrainConfig:
     deterministic: bool = False
     devices: int = 0
     scale_with_devices: bool = True
-    devices_lr_power: float = 1.0
-    devices_clip: float = 0.4
+    devices_lr_power: float = 0.0
+    devices_clip: float = 0.0
     partition: str = "auto"
 
     def __post_init__(self) -> None:
