@@ -40,8 +40,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.common import RESULTS_DIR, environment_metadata, markdown_table, save_results
 
 RESULTS = RESULTS_DIR / "scaling"
-# The CPU preset cut down to three epochs of 32 envs (the resume tests' run), on C MuJoCo.
+# The CPU preset cut down to three epochs of 32 envs (the resume tests' run), on C MuJoCo, at
+# twice its batch on two devices (as measured in scaling/server_group_reach_tiny.json).
 TINY = [
+    "scale_with_devices=true",
     "backend=mujoco",
     "num_timesteps=1920",
     "num_evals=4",

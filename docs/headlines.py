@@ -287,38 +287,48 @@ def _gpu_seeds_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
     return "Touch `--preset fast` seeds, one process per GPU", value, list(GPU_SEEDS)
 
 
-# Touch seeds trained on two GPUs each, and fresh seeds on one GPU (the same commit and host)
+# Touch seeds trained on two GPUs each through a warm group (the preset's batch split over the
+# GPUs, as shipped; then grown with them), and fresh seeds on one GPU's warm trainer
 TWO_GPU_SEEDS = (
-    "seeds/fresh/seeds_touch_fast_fresh_8100_2gpu.json",
-    "seeds/fresh/seeds_touch_fast_fresh_8036.json",
+    "seeds/fresh/seeds_touch_fast_fresh_8530_2gpu_split_server.json",
+    "seeds/fresh/seeds_touch_fast_fresh_8200_server.json",
+    "seeds/fresh/seeds_touch_fast_fresh_8500_2gpu_server.json",
 )
+
+
+def _warm_solved(load: Callable[[str], Json], rel: str) -> list[Json]:
+    """The warm seeds of a seeds report that reached its threshold."""
+    return [r for r in load(rel)["seeds"] if r.get("warm") and r["time_to_threshold"]]
 
 
 def _two_gpu_seeds_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]]:
     """Touch on 2 GPUs per seed: solve rate, and its warm median beside the one-GPU campaign's
-    (steps to the threshold and env steps/s as the causes); medians over each file's warm
-    solved seeds."""
+    (steps to the threshold and env steps/s as the causes), then the grown batch's; medians
+    over each file's warm solved seeds."""
     summary = load(TWO_GPU_SEEDS[0])["summary"]
-    two, one = (
-        [r for r in load(rel)["seeds"] if r.get("warm") and r["time_to_threshold"]]
-        for rel in TWO_GPU_SEEDS
-    )
+    two, one, grown = (_warm_solved(load, rel) for rel in TWO_GPU_SEEDS)
 
-    def ratio(key: str) -> float:
-        return statistics.median(r[key] for r in two) / statistics.median(r[key] for r in one)
+    def median(runs: list[Json], key: str) -> float:
+        return statistics.median(r[key] for r in runs)
 
-    t2 = statistics.median(r["time_to_threshold"] for r in two)
-    t1 = statistics.median(r["time_to_threshold"] for r in one)
+    def ratio(runs: list[Json], key: str) -> float:
+        return median(runs, key) / median(one, key)
+
+    t1 = median(one, "time_to_threshold")
     value = (
         f"{summary['solved']} of {summary['seeds']} seeds at {fmt(summary['threshold'])}; warm "
-        f"median {secs(t2)} ({len(two)} seeds) against {secs(t1)} on one GPU ({len(one)} "
-        f"seeds, {t2 / t1:.2f}x): {ratio('training_steps_per_s'):.2f}x the env steps/s, "
-        f"{ratio('steps_to_threshold'):.1f}x the steps to the threshold"
+        f"median {secs(median(two, 'time_to_threshold'))} ({len(two)} seeds) against "
+        f"{secs(t1)} on one GPU ({len(one)} seeds, "
+        f"{ratio(two, 'time_to_threshold'):.2f}x): {ratio(two, 'training_steps_per_s'):.2f}x "
+        f"the env steps/s, {ratio(two, 'steps_to_threshold'):.2f}x the steps. The batch grown "
+        f"with the GPUs (`--set scale_with_devices=true`, seeds 8500-8509): "
+        f"{secs(median(grown, 'time_to_threshold'))} ({ratio(grown, 'time_to_threshold'):.2f}x), "
+        f"{ratio(grown, 'steps_to_threshold'):.2f}x the steps"
     )
     what = (
-        "Touch: `--preset fast` as shipped on 2 H200s per seed (`train --devices 2`, the batch "
-        "grown with the GPUs), fresh seeds 8100-8105, beside fresh seeds 8036-8066 on one H200 "
-        "each on the same host, time from the command's start"
+        "Touch: `--preset fast` as shipped on 2 H200s per seed (`train --devices 2 --server`, a "
+        "warm group of both GPUs, the preset's batch split over them), fresh seeds 8530-8540, "
+        "beside fresh seeds 8200-8255 on one H200's warm trainer, time from the command's start"
     )
     return what, value, list(TWO_GPU_SEEDS)
 

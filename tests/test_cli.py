@@ -317,16 +317,19 @@ def test_known_library_warnings_stay_off_the_console() -> None:
 
 
 def test_a_run_on_several_devices_says_what_was_measured_first(capsys) -> None:
-    """``--devices N`` with the batch grown says, on stderr, that a seed solved later on two
-    GPUs than on one and points at a seed per GPU; one device, or the preset's batch kept
-    (``scale_with_devices=false``), says nothing."""
+    """``--devices N`` says on stderr what was measured on two GPUs: the split batch (the
+    default) no sooner than one GPU, the grown one (``scale_with_devices=true``) later; both
+    point at a seed per GPU. One device says nothing."""
     from mjx_arm.train.config import TrainConfig
     from mjx_arm.train.run_lines import devices_note
 
     devices_note(2, TrainConfig())
     err = capsys.readouterr().err
-    assert err.startswith("note: --devices 2 grows the batch 2 times") and "bench seeds" in err
-    for devices, config in ((None, TrainConfig()), (1, TrainConfig()),
-                            (4, TrainConfig(scale_with_devices=False))):  # fmt: skip
-        devices_note(devices, config)
+    assert err.startswith("note: --devices 2 splits the batch over 2 devices")
+    assert "bench seeds" in err
+    devices_note(4, TrainConfig(scale_with_devices=True))
+    err = capsys.readouterr().err
+    assert err.startswith("note: --devices 4 grows the batch 4 times") and "bench seeds" in err
+    for devices in (None, 1):
+        devices_note(devices, TrainConfig())
         assert capsys.readouterr().err == ""

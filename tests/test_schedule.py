@@ -133,8 +133,13 @@ def test_a_fixed_force_scale_holds_through_updates() -> None:
     assert float(plain.std[1]) == pytest.approx(1e-6)  # no dims named: Brax's statistics
 
 
-def test_devices_scale_the_envs_minibatch_and_budget() -> None:
-    config = load_config("fast", None, ["task=touch"])
+def test_devices_scale_the_envs_minibatch_and_budget_when_asked() -> None:
+    """By default ``--devices N`` splits the preset's batch (the config is unchanged);
+    ``scale_with_devices`` grows envs, minibatch, budget and first evaluation N times, and the
+    rate and clip only where ``devices_lr_power`` and ``devices_clip`` say."""
+    preset = load_config("fast", None, ["task=touch"])
+    assert preset.scaled_for_devices(2) == preset
+    config = preset.replace(scale_with_devices=True)
     two = config.scaled_for_devices(2)
     assert (two.num_envs, two.batch_size) == (2 * config.num_envs, 2 * config.batch_size)
     assert two.num_timesteps == 2 * config.num_timesteps
@@ -148,8 +153,6 @@ def test_devices_scale_the_envs_minibatch_and_budget() -> None:
     assert four.learning_rate == pytest.approx(2 * config.learning_rate, rel=1e-12)
     assert four.clipping_epsilon == config.clipping_epsilon
     assert config.scaled_for_devices(1) == config
-    kept = config.replace(scale_with_devices=False)
-    assert kept.scaled_for_devices(4) == kept
 
 
 def test_the_seeds_summary_gives_an_interval_and_collapses() -> None:

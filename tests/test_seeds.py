@@ -260,18 +260,20 @@ def test_gpus_per_seed_groups_the_gpus_and_trains_each_seed_on_its_group() -> No
         SeedsConfig(gpus_per_seed=0)
 
 
-def test_a_seed_on_several_gpus_is_checked_on_its_grown_batch() -> None:
-    """The settings check of a seed on N GPUs uses the config ``train --devices N`` trains
-    (envs and minibatch grown N times), so a preset whose batch splits over N GPUs only once
-    grown passes, and a --set that breaks the split fails before any seed starts."""
+def test_a_seed_on_several_gpus_is_checked_on_the_batch_it_trains() -> None:
+    """The settings check of a seed on N GPUs uses the config ``train --devices N`` trains:
+    the preset's batch split over them (the default), or grown N times with
+    ``scale_with_devices=true``, so a batch that splits over N GPUs only once grown passes
+    there, and fails before any seed starts where it is split."""
     from mjx_arm.bench.seeds import check_seed_settings
     from mjx_arm.inputs import ConfigError
 
     config = SeedsConfig(task="touch", preset="fast", seeds="0", gpus_per_seed=2)
     odd = ("num_envs=2049", "batch_size=2049", "num_minibatches=1")  # grown: 4098 each
-    check_seed_settings(config, odd, devices=2)
+    check_seed_settings(config, (*odd, "scale_with_devices=true"), devices=2)
+    check_seed_settings(config, (), devices=2)  # the preset's 8192 envs split in two
     with pytest.raises(ConfigError, match="multiple of the device count"):
-        check_seed_settings(config, (*odd, "scale_with_devices=false"), devices=2)
+        check_seed_settings(config, odd, devices=2)
 
 
 def test_the_threshold_defaults_to_where_the_task_counts_as_solved() -> None:

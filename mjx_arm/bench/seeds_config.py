@@ -57,7 +57,7 @@ class SeedsConfig:
     )
     gpus_per_seed: int = setting(
         1,
-        "GPUs each seed trains on (train --devices N: a process per GPU, the batch grown with "
+        "GPUs each seed trains on (train --devices N: a process per GPU, the batch split over "
         "them); --devices then counts GPUs in all, in groups of this size",
     )
     arm: str = setting("", "the arm: a URDF or an arm file (.toml/.json); '' is the shipped arm")

@@ -214,7 +214,7 @@ def config_from_args(args: argparse.Namespace):
     overrides += field_flag_settings(args, FIELD_FLAGS)
     config = load_config(args.preset or DEFAULT_PRESET, args.config, overrides)
     config = _with_arm(config, args.arm, args.ee_link)
-    config = config.scaled_for_devices(args.devices or 1)  # --devices N grows the batch
+    config = config.scaled_for_devices(args.devices or 1)  # scale_with_devices: grown batch
     return config.replace(arm=with_repair_arguments(config.arm, args))
 
 

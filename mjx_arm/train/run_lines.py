@@ -45,14 +45,23 @@ def start_lines(run_dir: Path, config: TrainConfig, preset: str | None) -> None:
 
 
 def devices_note(devices: int | None, config: TrainConfig) -> None:
-    """Before a run on several devices with the batch grown with them, say on stderr what was
-    measured: more env steps/s, but a seed solved later than on one GPU."""
-    if not devices or devices < 2 or not config.scale_with_devices:
+    """Before a run on several devices, say on stderr what was measured: the preset's batch
+    split over them trains no sooner than one GPU, a batch grown with them later still."""
+    if not devices or devices < 2:
         return
+    if config.scale_with_devices:
+        what = (
+            f"grows the batch {devices} times: more env steps/s, but Touch seeds on 2 H200s "
+            "needed 2-2.6x the env steps and reached 0.95 later than on one GPU"
+        )
+    else:
+        what = (
+            f"splits the batch over {devices} devices: the run learns as on one, and Touch "
+            "seeds on 2 H200s reached 0.95 in about one GPU's time, not sooner"
+        )
     print(
-        f"note: --devices {devices} grows the batch {devices} times: more env steps/s, but Touch "
-        "seeds on 2 H200s reached 0.95 later than on one, at the median (docs/training.md, "
-        "'Several devices'). For results sooner, train a seed per GPU: mjx-arm bench seeds",
+        f"note: --devices {devices} {what} (docs/training.md, 'Several devices'). For more "
+        "results at once, train a seed per GPU: mjx-arm bench seeds",
         file=sys.stderr,
     )
 
