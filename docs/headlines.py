@@ -326,9 +326,10 @@ def _two_gpu_seeds_row(load: Callable[[str], Json]) -> tuple[str, str, list[str]
         f"{ratio(grown, 'steps_to_threshold'):.2f}x the steps"
     )
     what = (
-        "Touch: `--preset fast` as shipped on 2 H200s per seed (`train --devices 2 --server`, a "
-        "warm group of both GPUs, the preset's batch split over them), fresh seeds 8530-8540, "
-        "beside fresh seeds 8200-8255 on one H200's warm trainer, time from the command's start"
+        "Touch: `--preset fast` on 2 H200s per seed (`train --devices 2 --server`, a warm "
+        "group of both GPUs, the preset's batch split over them: the default since, run then "
+        "with `--set scale_with_devices=false`), fresh seeds 8530-8540, beside fresh seeds "
+        "8200-8255 on one H200's warm trainer, time from the command's start"
     )
     return what, value, list(TWO_GPU_SEEDS)
 
